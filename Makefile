@@ -1,0 +1,39 @@
+# The two commands of the README: `make demo` (main job on the built-in scene) and
+# `make test` (every test). Both do all set-up on a fresh machine first.
+SHELL := /bin/bash
+VENV := $(CURDIR)/.venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.deps-installed
+PYDEPS := bpy==5.0.1 "maturin>=1.7,<2" pytest hypothesis matplotlib
+
+.PHONY: setup build demo test test-rust test-python bench clean
+
+$(STAMP):
+	python3 -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q $(PYDEPS)
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+# Release build of the native module, installed into the venv.
+build: setup
+	VIRTUAL_ENV=$(VENV) PATH=$(VENV)/bin:$$PATH $(VENV)/bin/maturin develop --release -q
+
+demo: build
+	$(PY) blender_scripts/demo.py
+
+test-rust:
+	cargo test --workspace --exclude translucent-python -q
+
+test-python: build
+	$(PY) -m pytest -q tests
+
+test: test-rust test-python
+
+bench: build
+	$(PY) blender_scripts/bench_prt.py
+
+clean:
+	cargo clean
+	rm -rf $(VENV) out

@@ -1,0 +1,190 @@
+//! Light sources and the world, in Blender/Cycles units so that a comparison with a Cycles
+//! render is like for like (DESIGN.md, "Verified on this machine kind"):
+//! sun Strength = irradiance [W/m^2] on a surface facing it; point/spot Power P [W] gives
+//! radiant intensity P/(4 pi) [W/sr]; an area light of power P and area A emits radiance
+//! P/(pi A) from its front side; the world colour is radiance.
+
+use crate::error::{Error, Result};
+use glam::Vec3;
+
+/// One light. Colours are linear RGB multipliers of the power/strength.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Light {
+    /// A distant light: `direction` is the way the light travels (Blender's sun points along -Z
+    /// of its object), `irradiance` the Strength [W/m^2].
+    Sun { direction: Vec3, irradiance: [f32; 3] },
+    /// An isotropic point light of `power` [W] per channel.
+    Point { position: Vec3, power: [f32; 3] },
+    /// A spot light: a point light restricted to a cone of full angle `spot_size` [rad] around
+    /// `direction`, softened over the fraction `blend` of the cone (Cycles' smoothstep).
+    Spot {
+        position: Vec3,
+        direction: Vec3,
+        power: [f32; 3],
+        spot_size: f32,
+        blend: f32,
+    },
+    /// A rectangular one-sided area light centred at `position`, emitting along `direction`,
+    /// with edges `size_u` x `size_v` along the unit vectors `axis_u`, `axis_v`.
+    Area {
+        position: Vec3,
+        direction: Vec3,
+        axis_u: Vec3,
+        size_u: f32,
+        size_v: f32,
+        power: [f32; 3],
+    },
+}
+
+/// What surrounds the scene: radiance arriving from directions that escape the mesh.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum World {
+    /// Nothing: costs no rays at all.
+    #[default]
+    Black,
+    /// A uniform radiance [W/(m^2 sr)] from every direction.
+    Uniform([f32; 3]),
+    /// An equirectangular radiance image (row-major, row 0 at the top = +Z), mapped the way
+    /// Cycles maps an Environment Texture with default vector: u = atan2(d.y, -d.x)/(2 pi) + 1/2,
+    /// v = atan2(d.z, hypot(d.x, d.y))/pi + 1/2.
+    Environment {
+        width: usize,
+        height: usize,
+        radiance: Vec<[f32; 3]>,
+    },
+}
+
+fn check_vec(name: &str, v: Vec3) -> Result<Vec3> {
+    if !v.is_finite() {
+        return Err(Error::InvalidLight(format!("{name} {v:?} is not finite")));
+    }
+    Ok(v)
+}
+
+fn check_dir(name: &str, v: Vec3) -> Result<Vec3> {
+    let v = check_vec(name, v)?;
+    v.try_normalize()
+        .ok_or_else(|| Error::InvalidLight(format!("{name} {v:?} has zero length")))
+}
+
+fn check_rgb(name: &str, c: [f32; 3]) -> Result<[f32; 3]> {
+    if c.iter().any(|x| !x.is_finite() || *x < 0.0) {
+        return Err(Error::InvalidLight(format!(
+            "{name} {c:?} must be finite and >= 0"
+        )));
+    }
+    Ok(c)
+}
+
+impl Light {
+    pub fn sun(direction: Vec3, irradiance: [f32; 3]) -> Result<Self> {
+        Ok(Light::Sun {
+            direction: check_dir("sun direction", direction)?,
+            irradiance: check_rgb("sun irradiance", irradiance)?,
+        })
+    }
+
+    pub fn point(position: Vec3, power: [f32; 3]) -> Result<Self> {
+        Ok(Light::Point {
+            position: check_vec("point light position", position)?,
+            power: check_rgb("point light power", power)?,
+        })
+    }
+
+    pub fn spot(
+        position: Vec3,
+        direction: Vec3,
+        power: [f32; 3],
+        spot_size: f32,
+        blend: f32,
+    ) -> Result<Self> {
+        if !(spot_size.is_finite() && spot_size > 0.0 && spot_size <= std::f32::consts::PI) {
+            return Err(Error::InvalidLight(format!(
+                "spot_size {spot_size} must lie in (0, pi] radians"
+            )));
+        }
+        if !(blend.is_finite() && (0.0..=1.0).contains(&blend)) {
+            return Err(Error::InvalidLight(format!("spot blend {blend} must lie in [0, 1]")));
+        }
+        Ok(Light::Spot {
+            position: check_vec("spot position", position)?,
+            direction: check_dir("spot direction", direction)?,
+            power: check_rgb("spot power", power)?,
+            spot_size,
+            blend,
+        })
+    }
+
+    pub fn area(
+        position: Vec3,
+        direction: Vec3,
+        axis_u: Vec3,
+        size_u: f32,
+        size_v: f32,
+        power: [f32; 3],
+    ) -> Result<Self> {
+        let direction = check_dir("area light direction", direction)?;
+        let axis_u = check_dir("area light axis_u", axis_u)?;
+        if axis_u.dot(direction).abs() > 1e-3 {
+            return Err(Error::InvalidLight(
+                "area light axis_u must be perpendicular to its direction".into(),
+            ));
+        }
+        for (n, s) in [("size_u", size_u), ("size_v", size_v)] {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(Error::InvalidLight(format!("area light {n} {s} must be > 0")));
+            }
+        }
+        Ok(Light::Area {
+            position: check_vec("area light position", position)?,
+            direction,
+            axis_u,
+            size_u,
+            size_v,
+            power: check_rgb("area light power", power)?,
+        })
+    }
+
+    /// Whether the light emits anything at all (a black light costs no rays).
+    pub fn is_black(&self) -> bool {
+        let c = match self {
+            Light::Sun { irradiance, .. } => irradiance,
+            Light::Point { power, .. } | Light::Spot { power, .. } | Light::Area { power, .. } => {
+                power
+            }
+        };
+        c.iter().all(|x| *x == 0.0)
+    }
+}
+
+impl World {
+    pub fn uniform(radiance: [f32; 3]) -> Result<Self> {
+        let c = check_rgb("world colour", radiance)?;
+        Ok(if c == [0.0; 3] { World::Black } else { World::Uniform(c) })
+    }
+
+    pub fn environment(width: usize, height: usize, radiance: Vec<[f32; 3]>) -> Result<Self> {
+        if width == 0 || height == 0 || radiance.len() != width * height {
+            return Err(Error::InvalidLight(format!(
+                "environment image of {width} x {height} needs {} pixels, got {}",
+                width * height,
+                radiance.len()
+            )));
+        }
+        for p in &radiance {
+            check_rgb("environment pixel", *p)?;
+        }
+        if radiance.iter().all(|p| *p == [0.0; 3]) {
+            return Ok(World::Black);
+        }
+        Ok(World::Environment {
+            width,
+            height,
+            radiance,
+        })
+    }
+
+    pub fn is_black(&self) -> bool {
+        matches!(self, World::Black)
+    }
+}

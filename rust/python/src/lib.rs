@@ -1,0 +1,17 @@
+//! The thin pyo3 binding of translucent-core: converts numpy arrays and Python values to core
+//! types, releases the GIL around long work, and maps core errors to Python exceptions.
+//! No maths lives here.
+
+use pyo3::prelude::*;
+
+mod convert;
+mod material;
+
+/// The native module; the pure-Python package `translucent` re-exports it.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<material::PyMaterial>()?;
+    m.add("Cancelled", m.py().get_type::<convert::Cancelled>())?;
+    Ok(())
+}
