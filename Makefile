@@ -4,11 +4,11 @@ SHELL := /bin/bash
 VENV := $(CURDIR)/.venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.deps-installed
-PYDEPS := bpy==5.0.1 "maturin>=1.7,<2" pytest hypothesis matplotlib
+PYDEPS := bpy==5.0.1 "maturin>=1.7,<2" pytest hypothesis matplotlib trimesh
 
-.PHONY: setup build demo test test-rust test-python bench clean
+.PHONY: setup build demo test test-rust test-python lint bench accuracy clean
 
-$(STAMP):
+$(STAMP): Makefile
 	python3 -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q $(PYDEPS)
@@ -16,12 +16,16 @@ $(STAMP):
 
 setup: $(STAMP)
 
-# Release build of the native module, installed into the venv.
+# Release build of the native module, installed (editable) into the venv.
 build: setup
 	VIRTUAL_ENV=$(VENV) PATH=$(VENV)/bin:$$PATH $(VENV)/bin/maturin develop --release -q
 
 demo: build
 	$(PY) blender_scripts/demo.py
+
+lint:
+	cargo fmt --all --check
+	cargo clippy --workspace --all-targets -q -- -D warnings
 
 test-rust:
 	cargo test --workspace --exclude translucent-python -q
@@ -29,10 +33,13 @@ test-rust:
 test-python: build
 	$(PY) -m pytest -q tests
 
-test: test-rust test-python
+test: lint test-rust test-python
 
 bench: build
 	$(PY) blender_scripts/bench_prt.py
+
+accuracy: build
+	$(PY) blender_scripts/accuracy_prt.py
 
 clean:
 	cargo clean

@@ -12,7 +12,10 @@ use glam::Vec3;
 pub enum Light {
     /// A distant light: `direction` is the way the light travels (Blender's sun points along -Z
     /// of its object), `irradiance` the Strength [W/m^2].
-    Sun { direction: Vec3, irradiance: [f32; 3] },
+    Sun {
+        direction: Vec3,
+        irradiance: [f32; 3],
+    },
     /// An isotropic point light of `power` [W] per channel.
     Point { position: Vec3, power: [f32; 3] },
     /// A spot light: a point light restricted to a cone of full angle `spot_size` [rad] around
@@ -104,7 +107,9 @@ impl Light {
             )));
         }
         if !(blend.is_finite() && (0.0..=1.0).contains(&blend)) {
-            return Err(Error::InvalidLight(format!("spot blend {blend} must lie in [0, 1]")));
+            return Err(Error::InvalidLight(format!(
+                "spot blend {blend} must lie in [0, 1]"
+            )));
         }
         Ok(Light::Spot {
             position: check_vec("spot position", position)?,
@@ -132,7 +137,9 @@ impl Light {
         }
         for (n, s) in [("size_u", size_u), ("size_v", size_v)] {
             if !(s.is_finite() && s > 0.0) {
-                return Err(Error::InvalidLight(format!("area light {n} {s} must be > 0")));
+                return Err(Error::InvalidLight(format!(
+                    "area light {n} {s} must be > 0"
+                )));
             }
         }
         Ok(Light::Area {
@@ -160,7 +167,11 @@ impl Light {
 impl World {
     pub fn uniform(radiance: [f32; 3]) -> Result<Self> {
         let c = check_rgb("world colour", radiance)?;
-        Ok(if c == [0.0; 3] { World::Black } else { World::Uniform(c) })
+        Ok(if c == [0.0; 3] {
+            World::Black
+        } else {
+            World::Uniform(c)
+        })
     }
 
     pub fn environment(width: usize, height: usize, radiance: Vec<[f32; 3]>) -> Result<Self> {

@@ -260,10 +260,20 @@ mod tests {
         let total: f64 = s.iter().map(|x| f64::from(x.area)).sum();
         assert!((total - 6.0).abs() < 1e-4);
         // First moment: the area-weighted centroid of a 2 x 3 rectangle is (1, 1.5).
-        let cx: f64 = s.iter().map(|x| f64::from(x.area * x.position.x)).sum::<f64>() / total;
-        let cy: f64 = s.iter().map(|x| f64::from(x.area * x.position.y)).sum::<f64>() / total;
+        let cx: f64 = s
+            .iter()
+            .map(|x| f64::from(x.area * x.position.x))
+            .sum::<f64>()
+            / total;
+        let cy: f64 = s
+            .iter()
+            .map(|x| f64::from(x.area * x.position.y))
+            .sum::<f64>()
+            / total;
         assert!((cx - 1.0).abs() < 1e-4 && (cy - 1.5).abs() < 1e-4);
-        assert!(s.iter().all(|x| x.position.z == 0.0 && x.position.x >= 0.0 && x.position.x <= 2.0));
+        assert!(s
+            .iter()
+            .all(|x| x.position.z == 0.0 && x.position.x >= 0.0 && x.position.x <= 2.0));
     }
 
     #[test]
@@ -273,8 +283,12 @@ mod tests {
         assert!(Mesh::new(p.clone(), vec![], None).is_err());
         let e = Mesh::new(p.clone(), vec![[0, 1, 3]], None).unwrap_err();
         assert!(e.to_string().contains("vertex 3"), "{e}");
-        let e = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::new(f32::NAN, 0.0, 0.0)], vec![[0, 1, 2]], None)
-            .unwrap_err();
+        let e = Mesh::new(
+            vec![Vec3::ZERO, Vec3::X, Vec3::new(f32::NAN, 0.0, 0.0)],
+            vec![[0, 1, 2]],
+            None,
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("non-finite"), "{e}");
         assert!(Mesh::new(p.clone(), vec![[0, 1, 2]], Some(vec![Vec3::Z])).is_err());
     }
@@ -282,7 +296,13 @@ mod tests {
     #[test]
     fn degenerate_and_isolated_are_reported_not_fatal() {
         let m = Mesh::new(
-            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(2.0, 0.0, 0.0), Vec3::splat(5.0)],
+            vec![
+                Vec3::ZERO,
+                Vec3::X,
+                Vec3::Y,
+                Vec3::new(2.0, 0.0, 0.0),
+                Vec3::splat(5.0),
+            ],
             vec![[0, 1, 2], [0, 1, 3]],
             None,
         )

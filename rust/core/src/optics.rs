@@ -328,7 +328,12 @@ mod tests {
     #[test]
     fn rd_total_matches_jensen_albedo_formula() {
         // Jensen 2001: R_d = a'/2 (1 + exp(-4/3 A sqrt(3(1-a')))) exp(-sqrt(3(1-a'))).
-        for &(sa, sp, eta) in &[(0.01, 1.0, 1.3), (0.5, 0.5, 1.0), (1e-5, 3.0, 2.5), (2.0, 0.1, 1.6)] {
+        for &(sa, sp, eta) in &[
+            (0.01, 1.0, 1.3),
+            (0.5, 0.5, 1.0),
+            (1e-5, 3.0, 2.5),
+            (2.0, 0.1, 1.6),
+        ] {
             let d = Dipole::new(sa, sp, eta);
             let a = sp / (sa + sp);
             let s = (3.0 * (1.0 - a)).sqrt();
@@ -360,7 +365,10 @@ mod tests {
     #[test]
     fn energy_conserving_without_absorption_and_zero_without_scattering() {
         let d = Dipole::new(0.0, 5.0, 1.3);
-        assert!((d.rd_total() - 1.0).abs() < 1e-12, "sigma_a = 0 reflects everything");
+        assert!(
+            (d.rd_total() - 1.0).abs() < 1e-12,
+            "sigma_a = 0 reflects everything"
+        );
         assert!(d.rd(1.0).is_finite() && d.rd(0.0).is_finite());
         let none = Dipole::new(0.0, 0.0, 1.3);
         assert_eq!(none.rd_total(), 0.0);
@@ -420,7 +428,11 @@ mod tests {
             };
             let avg = simpson(|mu| 2.0 * internal(mu) * mu, 0.0, 1.0, 200_000);
             // The fit is quoted as good to about 1 % in this range.
-            assert!((avg - f_dr(eta)).abs() < 0.02, "eta {eta}: {avg} vs {}", f_dr(eta));
+            assert!(
+                (avg - f_dr(eta)).abs() < 0.02,
+                "eta {eta}: {avg} vs {}",
+                f_dr(eta)
+            );
         }
     }
 

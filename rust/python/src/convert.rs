@@ -4,7 +4,12 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use translucent_core::Error;
 
-pyo3::create_exception!(_native, Cancelled, PyRuntimeError, "The computation was cancelled by its progress callback.");
+pyo3::create_exception!(
+    _native,
+    Cancelled,
+    PyRuntimeError,
+    "The computation was cancelled by its progress callback."
+);
 
 /// Every user-caused core error is a ValueError naming what was wrong; cancelling is `Cancelled`.
 pub fn to_py(err: Error) -> PyErr {
@@ -23,6 +28,118 @@ pub fn rgb(name: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
         PyValueError::new_err(format!("{name} must be a float or a sequence of 3 floats"))
     })?;
     <[f64; 3]>::try_from(v.as_slice()).map_err(|_| {
-        PyValueError::new_err(format!("{name} must have 3 components (RGB), got {}", v.len()))
+        PyValueError::new_err(format!(
+            "{name} must have 3 components (RGB), got {}",
+            v.len()
+        ))
     })
+}
+
+use numpy::{PyArray2, PyReadonlyArray2, PyUntypedArrayMethods};
+use translucent_core::Vec3;
+
+fn as_contiguous<'py>(value: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<'py, PyAny>> {
+    let np = value.py().import("numpy")?;
+    np.call_method1("ascontiguousarray", (value, dtype))
+}
+
+/// An (N, 3) array of finite-or-not floats as Vec3 (validation of values is the core's job).
+pub fn vec3_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
+    let arr = as_contiguous(value, "float32")
+        .map_err(|e| PyValueError::new_err(format!("{name} must be an (N, 3) float array: {e}")))?;
+    let arr: PyReadonlyArray2<f32> = arr
+        .extract()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be a 2-D (N, 3) float array")))?;
+    if arr.shape()[1] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "{name} must have shape (N, 3), got {:?}",
+            arr.shape()
+        )));
+    }
+    let s = arr.as_slice()?;
+    Ok(s.chunks_exact(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect())
+}
+
+/// An (M, 3) integer array of vertex indices, checked non-negative and below 2^32.
+pub fn triangle_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
+    let arr = as_contiguous(value, "int64").map_err(|e| {
+        PyValueError::new_err(format!("{name} must be an (M, 3) integer array: {e}"))
+    })?;
+    let arr: PyReadonlyArray2<i64> = arr
+        .extract()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be a 2-D (M, 3) integer array")))?;
+    if arr.shape()[1] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "{name} must have shape (M, 3), got {:?}",
+            arr.shape()
+        )));
+    }
+    let s = arr.as_slice()?;
+    if let Some(i) = s.iter().position(|&v| v < 0 || v > i64::from(u32::MAX)) {
+        return Err(PyValueError::new_err(format!(
+            "{name}: triangle {} has index {} out of range",
+            i / 3,
+            s[i]
+        )));
+    }
+    Ok(s.chunks_exact(3)
+        .map(|t| [t[0] as u32, t[1] as u32, t[2] as u32])
+        .collect())
+}
+
+/// A 3-vector from any sequence of three numbers.
+pub fn vec3(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec3> {
+    let v = rgb(name, value)?;
+    Ok(Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32))
+}
+
+/// Per-vertex RGB values as an (N, 3) float32 numpy array.
+pub fn rgb_array<'py>(py: Python<'py>, values: &[[f32; 3]]) -> Bound<'py, PyArray2<f32>> {
+    let flat: Vec<f32> = values.iter().flatten().copied().collect();
+    numpy::ndarray::Array2::from_shape_vec((values.len(), 3), flat)
+        .map(|a| PyArray2::from_owned_array(py, a))
+        .expect("shape matches length")
+}
+
+/// Wraps a Python progress callable for the core: called with a fraction in [0, 1]; returning
+/// False (or raising) cancels. A raised exception is kept so it can be re-raised.
+pub struct Progress {
+    callback: Option<Py<PyAny>>,
+    error: std::sync::Mutex<Option<PyErr>>,
+}
+
+impl Progress {
+    pub fn new(callback: Option<Py<PyAny>>) -> Self {
+        Self {
+            callback,
+            error: std::sync::Mutex::new(None),
+        }
+    }
+
+    pub fn call(&self, fraction: f32) -> bool {
+        let Some(cb) = &self.callback else {
+            return true;
+        };
+        Python::attach(|py| match cb.call1(py, (fraction,)) {
+            Ok(r) => !matches!(r.extract::<bool>(py), Ok(false)) || r.is_none(py),
+            Err(e) => {
+                *self.error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+                false
+            }
+        })
+    }
+
+    pub fn is_set(&self) -> bool {
+        self.callback.is_some()
+    }
+
+    /// The exception to raise for a core error: the callback's own, if it raised.
+    pub fn to_py(&self, err: Error) -> PyErr {
+        if let Some(e) = self.error.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            return e;
+        }
+        to_py(err)
+    }
 }

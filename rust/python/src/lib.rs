@@ -6,12 +6,19 @@ use pyo3::prelude::*;
 
 mod convert;
 mod material;
+mod prt;
+mod reference;
+mod scene;
 
 /// The native module; the pure-Python package `translucent` re-exports it.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    m.add_class::<material::PyMaterial>()?;
     m.add("Cancelled", m.py().get_type::<convert::Cancelled>())?;
+    m.add_class::<material::PyMaterial>()?;
+    m.add_class::<scene::PyScene>()?;
+    m.add_class::<prt::PyPrt>()?;
+    m.add_function(wrap_pyfunction!(reference::reference_radiosity_py, m)?)?;
+    m.add_function(wrap_pyfunction!(reference::relative_error, m)?)?;
     Ok(())
 }

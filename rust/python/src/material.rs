@@ -15,7 +15,12 @@ pub struct PyMaterial {
 impl PyMaterial {
     #[new]
     #[pyo3(signature = (sigma_a, sigma_s, g = 0.0, eta = 1.3))]
-    fn new(sigma_a: &Bound<'_, PyAny>, sigma_s: &Bound<'_, PyAny>, g: f64, eta: f64) -> PyResult<Self> {
+    fn new(
+        sigma_a: &Bound<'_, PyAny>,
+        sigma_s: &Bound<'_, PyAny>,
+        g: f64,
+        eta: f64,
+    ) -> PyResult<Self> {
         let inner = Material::new(rgb("sigma_a", sigma_a)?, rgb("sigma_s", sigma_s)?, g, eta)
             .map_err(to_py)?;
         Ok(Self { inner })
@@ -33,7 +38,10 @@ impl PyMaterial {
     /// Names of the measured presets.
     #[staticmethod]
     fn preset_names() -> Vec<&'static str> {
-        translucent_core::optics::MEASURED.iter().map(|m| m.0).collect()
+        translucent_core::optics::MEASURED
+            .iter()
+            .map(|m| m.0)
+            .collect()
     }
 
     #[getter]

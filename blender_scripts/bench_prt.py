@@ -1,0 +1,90 @@
+"""Benchmark of the PRT method (issue 3, point 9). Prints medians of several runs and the
+machine; timings live here, never in tests.
+
+1. Precompute: the Stanford bunny scaled to 10 cm, marble, 32 coefficients (budget: 20 s on
+   the 2-core CI machine).
+2. One edit (coefficient fit + dot product, 3 channels) on a >= 120k-vertex mesh (the bunny
+   subdivided once; budget: 5 ms on the CPU).
+
+Run: `make bench` (or .venv/bin/python blender_scripts/bench_prt.py [--runs N]).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(__file__))
+import models  # noqa: E402
+
+import translucent  # noqa: E402
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            names = [l.split(":", 1)[1].strip() for l in f if l.startswith("model name")]
+        cpu = names[0] if names else cpu
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=int, default=3, help="precompute runs (median)")
+    ap.add_argument("--edits", type=int, default=30, help="edit runs (median)")
+    args = ap.parse_args()
+    print(f"machine: {machine()}")
+    print(f"translucent {translucent.__version__}")
+
+    marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    p, t = models.load("stanford-bunny.obj", diagonal=0.1)
+    scene = models.standard_scene(p, t)
+    times, reports = [], []
+    for _ in range(args.runs):
+        t0 = time.perf_counter()
+        prt = translucent.Prt(scene, marble, coefficients=32)
+        times.append(time.perf_counter() - t0)
+        reports.append(prt.report)
+    r = reports[-1]
+    print(
+        f"\nprecompute, bunny 10 cm ({scene.vertex_count} vertices, {r['samples']} samples), marble, "
+        f"32 coefficients: median {statistics.median(times):.2f} s over {args.runs} runs "
+        f"(irradiance {r['seconds_irradiance']:.2f} s, tree {r['seconds_tree']:.2f} s, "
+        f"transport {r['seconds_transport']:.2f} s) [budget 20 s]"
+    )
+
+    p2, t2 = models.subdivide(p, t)
+    big = models.standard_scene(p2, t2)
+    prt = translucent.Prt(big, marble, coefficients=32, samples=150_000)
+    skin = translucent.Material.preset("skin1", mm_per_unit=1000.0)
+    core, wall = [], []
+    for k in range(args.edits):
+        m = marble if k % 2 else skin
+        t0 = time.perf_counter()
+        b = prt.radiosity(m)
+        wall.append(time.perf_counter() - t0)
+        core.append(prt.last_eval["seconds"])
+    assert b.shape == (big.vertex_count, 3)
+    last = prt.last_eval
+    print(
+        f"edit, {big.vertex_count} vertices, 32 coefficients, 3 channels "
+        f"({prt.report['stored_channels']} stored, {prt.report['transport_bytes'] / 1e6:.1f} MB): "
+        f"median {1e3 * statistics.median(core):.2f} ms in the core "
+        f"(fit {1e3 * last['fit_seconds']:.3f} ms, dot {1e3 * last['dot_seconds']:.2f} ms), "
+        f"{1e3 * statistics.median(wall):.2f} ms from Python with the numpy copy, "
+        f"over {args.edits} edits [budget 5 ms]"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

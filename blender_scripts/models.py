@@ -1,0 +1,54 @@
+"""Test meshes from ../shared/models, scaled to a stated size, and the standard lighting the
+benchmarks and accuracy checks use. Loading only: no maths beyond scaling to a size."""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+
+import translucent
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+MODELS = REPO.parent / "shared" / "models"
+
+
+def load(name: str, diagonal: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (N, 3) float32 and triangles (M, 3) int64 of a shared model, centred and
+    scaled so its bounding-box diagonal is `diagonal` scene units (0.1 = 10 cm in metres)."""
+    import trimesh  # a well-kept loader for OBJ/PLY
+
+    path = MODELS / name
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found: the shared models live beside the repo")
+    mesh = trimesh.load(path, process=False, force="mesh")
+    p = np.asarray(mesh.vertices, dtype=np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    p = (p - 0.5 * (lo + hi)) * (diagonal / np.linalg.norm(hi - lo))
+    return p.astype(np.float32), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def subdivide(positions: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Midpoint subdivision (each triangle into four): a bigger mesh of the same shape."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    mids = 0.5 * (positions[unique[:, 0]] + positions[unique[:, 1]])
+    n = len(positions)
+    m = len(triangles)
+    ab, bc, ca = (inverse[:m] + n, inverse[m : 2 * m] + n, inverse[2 * m :] + n)
+    a, b, c = triangles.T
+    tris = np.concatenate(
+        [np.stack(t, axis=1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
+    )
+    return np.concatenate([positions, mids]).astype(np.float32), tris.astype(np.int64)
+
+
+def standard_scene(positions: np.ndarray, triangles: np.ndarray) -> translucent.Scene:
+    """The benchmark lighting: a key point light above-front and a dimmer sun from the back
+    left, both white, no world (Blender units: metres, watts, W/m^2)."""
+    scene = translucent.Scene(positions, triangles)
+    diag = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
+    scene.add_point_light((0.6 * diag, -1.0 * diag, 1.2 * diag), power=110.0 * diag**2)
+    scene.add_sun(direction=(0.5, 0.6, -0.62), irradiance=2.0)
+    return scene

@@ -1,0 +1,852 @@
+//! Precomputed radiance transfer for material editing (Xu et al. 2007): transport T_j per
+//! vertex (eq. 10) precomputed once for fixed geometry and lighting, then any material is a
+//! least-squares fit of basis coefficients plus one dot product per vertex (eq. 9).
+//!
+//! Two departures from the paper, both for speed and stability:
+//! - far samples are summed by cluster through a moment tree (`tree`), so the precompute grows
+//!   as n log n instead of vertices x samples;
+//! - the part of the integral closer than the sample spacing is a disc around the receiver,
+//!   integrated in closed form with the dipole itself (`Dipole::rd_disc`), so a stiff material
+//!   tends to the diffuse-BRDF limit R_d,total I(x) whatever the knots.
+
+mod layout;
+mod tree;
+
+use crate::basis::{Basis, Degree, Fitter};
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use crate::optics::{fresnel_transmittance, Material};
+use glam::{DVec3, Vec3};
+use layout::Transport;
+use rayon::prelude::*;
+use std::time::Instant;
+use tree::{SampleTree, WeightedSample};
+
+/// Irradiance at points with normals, supplied by the caller (usually `irradiance::irradiance`
+/// with the scene's lights); I = int F_t L (n . w) dw, Xu 2007 eq. (3).
+pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync + 'a;
+/// Progress in [0, 1]; returning false cancels.
+pub type ProgressFn<'a> = dyn Fn(f32) -> bool + Sync + 'a;
+
+/// How the transport is precomputed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrtSettings {
+    /// Basis size: the length of the per-vertex dot product for each channel (Xu's "coefficients").
+    pub coefficients: usize,
+    pub degree: Degree,
+    /// Surface samples for the irradiance; `None` picks 4 per vertex, at least 20 000.
+    pub samples: Option<usize>,
+    /// Fraction of R_d,total that may fall beyond the support radius.
+    pub tolerance: f64,
+    /// Opening ratio of the far field: a cluster of radius rho at distance d is summed by its
+    /// moments when rho <= far_field (d - rho). 0 sums every sample exactly (brute force).
+    pub far_field: f64,
+    /// Relative index of refraction the irradiance (its Fresnel factor) was computed for.
+    pub eta: f64,
+}
+
+impl Default for PrtSettings {
+    fn default() -> Self {
+        Self {
+            coefficients: 32,
+            degree: Degree::Linear,
+            samples: None,
+            tolerance: 1e-3,
+            far_field: 0.25,
+            eta: 1.3,
+        }
+    }
+}
+
+/// What the precompute did and left out, and how long each step took.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PrtReport {
+    pub vertices: usize,
+    pub samples: usize,
+    pub sample_spacing: f64,
+    /// Radius of the receiver's own disc, integrated in closed form [unit].
+    pub near_radius: f64,
+    /// Support radius: samples beyond it are not visited [unit].
+    pub support_radius: f64,
+    pub knots: Vec<f64>,
+    /// 1 when every sample's irradiance has the same colour (one transport serves all three
+    /// channels), else 3.
+    pub stored_channels: usize,
+    pub transport_bytes: usize,
+    /// Samples summed one by one, clusters summed by their moments, clusters skipped because
+    /// they lie beyond the support radius or receive no light.
+    pub exact_samples: u64,
+    pub far_clusters: u64,
+    pub skipped_beyond_support: u64,
+    pub skipped_dark: u64,
+    /// Bound on the relative error of one cluster's mean distance, rho^3 / (2 (d - rho)^2 d),
+    /// at the chosen opening ratio (Taylor remainder of |x_o - x| about the cluster centre).
+    pub far_field_distance_bound: f64,
+    pub seconds_irradiance: f64,
+    pub seconds_tree: f64,
+    pub seconds_transport: f64,
+    pub seconds_total: f64,
+}
+
+/// The precomputed transport of one mesh under fixed lighting.
+#[derive(Debug, Clone)]
+pub struct Prt {
+    fitter: Fitter,
+    transport: Transport,
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    near_radius: f64,
+    eta: f64,
+    report: PrtReport,
+}
+
+/// One material evaluated: per-vertex radiosity, and what it cost and how good the fit was.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluation {
+    /// Multiple-scattering radiosity B per vertex [W/unit^2 ... in the irradiance's units].
+    pub radiosity: Vec<[f32; 3]>,
+    /// Relative L2 error of the fitted profile over the basis domain, per channel (Xu eq. 18).
+    pub fit_error: [f64; 3],
+    /// Estimated relative error of B per channel: fit error weighted by the share of
+    /// R_d,total the basis carries, plus the tail beyond the support radius.
+    pub error_estimate: [f64; 3],
+    pub fit_seconds: f64,
+    pub dot_seconds: f64,
+}
+
+impl Prt {
+    /// Precomputes the transport for `mesh` lit as `irradiance` says, with a basis chosen for
+    /// the `representatives` (every channel of each). Errors on bad settings, and
+    /// `Error::Cancelled` when `progress` returns false.
+    pub fn precompute(
+        mesh: &Mesh,
+        representatives: &[Material],
+        settings: &PrtSettings,
+        irradiance: &IrradianceFn,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Prt> {
+        let start = Instant::now();
+        check_settings(representatives, settings)?;
+        let tick = |f: f32| match progress {
+            Some(p) if !p(f) => Err(Error::Cancelled),
+            _ => Ok(()),
+        };
+        tick(0.0)?;
+        let mut report = PrtReport {
+            vertices: mesh.vertex_count(),
+            ..Default::default()
+        };
+
+        // Samples and their irradiance (Xu 2007 §6.1), and the irradiance at the receivers.
+        let count = settings
+            .samples
+            .unwrap_or_else(|| (4 * mesh.vertex_count()).max(20_000));
+        let spacing = mesh.spacing_for_sample_count(count);
+        let samples = mesh.surface_samples(spacing)?;
+        let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
+        let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
+        let sample_irradiance = irradiance(&points, &normals)?;
+        let vertex_irradiance = irradiance(mesh.positions(), mesh.normals())?;
+        check_irradiance(&sample_irradiance, points.len())?;
+        check_irradiance(&vertex_irradiance, mesh.vertex_count())?;
+        report.samples = samples.len();
+        report.sample_spacing = f64::from(spacing);
+        report.seconds_irradiance = start.elapsed().as_secs_f64();
+        tick(0.1)?;
+
+        // Leave out what the lighting does not need: white light needs one transport, not three.
+        let colour = common_colour(&sample_irradiance, &vertex_irradiance);
+        let channels = if colour.is_some() { 1 } else { 3 };
+        let scale = colour.unwrap_or([1.0; 3]);
+        let project = |i: &[f32; 3]| -> [f32; 3] {
+            match colour {
+                // The brightest channel carries the intensity; the others are its multiples.
+                Some(c) => [i[max_index(&c)] / c[max_index(&c)], 0.0, 0.0],
+                None => *i,
+            }
+        };
+
+        let t_tree = Instant::now();
+        let weighted: Vec<WeightedSample> = samples
+            .iter()
+            .zip(&sample_irradiance)
+            .map(|(s, i)| WeightedSample {
+                position: s.position,
+                area: s.area,
+                weight: project(i).map(|x| x * s.area),
+            })
+            .collect();
+        let tree = SampleTree::build(weighted, channels);
+        report.seconds_tree = t_tree.elapsed().as_secs_f64();
+
+        // The receiver's own disc: samples within `exclusion` of a vertex are replaced by a disc
+        // of equal area; `near_radius` is the smallest such disc (a low percentile over vertices),
+        // integrated in closed form at edit time; the rest of each vertex's own disc goes through
+        // the basis.
+        let exclusion = 1.5 * f64::from(spacing);
+        let excluded_area: Vec<f64> = mesh
+            .positions()
+            .par_iter()
+            .map(|p| area_within(&tree, p.as_dvec3(), exclusion))
+            .collect();
+        let near_radius = percentile_radius(&excluded_area, 0.05).max(0.25 * exclusion);
+        report.near_radius = near_radius;
+
+        // Basis domain [near_radius, support] and knots by DP on the representatives (Xu §5).
+        let support = representatives
+            .iter()
+            .flat_map(|m| m.dipoles())
+            .map(|d| d.support_radius(settings.tolerance))
+            .fold(0.0, f64::max)
+            .min(f64::from(mesh.diagonal()))
+            .max(2.0 * near_radius);
+        report.support_radius = support;
+        let dipoles: Vec<_> = representatives
+            .iter()
+            .flat_map(|m| m.dipoles())
+            .filter(|d| d.rd_tail(near_radius) > 1e-12 * d.rd_total())
+            .collect();
+        let functions: Vec<Box<dyn Fn(f64) -> f64>> = dipoles
+            .iter()
+            .map(|d| {
+                let d = *d;
+                Box::new(move |r: f64| d.rd(r)) as Box<dyn Fn(f64) -> f64>
+            })
+            .collect();
+        let refs: Vec<&dyn Fn(f64) -> f64> = functions.iter().map(|f| f.as_ref()).collect();
+        let basis = if refs.is_empty() {
+            // Nothing diffuses beyond the disc: any knots will do; the fit will be ~0.
+            uniform_basis(near_radius, support, settings)?
+        } else {
+            Basis::choose(
+                &refs,
+                near_radius,
+                support,
+                settings.coefficients,
+                settings.degree,
+            )?
+        };
+        report.knots = basis.knots().to_vec();
+        tick(0.15)?;
+
+        // Transport T_j per vertex (Xu 2007 eq. 10), in chunks so progress can be reported.
+        let t_transport = Instant::now();
+        let n = basis.len();
+        let stride = n + 1;
+        let far = FarField::new(settings.far_field);
+        report.far_field_distance_bound = far.distance_bound();
+        let vcount = mesh.vertex_count();
+        let mut rows = vec![0f32; vcount * channels * stride];
+        let mut counters = Counters::default();
+        let chunk = 2048;
+        for (ci, rows_chunk) in rows.chunks_mut(chunk * channels * stride).enumerate() {
+            let first = ci * chunk;
+            let chunk_counters = rows_chunk
+                .par_chunks_mut(channels * stride)
+                .enumerate()
+                .map(|(k, row)| {
+                    let v = first + k;
+                    let receiver = Receiver {
+                        position: mesh.positions()[v].as_dvec3(),
+                        irradiance: project(&vertex_irradiance[v]),
+                        own_disc: (excluded_area[v] / std::f64::consts::PI).sqrt(),
+                    };
+                    transport_row(&tree, &basis, &far, exclusion, near_radius, &receiver, row)
+                })
+                .reduce(Counters::default, Counters::sum);
+            counters = counters.sum(chunk_counters);
+            tick(0.15 + 0.85 * ((first + chunk).min(vcount) as f32 / vcount as f32))?;
+        }
+        report.exact_samples = counters.exact;
+        report.far_clusters = counters.far;
+        report.skipped_beyond_support = counters.beyond;
+        report.skipped_dark = counters.dark;
+        let transport = Transport::from_rows(&rows, vcount, channels, stride, scale);
+        report.transport_bytes = transport.bytes();
+        report.stored_channels = channels;
+        report.seconds_transport = t_transport.elapsed().as_secs_f64();
+        report.seconds_total = start.elapsed().as_secs_f64();
+        tick(1.0)?;
+        Ok(Prt {
+            fitter: basis.fitter(),
+            transport,
+            positions: mesh.positions().to_vec(),
+            normals: mesh.normals().to_vec(),
+            near_radius,
+            eta: settings.eta,
+            report,
+        })
+    }
+
+    pub fn report(&self) -> &PrtReport {
+        &self.report
+    }
+
+    pub fn basis(&self) -> &Basis {
+        self.fitter.basis()
+    }
+
+    pub fn eta(&self) -> f64 {
+        self.eta
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Fits the material's R_d on the basis (Xu 2007 eq. 8, 18) and returns, per channel, the
+    /// coefficient vector of the dot product: [M(near_radius), c_0 .. c_{n-1}].
+    pub fn coefficients(&self, material: &Material) -> Result<([Vec<f32>; 3], [f64; 3], [f64; 3])> {
+        if (material.eta - self.eta).abs() > 1e-9 {
+            return Err(Error::InvalidArgument(format!(
+                "this transport was precomputed for eta = {}, the material has eta = {}: \
+                 precompute again for the new index of refraction",
+                self.eta, material.eta
+            )));
+        }
+        let (lo, hi) = self.basis().domain();
+        let mut fit_error = [0.0; 3];
+        let mut estimate = [0.0; 3];
+        let coeffs = std::array::from_fn(|c| {
+            let d = material.dipole(c);
+            let fit = self.fitter.fit(&|r| d.rd(r));
+            let total = d.rd_total();
+            let (share, tail) = if total > 0.0 {
+                (
+                    (d.rd_disc(hi) - d.rd_disc(lo)) / total,
+                    d.rd_tail(hi) / total,
+                )
+            } else {
+                (0.0, 0.0)
+            };
+            fit_error[c] = fit.rel_l2_error;
+            estimate[c] = fit.rel_l2_error * share + tail;
+            std::iter::once(d.rd_disc(self.near_radius) as f32)
+                .chain(fit.coefficients.iter().map(|x| *x as f32))
+                .collect()
+        });
+        Ok((coeffs, fit_error, estimate))
+    }
+
+    /// Multiple-scattering radiosity B = sum_j c_j T_j per vertex and channel (Xu 2007 eq. 9
+    /// without the F_t/pi factor).
+    pub fn radiosity(&self, material: &Material) -> Result<Evaluation> {
+        let t0 = Instant::now();
+        let (coeffs, fit_error, error_estimate) = self.coefficients(material)?;
+        let fit_seconds = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let radiosity = self.transport.dot(&coeffs);
+        Ok(Evaluation {
+            radiosity,
+            fit_error,
+            error_estimate,
+            fit_seconds,
+            dot_seconds: t1.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Multiple-scattering radiance toward `eye`: L_d = F_t(eta, w_o) B / pi (Xu 2007 eq. 2).
+    /// Vertices facing away from the eye get 0.
+    pub fn radiance(&self, material: &Material, eye: Vec3) -> Result<Evaluation> {
+        if !eye.is_finite() {
+            return Err(Error::InvalidArgument(format!("eye {eye:?} is not finite")));
+        }
+        let mut e = self.radiosity(material)?;
+        radiance_from_radiosity(
+            &mut e.radiosity,
+            &self.positions,
+            &self.normals,
+            eye,
+            self.eta,
+        );
+        Ok(e)
+    }
+}
+
+/// Turns radiosity into outgoing radiance toward `eye` in place: L_d = F_t(eta, w_o) B / pi.
+pub fn radiance_from_radiosity(
+    values: &mut [[f32; 3]],
+    positions: &[Vec3],
+    normals: &[Vec3],
+    eye: Vec3,
+    eta: f64,
+) {
+    values
+        .par_iter_mut()
+        .zip(positions.par_iter().zip(normals.par_iter()))
+        .for_each(|(b, (p, n))| {
+            let cos_o = n.dot((eye - *p).normalize_or_zero());
+            let k = (fresnel_transmittance(eta, f64::from(cos_o)) / std::f64::consts::PI) as f32;
+            *b = b.map(|x| x * k);
+        });
+}
+
+fn check_settings(representatives: &[Material], s: &PrtSettings) -> Result<()> {
+    if representatives.is_empty() {
+        return Err(Error::InvalidArgument(
+            "give at least one material to choose the basis for".into(),
+        ));
+    }
+    if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
+        return Err(Error::InvalidArgument(format!(
+            "tolerance {} must lie in (0, 1)",
+            s.tolerance
+        )));
+    }
+    if !(s.far_field.is_finite() && (0.0..1.0).contains(&s.far_field)) {
+        return Err(Error::InvalidArgument(format!(
+            "far_field {} must lie in [0, 1)",
+            s.far_field
+        )));
+    }
+    if let Some(n) = s.samples {
+        if !(100..=50_000_000).contains(&n) {
+            return Err(Error::InvalidArgument(format!(
+                "samples {n} must lie in [100, 50 000 000]"
+            )));
+        }
+    }
+    if let Some(m) = representatives
+        .iter()
+        .find(|m| (m.eta - s.eta).abs() > 1e-9)
+    {
+        return Err(Error::InvalidArgument(format!(
+            "all materials must share the eta the irradiance is computed for ({}), found {}",
+            s.eta, m.eta
+        )));
+    }
+    Ok(())
+}
+
+fn check_irradiance(values: &[[f32; 3]], expected: usize) -> Result<()> {
+    if values.len() != expected {
+        return Err(Error::InvalidArgument(format!(
+            "the irradiance callback returned {} values for {expected} points",
+            values.len()
+        )));
+    }
+    if values.iter().flatten().any(|x| !x.is_finite() || *x < 0.0) {
+        return Err(Error::InvalidArgument(
+            "the irradiance callback returned a negative or non-finite value".into(),
+        ));
+    }
+    Ok(())
+}
+
+fn max_index(c: &[f32; 3]) -> usize {
+    (0..3).fold(0, |best, k| if c[k] > c[best] { k } else { best })
+}
+
+/// If every irradiance value is a multiple of one colour, that colour (brightest channel 1).
+fn common_colour(a: &[[f32; 3]], b: &[[f32; 3]]) -> Option<[f32; 3]> {
+    let all = a.iter().chain(b);
+    let brightest = all.clone().fold([0f32; 3], |m, x| {
+        if x.iter().sum::<f32>() > m.iter().sum::<f32>() {
+            *x
+        } else {
+            m
+        }
+    });
+    let k = max_index(&brightest);
+    if brightest[k] <= 0.0 {
+        return Some([1.0; 3]);
+    }
+    let colour = brightest.map(|x| x / brightest[k]);
+    let same = all.clone().all(|x| {
+        (0..3).all(|c| (x[c] - colour[c] * x[k]).abs() <= 1e-5 * x[k].max(f32::MIN_POSITIVE))
+    });
+    same.then_some(colour)
+}
+
+/// Geometric area of the samples within `radius` of `p`.
+fn area_within(tree: &SampleTree, p: DVec3, radius: f64) -> f64 {
+    let mut total = 0.0;
+    let mut stack = vec![0usize];
+    while let Some(ni) = stack.pop() {
+        let node = &tree.nodes[ni];
+        let d = (node.center - p).length();
+        if d - node.radius >= radius {
+            continue;
+        }
+        if d + node.radius < radius {
+            total += node.area;
+        } else if node.first_child == 0 {
+            for s in &tree.samples[node.start as usize..node.end as usize] {
+                if (s.position.as_dvec3() - p).length() < radius {
+                    total += f64::from(s.area);
+                }
+            }
+        } else {
+            stack.push(node.first_child as usize);
+            stack.push(node.first_child as usize + 1);
+        }
+    }
+    total
+}
+
+/// The radius of the disc whose area is the `q`-quantile of the excluded areas (ignoring
+/// vertices with no samples around them: isolated ones).
+fn percentile_radius(areas: &[f64], q: f64) -> f64 {
+    let mut a: Vec<f64> = areas.iter().cloned().filter(|x| *x > 0.0).collect();
+    if a.is_empty() {
+        return 0.0;
+    }
+    let k = ((a.len() - 1) as f64 * q) as usize;
+    let (_, v, _) = a.select_nth_unstable_by(k, f64::total_cmp);
+    (*v / std::f64::consts::PI).sqrt()
+}
+
+fn uniform_basis(lo: f64, hi: f64, s: &PrtSettings) -> Result<Basis> {
+    let intervals = s.coefficients.saturating_sub(match s.degree {
+        Degree::Linear => 1,
+        Degree::Quadratic => 2,
+    });
+    let m = intervals.max(1);
+    Basis::with_knots(
+        (0..=m)
+            .map(|i| lo + (hi - lo) * i as f64 / m as f64)
+            .collect(),
+        s.degree,
+    )
+}
+
+/// The far-field acceptance test and its error bound.
+struct FarField {
+    theta: f64,
+}
+
+impl FarField {
+    fn new(theta: f64) -> Self {
+        Self { theta }
+    }
+
+    /// rho <= theta (d - rho): the cluster subtends a small angle.
+    fn accepts(&self, rho: f64, d: f64) -> bool {
+        self.theta > 0.0 && rho <= self.theta * (d - rho)
+    }
+
+    /// Relative error bound of the second-order mean distance at the opening limit:
+    /// |r - (d - u.delta + (|delta|^2 - (u.delta)^2)/(2d))| <= |delta|^3 / (2 (d - |delta|)^2),
+    /// divided by d; with rho = theta (d - rho).
+    fn distance_bound(&self) -> f64 {
+        let t = self.theta;
+        if t == 0.0 {
+            return 0.0;
+        }
+        // rho/d = t/(1+t); (d - rho)/d = 1/(1+t).
+        let rho = t / (1.0 + t);
+        let gap = 1.0 / (1.0 + t);
+        rho.powi(3) / (2.0 * gap * gap)
+    }
+}
+
+struct Receiver {
+    position: DVec3,
+    irradiance: [f32; 3],
+    /// Radius of the disc of the same area as the samples excluded around the receiver.
+    own_disc: f64,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct Counters {
+    exact: u64,
+    far: u64,
+    beyond: u64,
+    dark: u64,
+}
+
+impl Counters {
+    fn sum(self, o: Counters) -> Counters {
+        Counters {
+            exact: self.exact + o.exact,
+            far: self.far + o.far,
+            beyond: self.beyond + o.beyond,
+            dark: self.dark + o.dark,
+        }
+    }
+}
+
+/// Fills one vertex's transport row: per stored channel, [I(x_o), T_0 .. T_{n-1}].
+fn transport_row(
+    tree: &SampleTree,
+    basis: &Basis,
+    far: &FarField,
+    exclusion: f64,
+    near_radius: f64,
+    rx: &Receiver,
+    row: &mut [f32],
+) -> Counters {
+    let channels = tree.channels;
+    let n = basis.len();
+    let stride = n + 1;
+    let (_, support) = basis.domain();
+    let degree_terms = match basis.degree() {
+        Degree::Linear => 2,
+        Degree::Quadratic => 3,
+    };
+    let mut acc = vec![0f64; channels * n];
+    let add = |c: usize, r: f64, w: f64, acc: &mut [f64]| {
+        let (first, values) = basis.eval(r);
+        for (k, v) in values.iter().take(degree_terms).enumerate() {
+            if first + k < n {
+                acc[c * n + first + k] += w * v;
+            }
+        }
+    };
+    let mut counters = Counters::default();
+    let mut stack = Vec::with_capacity(64);
+    stack.push(0usize);
+    while let Some(ni) = stack.pop() {
+        let node = &tree.nodes[ni];
+        let v = rx.position - node.center;
+        let d = v.length();
+        let gap = d - node.radius;
+        if gap >= support {
+            counters.beyond += 1;
+            continue;
+        }
+        if gap >= exclusion && node.dark {
+            counters.dark += 1;
+            continue;
+        }
+        if node.first_child == 0 {
+            for s in &tree.samples[node.start as usize..node.end as usize] {
+                let r = (s.position.as_dvec3() - rx.position).length();
+                if r < exclusion || r >= support {
+                    continue;
+                }
+                counters.exact += 1;
+                for c in 0..channels {
+                    add(c, r, f64::from(s.weight[c]), &mut acc);
+                }
+            }
+        } else if gap >= exclusion && far.accepts(node.radius, d) {
+            // Two pseudo-samples at mean +- deviation of the cluster's distances reproduce
+            // sum w, sum w r and sum w r^2: exact for any profile quadratic in r over the
+            // cluster's range. sum w r^2 is exact from the moments; sum w r is the Taylor
+            // expansion of |v - delta| to second order (remainder bounded in FarField).
+            counters.far += 1;
+            let u = v / d;
+            for c in 0..channels {
+                let m = &tree.moments[ni * channels + c];
+                if m.w <= 0.0 {
+                    continue;
+                }
+                let m1 = m.w * d - u.dot(m.s) + (m.trace() - m.quadratic(u)) / (2.0 * d);
+                let m2 = m.w * d * d - 2.0 * v.dot(m.s) + m.trace();
+                let mean = m1 / m.w;
+                let sd = (m2 / m.w - mean * mean).max(0.0).sqrt();
+                add(c, mean - sd, 0.5 * m.w, &mut acc);
+                add(c, mean + sd, 0.5 * m.w, &mut acc);
+            }
+        } else {
+            stack.push(node.first_child as usize);
+            stack.push(node.first_child as usize + 1);
+        }
+    }
+    // The receiver's own disc: [0, near_radius] in closed form at edit time (slot 0 holds
+    // I(x_o)); [near_radius, own_disc] through the basis, I taken constant over the disc.
+    let ring = basis.integrals_2pi_r(near_radius, rx.own_disc.max(near_radius));
+    for c in 0..channels {
+        let i = f64::from(rx.irradiance[c]);
+        let out = &mut row[c * stride..(c + 1) * stride];
+        out[0] = i as f32;
+        for j in 0..n {
+            out[j + 1] = (acc[c * n + j] + i * ring[j]) as f32;
+        }
+    }
+    counters
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::fresnel_transmittance;
+
+    /// A flat square grid of `n` x `n` vertices and side `size`, centred at the origin, normal +Z.
+    pub(crate) fn plane(n: usize, size: f32) -> Mesh {
+        let mut p = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let x = size * (i as f32 / (n - 1) as f32 - 0.5);
+                let y = size * (j as f32 / (n - 1) as f32 - 0.5);
+                p.push(Vec3::new(x, y, 0.0));
+            }
+        }
+        let mut t = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = (j * n + i) as u32;
+                let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
+                t.push([a, b, d]);
+                t.push([a, d, c]);
+            }
+        }
+        Mesh::new(p, t, None).unwrap()
+    }
+
+    /// Irradiance of a sun of strength `e` at zenith angle `theta` on the +Z plane (Xu eq. 3
+    /// for a delta light): F_t(eta, cos) E cos, the same at every point.
+    fn sun(
+        e: f32,
+        theta: f64,
+        eta: f64,
+    ) -> impl Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync {
+        let c = theta.cos();
+        let i = (fresnel_transmittance(eta, c) * c * f64::from(e)) as f32;
+        move |p: &[Vec3], _n: &[Vec3]| Ok(vec![[i; 3]; p.len()])
+    }
+
+    /// Jensen 2001's closed form for R_d,total, written out apart from `optics`.
+    fn rd_total(sigma_a: f64, sigma_s_prime: f64, eta: f64) -> f64 {
+        let a = sigma_s_prime / (sigma_a + sigma_s_prime);
+        let f_dr = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
+        let big_a = (1.0 + f_dr) / (1.0 - f_dr);
+        let s = (3.0 * (1.0 - a)).sqrt();
+        0.5 * a * (1.0 + (-4.0 / 3.0 * big_a * s).exp()) * (-s).exp()
+    }
+
+    fn centre(mesh: &Mesh) -> usize {
+        mesh.positions()
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.length().total_cmp(&b.1.length()))
+            .unwrap()
+            .0
+    }
+
+    fn check_plane(mesh: &Mesh, m: &Material, theta: f64, tol: f64) {
+        let settings = PrtSettings {
+            eta: m.eta,
+            ..Default::default()
+        };
+        let prt = Prt::precompute(mesh, &[*m], &settings, &sun(1.0, theta, m.eta), None).unwrap();
+        let b = prt.radiosity(m).unwrap().radiosity;
+        let v = centre(mesh);
+        let e = fresnel_transmittance(m.eta, theta.cos()) * theta.cos();
+        for c in 0..3 {
+            let expect = e * rd_total(m.sigma_a[c], m.sigma_s_prime()[c], m.eta);
+            let got = f64::from(b[v][c]);
+            eprintln!(
+                "plane: channel {c} B {got:.6e} closed form {expect:.6e} ({:+.3} %)",
+                100.0 * (got / expect - 1.0)
+            );
+            assert!(
+                (got - expect).abs() <= tol * expect,
+                "channel {c}: B = {got}, closed form {expect} ({:.3} %)",
+                100.0 * (got / expect - 1.0)
+            );
+        }
+    }
+
+    #[test]
+    fn sun_on_a_large_plane_gives_ft_e_cos_rd_total_for_marble() {
+        // 200 mm square, 2 mm grid: the marble tail beyond 100 mm is below 1e-5.
+        let mesh = plane(101, 200.0);
+        let marble = Material::preset("marble", 1.0).unwrap();
+        for theta in [0.0, 0.6, 1.2] {
+            check_plane(&mesh, &marble, theta, 0.01);
+        }
+        let ketchup = Material::preset("ketchup", 1.0).unwrap();
+        check_plane(&mesh, &ketchup, 0.3, 0.01);
+    }
+
+    #[test]
+    fn stiff_material_tends_to_the_diffuse_brdf_limit() {
+        // sigma_s' = 1e4 per mm on a millimetre mesh: R_d lives far inside one sample.
+        let mesh = plane(41, 20.0);
+        let stiff = Material::new([1.0, 10.0, 100.0], [1e4; 3], 0.0, 1.3).unwrap();
+        check_plane(&mesh, &stiff, 0.4, 0.01);
+    }
+
+    #[test]
+    fn no_absorption_conserves_energy_on_a_plane() {
+        // sigma_a = 0: R_d,total = 1 and the tail falls as 1/r; 1000 mean free paths of plane
+        // leave (z_r + z_v) / (2 R) < 0.3 % outside.
+        let mesh = plane(161, 100.0);
+        let white = Material::new([0.0; 3], [10.0, 20.0, 40.0], 0.0, 1.3).unwrap();
+        check_plane(&mesh, &white, 0.0, 0.01);
+    }
+
+    #[test]
+    fn clustered_far_field_matches_brute_force_sum() {
+        let mesh = plane(61, 60.0);
+        let m = Material::preset("skin1", 1.0).unwrap();
+        // A spatially varying irradiance so clusters are not uniform.
+        let irr = |p: &[Vec3], _n: &[Vec3]| {
+            Ok(p.iter()
+                .map(|x| {
+                    let v = 1.0 + 0.5 * (x.x * 0.2).sin() + 0.3 * (x.y * 0.1).cos();
+                    [v, 0.5 * v, 0.25 * v]
+                })
+                .collect())
+        };
+        let exact = PrtSettings {
+            far_field: 0.0,
+            ..Default::default()
+        };
+        let fast = PrtSettings::default();
+        let a = Prt::precompute(&mesh, &[m], &exact, &irr, None).unwrap();
+        let b = Prt::precompute(&mesh, &[m], &fast, &irr, None).unwrap();
+        assert!(b.report().far_clusters > 0 && a.report().far_clusters == 0);
+        let ea = a.radiosity(&m).unwrap().radiosity;
+        let eb = b.radiosity(&m).unwrap().radiosity;
+        let s = crate::metrics::relative_error(&eb, &ea, mesh.vertex_areas()).unwrap();
+        eprintln!(
+            "clustered vs brute force: {s:?}; {} far clusters",
+            b.report().far_clusters
+        );
+        assert!(s.worst_rms() < 1e-3, "clustered vs brute force: {s:?}");
+        assert_eq!(
+            b.report().stored_channels,
+            1,
+            "one colour of light needs one transport"
+        );
+    }
+
+    #[test]
+    fn cancelling_stops_the_precompute() {
+        let mesh = plane(11, 10.0);
+        let m = Material::preset("marble", 1.0).unwrap();
+        let stop = |f: f32| f < 0.5;
+        let r = Prt::precompute(
+            &mesh,
+            &[m],
+            &PrtSettings::default(),
+            &sun(1.0, 0.0, 1.3),
+            Some(&stop),
+        );
+        assert_eq!(r.unwrap_err(), Error::Cancelled);
+    }
+
+    #[test]
+    fn eta_mismatch_and_bad_settings_are_errors() {
+        let mesh = plane(11, 10.0);
+        let m = Material::preset("marble", 1.0).unwrap();
+        let prt = Prt::precompute(
+            &mesh,
+            &[m],
+            &PrtSettings::default(),
+            &sun(1.0, 0.0, 1.3),
+            None,
+        )
+        .unwrap();
+        let other = Material::new(m.sigma_a, m.sigma_s, 0.0, 1.5).unwrap();
+        assert!(prt.radiosity(&other).is_err());
+        let bad = PrtSettings {
+            tolerance: 0.0,
+            ..Default::default()
+        };
+        assert!(Prt::precompute(&mesh, &[m], &bad, &sun(1.0, 0.0, 1.3), None).is_err());
+        assert!(Prt::precompute(
+            &mesh,
+            &[],
+            &PrtSettings::default(),
+            &sun(1.0, 0.0, 1.3),
+            None
+        )
+        .is_err());
+        let nan = |p: &[Vec3], _n: &[Vec3]| Ok(vec![[f32::NAN; 3]; p.len()]);
+        assert!(Prt::precompute(&mesh, &[m], &PrtSettings::default(), &nan, None).is_err());
+    }
+}

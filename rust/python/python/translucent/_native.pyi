@@ -1,0 +1,149 @@
+"""Type stubs of the native module. Units: scene units for lengths, 1/scene unit for
+coefficients, Blender/Cycles light units (W, W/m^2, radiance)."""
+
+from typing import Callable, Literal, Sequence, overload
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+RGB = float | Sequence[float]
+Vec3 = Sequence[float]
+ArrayN3 = npt.ArrayLike
+Progress = Callable[[float], bool | None]
+
+class Cancelled(RuntimeError):
+    """Raised when a progress callback returned False."""
+
+class Material:
+    """Homogeneous translucent material for the dipole model (Jensen 2001)."""
+
+    def __init__(self, sigma_a: RGB, sigma_s: RGB, g: float = 0.0, eta: float = 1.3) -> None: ...
+    @staticmethod
+    def preset(name: str, mm_per_unit: float = 1000.0) -> Material:
+        """Jensen 2001's measured material `name`; `mm_per_unit` mm per scene unit (1000 = metres)."""
+    @staticmethod
+    def preset_names() -> list[str]: ...
+    @property
+    def sigma_a(self) -> tuple[float, float, float]: ...
+    @property
+    def sigma_s(self) -> tuple[float, float, float]: ...
+    @property
+    def g(self) -> float: ...
+    @property
+    def eta(self) -> float: ...
+    @property
+    def total_diffuse_reflectance(self) -> tuple[float, float, float]: ...
+
+class Scene:
+    """A triangle mesh with its lights and world."""
+
+    def __init__(
+        self, positions: ArrayN3, triangles: npt.ArrayLike, normals: ArrayN3 | None = None
+    ) -> None: ...
+    def add_sun(self, direction: Vec3, irradiance: float, color: RGB | None = None) -> None:
+        """`direction`: the way the light travels; `irradiance`: Blender's Strength [W/m^2]."""
+    def add_point_light(self, position: Vec3, power: float, color: RGB | None = None) -> None:
+        """`power`: Blender's Power [W]; intensity power/(4 pi) [W/sr]."""
+    def add_spot_light(
+        self,
+        position: Vec3,
+        direction: Vec3,
+        power: float,
+        spot_size: float,
+        blend: float = 0.15,
+        color: RGB | None = None,
+    ) -> None:
+        """`spot_size`: full cone angle [rad]; `blend` in [0, 1] as in Blender."""
+    def add_area_light(
+        self,
+        position: Vec3,
+        direction: Vec3,
+        axis_u: Vec3,
+        size_u: float,
+        size_v: float,
+        power: float,
+        color: RGB | None = None,
+    ) -> None:
+        """One-sided rectangle of `power` [W], emitting along `direction`."""
+    def set_world(
+        self, color: RGB | None = None, strength: float = 1.0, image: npt.ArrayLike | None = None
+    ) -> None:
+        """Uniform radiance `color` x `strength`, or an (H, W, 3) equirectangular radiance image."""
+    def irradiance(
+        self, eta: float = 1.0, world_samples: int = 64, area_samples: int = 16, seed: int = 0
+    ) -> npt.NDArray[np.float32]:
+        """(N, 3) irradiance entering the surface at each vertex (Xu 2007 eq. 3)."""
+    @property
+    def vertex_count(self) -> int: ...
+    @property
+    def triangle_count(self) -> int: ...
+    @property
+    def area(self) -> float: ...
+    @property
+    def light_count(self) -> int: ...
+    @property
+    def vertex_areas(self) -> npt.NDArray[np.float32]:
+        """(N, 1) area per vertex, the weights of error metrics."""
+    @property
+    def mesh_report(self) -> dict[str, float]: ...
+
+class Prt:
+    """Precomputed transport (Xu 2007) of a scene; evaluates a material in milliseconds."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        materials: Material | Sequence[Material],
+        coefficients: int = 32,
+        degree: Literal[1, 2] = 1,
+        samples: int | None = None,
+        tolerance: float = 1e-3,
+        far_field: float = 0.25,
+        world_samples: int = 64,
+        area_samples: int = 16,
+        progress: Progress | None = None,
+    ) -> None: ...
+    def radiosity(self, material: Material) -> npt.NDArray[np.float32]:
+        """(N, 3) multiple-scattering radiosity B per vertex."""
+    def radiance(self, material: Material, eye: Vec3) -> npt.NDArray[np.float32]:
+        """(N, 3) multiple-scattering radiance toward the point `eye`, F_t B / pi."""
+    @property
+    def last_eval(self) -> dict[str, float | list[float]] | None: ...
+    @property
+    def report(self) -> dict[str, float | int | list[float]]: ...
+    @property
+    def eta(self) -> float: ...
+    @property
+    def vertex_count(self) -> int: ...
+
+@overload
+def reference_radiosity(
+    scene: Scene,
+    material: Material,
+    rel_tol: float = 1e-3,
+    receivers: Sequence[int] | None = None,
+    max_level: int = 4,
+    world_samples: int = 64,
+    area_samples: int = 16,
+    progress: Progress | None = None,
+    details: Literal[False] = False,
+) -> npt.NDArray[np.float32]: ...
+@overload
+def reference_radiosity(
+    scene: Scene,
+    material: Material,
+    rel_tol: float = 1e-3,
+    receivers: Sequence[int] | None = None,
+    max_level: int = 4,
+    world_samples: int = 64,
+    area_samples: int = 16,
+    progress: Progress | None = None,
+    *,
+    details: Literal[True],
+) -> tuple[npt.NDArray[np.float32], dict[str, object]]: ...
+def relative_error(
+    estimate: ArrayN3, truth: ArrayN3, weights: npt.ArrayLike | None = None
+) -> dict[str, list[float]]:
+    """Area-weighted relative RMS and max relative error per channel."""

@@ -1,0 +1,185 @@
+//! `translucent.Prt`: precompute once, then evaluate any material in milliseconds.
+
+use crate::convert::{rgb_array, vec3, Progress};
+use crate::material::PyMaterial;
+use crate::scene::PyScene;
+use numpy::PyArray2;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use translucent_core::basis::Degree;
+use translucent_core::irradiance::{irradiance, IrradianceSettings};
+use translucent_core::optics::Material;
+use translucent_core::prt::{Evaluation, Prt, PrtSettings};
+use translucent_core::Vec3;
+
+/// Precomputed transport (Xu 2007) of a scene for materials near `materials`.
+#[pyclass(name = "Prt", module = "translucent")]
+pub struct PyPrt {
+    inner: Prt,
+    last: Option<Evaluation>,
+}
+
+fn materials_of(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Material>> {
+    if let Ok(m) = obj.extract::<PyRef<PyMaterial>>() {
+        return Ok(vec![m.inner]);
+    }
+    let list: Vec<PyRef<PyMaterial>> = obj.extract().map_err(|_| {
+        PyValueError::new_err("materials must be a Material or a sequence of Materials")
+    })?;
+    Ok(list.iter().map(|m| m.inner).collect())
+}
+
+#[pymethods]
+impl PyPrt {
+    /// Precomputes the transport. Releases the GIL; `progress(fraction)` is called now and then
+    /// and may return False to cancel (raises `translucent.Cancelled`).
+    #[new]
+    #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
+        tolerance = 1e-3, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        scene: PyRef<'_, PyScene>,
+        materials: &Bound<'_, PyAny>,
+        coefficients: usize,
+        degree: u32,
+        samples: Option<usize>,
+        tolerance: f64,
+        far_field: f64,
+        world_samples: u32,
+        area_samples: u32,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Self> {
+        let materials = materials_of(materials)?;
+        let eta = materials.first().map(|m| m.eta).unwrap_or(1.3);
+        let degree = Degree::from_int(degree).map_err(crate::convert::to_py)?;
+        let settings = PrtSettings {
+            coefficients,
+            degree,
+            samples,
+            tolerance,
+            far_field,
+            eta,
+        };
+        let irr = IrradianceSettings {
+            eta,
+            world_samples,
+            area_samples,
+            seed: 0,
+        };
+        let tracer = scene.tracer();
+        let progress = Progress::new(progress);
+        let core_scene = &scene.scene;
+        let result = py.detach(|| {
+            let irradiance_fn = |p: &[Vec3], n: &[Vec3]| {
+                irradiance(core_scene, &tracer, p, n, &irr).map(|(v, _)| v)
+            };
+            let tick = |f: f32| progress.call(f);
+            Prt::precompute(
+                &core_scene.mesh,
+                &materials,
+                &settings,
+                &irradiance_fn,
+                if progress.is_set() { Some(&tick) } else { None },
+            )
+        });
+        let inner = result.map_err(|e| progress.to_py(e))?;
+        Ok(Self { inner, last: None })
+    }
+
+    /// Multiple-scattering radiosity B per vertex, (N, 3) float32 (Xu 2007 eq. 9 without F_t/pi).
+    fn radiosity<'py>(
+        &mut self,
+        py: Python<'py>,
+        material: PyRef<'_, PyMaterial>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let m = material.inner;
+        let inner = &self.inner;
+        let e = py
+            .detach(|| inner.radiosity(&m))
+            .map_err(crate::convert::to_py)?;
+        let out = rgb_array(py, &e.radiosity);
+        self.last = Some(e);
+        Ok(out)
+    }
+
+    /// Multiple-scattering radiance toward the point `eye`, L_d = F_t B / pi, (N, 3) float32.
+    fn radiance<'py>(
+        &mut self,
+        py: Python<'py>,
+        material: PyRef<'_, PyMaterial>,
+        eye: &Bound<'_, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let m = material.inner;
+        let eye = vec3("eye", eye)?;
+        let inner = &self.inner;
+        let e = py
+            .detach(|| inner.radiance(&m, eye))
+            .map_err(crate::convert::to_py)?;
+        let out = rgb_array(py, &e.radiosity);
+        self.last = Some(e);
+        Ok(out)
+    }
+
+    /// Timing and error estimate of the last evaluation: seconds, fit_seconds, dot_seconds,
+    /// fit_error and error_estimate per channel; None before the first.
+    #[getter]
+    fn last_eval<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(e) = &self.last else { return Ok(None) };
+        let d = PyDict::new(py);
+        d.set_item("seconds", e.fit_seconds + e.dot_seconds)?;
+        d.set_item("fit_seconds", e.fit_seconds)?;
+        d.set_item("dot_seconds", e.dot_seconds)?;
+        d.set_item("fit_error", e.fit_error.to_vec())?;
+        d.set_item("error_estimate", e.error_estimate.to_vec())?;
+        Ok(Some(d))
+    }
+
+    /// What the precompute did, skipped, and how long each step took.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let r = self.inner.report();
+        let d = PyDict::new(py);
+        d.set_item("vertices", r.vertices)?;
+        d.set_item("samples", r.samples)?;
+        d.set_item("sample_spacing", r.sample_spacing)?;
+        d.set_item("near_radius", r.near_radius)?;
+        d.set_item("support_radius", r.support_radius)?;
+        d.set_item("knots", r.knots.clone())?;
+        d.set_item("coefficients", self.inner.basis().len())?;
+        d.set_item("stored_channels", r.stored_channels)?;
+        d.set_item("transport_bytes", r.transport_bytes)?;
+        d.set_item("exact_samples", r.exact_samples)?;
+        d.set_item("far_clusters", r.far_clusters)?;
+        d.set_item("skipped_beyond_support", r.skipped_beyond_support)?;
+        d.set_item("skipped_dark", r.skipped_dark)?;
+        d.set_item("far_field_distance_bound", r.far_field_distance_bound)?;
+        d.set_item("seconds_irradiance", r.seconds_irradiance)?;
+        d.set_item("seconds_tree", r.seconds_tree)?;
+        d.set_item("seconds_transport", r.seconds_transport)?;
+        d.set_item("seconds", r.seconds_total)?;
+        Ok(d)
+    }
+
+    #[getter]
+    fn eta(&self) -> f64 {
+        self.inner.eta()
+    }
+
+    #[getter]
+    fn vertex_count(&self) -> usize {
+        self.inner.vertex_count()
+    }
+
+    fn __repr__(&self) -> String {
+        let r = self.inner.report();
+        format!(
+            "Prt({} vertices, {} samples, {} coefficients, {:.2} s)",
+            r.vertices,
+            r.samples,
+            self.inner.basis().len(),
+            r.seconds_total
+        )
+    }
+}

@@ -1,0 +1,147 @@
+//! `translucent.reference_radiosity` and `translucent.relative_error`.
+
+use crate::convert::{rgb_array, to_py, Progress};
+use crate::material::PyMaterial;
+use crate::scene::PyScene;
+use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use translucent_core::irradiance::{irradiance, IrradianceSettings};
+use translucent_core::metrics;
+use translucent_core::reference::{reference_radiosity, ReferenceSettings};
+use translucent_core::Vec3;
+
+/// Ground-truth radiosity by direct integration over the mesh (no basis, no clusters).
+/// Returns (K, 3) float32 for the `receivers` (all vertices by default). With `details=True`
+/// returns (radiosity, dict) with the level reached, the estimated error and the seconds.
+#[pyfunction]
+#[pyo3(signature = (scene, material, rel_tol = 1e-3, receivers = None, max_level = 4,
+    world_samples = 64, area_samples = 16, progress = None, details = false))]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(name = "reference_radiosity")]
+pub fn reference_radiosity_py<'py>(
+    py: Python<'py>,
+    scene: PyRef<'_, PyScene>,
+    material: PyRef<'_, PyMaterial>,
+    rel_tol: f64,
+    receivers: Option<Vec<i64>>,
+    max_level: u32,
+    world_samples: u32,
+    area_samples: u32,
+    progress: Option<Py<PyAny>>,
+    details: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    if !(rel_tol.is_finite() && rel_tol > 0.0 && rel_tol < 1.0) {
+        return Err(PyValueError::new_err(format!(
+            "rel_tol {rel_tol} must lie in (0, 1)"
+        )));
+    }
+    let n = scene.scene.mesh.vertex_count() as i64;
+    let receivers: Option<Vec<u32>> = receivers
+        .map(|r| {
+            r.into_iter()
+                .map(|i| {
+                    if (0..n).contains(&i) {
+                        Ok(i as u32)
+                    } else {
+                        Err(PyValueError::new_err(format!(
+                            "receiver index {i} out of range for {n} vertices"
+                        )))
+                    }
+                })
+                .collect()
+        })
+        .transpose()?;
+    let m = material.inner;
+    let irr = IrradianceSettings {
+        eta: m.eta,
+        world_samples,
+        area_samples,
+        seed: 1,
+    };
+    let settings = ReferenceSettings {
+        rel_tol,
+        max_level,
+        ..Default::default()
+    };
+    let tracer = scene.tracer();
+    let core_scene = &scene.scene;
+    let progress = Progress::new(progress);
+    let result = py
+        .detach(|| {
+            let irradiance_fn = |p: &[Vec3], nrm: &[Vec3]| {
+                irradiance(core_scene, &tracer, p, nrm, &irr).map(|(v, _)| v)
+            };
+            let tick = |f: f32| progress.call(f);
+            reference_radiosity(
+                &core_scene.mesh,
+                &m,
+                &irradiance_fn,
+                receivers.as_deref(),
+                &settings,
+                if progress.is_set() { Some(&tick) } else { None },
+            )
+        })
+        .map_err(|e| progress.to_py(e))?;
+    let values = rgb_array(py, &result.radiosity);
+    if !details {
+        return Ok(values.into_any());
+    }
+    let d = PyDict::new(py);
+    d.set_item("level", result.level)?;
+    d.set_item("nodes", result.nodes)?;
+    d.set_item("estimated_rel_error", result.estimated_rel_error)?;
+    d.set_item("converged", result.converged)?;
+    d.set_item("skipped_far", result.skipped_far)?;
+    d.set_item("seconds", result.seconds)?;
+    d.set_item("receivers", result.receivers.clone())?;
+    Ok((values, d).into_pyobject(py)?.into_any())
+}
+
+fn rows(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]>> {
+    let np = a.py().import("numpy")?;
+    let arr = np.call_method1("ascontiguousarray", (a, "float32"))?;
+    let arr: PyReadonlyArray2<f32> = arr
+        .extract()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be an (N, 3) float array")))?;
+    if arr.shape()[1] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "{name} must have shape (N, 3), got {:?}",
+            arr.shape()
+        )));
+    }
+    Ok(arr
+        .as_slice()?
+        .chunks_exact(3)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect())
+}
+
+/// Area-weighted relative RMS and max relative error per channel of `estimate` against
+/// `truth` (both (N, 3)), weights (N,) e.g. `scene.vertex_areas`. Returns
+/// {"rms": [r, g, b], "max": [r, g, b]}.
+#[pyfunction]
+#[pyo3(signature = (estimate, truth, weights = None))]
+pub fn relative_error<'py>(
+    py: Python<'py>,
+    estimate: &Bound<'py, PyAny>,
+    truth: &Bound<'py, PyAny>,
+    weights: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let e = rows("estimate", estimate)?;
+    let t = rows("truth", truth)?;
+    let w: Vec<f32> = match weights {
+        Some(w) => {
+            let np = py.import("numpy")?;
+            let flat = np.call_method1("ravel", (np.call_method1("asarray", (w, "float32"))?,))?;
+            flat.extract()?
+        }
+        None => vec![1.0; t.len()],
+    };
+    let s = metrics::relative_error(&e, &t, &w).map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("rms", s.rel_rms.to_vec())?;
+    d.set_item("max", s.rel_max.to_vec())?;
+    Ok(d)
+}

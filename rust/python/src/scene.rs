@@ -1,0 +1,288 @@
+//! `translucent.Scene`: a mesh, its lights and its world, and the ray tracer built over it.
+
+use crate::convert::{rgb, rgb_array, to_py, triangle_array, vec3, vec3_array};
+use numpy::{PyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::{Arc, OnceLock};
+use translucent_core::irradiance::{irradiance, IrradianceSettings};
+use translucent_core::lights::{Light, World};
+use translucent_core::mesh::Mesh;
+use translucent_core::raytrace::Tracer;
+use translucent_core::scene::Scene;
+
+/// A triangle mesh with lights and a world. Lengths in scene units; light units as Blender's.
+#[pyclass(name = "Scene", module = "translucent")]
+pub struct PyScene {
+    pub scene: Scene,
+    tracer: OnceLock<Arc<Tracer>>,
+}
+
+impl PyScene {
+    /// The ray tracer over the mesh, built on first use (the mesh never changes).
+    pub fn tracer(&self) -> Arc<Tracer> {
+        self.tracer
+            .get_or_init(|| Arc::new(Tracer::new(&self.scene.mesh)))
+            .clone()
+    }
+}
+
+fn colour(power: f64, color: &Bound<'_, PyAny>) -> PyResult<[f32; 3]> {
+    Ok(rgb("color", color)?.map(|c| (c * power) as f32))
+}
+
+#[pymethods]
+impl PyScene {
+    #[new]
+    #[pyo3(signature = (positions, triangles, normals = None))]
+    fn new(
+        py: Python<'_>,
+        positions: &Bound<'_, PyAny>,
+        triangles: &Bound<'_, PyAny>,
+        normals: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let positions = vec3_array("positions", positions)?;
+        let triangles = triangle_array("triangles", triangles)?;
+        let normals = normals.map(|n| vec3_array("normals", n)).transpose()?;
+        let mesh = py
+            .detach(|| Mesh::new(positions, triangles, normals))
+            .map_err(to_py)?;
+        Ok(Self {
+            scene: Scene::new(mesh),
+            tracer: OnceLock::new(),
+        })
+    }
+
+    /// A sun: `direction` is the way the light travels; `irradiance` is Blender's Strength [W/m^2].
+    #[pyo3(signature = (direction, irradiance, color = None))]
+    fn add_sun(
+        &mut self,
+        direction: &Bound<'_, PyAny>,
+        irradiance: f64,
+        color: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let c = colour_or_white(irradiance, color)?;
+        let light = Light::sun(vec3("direction", direction)?, c).map_err(to_py)?;
+        self.scene.lights.push(light);
+        Ok(())
+    }
+
+    /// A point light of Blender Power `power` [W] (intensity power/(4 pi) W/sr).
+    #[pyo3(signature = (position, power, color = None))]
+    fn add_point_light(
+        &mut self,
+        position: &Bound<'_, PyAny>,
+        power: f64,
+        color: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let c = colour_or_white(power, color)?;
+        let light = Light::point(vec3("position", position)?, c).map_err(to_py)?;
+        self.scene.lights.push(light);
+        Ok(())
+    }
+
+    /// A spot light: full cone angle `spot_size` [rad] and `blend` in [0, 1], as in Blender.
+    #[pyo3(signature = (position, direction, power, spot_size, blend = 0.15, color = None))]
+    fn add_spot_light(
+        &mut self,
+        position: &Bound<'_, PyAny>,
+        direction: &Bound<'_, PyAny>,
+        power: f64,
+        spot_size: f32,
+        blend: f32,
+        color: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let c = colour_or_white(power, color)?;
+        let light = Light::spot(
+            vec3("position", position)?,
+            vec3("direction", direction)?,
+            c,
+            spot_size,
+            blend,
+        )
+        .map_err(to_py)?;
+        self.scene.lights.push(light);
+        Ok(())
+    }
+
+    /// A one-sided rectangular area light of `power` [W] centred at `position`, emitting along
+    /// `direction`, `size_u` along `axis_u` and `size_v` along direction x axis_u.
+    #[pyo3(signature = (position, direction, axis_u, size_u, size_v, power, color = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_area_light(
+        &mut self,
+        position: &Bound<'_, PyAny>,
+        direction: &Bound<'_, PyAny>,
+        axis_u: &Bound<'_, PyAny>,
+        size_u: f32,
+        size_v: f32,
+        power: f64,
+        color: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let c = colour_or_white(power, color)?;
+        let light = Light::area(
+            vec3("position", position)?,
+            vec3("direction", direction)?,
+            vec3("axis_u", axis_u)?,
+            size_u,
+            size_v,
+            c,
+        )
+        .map_err(to_py)?;
+        self.scene.lights.push(light);
+        Ok(())
+    }
+
+    /// The world: a uniform radiance `color` x `strength`, or an equirectangular (H, W, 3)
+    /// radiance `image` x `strength` (Cycles' Environment Texture mapping).
+    #[pyo3(signature = (color = None, strength = 1.0, image = None))]
+    fn set_world(
+        &mut self,
+        color: Option<&Bound<'_, PyAny>>,
+        strength: f64,
+        image: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        if !(strength.is_finite() && strength >= 0.0) {
+            return Err(PyValueError::new_err(format!(
+                "world strength {strength} must be finite and >= 0"
+            )));
+        }
+        self.scene.world = match image {
+            Some(img) => {
+                let np = img.py().import("numpy")?;
+                let arr = np.call_method1("ascontiguousarray", (img, "float32"))?;
+                let arr: PyReadonlyArray3<f32> = arr.extract().map_err(|_| {
+                    PyValueError::new_err("world image must be an (H, W, 3) float array")
+                })?;
+                let shape = arr.shape().to_vec();
+                if shape[2] != 3 {
+                    return Err(PyValueError::new_err(format!(
+                        "world image must have shape (H, W, 3), got {shape:?}"
+                    )));
+                }
+                let px = arr
+                    .as_slice()?
+                    .chunks_exact(3)
+                    .map(|p| [p[0], p[1], p[2]].map(|x| (f64::from(x) * strength) as f32))
+                    .collect();
+                World::environment(shape[1], shape[0], px).map_err(to_py)?
+            }
+            None => {
+                let c = match color {
+                    Some(c) => rgb("color", c)?,
+                    None => [0.0; 3],
+                };
+                World::uniform(c.map(|x| (x * strength) as f32)).map_err(to_py)?
+            }
+        };
+        Ok(())
+    }
+
+    #[getter]
+    fn vertex_count(&self) -> usize {
+        self.scene.mesh.vertex_count()
+    }
+
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.scene.mesh.triangles().len()
+    }
+
+    /// Total surface area [unit^2].
+    #[getter]
+    fn area(&self) -> f64 {
+        self.scene.mesh.area()
+    }
+
+    #[getter]
+    fn light_count(&self) -> usize {
+        self.scene.lights.len()
+    }
+
+    /// Per-vertex area (a third of each adjacent triangle): the weights of error metrics.
+    #[getter]
+    fn vertex_areas<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        let a = self.scene.mesh.vertex_areas();
+        numpy::ndarray::Array2::from_shape_vec((a.len(), 1), a.to_vec())
+            .map(|x| PyArray2::from_owned_array(py, x))
+            .expect("shape matches")
+    }
+
+    /// What mesh validation found that is not fatal.
+    #[getter]
+    fn mesh_report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let r = self.scene.mesh.report();
+        let d = PyDict::new(py);
+        d.set_item("degenerate_triangles", r.degenerate_triangles)?;
+        d.set_item("isolated_vertices", r.isolated_vertices)?;
+        d.set_item("zero_normals", r.zero_normals)?;
+        d.set_item("area", r.area)?;
+        Ok(d)
+    }
+
+    /// Irradiance entering the surface at each vertex [W/unit^2 as the lights give it],
+    /// I = int F_t(eta) L (n . w) dw (Xu 2007 eq. 3); eta = 1 gives the plain irradiance E.
+    #[pyo3(signature = (eta = 1.0, world_samples = 64, area_samples = 16, seed = 0))]
+    fn irradiance<'py>(
+        &self,
+        py: Python<'py>,
+        eta: f64,
+        world_samples: u32,
+        area_samples: u32,
+        seed: u64,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        check_eta(eta)?;
+        let settings = IrradianceSettings {
+            eta,
+            world_samples,
+            area_samples,
+            seed,
+        };
+        let tracer = self.tracer();
+        let mesh = &self.scene.mesh;
+        let values = py
+            .detach(|| {
+                irradiance(
+                    &self.scene,
+                    &tracer,
+                    mesh.positions(),
+                    mesh.normals(),
+                    &settings,
+                )
+            })
+            .map_err(to_py)?
+            .0;
+        Ok(rgb_array(py, &values))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene({} vertices, {} triangles, {} lights)",
+            self.scene.mesh.vertex_count(),
+            self.scene.mesh.triangles().len(),
+            self.scene.lights.len()
+        )
+    }
+}
+
+pub fn check_eta(eta: f64) -> PyResult<()> {
+    if !(eta.is_finite() && (1.0..=5.0).contains(&eta)) {
+        return Err(PyValueError::new_err(format!(
+            "eta = {eta}: the relative index of refraction must lie in [1, 5]"
+        )));
+    }
+    Ok(())
+}
+
+fn colour_or_white(power: f64, color: Option<&Bound<'_, PyAny>>) -> PyResult<[f32; 3]> {
+    if !power.is_finite() || power < 0.0 {
+        return Err(PyValueError::new_err(format!(
+            "light power/strength {power} must be finite and >= 0"
+        )));
+    }
+    match color {
+        Some(c) => colour(power, c),
+        None => Ok([power as f32; 3]),
+    }
+}

@@ -1,0 +1,214 @@
+"""The Python API as a bpy scripter uses it: numpy in and out, clear exceptions, closed-form
+checks on a plane, cancelling, and the ground truth agreeing with PRT."""
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+import translucent
+
+
+def plane(n: int = 41, size: float = 0.2):
+    """A flat square grid in z = 0 (metres), n x n vertices, normal +Z."""
+    xs = np.linspace(-size / 2, size / 2, n, dtype=np.float32)
+    x, y = np.meshgrid(xs, xs)
+    p = np.stack([x.ravel(), y.ravel(), np.zeros(n * n, np.float32)], axis=1)
+    i = np.arange(n - 1)
+    a = (i[None, :] + n * i[:, None]).ravel()
+    t = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    return p, t
+
+
+def fresnel_t(eta: float, cos_i: float) -> float:
+    """Unpolarised dielectric Fresnel transmittance, written out independently."""
+    sin_t = math.sqrt(max(0.0, 1 - cos_i**2)) / eta
+    cos_t = math.sqrt(1 - sin_t**2)
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    return 1 - 0.5 * (rs**2 + rp**2)
+
+
+def jensen_rd_total(sigma_a: float, sigma_s_prime: float, eta: float) -> float:
+    a = sigma_s_prime / (sigma_a + sigma_s_prime)
+    f_dr = -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
+    big_a = (1 + f_dr) / (1 - f_dr)
+    s = math.sqrt(3 * (1 - a))
+    return a / 2 * (1 + math.exp(-4 / 3 * big_a * s)) * math.exp(-s)
+
+
+def centre_index(p: np.ndarray) -> int:
+    return int(np.argmin(np.linalg.norm(p, axis=1)))
+
+
+# ---------------------------------------------------------------- bad input -> clear errors
+
+
+@pytest.mark.parametrize(
+    "mutate, words",
+    [
+        (lambda p, t: (p[:0], t), "no vertices"),
+        (lambda p, t: (p, t[:0]), "no triangles"),
+        (lambda p, t: (np.where(np.arange(len(p))[:, None] == 3, np.nan, p), t), "non-finite"),
+        (lambda p, t: (p, np.where(t == t.max(), len(p) + 5, t)), "references vertex"),
+        (lambda p, t: (p, np.where(t == 0, -1, t)), "out of range"),
+        (lambda p, t: (p[:, :2], t), r"shape \(N, 3\)"),
+        (lambda p, t: (p, t[:, :2]), r"shape \(M, 3\)"),
+    ],
+)
+def test_bad_mesh_raises_value_error_saying_what_is_wrong(mutate, words):
+    p, t = plane(5)
+    p2, t2 = mutate(p.copy(), t.copy())
+    with pytest.raises(ValueError, match=words):
+        translucent.Scene(p2, t2)
+
+
+def test_wrong_number_of_normals_is_rejected():
+    p, t = plane(5)
+    with pytest.raises(ValueError, match="normals"):
+        translucent.Scene(p, t, normals=np.zeros((3, 3)))
+
+
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda s: s.add_point_light((0, 0, 1), power=-5.0), "power"),
+        (lambda s: s.add_sun((0, 0, 0), irradiance=1.0), "zero length"),
+        (lambda s: s.add_sun((0, 0, -1), irradiance=float("nan")), "finite"),
+        (lambda s: s.add_spot_light((0, 0, 1), (0, 0, -1), 10.0, spot_size=4.0), "spot_size"),
+        (lambda s: s.set_world(color=(1, 1)), "3 components"),
+        (lambda s: s.set_world(image=np.ones((4, 8, 2))), r"\(H, W, 3\)"),
+        (lambda s: s.irradiance(eta=0.5), "eta"),
+    ],
+)
+def test_bad_lights_raise_value_error(call, words):
+    p, t = plane(5)
+    s = translucent.Scene(p, t)
+    with pytest.raises(ValueError, match=words):
+        call(s)
+
+
+def test_bad_prt_arguments_raise_value_error():
+    p, t = plane(9)
+    s = translucent.Scene(p, t)
+    s.add_sun((0, 0, -1), 1.0)
+    m = translucent.Material.preset("marble")
+    with pytest.raises(ValueError, match="at least one material"):
+        translucent.Prt(s, [])
+    with pytest.raises(ValueError):
+        translucent.Prt(s, m, coefficients=0)
+    with pytest.raises(ValueError):
+        translucent.Prt(s, m, degree=3)
+    with pytest.raises(ValueError, match="tolerance"):
+        translucent.Prt(s, m, tolerance=2.0)
+    prt = translucent.Prt(s, m)
+    with pytest.raises(ValueError, match="eta"):
+        prt.radiosity(translucent.Material(m.sigma_a, m.sigma_s, eta=1.5))
+    with pytest.raises(ValueError, match="receiver index"):
+        translucent.reference_radiosity(s, m, receivers=[len(p)])
+    with pytest.raises(ValueError, match="same length"):
+        translucent.relative_error(np.zeros((3, 3)), np.zeros((2, 3)))
+
+
+# ---------------------------------------------------------------- closed forms
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.7])
+def test_sun_on_plane_matches_closed_form_through_the_whole_api(theta):
+    # 40 cm plane, marble in metres: the tail beyond 20 cm is negligible.
+    p, t = plane(81, 0.4)
+    s = translucent.Scene(p, t)
+    s.add_sun((math.sin(theta), 0.0, -math.cos(theta)), irradiance=3.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    b = translucent.Prt(s, m).radiosity(m)
+    assert b.shape == (len(p), 3) and b.dtype == np.float32
+    v = centre_index(p)
+    e = fresnel_t(1.3, math.cos(theta)) * 3.0 * math.cos(theta)
+    sp, sa = (2.19, 2.62, 3.00), (0.0021, 0.0041, 0.0071)
+    for c in range(3):
+        expect = e * jensen_rd_total(sa[c], sp[c], 1.3)
+        assert b[v, c] == pytest.approx(expect, rel=0.01)
+
+
+def test_radiance_is_fresnel_over_pi_times_radiosity():
+    p, t = plane(21, 0.1)
+    s = translucent.Scene(p, t)
+    s.add_sun((0, 0, -1), 1.0)
+    m = translucent.Material.preset("skin1")
+    prt = translucent.Prt(s, m)
+    b = prt.radiosity(m)
+    eye = np.array([0.0, 0.3, 0.3])
+    l = prt.radiance(m, eye)
+    for v in (0, centre_index(p), len(p) - 1):
+        w = eye - p[v]
+        cos_o = w[2] / np.linalg.norm(w)
+        np.testing.assert_allclose(l[v], b[v] * fresnel_t(1.3, cos_o) / math.pi, rtol=1e-5)
+    assert prt.last_eval["seconds"] > 0
+    assert len(prt.last_eval["error_estimate"]) == 3
+
+
+# ---------------------------------------------------------------- PRT against ground truth
+
+
+def test_prt_matches_reference_on_a_lit_plane_with_a_shadow_edge():
+    p, t = plane(41, 0.1)
+    s = translucent.Scene(p, t)
+    # A spot light makes the irradiance vary across the plane.
+    s.add_spot_light((0.0, 0.0, 0.05), (0, 0, -1), power=5.0, spot_size=1.2, blend=0.3)
+    m = translucent.Material.preset("skin1", mm_per_unit=1000.0)
+    b = translucent.Prt(s, m, coefficients=32).radiosity(m)
+    idx = list(range(0, len(p), 7))
+    ref = translucent.reference_radiosity(s, m, rel_tol=1e-3, receivers=idx)
+    err = translucent.relative_error(b[idx], ref, s.vertex_areas[idx, 0])
+    assert max(err["rms"]) < 0.02, err
+
+
+# ---------------------------------------------------------------- progress, cancel, GIL
+
+
+def test_progress_is_reported_and_false_cancels():
+    p, t = plane(31)
+    s = translucent.Scene(p, t)
+    s.add_sun((0, 0, -1), 1.0)
+    m = translucent.Material.preset("marble")
+    seen = []
+    translucent.Prt(s, m, progress=lambda f: seen.append(f))
+    assert seen[0] == 0.0 and seen[-1] == 1.0 and seen == sorted(seen)
+    with pytest.raises(translucent.Cancelled):
+        translucent.Prt(s, m, progress=lambda f: f < 0.5)
+
+
+def test_exception_in_progress_callback_propagates():
+    p, t = plane(11)
+    s = translucent.Scene(p, t)
+    s.add_sun((0, 0, -1), 1.0)
+
+    def boom(f):
+        raise KeyError("from the callback")
+
+    with pytest.raises(KeyError, match="from the callback"):
+        translucent.Prt(s, translucent.Material.preset("marble"), progress=boom)
+
+
+def test_precompute_releases_the_gil():
+    p, t = plane(101, 0.2)
+    s = translucent.Scene(p, t)
+    s.add_sun((0, 0, -1), 1.0)
+    m = translucent.Material.preset("marble")
+    ticks = 0
+    done = threading.Event()
+
+    def count():
+        nonlocal ticks
+        while not done.is_set():
+            ticks += 1
+
+    th = threading.Thread(target=count)
+    th.start()
+    try:
+        translucent.Prt(s, m, far_field=0.0)
+    finally:
+        done.set()
+        th.join()
+    assert ticks > 1000
