@@ -48,7 +48,7 @@ pub enum World {
     /// A uniform radiance [W/(m^2 sr)] from every direction.
     Uniform([f32; 3]),
     /// An equirectangular radiance image (row-major, row 0 at the top = +Z), mapped the way
-    /// Cycles maps an Environment Texture with default vector: u = atan2(d.y, -d.x)/(2 pi) + 1/2,
+    /// Cycles maps an Environment Texture with default vector: u = -atan2(d.y, d.x)/(2 pi) + 1/2,
     /// v = atan2(d.z, hypot(d.x, d.y))/pi + 1/2.
     Environment {
         width: usize,
