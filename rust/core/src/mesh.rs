@@ -207,12 +207,35 @@ impl Mesh {
         Ok(out)
     }
 
-    /// The sample spacing that yields about `count` samples over the whole surface.
+    /// Number of samples `surface_samples(spacing)` produces.
+    pub fn sample_count(&self, spacing: f32) -> usize {
+        self.triangles
+            .iter()
+            .zip(&self.triangle_areas)
+            .filter(|(_, a)| **a > 0.0)
+            .map(|(tri, _)| {
+                let [a, b, c] = tri.map(|v| self.positions[v as usize]);
+                let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+                ((longest / spacing).ceil() as usize).clamp(1, 4096).pow(2)
+            })
+            .sum()
+    }
+
+    /// The sample spacing that yields about `count` samples (bisection on `sample_count`).
     pub fn spacing_for_sample_count(&self, count: usize) -> f32 {
-        // A sub-triangle of edge h has area sqrt(3)/4 h^2 (equilateral); real meshes split
-        // their longest edge, so this overestimates the count slightly.
-        let per_sample = self.area() / count.max(1) as f64;
-        (per_sample * 4.0 / 3f64.sqrt()).sqrt() as f32
+        let (mut lo, mut hi) = (
+            self.diagonal() * 1e-6,
+            self.diagonal().max(f32::MIN_POSITIVE),
+        );
+        for _ in 0..40 {
+            let mid = (lo * hi).sqrt();
+            if self.sample_count(mid) > count {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi
     }
 }
 

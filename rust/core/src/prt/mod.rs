@@ -28,13 +28,18 @@ pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + 
 /// Progress in [0, 1]; returning false cancels.
 pub type ProgressFn<'a> = dyn Fn(f32) -> bool + Sync + 'a;
 
+/// The most samples the default spacing asks for.
+pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
+
 /// How the transport is precomputed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PrtSettings {
     /// Basis size: the length of the per-vertex dot product for each channel (Xu's "coefficients").
     pub coefficients: usize,
     pub degree: Degree,
-    /// Surface samples for the irradiance; `None` picks 4 per vertex, at least 20 000.
+    /// Surface samples for the irradiance; `None` spaces them half the representatives'
+    /// shortest length (z_r or 1/sigma_tr), between 4 per vertex (at least 20 000) and
+    /// `DEFAULT_MAX_SAMPLES`.
     pub samples: Option<usize>,
     /// Fraction of R_d,total that may fall beyond the support radius.
     pub tolerance: f64,
@@ -138,10 +143,10 @@ impl Prt {
         };
 
         // Samples and their irradiance (Xu 2007 §6.1), and the irradiance at the receivers.
-        let count = settings
-            .samples
-            .unwrap_or_else(|| (4 * mesh.vertex_count()).max(20_000));
-        let spacing = mesh.spacing_for_sample_count(count);
+        let spacing = match settings.samples {
+            Some(count) => mesh.spacing_for_sample_count(count),
+            None => default_spacing(mesh, representatives),
+        };
         let samples = mesh.surface_samples(spacing)?;
         let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
         let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
@@ -180,16 +185,17 @@ impl Prt {
         report.seconds_tree = t_tree.elapsed().as_secs_f64();
 
         // The receiver's own disc: samples within `exclusion` of a vertex are replaced by a disc
-        // of equal area; `near_radius` is the smallest such disc (a low percentile over vertices),
-        // integrated in closed form at edit time; the rest of each vertex's own disc goes through
-        // the basis.
+        // of equal area. Its inner part, radius `near_radius`, is integrated in closed form at
+        // edit time with the irradiance at the vertex (the diffuse-BRDF limit of a stiff
+        // material lives there); the ring out to the equal-area radius goes through the basis
+        // with the mean irradiance of the samples it replaces (right across shadow edges).
         let exclusion = 1.5 * f64::from(spacing);
-        let excluded_area: Vec<f64> = mesh
+        let near_radius = 0.5 * f64::from(spacing);
+        let excluded: Vec<(f64, [f64; 3])> = mesh
             .positions()
             .par_iter()
-            .map(|p| area_within(&tree, p.as_dvec3(), exclusion))
+            .map(|p| within(&tree, p.as_dvec3(), exclusion))
             .collect();
-        let near_radius = percentile_radius(&excluded_area, 0.05).max(0.25 * exclusion);
         report.near_radius = near_radius;
 
         // Basis domain [near_radius, support] and knots by DP on the representatives (Xu §5).
@@ -246,10 +252,16 @@ impl Prt {
                 .enumerate()
                 .map(|(k, row)| {
                     let v = first + k;
+                    let (area, weight) = excluded[v];
                     let receiver = Receiver {
                         position: mesh.positions()[v].as_dvec3(),
                         irradiance: project(&vertex_irradiance[v]),
-                        own_disc: (excluded_area[v] / std::f64::consts::PI).sqrt(),
+                        ring_irradiance: if area > 0.0 {
+                            weight.map(|w| (w / area) as f32)
+                        } else {
+                            project(&vertex_irradiance[v])
+                        },
+                        own_disc: (area / std::f64::consts::PI).sqrt(),
                     };
                     transport_row(&tree, &basis, &far, exclusion, near_radius, &receiver, row)
                 })
@@ -381,6 +393,34 @@ pub fn radiance_from_radiosity(
         });
 }
 
+/// Half the shortest length over which any representative's R_d changes (its source depth
+/// z_r or its decay length 1/sigma_tr), so the sample sum resolves the profile; bounded by the
+/// sample counts `PrtSettings::samples` documents.
+fn default_spacing(mesh: &Mesh, representatives: &[Material]) -> f32 {
+    let shortest = representatives
+        .iter()
+        .flat_map(|m| m.dipoles())
+        .filter(|d| !d.is_zero())
+        .map(|d| {
+            if d.sigma_tr > 0.0 {
+                d.z_r.min(1.0 / d.sigma_tr)
+            } else {
+                d.z_r
+            }
+        })
+        .fold(f64::INFINITY, f64::min);
+    let least = (4 * mesh.vertex_count()).max(20_000);
+    let spacing = (0.5 * shortest).min(f64::from(mesh.diagonal())) as f32;
+    let count = mesh.sample_count(spacing);
+    if count > DEFAULT_MAX_SAMPLES {
+        mesh.spacing_for_sample_count(DEFAULT_MAX_SAMPLES)
+    } else if count < least {
+        mesh.spacing_for_sample_count(least)
+    } else {
+        spacing
+    }
+}
+
 fn check_settings(representatives: &[Material], s: &PrtSettings) -> Result<()> {
     if representatives.is_empty() {
         return Err(Error::InvalidArgument(
@@ -458,9 +498,12 @@ fn common_colour(a: &[[f32; 3]], b: &[[f32; 3]]) -> Option<[f32; 3]> {
     same.then_some(colour)
 }
 
-/// Geometric area of the samples within `radius` of `p`.
-fn area_within(tree: &SampleTree, p: DVec3, radius: f64) -> f64 {
-    let mut total = 0.0;
+/// Geometric area of the samples within `radius` of `p`, and the sum of their weights
+/// (irradiance x area) per stored channel.
+fn within(tree: &SampleTree, p: DVec3, radius: f64) -> (f64, [f64; 3]) {
+    let ch = tree.channels;
+    let mut area = 0.0;
+    let mut weight = [0.0f64; 3];
     let mut stack = vec![0usize];
     while let Some(ni) = stack.pop() {
         let node = &tree.nodes[ni];
@@ -469,11 +512,17 @@ fn area_within(tree: &SampleTree, p: DVec3, radius: f64) -> f64 {
             continue;
         }
         if d + node.radius < radius {
-            total += node.area;
+            area += node.area;
+            for (c, w) in weight.iter_mut().enumerate().take(ch) {
+                *w += tree.moments[ni * ch + c].w;
+            }
         } else if node.first_child == 0 {
             for s in &tree.samples[node.start as usize..node.end as usize] {
                 if (s.position.as_dvec3() - p).length() < radius {
-                    total += f64::from(s.area);
+                    area += f64::from(s.area);
+                    for (c, w) in weight.iter_mut().enumerate().take(ch) {
+                        *w += f64::from(s.weight[c]);
+                    }
                 }
             }
         } else {
@@ -481,19 +530,7 @@ fn area_within(tree: &SampleTree, p: DVec3, radius: f64) -> f64 {
             stack.push(node.first_child as usize + 1);
         }
     }
-    total
-}
-
-/// The radius of the disc whose area is the `q`-quantile of the excluded areas (ignoring
-/// vertices with no samples around them: isolated ones).
-fn percentile_radius(areas: &[f64], q: f64) -> f64 {
-    let mut a: Vec<f64> = areas.iter().cloned().filter(|x| *x > 0.0).collect();
-    if a.is_empty() {
-        return 0.0;
-    }
-    let k = ((a.len() - 1) as f64 * q) as usize;
-    let (_, v, _) = a.select_nth_unstable_by(k, f64::total_cmp);
-    (*v / std::f64::consts::PI).sqrt()
+    (area, weight)
 }
 
 fn uniform_basis(lo: f64, hi: f64, s: &PrtSettings) -> Result<Basis> {
@@ -543,6 +580,8 @@ impl FarField {
 struct Receiver {
     position: DVec3,
     irradiance: [f32; 3],
+    /// Mean irradiance of the samples the receiver's own disc replaces.
+    ring_irradiance: [f32; 3],
     /// Radius of the disc of the same area as the samples excluded around the receiver.
     own_disc: f64,
 }
@@ -645,14 +684,14 @@ fn transport_row(
         }
     }
     // The receiver's own disc: [0, near_radius] in closed form at edit time (slot 0 holds
-    // I(x_o)); [near_radius, own_disc] through the basis, I taken constant over the disc.
+    // I(x_o)); [near_radius, own_disc] through the basis with the ring's mean irradiance.
     let ring = basis.integrals_2pi_r(near_radius, rx.own_disc.max(near_radius));
     for c in 0..channels {
-        let i = f64::from(rx.irradiance[c]);
+        let i_ring = f64::from(rx.ring_irradiance[c]);
         let out = &mut row[c * stride..(c + 1) * stride];
-        out[0] = i as f32;
+        out[0] = rx.irradiance[c];
         for j in 0..n {
-            out[j + 1] = (acc[c * n + j] + i * ring[j]) as f32;
+            out[j + 1] = (acc[c * n + j] + i_ring * ring[j]) as f32;
         }
     }
     counters
