@@ -34,6 +34,31 @@ impl Default for IrradianceSettings {
     }
 }
 
+/// What the points stand for. Points that are summed many at a time under a smooth kernel
+/// (PRT samples, reference patches) need far fewer world rays each than a point whose value is
+/// used alone (a receiver vertex): their Monte Carlo noise averages out in the sum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Density {
+    /// Points used one by one: `world_samples` rays each.
+    Receivers,
+    /// Dense points summed together: `world_samples / DENSE_WORLD_DIVISOR` rays each (at least 4).
+    Dense,
+}
+
+/// How many times fewer world rays a dense point gets.
+pub const DENSE_WORLD_DIVISOR: u32 = 8;
+
+impl IrradianceSettings {
+    /// These settings for points of the given density.
+    pub fn for_density(&self, density: Density) -> IrradianceSettings {
+        let mut s = self.clone();
+        if density == Density::Dense {
+            s.world_samples = (self.world_samples / DENSE_WORLD_DIVISOR).max(4);
+        }
+        s
+    }
+}
+
 /// What the estimate cost and what it left out.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct IrradianceReport {

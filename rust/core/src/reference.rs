@@ -15,8 +15,10 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::time::Instant;
 
-/// Irradiance at points with normals (Xu 2007 eq. 3), supplied by the caller.
-pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync + 'a;
+use crate::irradiance::Density;
+/// Irradiance at points with normals (Xu 2007 eq. 3), supplied by the caller; the patches are
+/// dense points summed many at a time.
+pub use crate::prt::IrradianceFn;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReferenceSettings {
@@ -178,7 +180,7 @@ fn build_level(mesh: &Mesh, level: u32, irradiance: &IrradianceFn) -> Result<Lev
     first.push(subs.len());
     let points: Vec<Vec3> = subs.iter().map(|s| s.centroid.as_vec3()).collect();
     let normals: Vec<Vec3> = subs.iter().map(|s| s.normal.as_vec3()).collect();
-    let values = irradiance(&points, &normals)?;
+    let values = irradiance(&points, &normals, Density::Dense)?;
     if values.len() != subs.len() || values.iter().flatten().any(|x| !x.is_finite() || *x < 0.0) {
         return Err(Error::InvalidArgument(
             "the irradiance callback returned a wrong count or a negative/non-finite value".into(),
@@ -462,8 +464,8 @@ mod tests {
             .unwrap() as u32
     }
 
-    fn constant(e: f32) -> impl Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync {
-        move |p: &[Vec3], _| Ok(vec![[e; 3]; p.len()])
+    fn constant(e: f32) -> impl Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync {
+        move |p: &[Vec3], _, _| Ok(vec![[e; 3]; p.len()])
     }
 
     #[test]
@@ -515,7 +517,9 @@ mod tests {
         // By symmetry the kernel averages a linear field to its value at the receiver.
         let mesh = plane(41, 100.0);
         let m = Material::preset("skin1", 1.0).unwrap();
-        let irr = |p: &[Vec3], _: &[Vec3]| Ok(p.iter().map(|x| [1.0 + 0.01 * x.x; 3]).collect());
+        let irr = |p: &[Vec3], _: &[Vec3], _: Density| {
+            Ok(p.iter().map(|x| [1.0 + 0.01 * x.x; 3]).collect())
+        };
         let x = Vec3::new(10.0, 0.0, 0.0);
         let v = (0..mesh.vertex_count())
             .min_by(|a, b| {
@@ -545,8 +549,9 @@ mod tests {
     fn receiver_subset_equals_rows_of_the_full_run() {
         let mesh = plane(9, 10.0);
         let m = Material::preset("ketchup", 1.0).unwrap();
-        let irr =
-            |p: &[Vec3], _: &[Vec3]| Ok(p.iter().map(|x| [1.0 + 0.1 * x.y, 0.5, 2.0]).collect());
+        let irr = |p: &[Vec3], _: &[Vec3], _: Density| {
+            Ok(p.iter().map(|x| [1.0 + 0.1 * x.y, 0.5, 2.0]).collect())
+        };
         let s = ReferenceSettings {
             max_level: 1,
             ..Default::default()

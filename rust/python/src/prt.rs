@@ -8,7 +8,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use translucent_core::basis::Degree;
-use translucent_core::irradiance::{irradiance, IrradianceSettings};
+use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
 use translucent_core::optics::Material;
 use translucent_core::prt::{Evaluation, Prt, PrtSettings};
 use translucent_core::Vec3;
@@ -72,8 +72,8 @@ impl PyPrt {
         let progress = Progress::new(progress);
         let core_scene = &scene.scene;
         let result = py.detach(|| {
-            let irradiance_fn = |p: &[Vec3], n: &[Vec3]| {
-                irradiance(core_scene, &tracer, p, n, &irr).map(|(v, _)| v)
+            let irradiance_fn = |p: &[Vec3], n: &[Vec3], d: Density| {
+                irradiance(core_scene, &tracer, p, n, &irr.for_density(d)).map(|(v, _)| v)
             };
             let tick = |f: f32| progress.call(f);
             Prt::precompute(

@@ -7,7 +7,7 @@ use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use translucent_core::irradiance::{irradiance, IrradianceSettings};
+use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
 use translucent_core::metrics;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::Vec3;
@@ -70,8 +70,8 @@ pub fn reference_radiosity_py<'py>(
     let progress = Progress::new(progress);
     let result = py
         .detach(|| {
-            let irradiance_fn = |p: &[Vec3], nrm: &[Vec3]| {
-                irradiance(core_scene, &tracer, p, nrm, &irr).map(|(v, _)| v)
+            let irradiance_fn = |p: &[Vec3], nrm: &[Vec3], d: Density| {
+                irradiance(core_scene, &tracer, p, nrm, &irr.for_density(d)).map(|(v, _)| v)
             };
             let tick = |f: f32| progress.call(f);
             reference_radiosity(

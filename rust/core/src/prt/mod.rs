@@ -14,6 +14,7 @@ mod tree;
 
 use crate::basis::{Basis, Degree, Fitter};
 use crate::error::{Error, Result};
+pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
 use crate::optics::{fresnel_transmittance, Material};
 use glam::{DVec3, Vec3};
@@ -23,8 +24,9 @@ use std::time::Instant;
 use tree::{SampleTree, WeightedSample};
 
 /// Irradiance at points with normals, supplied by the caller (usually `irradiance::irradiance`
-/// with the scene's lights); I = int F_t L (n . w) dw, Xu 2007 eq. (3).
-pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync + 'a;
+/// with the scene's lights); I = int F_t L (n . w) dw, Xu 2007 eq. (3). The density says
+/// whether the points are summed many at a time (samples) or used alone (vertices).
+pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync + 'a;
 /// Progress in [0, 1]; returning false cancels.
 pub type ProgressFn<'a> = dyn Fn(f32) -> bool + Sync + 'a;
 
@@ -150,8 +152,8 @@ impl Prt {
         let samples = mesh.surface_samples(spacing)?;
         let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
         let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
-        let sample_irradiance = irradiance(&points, &normals)?;
-        let vertex_irradiance = irradiance(mesh.positions(), mesh.normals())?;
+        let sample_irradiance = irradiance(&points, &normals, Density::Dense)?;
+        let vertex_irradiance = irradiance(mesh.positions(), mesh.normals(), Density::Receivers)?;
         check_irradiance(&sample_irradiance, points.len())?;
         check_irradiance(&vertex_irradiance, mesh.vertex_count())?;
         report.samples = samples.len();
@@ -730,10 +732,10 @@ mod tests {
         e: f32,
         theta: f64,
         eta: f64,
-    ) -> impl Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync {
+    ) -> impl Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync {
         let c = theta.cos();
         let i = (fresnel_transmittance(eta, c) * c * f64::from(e)) as f32;
-        move |p: &[Vec3], _n: &[Vec3]| Ok(vec![[i; 3]; p.len()])
+        move |p: &[Vec3], _n: &[Vec3], _d: Density| Ok(vec![[i; 3]; p.len()])
     }
 
     /// Jensen 2001's closed form for R_d,total, written out apart from `optics`.
@@ -812,7 +814,7 @@ mod tests {
         let mesh = plane(61, 60.0);
         let m = Material::preset("skin1", 1.0).unwrap();
         // A spatially varying irradiance so clusters are not uniform.
-        let irr = |p: &[Vec3], _n: &[Vec3]| {
+        let irr = |p: &[Vec3], _n: &[Vec3], _d: Density| {
             Ok(p.iter()
                 .map(|x| {
                     let v = 1.0 + 0.5 * (x.x * 0.2).sin() + 0.3 * (x.y * 0.1).cos();
@@ -885,7 +887,7 @@ mod tests {
             None
         )
         .is_err());
-        let nan = |p: &[Vec3], _n: &[Vec3]| Ok(vec![[f32::NAN; 3]; p.len()]);
+        let nan = |p: &[Vec3], _n: &[Vec3], _d: Density| Ok(vec![[f32::NAN; 3]; p.len()]);
         assert!(Prt::precompute(&mesh, &[m], &PrtSettings::default(), &nan, None).is_err());
     }
 }
