@@ -274,7 +274,7 @@ impl Basis {
         let mut out = vec![0.0; self.len()];
         let (lo, hi) = self.domain();
         let (a, b) = (a.max(lo), b.min(hi));
-        if !(b > a) {
+        if a.is_nan() || b.is_nan() || b <= a {
             return out;
         }
         for w in self.knots.windows(2) {

@@ -163,7 +163,7 @@ impl Estimator<'_> {
 
     /// Radiance arriving from a point source of intensity `intensity` [W/sr] at `pos`:
     /// E = F_t I cos / d^2 (inverse square law). No ray when the light is behind the surface.
-    fn from_point(&mut self, pos: Vec3, intensity: [f32; 3]) -> [f32; 3] {
+    fn point_source(&mut self, pos: Vec3, intensity: [f32; 3]) -> [f32; 3] {
         let v = pos - self.p;
         let d2 = v.length_squared();
         if d2 <= 0.0 {
@@ -194,7 +194,7 @@ impl Estimator<'_> {
             }
             // Blender Power P [W] of a point light is radiant intensity P / (4 pi) [W/sr].
             Light::Point { position, power } => {
-                self.from_point(*position, scaled(power, 1.0 / (4.0 * PI)))
+                self.point_source(*position, scaled(power, 1.0 / (4.0 * PI)))
             }
             // A spot is a point light masked by a cone (Cycles' spot_light_attenuation:
             // smoothstep over the blend fraction of the cone's cosine range, no extra cosine).
@@ -217,7 +217,7 @@ impl Estimator<'_> {
                 } else {
                     1.0
                 };
-                self.from_point(*position, scaled(power, mask / (4.0 * PI)))
+                self.point_source(*position, scaled(power, mask / (4.0 * PI)))
             }
             // A Lambertian rectangle of power P and area A has radiance P / (pi A) (Cycles);
             // E = sum over stratified points of L F_t cos cos_l A / (N d^2).

@@ -171,7 +171,11 @@ impl Dipole {
     /// The dipole for absorption `sigma_a`, reduced scattering `sigma_s_prime`, relative index `eta`.
     pub fn new(sigma_a: f64, sigma_s_prime: f64, eta: f64) -> Self {
         let sigma_t_prime = sigma_a + sigma_s_prime;
-        if !(sigma_t_prime > 0.0) || !(sigma_s_prime > 0.0) {
+        if sigma_t_prime.is_nan()
+            || sigma_s_prime.is_nan()
+            || sigma_t_prime <= 0.0
+            || sigma_s_prime <= 0.0
+        {
             // No scattering: nothing diffuses back out. z_r = 1 keeps every formula finite.
             return Self {
                 alpha_prime: 0.0,

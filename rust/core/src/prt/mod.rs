@@ -107,6 +107,18 @@ pub struct Prt {
     report: PrtReport,
 }
 
+/// A material projected on the basis: the dot-product coefficients per channel and the fit's
+/// quality.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coefficients {
+    /// Per channel: [M(near_radius), c_0 .. c_{n-1}].
+    pub vectors: [Vec<f32>; 3],
+    /// Relative L2 error of the fitted profile over the basis domain (Xu eq. 18).
+    pub fit_error: [f64; 3],
+    /// Estimated relative error of B (see `Evaluation::error_estimate`).
+    pub error_estimate: [f64; 3],
+}
+
 /// One material evaluated: per-vertex radiosity, and what it cost and how good the fit was.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Evaluation {
@@ -310,7 +322,7 @@ impl Prt {
 
     /// Fits the material's R_d on the basis (Xu 2007 eq. 8, 18) and returns, per channel, the
     /// coefficient vector of the dot product: [M(near_radius), c_0 .. c_{n-1}].
-    pub fn coefficients(&self, material: &Material) -> Result<([Vec<f32>; 3], [f64; 3], [f64; 3])> {
+    pub fn coefficients(&self, material: &Material) -> Result<Coefficients> {
         if (material.eta - self.eta).abs() > 1e-9 {
             return Err(Error::InvalidArgument(format!(
                 "this transport was precomputed for eta = {}, the material has eta = {}: \
@@ -339,21 +351,25 @@ impl Prt {
                 .chain(fit.coefficients.iter().map(|x| *x as f32))
                 .collect()
         });
-        Ok((coeffs, fit_error, estimate))
+        Ok(Coefficients {
+            vectors: coeffs,
+            fit_error,
+            error_estimate: estimate,
+        })
     }
 
     /// Multiple-scattering radiosity B = sum_j c_j T_j per vertex and channel (Xu 2007 eq. 9
     /// without the F_t/pi factor).
     pub fn radiosity(&self, material: &Material) -> Result<Evaluation> {
         let t0 = Instant::now();
-        let (coeffs, fit_error, error_estimate) = self.coefficients(material)?;
+        let c = self.coefficients(material)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let radiosity = self.transport.dot(&coeffs);
+        let radiosity = self.transport.dot(&c.vectors);
         Ok(Evaluation {
             radiosity,
-            fit_error,
-            error_estimate,
+            fit_error: c.fit_error,
+            error_estimate: c.error_estimate,
             fit_seconds,
             dot_seconds: t1.elapsed().as_secs_f64(),
         })
@@ -756,6 +772,7 @@ mod tests {
             .0
     }
 
+    #[allow(clippy::needless_range_loop)]
     fn check_plane(mesh: &Mesh, m: &Material, theta: f64, tol: f64) {
         let settings = PrtSettings {
             eta: m.eta,
