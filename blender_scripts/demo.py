@@ -59,7 +59,7 @@ def build_scene() -> tuple[bpy.types.Object, bpy.types.Object]:
     cam = bpy.data.objects.new("Camera", cam_data)
     cam.location = (0.0, -0.32, 0.03)
     cam.rotation_euler = (np.radians(85.0), 0.0, 0.0)
-    cam_data.lens = 50
+    cam_data.lens = 80
     scene.collection.objects.link(cam)
     scene.camera = cam
     return suzanne, cam

@@ -11,6 +11,43 @@ pyo3::create_exception!(
     "The computation was cancelled by its progress callback."
 );
 
+/// Runs core work so that a panic (a bug, never bad input) becomes a RuntimeError naming it,
+/// not a `PanicException` (a BaseException that `except Exception` would not catch).
+pub fn guard<T>(work: impl FnOnce() -> Result<T, Error>) -> Result<T, GuardError> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(work)) {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(e)) => Err(GuardError::Core(e)),
+        Err(payload) => {
+            let msg = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(GuardError::Panic(msg))
+        }
+    }
+}
+
+/// A core error, or a caught panic.
+pub enum GuardError {
+    Core(Error),
+    Panic(String),
+}
+
+impl GuardError {
+    pub fn into_py(self, progress: Option<&Progress>) -> PyErr {
+        match self {
+            GuardError::Core(e) => match progress {
+                Some(p) => p.to_py(e),
+                None => to_py(e),
+            },
+            GuardError::Panic(m) => PyRuntimeError::new_err(format!(
+                "internal error in translucent (please report): {m}"
+            )),
+        }
+    }
+}
+
 /// Every user-caused core error is a ValueError naming what was wrong; cancelling is `Cancelled`.
 pub fn to_py(err: Error) -> PyErr {
     match err {

@@ -1,6 +1,6 @@
 //! `translucent.Prt`: precompute once, then evaluate any material in milliseconds.
 
-use crate::convert::{rgb_array, vec3, Progress};
+use crate::convert::{guard, rgb_array, vec3, Progress};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
@@ -72,19 +72,21 @@ impl PyPrt {
         let progress = Progress::new(progress);
         let core_scene = &scene.scene;
         let result = py.detach(|| {
-            let irradiance_fn = |p: &[Vec3], n: &[Vec3], d: Density| {
-                irradiance(core_scene, &tracer, p, n, &irr.for_density(d)).map(|(v, _)| v)
-            };
-            let tick = |f: f32| progress.call(f);
-            Prt::precompute(
-                &core_scene.mesh,
-                &materials,
-                &settings,
-                &irradiance_fn,
-                if progress.is_set() { Some(&tick) } else { None },
-            )
+            guard(|| {
+                let irradiance_fn = |p: &[Vec3], n: &[Vec3], d: Density| {
+                    irradiance(core_scene, &tracer, p, n, &irr.for_density(d)).map(|(v, _)| v)
+                };
+                let tick = |f: f32| progress.call(f);
+                Prt::precompute(
+                    &core_scene.mesh,
+                    &materials,
+                    &settings,
+                    &irradiance_fn,
+                    if progress.is_set() { Some(&tick) } else { None },
+                )
+            })
         });
-        let inner = result.map_err(|e| progress.to_py(e))?;
+        let inner = result.map_err(|e| e.into_py(Some(&progress)))?;
         Ok(Self { inner, last: None })
     }
 

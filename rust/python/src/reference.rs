@@ -1,6 +1,6 @@
 //! `translucent.reference_radiosity` and `translucent.relative_error`.
 
-use crate::convert::{rgb_array, to_py, Progress};
+use crate::convert::{guard, rgb_array, to_py, Progress};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
@@ -70,20 +70,22 @@ pub fn reference_radiosity_py<'py>(
     let progress = Progress::new(progress);
     let result = py
         .detach(|| {
-            let irradiance_fn = |p: &[Vec3], nrm: &[Vec3], d: Density| {
-                irradiance(core_scene, &tracer, p, nrm, &irr.for_density(d)).map(|(v, _)| v)
-            };
-            let tick = |f: f32| progress.call(f);
-            reference_radiosity(
-                &core_scene.mesh,
-                &m,
-                &irradiance_fn,
-                receivers.as_deref(),
-                &settings,
-                if progress.is_set() { Some(&tick) } else { None },
-            )
+            guard(|| {
+                let irradiance_fn = |p: &[Vec3], nrm: &[Vec3], d: Density| {
+                    irradiance(core_scene, &tracer, p, nrm, &irr.for_density(d)).map(|(v, _)| v)
+                };
+                let tick = |f: f32| progress.call(f);
+                reference_radiosity(
+                    &core_scene.mesh,
+                    &m,
+                    &irradiance_fn,
+                    receivers.as_deref(),
+                    &settings,
+                    if progress.is_set() { Some(&tick) } else { None },
+                )
+            })
         })
-        .map_err(|e| progress.to_py(e))?;
+        .map_err(|e| e.into_py(Some(&progress)))?;
     let values = rgb_array(py, &result.radiosity);
     if !details {
         return Ok(values.into_any());

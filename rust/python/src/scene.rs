@@ -1,6 +1,6 @@
 //! `translucent.Scene`: a mesh, its lights and its world, and the ray tracer built over it.
 
-use crate::convert::{rgb, rgb_array, to_py, triangle_array, vec3, vec3_array};
+use crate::convert::{guard, rgb, rgb_array, to_py, triangle_array, vec3, vec3_array};
 use numpy::{PyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -46,8 +46,8 @@ impl PyScene {
         let triangles = triangle_array("triangles", triangles)?;
         let normals = normals.map(|n| vec3_array("normals", n)).transpose()?;
         let mesh = py
-            .detach(|| Mesh::new(positions, triangles, normals))
-            .map_err(to_py)?;
+            .detach(|| guard(|| Mesh::new(positions, triangles, normals)))
+            .map_err(|e| e.into_py(None))?;
         Ok(Self {
             scene: Scene::new(mesh),
             tracer: OnceLock::new(),
