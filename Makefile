@@ -8,13 +8,28 @@ PYDEPS := bpy==5.0.1 "maturin>=1.7,<2" pytest hypothesis matplotlib trimesh
 
 .PHONY: setup build demo test test-rust test-python lint bench accuracy clean
 
+# Mesa's software Vulkan (lavapipe) so the wgpu path runs without a GPU; GPU tests skip
+# with their reason where it cannot be installed.
+VULKAN_STAMP := $(VENV)/.vulkan-installed
+
+$(VULKAN_STAMP): $(STAMP)
+	@if [ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || [ -e /usr/share/vulkan/icd.d/lvp_icd.aarch64.json ]; then \
+		echo "lavapipe present"; \
+	elif command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mesa-vulkan-drivers >/dev/null) \
+			|| echo "warning: could not install mesa-vulkan-drivers; GPU tests will skip"; \
+	else \
+		echo "warning: not root or no apt-get: install mesa-vulkan-drivers for the wgpu tests"; \
+	fi
+	touch $(VULKAN_STAMP)
+
 $(STAMP): Makefile
 	python3 -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q $(PYDEPS)
 	touch $(STAMP)
 
-setup: $(STAMP)
+setup: $(STAMP) $(VULKAN_STAMP)
 
 # Release build of the native module, installed (editable) into the venv.
 build: setup

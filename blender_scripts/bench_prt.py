@@ -79,7 +79,7 @@ def main() -> int:
         f"{big.vertex_count} vertices / 1M samples {grow[1]:.2f} s: x{grow[1] / grow[0]:.1f} "
         f"for x4 work (brute force would be x16)"
     )
-    prt = translucent.Prt(big, marble, coefficients=32, samples=150_000)
+    prt = translucent.Prt(big, marble, coefficients=32, samples=150_000, backend="cpu")
     skin = translucent.Material.preset("skin1", mm_per_unit=1000.0)
     core, wall = [], []
     for k in range(args.edits):
@@ -97,6 +97,23 @@ def main() -> int:
         f"(fit {1e3 * last['fit_seconds']:.3f} ms, dot {1e3 * last['dot_seconds']:.2f} ms), "
         f"{1e3 * statistics.median(wall):.2f} ms from Python with the numpy copy, "
         f"over {args.edits} edits [budget 5 ms]"
+    )
+    # The same edits through wgpu: a real GPU where there is one, else Mesa's lavapipe.
+    try:
+        where = prt.set_backend("gpu")
+    except RuntimeError as e:
+        print(f"edit on the GPU: skipped ({e})")
+        return 0
+    parts = {k: [] for k in ("fit_seconds", "upload_seconds", "dispatch_seconds", "readback_seconds", "seconds")}
+    for k in range(args.edits):
+        prt.radiosity(marble if k % 2 else skin)
+        for key in parts:
+            parts[key].append(prt.last_eval[key])
+    med = {k: 1e3 * statistics.median(v) for k, v in parts.items()}
+    print(
+        f"edit on {where}: median {med['seconds']:.2f} ms (fit {med['fit_seconds']:.3f}, upload "
+        f"{med['upload_seconds']:.3f}, dispatch+wait {med['dispatch_seconds']:.2f}, readback "
+        f"{med['readback_seconds']:.2f} ms) over {args.edits} edits"
     )
     return 0
 

@@ -16,6 +16,9 @@ pub enum Error {
     /// Any other argument out of range (basis size, tolerance, receiver index).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// No usable GPU adapter (or it failed); the CPU path is always available.
+    #[error("GPU unavailable: {0}")]
+    GpuUnavailable(String),
     /// The caller's progress callback asked to stop.
     #[error("cancelled by the caller")]
     Cancelled,

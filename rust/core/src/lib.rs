@@ -3,6 +3,7 @@
 
 pub mod basis;
 pub mod error;
+pub mod gpu;
 pub mod irradiance;
 pub mod lights;
 pub mod mesh;

@@ -52,6 +52,7 @@ impl GuardError {
 pub fn to_py(err: Error) -> PyErr {
     match err {
         Error::Cancelled => Cancelled::new_err(err.to_string()),
+        Error::GpuUnavailable(_) => PyRuntimeError::new_err(err.to_string()),
         _ => PyValueError::new_err(err.to_string()),
     }
 }

@@ -1,16 +1,16 @@
 //! `translucent.Prt`: precompute once, then evaluate any material in milliseconds.
 
-use crate::convert::{guard, rgb_array, vec3, Progress};
+use crate::convert::{guard, rgb_array, to_py, vec3, Progress};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use translucent_core::basis::Degree;
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
 use translucent_core::optics::Material;
-use translucent_core::prt::{Evaluation, Prt, PrtSettings};
+use translucent_core::prt::{Backend, Evaluation, Prt, PrtSettings};
 use translucent_core::Vec3;
 
 /// Precomputed transport (Xu 2007) of a scene for materials near `materials`.
@@ -18,6 +18,45 @@ use translucent_core::Vec3;
 pub struct PyPrt {
     inner: Prt,
     last: Option<Evaluation>,
+    backend_message: String,
+}
+
+impl PyPrt {
+    /// "cpu", "gpu" (any adapter, lavapipe included) or "auto" (a hardware GPU if there is
+    /// one, else the CPU). Returns what happened, in words.
+    fn choose_backend(&mut self, py: Python<'_>, backend: &str) -> PyResult<String> {
+        let inner = &mut self.inner;
+        let result = match backend {
+            "cpu" => {
+                py.detach(|| inner.set_backend(Backend::Cpu, true))
+                    .map_err(to_py)?;
+                "CPU (rayon)".to_string()
+            }
+            "gpu" => {
+                py.detach(|| inner.set_backend(Backend::Gpu, true))
+                    .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+                adapter_words(inner)
+            }
+            "auto" => match py.detach(|| inner.set_backend(Backend::Gpu, false)) {
+                Ok(()) => adapter_words(inner),
+                Err(e) => format!("CPU (rayon): {e}"),
+            },
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "backend {other:?}: choose 'auto', 'gpu' or 'cpu'"
+                )))
+            }
+        };
+        self.backend_message = result.clone();
+        Ok(result)
+    }
+}
+
+fn adapter_words(prt: &Prt) -> String {
+    match prt.gpu_adapter() {
+        Some(a) => format!("GPU: {} ({}, {})", a.name, a.device_type, a.backend),
+        None => "CPU (rayon)".into(),
+    }
 }
 
 fn materials_of(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Material>> {
@@ -36,7 +75,8 @@ impl PyPrt {
     /// and may return False to cancel (raises `translucent.Cancelled`).
     #[new]
     #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
-        tolerance = 1e-3, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None))]
+        tolerance = 1e-3, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
+        backend = "auto"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -50,7 +90,13 @@ impl PyPrt {
         world_samples: u32,
         area_samples: u32,
         progress: Option<Py<PyAny>>,
+        backend: &str,
     ) -> PyResult<Self> {
+        if !matches!(backend, "auto" | "gpu" | "cpu") {
+            return Err(PyValueError::new_err(format!(
+                "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
+            )));
+        }
         let materials = materials_of(materials)?;
         let eta = materials.first().map(|m| m.eta).unwrap_or(1.3);
         let degree = Degree::from_int(degree).map_err(crate::convert::to_py)?;
@@ -87,7 +133,35 @@ impl PyPrt {
             })
         });
         let inner = result.map_err(|e| e.into_py(Some(&progress)))?;
-        Ok(Self { inner, last: None })
+        let mut prt = Self {
+            inner,
+            last: None,
+            backend_message: String::new(),
+        };
+        prt.choose_backend(py, backend)?;
+        Ok(prt)
+    }
+
+    /// Where edits run: "auto", "gpu" or "cpu" (see the constructor). Returns a sentence saying
+    /// which device was chosen, or why the CPU was kept. "gpu" raises RuntimeError when no
+    /// adapter exists.
+    fn set_backend(&mut self, py: Python<'_>, backend: &str) -> PyResult<String> {
+        self.choose_backend(py, backend)
+    }
+
+    /// "gpu" or "cpu".
+    #[getter]
+    fn backend(&self) -> &'static str {
+        match self.inner.backend() {
+            Backend::Gpu => "gpu",
+            Backend::Cpu => "cpu",
+        }
+    }
+
+    /// Which device evaluates edits, or why the CPU is used.
+    #[getter]
+    fn backend_message(&self) -> String {
+        self.backend_message.clone()
     }
 
     /// Multiple-scattering radiosity B per vertex, (N, 3) float32 (Xu 2007 eq. 9 without F_t/pi).
@@ -133,6 +207,12 @@ impl PyPrt {
         d.set_item("seconds", e.fit_seconds + e.dot_seconds)?;
         d.set_item("fit_seconds", e.fit_seconds)?;
         d.set_item("dot_seconds", e.dot_seconds)?;
+        d.set_item("backend", self.backend())?;
+        if let Some(g) = e.gpu {
+            d.set_item("upload_seconds", g.upload)?;
+            d.set_item("dispatch_seconds", g.dispatch)?;
+            d.set_item("readback_seconds", g.readback)?;
+        }
         d.set_item("fit_error", e.fit_error.to_vec())?;
         d.set_item("error_estimate", e.error_estimate.to_vec())?;
         Ok(Some(d))

@@ -54,6 +54,32 @@ impl Transport {
         }
     }
 
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+    pub fn vertices(&self) -> usize {
+        self.vertices
+    }
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// The coefficients as the dot product uses them, `[3][stride]`, with the irradiance
+    /// colour folded in when one stored channel serves all three.
+    pub fn scaled(&self, coeffs: &[Vec<f32>; 3]) -> [Vec<f32>; 3] {
+        std::array::from_fn(|c| {
+            let k = if self.channels == 1 {
+                self.scale[c]
+            } else {
+                1.0
+            };
+            coeffs[c].iter().map(|x| x * k).collect()
+        })
+    }
+
     pub fn bytes(&self) -> usize {
         self.values.len() * std::mem::size_of::<f32>()
     }
@@ -65,10 +91,7 @@ impl Transport {
         let channels = self.channels;
         debug_assert!(coeffs.iter().all(|c| c.len() == stride));
         // With one stored channel, the irradiance colour folds into the coefficients.
-        let scaled: [Vec<f32>; 3] = std::array::from_fn(|c| {
-            let k = if channels == 1 { self.scale[c] } else { 1.0 };
-            coeffs[c].iter().map(|x| x * k).collect()
-        });
+        let scaled = self.scaled(coeffs);
         let per_block = channels * stride * LANES;
         let mut out = vec![[0f32; 3]; self.vertices];
         out.par_chunks_mut(LANES)

@@ -95,11 +95,22 @@ pub struct PrtReport {
     pub seconds_total: f64,
 }
 
+/// Where the per-edit dot product runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// rayon over blocks of vertices.
+    Cpu,
+    /// wgpu compute (any Vulkan adapter, lavapipe included).
+    Gpu,
+}
+
 /// The precomputed transport of one mesh under fixed lighting.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Prt {
     fitter: Fitter,
     transport: Transport,
+    /// The transport resident on a GPU once `use_gpu` succeeded.
+    gpu: Option<crate::gpu::GpuEvaluator>,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     near_radius: f64,
@@ -130,7 +141,10 @@ pub struct Evaluation {
     /// R_d,total the basis carries, plus the tail beyond the support radius.
     pub error_estimate: [f64; 3],
     pub fit_seconds: f64,
+    /// The whole dot product, GPU transfers included.
     pub dot_seconds: f64,
+    /// Upload, dispatch and readback when the GPU ran it.
+    pub gpu: Option<crate::gpu::GpuTimings>,
 }
 
 impl Prt {
@@ -296,12 +310,49 @@ impl Prt {
         Ok(Prt {
             fitter: basis.fitter(),
             transport,
+            gpu: None,
             positions: mesh.positions().to_vec(),
             normals: mesh.normals().to_vec(),
             near_radius,
             eta: settings.eta,
             report,
         })
+    }
+
+    /// Moves the dot product to a GPU (uploading the transport once), or back to the CPU.
+    /// `allow_software` admits a software adapter (lavapipe). On failure the CPU stays in use
+    /// and the error says why.
+    pub fn set_backend(&mut self, backend: Backend, allow_software: bool) -> Result<()> {
+        match backend {
+            Backend::Cpu => {
+                self.gpu = None;
+                Ok(())
+            }
+            Backend::Gpu => {
+                let t = &self.transport;
+                self.gpu = Some(crate::gpu::GpuEvaluator::new(
+                    t.values(),
+                    t.vertices(),
+                    t.channels(),
+                    t.stride(),
+                    allow_software,
+                )?);
+                Ok(())
+            }
+        }
+    }
+
+    pub fn backend(&self) -> Backend {
+        if self.gpu.is_some() {
+            Backend::Gpu
+        } else {
+            Backend::Cpu
+        }
+    }
+
+    /// The GPU adapter in use, if any.
+    pub fn gpu_adapter(&self) -> Option<&crate::gpu::AdapterDescription> {
+        self.gpu.as_ref().map(|g| g.adapter())
     }
 
     pub fn report(&self) -> &PrtReport {
@@ -365,13 +416,20 @@ impl Prt {
         let c = self.coefficients(material)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let radiosity = self.transport.dot(&c.vectors);
+        let (radiosity, gpu) = match &self.gpu {
+            Some(gpu) => {
+                let (b, t) = gpu.dot(&self.transport.scaled(&c.vectors).concat())?;
+                (b, Some(t))
+            }
+            None => (self.transport.dot(&c.vectors), None),
+        };
         Ok(Evaluation {
             radiosity,
             fit_error: c.fit_error,
             error_estimate: c.error_estimate,
             fit_seconds,
             dot_seconds: t1.elapsed().as_secs_f64(),
+            gpu,
         })
     }
 
@@ -860,6 +918,43 @@ mod tests {
             1,
             "one colour of light needs one transport"
         );
+    }
+
+    #[test]
+    fn gpu_and_cpu_dot_products_agree() {
+        // Three stored channels (coloured irradiance) exercise the full layout.
+        let mesh = plane(41, 40.0);
+        let irr = |p: &[Vec3], _n: &[Vec3], _d: Density| {
+            Ok(p.iter()
+                .map(|x| [1.0 + 0.02 * x.x, 0.5 + 0.01 * x.y.abs(), 0.3])
+                .collect())
+        };
+        let m = Material::preset("skin1", 1.0).unwrap();
+        let mut prt = Prt::precompute(&mesh, &[m], &PrtSettings::default(), &irr, None).unwrap();
+        assert_eq!(prt.report().stored_channels, 3);
+        let cpu = prt.radiosity(&m).unwrap().radiosity;
+        if let Err(e) = prt.set_backend(Backend::Gpu, true) {
+            // CI installs Mesa's lavapipe; elsewhere a machine may have no Vulkan at all.
+            eprintln!("skipped: {e}");
+            return;
+        }
+        assert_eq!(prt.backend(), Backend::Gpu);
+        let other = Material::preset("ketchup", 1.0).unwrap();
+        for mat in [m, other] {
+            let gpu = prt.radiosity(&mat).unwrap().radiosity;
+            prt.set_backend(Backend::Cpu, true).unwrap();
+            let cpu = prt.radiosity(&mat).unwrap().radiosity;
+            prt.set_backend(Backend::Gpu, true).unwrap();
+            for (g, c) in gpu.iter().zip(&cpu) {
+                for k in 0..3 {
+                    assert!(
+                        (g[k] - c[k]).abs() <= 1e-5 * c[k].abs().max(1e-6),
+                        "{g:?} vs {c:?}"
+                    );
+                }
+            }
+        }
+        let _ = cpu;
     }
 
     #[test]

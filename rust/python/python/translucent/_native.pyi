@@ -104,7 +104,16 @@ class Prt:
         world_samples: int = 64,
         area_samples: int = 16,
         progress: Progress | None = None,
-    ) -> None: ...
+        backend: Literal["auto", "gpu", "cpu"] = "auto",
+    ) -> None:
+        """`backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
+        "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none."""
+    def set_backend(self, backend: Literal["auto", "gpu", "cpu"]) -> str:
+        """Moves edits to another device; returns which one (or why the CPU was kept)."""
+    @property
+    def backend(self) -> Literal["gpu", "cpu"]: ...
+    @property
+    def backend_message(self) -> str: ...
     def radiosity(self, material: Material) -> npt.NDArray[np.float32]:
         """(N, 3) multiple-scattering radiosity B per vertex."""
     def radiance(self, material: Material, eye: Vec3) -> npt.NDArray[np.float32]:
