@@ -1,11 +1,15 @@
 """Translucent: subsurface-scattering preview for Blender (Jensen dipole, PRT after Xu 2007).
 
-Blender-side code only: UI, scene export (`export`), colour write-back (`writeback`).
-All maths lives in the native `translucent` module. The full editing UI is a later issue;
-this registers a Material Properties panel that points at the Python API.
+Blender-side code only: settings (`properties`), operators, the material panel, scene export
+(`export`) and colour write-back (`writeback`). All maths lives in the native `translucent`
+module. Enable the preview on a material, press Precompute, then drag the sliders: the
+objects' "translucent_preview" colour attribute follows (show it with Solid shading, Color:
+Attribute).
 """
 
 import bpy
+
+from . import operators, properties, session
 
 
 class TRANSLUCENT_PT_material(bpy.types.Panel):
@@ -18,24 +22,67 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
     def poll(cls, context):
         return context.material is not None
 
+    def draw_header(self, context):
+        self.layout.prop(context.material.translucent, "enabled", text="")
+
     def draw(self, context):
         layout = self.layout
-        try:
-            import translucent
+        mat = context.material
+        s = mat.translucent
+        layout.active = s.enabled
+        layout.prop(s, "preset")
+        col = layout.column()
+        col.prop(s, "sigma_a")
+        col.prop(s, "sigma_s")
+        col.prop(s, "g")
+        col.prop(s, "eta")
+        col.prop(s, "mm_per_unit")
+        row = layout.row()
+        row.prop(s, "coefficients")
+        row.prop(s, "degree", text="")
+        layout.prop(s, "backend")
+        state = session.state(mat)
+        if state == "running":
+            job = session.JOBS[mat.name]
+            layout.label(text=f"Precomputing {100 * job.progress:.0f} % (Esc cancels)", icon="TIME")
+        else:
+            layout.operator("translucent.precompute", icon="RENDER_STILL")
+        if state == "none":
+            layout.label(text="No transport: press Precompute", icon="INFO")
+        elif state == "stale":
+            layout.label(text="Scene or IOR changed: transport is stale, precompute again", icon="ERROR")
+        sess = session.SESSIONS.get(mat.name)
+        if sess is not None and sess.last_error:
+            err = ", ".join(f"{100 * e:.2f}" for e in sess.last_error)
+            layout.label(text=f"Edit {1e3 * sess.last_seconds:.2f} ms, est. error {err} %")
+            if max(sess.last_error) > 0.05:
+                layout.label(text="Material far from the basis: precompute again", icon="ERROR")
+            for name in sess.not_shown:
+                layout.label(text=f"{name}: modifier changes vertex count, not shown", icon="ERROR")
+        layout.operator("translucent.clear")
 
-            layout.label(text=f"translucent {translucent.__version__} loaded")
-        except ImportError:
-            layout.label(text="native module not installed", icon="ERROR")
+
+@bpy.app.handlers.persistent
+def _drop_sessions(*_args):
+    """A loaded file starts without transport (it is not saved); the panel asks for a precompute."""
+    session.SESSIONS.clear()
+    session.JOBS.clear()
 
 
 classes = (TRANSLUCENT_PT_material,)
 
 
 def register():
-    for cls in classes:
+    properties.register()
+    for cls in operators.classes + classes:
         bpy.utils.register_class(cls)
+    bpy.app.handlers.load_post.append(_drop_sessions)
 
 
 def unregister():
-    for cls in reversed(classes):
+    if _drop_sessions in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_drop_sessions)
+    for cls in reversed(operators.classes + classes):
         bpy.utils.unregister_class(cls)
+    properties.unregister()
+    session.SESSIONS.clear()

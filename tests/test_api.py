@@ -145,6 +145,8 @@ def test_radiance_is_fresnel_over_pi_times_radiosity():
         cos_o = w[2] / np.linalg.norm(w)
         np.testing.assert_allclose(l[v], b[v] * fresnel_t(1.3, cos_o) / math.pi, rtol=1e-5)
     assert prt.last_eval["seconds"] > 0
+    along_normal = prt.radiance(m)
+    np.testing.assert_allclose(along_normal, b * fresnel_t(1.3, 1.0) / math.pi, rtol=1e-5)
     assert len(prt.last_eval["error_estimate"]) == 3
 
 

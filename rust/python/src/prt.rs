@@ -180,15 +180,17 @@ impl PyPrt {
         Ok(out)
     }
 
-    /// Multiple-scattering radiance toward the point `eye`, L_d = F_t B / pi, (N, 3) float32.
+    /// Multiple-scattering radiance toward the point `eye`, L_d = F_t B / pi, (N, 3) float32;
+    /// without `eye`, the radiance leaving along each vertex normal.
+    #[pyo3(signature = (material, eye = None))]
     fn radiance<'py>(
         &mut self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
-        eye: &Bound<'_, PyAny>,
+        eye: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let eye = vec3("eye", eye)?;
+        let eye = eye.map(|e| vec3("eye", e)).transpose()?;
         let inner = &self.inner;
         let e = py
             .detach(|| inner.radiance(&m, eye))

@@ -434,19 +434,26 @@ impl Prt {
     }
 
     /// Multiple-scattering radiance toward `eye`: L_d = F_t(eta, w_o) B / pi (Xu 2007 eq. 2).
-    /// Vertices facing away from the eye get 0.
-    pub fn radiance(&self, material: &Material, eye: Vec3) -> Result<Evaluation> {
-        if !eye.is_finite() {
+    /// Vertices facing away from the eye get 0. Without an eye, the radiance leaving along
+    /// each vertex normal (a view-independent preview colour).
+    pub fn radiance(&self, material: &Material, eye: Option<Vec3>) -> Result<Evaluation> {
+        if let Some(eye) = eye.filter(|e| !e.is_finite()) {
             return Err(Error::InvalidArgument(format!("eye {eye:?} is not finite")));
         }
         let mut e = self.radiosity(material)?;
-        radiance_from_radiosity(
-            &mut e.radiosity,
-            &self.positions,
-            &self.normals,
-            eye,
-            self.eta,
-        );
+        match eye {
+            Some(eye) => radiance_from_radiosity(
+                &mut e.radiosity,
+                &self.positions,
+                &self.normals,
+                eye,
+                self.eta,
+            ),
+            None => {
+                let k = (fresnel_transmittance(self.eta, 1.0) / std::f64::consts::PI) as f32;
+                e.radiosity.iter_mut().for_each(|b| *b = b.map(|x| x * k));
+            }
+        }
         Ok(e)
     }
 }

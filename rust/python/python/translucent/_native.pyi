@@ -116,8 +116,9 @@ class Prt:
     def backend_message(self) -> str: ...
     def radiosity(self, material: Material) -> npt.NDArray[np.float32]:
         """(N, 3) multiple-scattering radiosity B per vertex."""
-    def radiance(self, material: Material, eye: Vec3) -> npt.NDArray[np.float32]:
-        """(N, 3) multiple-scattering radiance toward the point `eye`, F_t B / pi."""
+    def radiance(self, material: Material, eye: Vec3 | None = None) -> npt.NDArray[np.float32]:
+        """(N, 3) multiple-scattering radiance toward the point `eye`, F_t B / pi; without an
+        eye, the radiance leaving along each vertex normal."""
     @property
     def last_eval(self) -> dict[str, float | list[float]] | None: ...
     @property

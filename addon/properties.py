@@ -1,0 +1,80 @@
+"""Settings of the preview, stored on the material (they save with the .blend file).
+Coefficients are shown per millimetre (Jensen's table units); `mm_per_unit` converts."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty
+
+from . import session
+
+
+def _preset_items(self, context):
+    try:
+        import translucent
+
+        names = translucent.Material.preset_names()
+    except ImportError:
+        names = []
+    return [("CUSTOM", "Custom", "Coefficients as set below")] + [
+        (n.upper(), n.capitalize(), f"Jensen 2001 measured {n}") for n in names
+    ]
+
+
+def _apply_preset(self, context):
+    if self.preset == "CUSTOM":
+        return
+    import translucent
+
+    m = translucent.Material.preset(self.preset.lower(), mm_per_unit=1.0)
+    self["sigma_a"] = m.sigma_a
+    self["sigma_s"] = m.sigma_s
+    self["g"] = 0.0
+    self["eta"] = m.eta
+    _live_edit(self, context)
+
+
+def _live_edit(self, context):
+    session.edit(self.id_data)
+
+
+class TranslucentMaterialSettings(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Preview", description="Show a subsurface-scattering preview of this material", default=False)
+    preset: EnumProperty(name="Preset", items=_preset_items, update=_apply_preset)
+    sigma_a: FloatVectorProperty(
+        name="Absorption", description="sigma_a per channel [1/mm]", size=3, min=0.0, soft_max=10.0,
+        default=(0.0021, 0.0041, 0.0071), precision=4, update=_live_edit,
+    )
+    sigma_s: FloatVectorProperty(
+        name="Scattering", description="sigma_s per channel [1/mm]", size=3, min=0.0, soft_max=50.0,
+        default=(2.19, 2.62, 3.00), precision=3, update=_live_edit,
+    )
+    g: FloatProperty(name="Anisotropy g", description="Phase-function mean cosine", min=-0.99, max=0.99, default=0.0, update=_live_edit)
+    eta: FloatProperty(name="IOR", description="Relative index of refraction (changing it needs a new precompute)", min=1.0, max=2.5, default=1.3)
+    mm_per_unit: FloatProperty(name="mm per unit", description="Millimetres per scene unit (1000 for metres)", min=1e-6, default=1000.0)
+    coefficients: IntProperty(name="Basis size", description="Coefficients of the piecewise polynomial basis (Xu 2007)", min=4, max=128, default=32)
+    degree: EnumProperty(name="Degree", items=[("1", "Linear", "C0 piecewise linear"), ("2", "Quadratic", "C1 piecewise quadratic")], default="1")
+    backend: EnumProperty(
+        name="Device",
+        items=[("auto", "Auto", "A GPU if there is one, else the CPU"), ("gpu", "GPU", "wgpu compute"), ("cpu", "CPU", "rayon")],
+        default="auto",
+    )
+
+    def material(self):
+        """The translucent.Material these settings describe, in scene units."""
+        import translucent
+
+        k = self.mm_per_unit
+        return translucent.Material(
+            tuple(x * k for x in self.sigma_a), tuple(x * k for x in self.sigma_s), g=self.g, eta=self.eta
+        )
+
+
+def register():
+    bpy.utils.register_class(TranslucentMaterialSettings)
+    bpy.types.Material.translucent = bpy.props.PointerProperty(type=TranslucentMaterialSettings)
+
+
+def unregister():
+    del bpy.types.Material.translucent
+    bpy.utils.unregister_class(TranslucentMaterialSettings)

@@ -1,0 +1,124 @@
+"""The add-on as an artist or a script drives it, in headless Blender: register twice, enable
+the preview, precompute, edit a slider, two objects sharing a material, stale detection,
+cancelling, save and reload; the user's data stays untouched."""
+
+import numpy as np
+import pytest
+
+from test_bpy_export import mesh_hash
+
+pytestmark = pytest.mark.bpy
+
+
+@pytest.fixture
+def addon(empty_blend):
+    import addon as package
+
+    package.register()
+    yield package
+    package.unregister()
+
+
+def read_preview(obj):
+    from addon import writeback
+
+    attr = obj.data.color_attributes[writeback.ATTRIBUTE]
+    px = np.empty(len(attr.data) * 4, np.float32)
+    attr.data.foreach_get("color", px)
+    return px.reshape(-1, 4)[:, :3]
+
+
+def scene_with_two_spheres(bpy):
+    mat = bpy.data.materials.new("Wax")
+    objs = []
+    for x in (-0.06, 0.06):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, location=(x, 0.0, 0.0), segments=24, ring_count=12)
+        o = bpy.context.active_object
+        o.data.materials.append(mat)
+        objs.append(o)
+    smooth = objs[0].modifiers.new("Smooth", "SMOOTH")  # keeps the vertex count
+    smooth.factor = 0.5
+    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    light.data.energy = 5.0
+    light.location = (0.0, -0.2, 0.2)
+    bpy.context.scene.collection.objects.link(light)
+    bpy.context.view_layer.objects.active = objs[0]
+    return mat, objs, light
+
+
+def test_register_and_unregister_twice(empty_blend):
+    import addon
+
+    for _ in range(2):
+        addon.register()
+        assert hasattr(empty_blend.types.Material, "translucent")
+        addon.unregister()
+        assert not hasattr(empty_blend.types.Material, "translucent")
+
+
+def test_precompute_and_live_edit_touch_only_the_preview_attribute(addon):
+    import bpy
+
+    from addon import session
+
+    mat, objs, light = scene_with_two_spheres(bpy)
+    before = [mesh_hash(o.data) for o in objs]
+    nodes_before = mat.node_tree.nodes.keys() if mat.node_tree else []
+    s = mat.translucent
+    s.enabled = True
+    s.mm_per_unit = 1000.0
+    s.preset = "MARBLE"
+    assert tuple(round(x, 4) for x in s.sigma_s) == (2.19, 2.62, 3.0)
+    assert session.state(mat) == "none"
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    assert session.state(mat) == "ready"
+    first = [read_preview(o) for o in objs]
+    for f in first:
+        assert np.all(np.isfinite(f)) and f.max() > 0 and f.min() >= 0
+    # Dragging a slider refits and rewrites the attribute of both objects sharing the material.
+    s.sigma_a = (0.5, 0.5, 0.5)
+    second = [read_preview(o) for o in objs]
+    for f, g in zip(first, second):
+        assert np.all(g <= f + 1e-6) and g.sum() < 0.9 * f.sum(), "more absorption, darker"
+    sess = session.SESSIONS[mat.name]
+    assert sess.last_seconds > 0 and len(sess.last_error) == 3
+    assert [mesh_hash(o.data) for o in objs] == before
+    assert (mat.node_tree.nodes.keys() if mat.node_tree else []) == nodes_before
+    assert len(objs[0].modifiers) == 1
+    # Moving the light makes the transport stale; so does a new IOR.
+    light.location.x += 0.05
+    bpy.context.view_layer.update()
+    assert session.state(mat) == "stale"
+
+
+def test_cancel_leaves_no_transport(addon):
+    import bpy
+
+    import translucent
+    from addon import session
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    mat.translucent.enabled = True
+    job, *_ = session.start(mat)
+    job.cancel = True
+    job.run_here()
+    assert isinstance(job.error, translucent.Cancelled)
+    assert mat.name not in session.SESSIONS
+
+
+def test_settings_survive_save_and_reload_but_transport_does_not(addon, tmp_path):
+    import bpy
+
+    from addon import session
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    mat.translucent.enabled = True
+    mat.translucent.sigma_a = (0.01, 0.02, 0.03)
+    bpy.ops.translucent.precompute(material_name=mat.name)
+    path = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    mat = bpy.data.materials["Wax"]
+    assert mat.translucent.enabled
+    assert tuple(round(x, 4) for x in mat.translucent.sigma_a) == (0.01, 0.02, 0.03)
+    assert session.state(mat) == "none", "transport is not saved: the panel asks for a precompute"
