@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.deps-installed
 PYDEPS := bpy==5.0.1 "maturin>=1.7,<2" pytest hypothesis matplotlib trimesh
 
-.PHONY: setup build demo test test-rust test-python lint bench accuracy clean
+.PHONY: setup build demo test test-rust test-python lint bench accuracy addon clean
 
 # Mesa's software Vulkan (lavapipe) so the wgpu path runs without a GPU; GPU tests skip
 # with their reason where it cannot be installed.
@@ -52,6 +52,10 @@ test: lint test-rust test-python
 
 bench: build
 	$(PY) blender_scripts/bench_prt.py
+
+# The installable Blender extension (zip with the native wheel) in dist/.
+addon: setup
+	$(PY) blender_scripts/build_extension.py --out dist
 
 accuracy: build
 	$(PY) blender_scripts/accuracy_prt.py
