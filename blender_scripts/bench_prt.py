@@ -98,6 +98,32 @@ def main() -> int:
         f"{1e3 * statistics.median(wall):.2f} ms from Python with the numpy copy, "
         f"over {args.edits} edits [budget 5 ms]"
     )
+    # Slider to viewport on the CPU path: fit + dot + writing the add-on's colour attribute.
+    try:
+        import bpy
+
+        sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        from addon import writeback
+
+        mesh = bpy.data.meshes.new("bench")
+        mesh.vertices.add(big.vertex_count)
+        mesh.vertices.foreach_set("co", p2.ravel())
+        totals, writes = [], []
+        for k in range(args.edits):
+            t0 = time.perf_counter()
+            colors = prt.radiance(marble if k % 2 else skin)
+            t1 = time.perf_counter()
+            writeback.write_colors(mesh, colors)
+            t2 = time.perf_counter()
+            totals.append(t2 - t0)
+            writes.append(t2 - t1)
+        print(
+            f"slider to viewport, CPU, {big.vertex_count} vertices: median {1e3 * statistics.median(totals):.2f} ms "
+            f"(attribute write {1e3 * statistics.median(writes):.2f} ms) [budget 16 ms]"
+        )
+    except ImportError:
+        print("slider to viewport: skipped (bpy not installed)")
+
     # The same edits through wgpu: a real GPU where there is one, else Mesa's lavapipe.
     try:
         where = prt.set_backend("gpu")
