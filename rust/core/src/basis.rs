@@ -11,6 +11,7 @@
 //! well conditioned (evaluated from differences r - knot, never raw powers r^i).
 
 use crate::error::{Error, Result};
+use crate::quadrature::GAUSS8;
 use nalgebra::{DMatrix, DVector};
 
 /// Polynomial degree of each piece: 1 (hat functions, C0) or 2 (quadratic B-splines, C1).
@@ -41,18 +42,6 @@ impl Degree {
 
 /// Most basis functions a basis may have.
 pub const MAX_COEFFICIENTS: usize = 256;
-
-/// Gauss–Legendre nodes and weights on [-1, 1], 8 points: exact to degree 15.
-const GAUSS8: [(f64, f64); 8] = [
-    (-0.960_289_856_497_536_3, 0.101_228_536_290_376_26),
-    (-0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
-    (-0.525_532_409_916_329, 0.313_706_645_877_887_3),
-    (-0.183_434_642_495_649_8, 0.362_683_783_378_362),
-    (0.183_434_642_495_649_8, 0.362_683_783_378_362),
-    (0.525_532_409_916_329, 0.313_706_645_877_887_3),
-    (0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
-    (0.960_289_856_497_536_3, 0.101_228_536_290_376_26),
-];
 
 /// B-splines of degree 1 or 2 on the knots r_min = k_0 < ... < k_m = r_max.
 #[derive(Debug, Clone, PartialEq)]

@@ -10,6 +10,7 @@ pub mod mesh;
 pub mod metrics;
 pub mod optics;
 pub mod prt;
+pub mod quadrature;
 pub mod raytrace;
 pub mod reference;
 pub mod scene;

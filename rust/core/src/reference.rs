@@ -10,6 +10,7 @@
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::optics::{Dipole, Material};
+use crate::quadrature::GAUSS8;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -133,17 +134,6 @@ fn triangle_integral(x: DVec3, p: &Patch, dip: &Dipole) -> f64 {
     }
     total / (2.0 * PI)
 }
-
-const GAUSS8: [(f64, f64); 8] = [
-    (-0.960_289_856_497_536_3, 0.101_228_536_290_376_26),
-    (-0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
-    (-0.525_532_409_916_329, 0.313_706_645_877_887_3),
-    (-0.183_434_642_495_649_8, 0.362_683_783_378_362),
-    (0.183_434_642_495_649_8, 0.362_683_783_378_362),
-    (0.525_532_409_916_329, 0.313_706_645_877_887_3),
-    (0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
-    (0.960_289_856_497_536_3, 0.101_228_536_290_376_26),
-];
 
 /// The mesh at one level: sub-triangles grouped by triangle, with their irradiance.
 struct Level {

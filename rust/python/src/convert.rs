@@ -81,8 +81,8 @@ fn as_contiguous<'py>(value: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<
     np.call_method1("ascontiguousarray", (value, dtype))
 }
 
-/// An (N, 3) array of finite-or-not floats as Vec3 (validation of values is the core's job).
-pub fn vec3_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
+/// An (N, 3) float array as rows (values are validated by the core, not here).
+pub fn float_rows(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]>> {
     let arr = as_contiguous(value, "float32")
         .map_err(|e| PyValueError::new_err(format!("{name} must be an (N, 3) float array: {e}")))?;
     let arr: PyReadonlyArray2<f32> = arr
@@ -94,9 +94,18 @@ pub fn vec3_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
             arr.shape()
         )));
     }
-    let s = arr.as_slice()?;
-    Ok(s.chunks_exact(3)
-        .map(|p| Vec3::new(p[0], p[1], p[2]))
+    Ok(arr
+        .as_slice()?
+        .chunks_exact(3)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect())
+}
+
+/// An (N, 3) float array as Vec3.
+pub fn vec3_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
+    Ok(float_rows(name, value)?
+        .into_iter()
+        .map(Vec3::from)
         .collect())
 }
 

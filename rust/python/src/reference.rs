@@ -1,9 +1,8 @@
 //! `translucent.reference_radiosity` and `translucent.relative_error`.
 
-use crate::convert::{guard, rgb_array, to_py, Progress};
+use crate::convert::{float_rows, guard, rgb_array, to_py, Progress};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
-use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -101,25 +100,6 @@ pub fn reference_radiosity_py<'py>(
     Ok((values, d).into_pyobject(py)?.into_any())
 }
 
-fn rows(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]>> {
-    let np = a.py().import("numpy")?;
-    let arr = np.call_method1("ascontiguousarray", (a, "float32"))?;
-    let arr: PyReadonlyArray2<f32> = arr
-        .extract()
-        .map_err(|_| PyValueError::new_err(format!("{name} must be an (N, 3) float array")))?;
-    if arr.shape()[1] != 3 {
-        return Err(PyValueError::new_err(format!(
-            "{name} must have shape (N, 3), got {:?}",
-            arr.shape()
-        )));
-    }
-    Ok(arr
-        .as_slice()?
-        .chunks_exact(3)
-        .map(|p| [p[0], p[1], p[2]])
-        .collect())
-}
-
 /// Area-weighted relative RMS and max relative error per channel of `estimate` against
 /// `truth` (both (N, 3)), weights (N,) e.g. `scene.vertex_areas`. Returns
 /// {"rms": [r, g, b], "max": [r, g, b]}.
@@ -131,8 +111,8 @@ pub fn relative_error<'py>(
     truth: &Bound<'py, PyAny>,
     weights: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let e = rows("estimate", estimate)?;
-    let t = rows("truth", truth)?;
+    let e = float_rows("estimate", estimate)?;
+    let t = float_rows("truth", truth)?;
     let w: Vec<f32> = match weights {
         Some(w) => {
             let np = py.import("numpy")?;
