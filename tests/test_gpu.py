@@ -34,6 +34,22 @@ def test_gpu_and_cpu_edits_agree():
         np.testing.assert_allclose(gpu, cpu, rtol=1e-5, atol=1e-6 * float(cpu.max()))
 
 
+def test_f16_transport_states_its_error_and_keeps_within_it():
+    s = lit_plane()
+    m = translucent.Material.preset("skin1")
+    prt = translucent.Prt(s, m, backend="cpu", world_samples=16)
+    cpu = prt.radiosity(m)
+    try:
+        prt.set_backend("gpu", half=True)
+    except RuntimeError as e:
+        pytest.skip(f"no wgpu adapter here: {e}")
+    half = prt.radiosity(m)
+    bound = prt.last_eval["transport_f16_error"]
+    assert 0 < bound < 1e-3
+    err = translucent.relative_error(half, cpu, s.vertex_areas)
+    assert max(err["rms"]) <= bound
+
+
 def test_auto_backend_says_what_it_chose_and_bad_names_are_rejected():
     s = lit_plane()
     m = translucent.Material.preset("marble")

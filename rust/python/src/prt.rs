@@ -24,7 +24,7 @@ pub struct PyPrt {
 impl PyPrt {
     /// "cpu", "gpu" (any adapter, lavapipe included) or "auto" (a hardware GPU if there is
     /// one, else the CPU). Returns what happened, in words.
-    fn choose_backend(&mut self, py: Python<'_>, backend: &str) -> PyResult<String> {
+    fn choose_backend(&mut self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
         let inner = &mut self.inner;
         let result = match backend {
             "cpu" => {
@@ -33,11 +33,11 @@ impl PyPrt {
                 "CPU (rayon)".to_string()
             }
             "gpu" => {
-                py.detach(|| inner.set_backend(Backend::Gpu, true))
+                py.detach(|| inner.set_backend_with(Backend::Gpu, true, half))
                     .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
                 adapter_words(inner)
             }
-            "auto" => match py.detach(|| inner.set_backend(Backend::Gpu, false)) {
+            "auto" => match py.detach(|| inner.set_backend_with(Backend::Gpu, false, half)) {
                 Ok(()) => adapter_words(inner),
                 Err(e) => format!("CPU (rayon): {e}"),
             },
@@ -138,15 +138,24 @@ impl PyPrt {
             last: None,
             backend_message: String::new(),
         };
-        prt.choose_backend(py, backend)?;
+        prt.choose_backend(py, backend, false)?;
         Ok(prt)
     }
 
     /// Where edits run: "auto", "gpu" or "cpu" (see the constructor). Returns a sentence saying
     /// which device was chosen, or why the CPU was kept. "gpu" raises RuntimeError when no
     /// adapter exists.
-    fn set_backend(&mut self, py: Python<'_>, backend: &str) -> PyResult<String> {
-        self.choose_backend(py, backend)
+    /// `half=True` stores the GPU transport as f16: half the memory; `transport_f16_error`
+    /// (also in `last_eval`) bounds the relative error it adds.
+    #[pyo3(signature = (backend, half = false))]
+    fn set_backend(&mut self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
+        self.choose_backend(py, backend, half)
+    }
+
+    /// With f16 GPU storage, the bound on the relative error it adds; else None.
+    #[getter]
+    fn transport_f16_error(&self) -> Option<f64> {
+        self.inner.gpu_half_error()
     }
 
     /// "gpu" or "cpu".
@@ -210,6 +219,9 @@ impl PyPrt {
         d.set_item("fit_seconds", e.fit_seconds)?;
         d.set_item("dot_seconds", e.dot_seconds)?;
         d.set_item("backend", self.backend())?;
+        if let Some(e) = self.inner.gpu_half_error() {
+            d.set_item("transport_f16_error", e)?;
+        }
         if let Some(g) = e.gpu {
             d.set_item("upload_seconds", g.upload)?;
             d.set_item("dispatch_seconds", g.dispatch)?;

@@ -37,6 +37,7 @@ pub struct GpuEvaluator {
     vertices: usize,
     stride: usize,
     adapter: AdapterDescription,
+    half_error: Option<f64>,
 }
 
 impl std::fmt::Debug for GpuEvaluator {
@@ -80,18 +81,53 @@ pub fn probe(allow_software: bool) -> Result<AdapterDescription> {
     adapter(allow_software).map(|(_, d)| d)
 }
 
+/// Packs the transport as f16 pairs in u32 words, each run of `run` values (16 lanes: one
+/// coefficient of 16 vertices) divided by its largest magnitude (returned as the scales), and
+/// measures the rounding: the largest |x - decoded(x)| relative to its run's largest |x|.
+fn pack_half(values: &[f32], run: usize) -> (Vec<u32>, Vec<f32>, f64) {
+    let mut halves = Vec::with_capacity(values.len());
+    let mut scales = Vec::with_capacity(values.len() / run.max(1) + 1);
+    let mut worst = 0.0f64;
+    for chunk in values.chunks(run.max(1)) {
+        let scale = chunk.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+        let inv = if scale > 0.0 { 1.0 / scale } else { 0.0 };
+        scales.push(scale);
+        for x in chunk {
+            let h = half::f16::from_f32(x * inv);
+            if scale > 0.0 {
+                worst = worst.max(f64::from((h.to_f32() * scale - x).abs() / scale));
+            }
+            halves.push(h.to_bits());
+        }
+    }
+    let words = halves
+        .chunks(2)
+        .map(|p| u32::from(p[0]) | (u32::from(p.get(1).copied().unwrap_or(0)) << 16))
+        .collect();
+    (words, scales, worst)
+}
+
 impl GpuEvaluator {
-    /// Uploads `transport` ([block][channel][j][16 lanes] f32, see prt/layout.rs).
+    /// Uploads `transport` ([block][channel][j][16 lanes] f32, see prt/layout.rs), as f32 or,
+    /// with `half`, as IEEE f16 (half the memory and bandwidth; `half_error` says what it costs).
     pub fn new(
         transport: &[f32],
         vertices: usize,
         channels: usize,
         stride: usize,
         allow_software: bool,
+        half: bool,
     ) -> Result<GpuEvaluator> {
         let (adapter, description) = adapter(allow_software)?;
         let limits = adapter.limits();
-        let bytes = std::mem::size_of_val(transport) as u64;
+        let (words, scales, half_error) = if half {
+            let (w, s, e) = pack_half(transport, 16);
+            (w, s, Some(e))
+        } else {
+            let bits: Vec<u32> = transport.iter().map(|x| x.to_bits()).collect();
+            (bits, vec![1.0f32], None)
+        };
+        let bytes = std::mem::size_of_val(words.as_slice()) as u64;
         if bytes > limits.max_storage_buffer_binding_size {
             return Err(Error::GpuUnavailable(format!(
                 "transport of {bytes} bytes exceeds the adapter's storage binding limit of {}",
@@ -116,7 +152,12 @@ impl GpuEvaluator {
             compilation_options: Default::default(),
             cache: None,
         });
-        let params: [u32; 4] = [vertices as u32, channels as u32, stride as u32, 0];
+        let params: [u32; 4] = [
+            vertices as u32,
+            channels as u32,
+            stride as u32,
+            u32::from(half),
+        ];
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("params"),
             contents: bytemuck::cast_slice(&params),
@@ -124,7 +165,12 @@ impl GpuEvaluator {
         });
         let transport_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("transport"),
-            contents: bytemuck::cast_slice(transport),
+            contents: bytemuck::cast_slice(&words),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let scales = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scales"),
+            contents: bytemuck::cast_slice(&scales),
             usage: wgpu::BufferUsages::STORAGE,
         });
         let coefficients = device.create_buffer(&wgpu::BufferDescriptor {
@@ -167,6 +213,10 @@ impl GpuEvaluator {
                     binding: 3,
                     resource: output.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: scales.as_entire_binding(),
+                },
             ],
         });
         Ok(GpuEvaluator {
@@ -180,7 +230,16 @@ impl GpuEvaluator {
             vertices,
             stride,
             adapter: description,
+            half_error,
         })
+    }
+
+    /// With f16 storage: the largest rounding error of a transport entry relative to the
+    /// largest of the same coefficient over its 16 vertices; None for f32. For coefficient
+    /// vectors of one sign (fitted dipole profiles) it bounds the error of B relative to the
+    /// brightest of those 16 vertices (a dim vertex beside bright ones can see more).
+    pub fn half_error(&self) -> Option<f64> {
+        self.half_error
     }
 
     pub fn adapter(&self) -> &AdapterDescription {

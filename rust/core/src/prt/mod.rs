@@ -323,6 +323,16 @@ impl Prt {
     /// `allow_software` admits a software adapter (lavapipe). On failure the CPU stays in use
     /// and the error says why.
     pub fn set_backend(&mut self, backend: Backend, allow_software: bool) -> Result<()> {
+        self.set_backend_with(backend, allow_software, false)
+    }
+
+    /// As `set_backend`; `half` stores the GPU transport as f16 (see `gpu_half_error`).
+    pub fn set_backend_with(
+        &mut self,
+        backend: Backend,
+        allow_software: bool,
+        half: bool,
+    ) -> Result<()> {
         match backend {
             Backend::Cpu => {
                 self.gpu = None;
@@ -336,6 +346,7 @@ impl Prt {
                     t.channels(),
                     t.stride(),
                     allow_software,
+                    half,
                 )?);
                 Ok(())
             }
@@ -348,6 +359,11 @@ impl Prt {
         } else {
             Backend::Cpu
         }
+    }
+
+    /// The rounding error f16 transport storage adds (see `GpuEvaluator::half_error`).
+    pub fn gpu_half_error(&self) -> Option<f64> {
+        self.gpu.as_ref().and_then(|g| g.half_error())
     }
 
     /// The GPU adapter in use, if any.
@@ -961,7 +977,16 @@ mod tests {
                 }
             }
         }
-        let _ = cpu;
+        // f16 storage: half the bytes; its stated rounding bound covers what it changes in B.
+        prt.set_backend_with(Backend::Gpu, true, true).unwrap();
+        let bound = prt.gpu_half_error().unwrap();
+        assert!(bound > 0.0 && bound < 1e-3, "f16 rounding bound {bound}");
+        let half = prt.radiosity(&m).unwrap().radiosity;
+        let s = crate::metrics::relative_error(&half, &cpu, mesh.vertex_areas()).unwrap();
+        assert!(
+            s.worst_rms() <= bound.max(1e-6) && s.worst_rms() > 0.0,
+            "{s:?} vs bound {bound}"
+        );
     }
 
     #[test]

@@ -108,8 +108,11 @@ class Prt:
     ) -> None:
         """`backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
         "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none."""
-    def set_backend(self, backend: Literal["auto", "gpu", "cpu"]) -> str:
-        """Moves edits to another device; returns which one (or why the CPU was kept)."""
+    def set_backend(self, backend: Literal["auto", "gpu", "cpu"], half: bool = False) -> str:
+        """Moves edits to another device; returns which one (or why the CPU was kept).
+        `half` stores the GPU transport as f16 (half the memory; see transport_f16_error)."""
+    @property
+    def transport_f16_error(self) -> float | None: ...
     @property
     def backend(self) -> Literal["gpu", "cpu"]: ...
     @property
