@@ -103,7 +103,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=str(REPO / "out" / "demo"))
     ap.add_argument("--presets", nargs="+", default=["marble", "skin1", "ketchup"])
-    ap.add_argument("--receivers", type=int, default=300, help="vertices the ground truth is computed at")
+    ap.add_argument("--receivers", type=int, default=100, help="vertices the ground truth is computed at")
     args = ap.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
