@@ -2,13 +2,17 @@
 //! knots by dynamic programming ("Interval Partition"), projection by constrained least
 //! squares (eqs. 16–19), evaluation and integrals for the transport precompute.
 //!
-//! Xu eq. 18–19 minimise over per-interval polynomials of degree n-1 under continuity
-//! constraints at the knots (read as C^(n-2): C0 linear, C1 quadratic; see papers/README.md).
-//! We solve that constrained problem in the null space of the constraints, which is spanned by
-//! the B-splines of the same degree on the same knots (simple interior knots, boundary knots
-//! repeated): the basis functions here ARE those B-splines, so every coefficient vector
-//! satisfies eq. 19 by construction and the least-squares system is unconstrained, banded and
-//! well conditioned (evaluated from differences r - knot, never raw powers r^i).
+//! Xu eqs. 16–17 write P with per-interval monomials r^i, and eqs. 18–19 minimise the fit error
+//! under continuity constraints at the knots (read as C^(n-2): C0 linear, C1 quadratic; see
+//! papers/README.md). We solve that constrained problem in the null space of the constraints,
+//! which is spanned by the B-splines of the same degree on the same knots (simple interior
+//! knots, boundary knots repeated degree + 1 times): the basis functions here ARE those
+//! B-splines, so every coefficient vector satisfies eq. 19 by construction, the least-squares
+//! system is unconstrained, banded and well conditioned, and n = m + degree. They are evaluated
+//! by Cox–de Boor from ratios of r - knot to knot spans, i.e. in the local coordinate
+//! t = (r - k_i)/(k_(i+1) - k_i), never from raw powers r^i. Unlike Xu's 10 uniform samples per
+//! interval, eq. 18 is taken as the continuous integral int (F - P)^2 r dr (area weight of
+//! B = int R_d I dA) by Gauss–Legendre per interval.
 
 use crate::error::{Error, Result};
 use crate::quadrature::GAUSS8;
@@ -87,10 +91,14 @@ impl Basis {
         })
     }
 
-    /// Knots chosen by dynamic programming (Xu 2007 §5, "Interval Partition"): the m = n - degree
-    /// intervals minimising, summed over the representative `functions` (each normalised by
-    /// its own r-weighted L2 norm), the r-weighted squared error of the piecewise linear
-    /// interpolant of the function at the knots.
+    /// Knots chosen by dynamic programming (Xu 2007 §5, "Interval Partition"). Xu fixes the
+    /// coefficients of eq. 18 to the piecewise linear interpolant of F at the knots, which makes
+    /// the error a sum of independent per-interval terms, so the best m = n - degree intervals
+    /// over a candidate grid follow from a discrete DP. The objective summed over the
+    /// representative `functions` is int (F - L F)^2 r dr (r: the area weight of B = int R_d I dA),
+    /// each F divided by its own int |F| r dr so channels and materials of different total
+    /// reflectance weigh equally. Functions identically zero on the domain are ignored; with
+    /// none left the knots are uniform.
     pub fn choose(
         functions: &[&dyn Fn(f64) -> f64],
         r_min: f64,
@@ -111,9 +119,17 @@ impl Basis {
             )));
         }
         let m = coefficients - p;
-        let candidates = candidate_knots(r_min, r_max, (4 * m).max(160));
+        let start = if r_min > 0.0 {
+            r_min
+        } else {
+            shortest_scale(functions, r_max)
+        };
+        let candidates = candidate_knots(r_min, start, r_max, (4 * m).max(256));
         let g = candidates.len();
-        // Fine grid: 4 sub-points per candidate gap (midpoint rule), with r weights.
+        if g - 1 <= m {
+            return Basis::with_knots(uniform(r_min, r_max, m), degree);
+        }
+        // Fine sub-grid: SUB midpoints per candidate gap, weight r * h (midpoint rule of r dr).
         const SUB: usize = 4;
         let mut fine_r = Vec::with_capacity((g - 1) * SUB);
         let mut fine_w = Vec::with_capacity((g - 1) * SUB);
@@ -125,7 +141,7 @@ impl Basis {
                 fine_w.push(r * h);
             }
         }
-        // Sampled, normalised representatives; functions that vanish on the domain drop out.
+        // Each representative sampled at the candidates and on the fine grid, normalised.
         let mut samples: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
         for f in functions {
             let at_knots: Vec<f64> = candidates.iter().map(|&r| f(r)).collect();
@@ -135,43 +151,58 @@ impl Basis {
                     "a representative function is not finite on the basis domain".into(),
                 ));
             }
-            let norm2: f64 = at_fine.iter().zip(&fine_w).map(|(f, w)| f * f * w).sum();
-            if norm2 > 0.0 {
-                let k = 1.0 / norm2.sqrt();
+            let total: f64 = at_fine.iter().zip(&fine_w).map(|(f, w)| f.abs() * w).sum();
+            if total > 0.0 && total.is_finite() {
+                let k = 1.0 / total;
                 samples.push((
                     at_knots.iter().map(|x| x * k).collect(),
                     at_fine.iter().map(|x| x * k).collect(),
                 ));
             }
         }
-        if samples.is_empty() || g - 1 <= m {
+        if samples.is_empty() {
             return Basis::with_knots(uniform(r_min, r_max, m), degree);
         }
-        // cost[a][b]: error of one interval from candidate a to candidate b.
+        // cost[a * g + b]: the objective restricted to one interval [c_a, c_b]. For a fixed a
+        // the local moments of g = F - F(c_a) and u = r - c_a are accumulated as b grows:
+        //   int (g - s u)^2 = Sgg - 2 s Sgu + s^2 Suu,  s = (F(c_b) - F(c_a)) / (c_b - c_a),
+        // which is O(G^2 * SUB) in all and, being local, keeps the cancellation at the scale of
+        // F's variation on the interval rather than of F itself.
         let mut cost = vec![f64::INFINITY; g * g];
-        for a in 0..g {
+        let mut sgg = vec![0.0; samples.len()];
+        let mut sgu = vec![0.0; samples.len()];
+        for a in 0..g - 1 {
+            let ra = candidates[a];
+            sgg.iter_mut().for_each(|x| *x = 0.0);
+            sgu.iter_mut().for_each(|x| *x = 0.0);
+            let mut suu = 0.0;
             for b in a + 1..g {
-                let (ra, rb) = (candidates[a], candidates[b]);
-                let mut e = 0.0;
-                for (at_k, at_f) in &samples {
-                    let (fa, fb) = (at_k[a], at_k[b]);
-                    for q in a * SUB..b * SUB {
-                        let t = (fine_r[q] - ra) / (rb - ra);
-                        let d = at_f[q] - (fa + t * (fb - fa));
-                        e += d * d * fine_w[q];
+                for q in (b - 1) * SUB..b * SUB {
+                    let (u, w) = (fine_r[q] - ra, fine_w[q]);
+                    suu += w * u * u;
+                    for (i, (at_k, at_f)) in samples.iter().enumerate() {
+                        let gq = at_f[q] - at_k[a];
+                        sgg[i] += w * gq * gq;
+                        sgu[i] += w * gq * u;
                     }
+                }
+                let h = candidates[b] - ra;
+                let mut e = 0.0;
+                for (i, (at_k, _)) in samples.iter().enumerate() {
+                    let s = (at_k[b] - at_k[a]) / h;
+                    e += (sgg[i] - 2.0 * s * sgu[i] + s * s * suu).max(0.0);
                 }
                 cost[a * g + b] = e;
             }
         }
-        // best[k][b]: least cost of k intervals from candidate 0 to candidate b.
+        // best[k * g + b]: least cost of k intervals from candidate 0 to candidate b; O(m G^2).
         let mut best = vec![f64::INFINITY; (m + 1) * g];
         let mut from = vec![0usize; (m + 1) * g];
         best[0] = 0.0;
         for k in 1..=m {
             for b in k..g {
                 let mut top = f64::INFINITY;
-                let mut arg = 0;
+                let mut arg = k - 1;
                 for a in (k - 1)..b {
                     let c = best[(k - 1) * g + a] + cost[a * g + b];
                     if c < top {
@@ -231,7 +262,8 @@ impl Basis {
 
     /// The basis functions that may be non-zero at r: the index of the first and the values of
     /// `degree + 1` consecutive functions (unused slots 0). All zero outside the domain.
-    /// Cox–de Boor recursion (The NURBS Book, A2.2) on the extended knot vector.
+    /// Cox–de Boor recursion (The NURBS Book, A2.2) on the extended knot vector after an
+    /// O(log m) binary search for the interval; no allocation (the per-vertex hot path).
     pub fn eval(&self, r: f64) -> (usize, [f64; 3]) {
         let Some(i) = self.interval(r) else {
             return (0, [0.0; 3]);
@@ -295,10 +327,39 @@ fn uniform(lo: f64, hi: f64, m: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Candidate knot positions: geometric from the smallest scale (profiles vary fastest near the
-/// receiver) merged with linear ones (their tails), without near-duplicates.
-fn candidate_knots(lo: f64, hi: f64, count: usize) -> Vec<f64> {
-    let start = if lo > 0.0 { lo } else { hi * 1e-5 };
+/// Where the geometric candidates start when r_min = 0: a tenth of the smallest radius that
+/// encloses 0.1 % of some representative's int |F| r dr (probed on a geometric grid). Below it
+/// the r weight leaves almost nothing to fit, and a start tied to the profiles rather than to
+/// r_max keeps stiff and long-tailed materials alike resolved.
+fn shortest_scale(functions: &[&dyn Fn(f64) -> f64], hi: f64) -> f64 {
+    const PROBES: usize = 480;
+    let floor = hi * 1e-12;
+    let probe = |k: usize| floor * (hi / floor).powf(k as f64 / PROBES as f64);
+    let mut scale = hi;
+    for f in functions {
+        let mut cumulative = Vec::with_capacity(PROBES);
+        let mut sum = 0.0;
+        for k in 0..PROBES {
+            let (r0, r1) = (probe(k), probe(k + 1));
+            let mid = 0.5 * (r0 + r1);
+            let v = f(mid);
+            if v.is_finite() {
+                sum += v.abs() * mid * (r1 - r0);
+            }
+            cumulative.push((r1, sum));
+        }
+        if sum > 0.0 {
+            if let Some((r, _)) = cumulative.iter().find(|(_, c)| *c >= 1e-3 * sum) {
+                scale = scale.min(*r);
+            }
+        }
+    }
+    (0.1 * scale).max(floor)
+}
+
+/// Candidate knot positions on [lo, hi]: half geometric from `start` (profiles vary fastest
+/// near the receiver), half linear (their tails), merged without near-duplicates.
+fn candidate_knots(lo: f64, start: f64, hi: f64, count: usize) -> Vec<f64> {
     let half = count / 2;
     let ratio = (hi / start).powf(1.0 / half as f64);
     let mut c: Vec<f64> = (0..=half).map(|i| start * ratio.powi(i as i32)).collect();
@@ -322,8 +383,11 @@ pub struct Fitter {
     basis: Basis,
     /// Gauss nodes: radius, weight (Gauss weight x r x Jacobian), first function, values.
     nodes: Vec<(f64, f64, usize, [f64; 3])>,
-    /// Check points for the reported error: Simpson on each interval, 4 panels.
+    /// Check points for the reported error: Gauss on the two halves of each interval.
     checks: Vec<(f64, f64, usize, [f64; 3])>,
+    /// Jacobi scaling diag(G)^-1/2 of the normal matrix.
+    scale: Vec<f64>,
+    /// Cholesky factor of the scaled normal matrix S G S, G_jk = int phi_j phi_k r dr.
     cholesky: nalgebra::Cholesky<f64, nalgebra::Dyn>,
 }
 
@@ -332,9 +396,10 @@ pub struct Fitter {
 pub struct Fit {
     pub coefficients: Vec<f64>,
     /// sqrt(int (F - P)^2 r dr / int F^2 r dr) over the domain, on check points that are not
-    /// the fitting nodes.
+    /// the fitting nodes (8-point Gauss on each half interval); 0 when F = 0.
     pub rel_l2_error: f64,
-    /// |int (F - P) r dr| / int |F| r dr.
+    /// |int (F - P) r dr| / int |F| r dr on the same check points; ~0 by partition of unity
+    /// (what remains is quadrature error of the fitting nodes); 0 when F = 0.
     pub rel_total_error: f64,
 }
 
@@ -351,11 +416,16 @@ impl Fitter {
                 let (first, v) = basis.eval(r);
                 nodes.push((r, wt * half * r, first, v));
             }
-            let h = (w[1] - w[0]) / 4.0;
-            for (s, sw) in [1.0, 4.0, 2.0, 4.0, 1.0].iter().enumerate() {
-                let r = w[0] + s as f64 * h;
-                let (first, v) = basis.eval(r);
-                checks.push((r, sw * h / 3.0 * r, first, v));
+            // Check rule: the same Gauss rule on each half of the interval. Its nodes are not
+            // the fitting nodes, so the reported error is not the LS residual at its own nodes,
+            // and it is accurate enough that rel_total_error shows the (near-zero) true loss.
+            for (lo, hi) in [(w[0], mid), (mid, w[1])] {
+                let (c, hh) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+                for (x, wt) in GAUSS8 {
+                    let r = c + hh * x;
+                    let (first, v) = basis.eval(r);
+                    checks.push((r, wt * hh * r, first, v));
+                }
             }
         }
         let mut g = DMatrix::<f64>::zeros(n, n);
@@ -366,19 +436,32 @@ impl Fitter {
                 }
             }
         }
-        // Every B-spline has support of positive length and r-weight on it, so G is SPD; a
-        // relative ridge guards the r_min = 0 corner where the first hat's weight is tiny.
-        let scale = (0..n).map(|i| g[(i, i)]).fold(0.0, f64::max);
+        // Every B-spline has support of positive length and r-weight on it, so G is SPD. Its
+        // diagonal spans many decades (geometric knots near the receiver, tiny r near r = 0),
+        // so factor the Jacobi-scaled S G S (S = diag(G)^-1/2): B-splines are a stable basis,
+        // and with unit diagonal the condition number no longer depends on the knot spread.
+        let scale: Vec<f64> = (0..n).map(|i| 1.0 / g[(i, i)].sqrt()).collect();
         for i in 0..n {
-            g[(i, i)] += 1e-14 * scale;
+            for j in 0..n {
+                g[(i, j)] *= scale[i] * scale[j];
+            }
         }
-        let cholesky = g
-            .cholesky()
-            .expect("B-spline Gram matrix is positive definite");
+        let cholesky = match g.clone().cholesky() {
+            Some(c) => c,
+            None => {
+                // Not reached for valid knots; a tiny ridge keeps the fitter total regardless.
+                for i in 0..n {
+                    g[(i, i)] += 1e-12;
+                }
+                g.cholesky()
+                    .expect("a unit-diagonal Gram matrix with a ridge is positive definite")
+            }
+        };
         Fitter {
             basis,
             nodes,
             checks,
+            scale,
             cholesky,
         }
     }
@@ -398,8 +481,12 @@ impl Fitter {
                 rhs[first + k] += wt * fr * v[k];
             }
         }
+        // c = S (S G S)^-1 S b.
+        for (x, s) in rhs.iter_mut().zip(&self.scale) {
+            *x *= s;
+        }
         let c = self.cholesky.solve(&rhs);
-        let coefficients: Vec<f64> = c.iter().copied().collect();
+        let coefficients: Vec<f64> = c.iter().zip(&self.scale).map(|(x, s)| x * s).collect();
         let (mut e2, mut f2, mut e1, mut f1) = (0.0, 0.0, 0.0, 0.0);
         for (r, wt, first, v) in &self.checks {
             let fr = f(*r);
@@ -465,79 +552,143 @@ mod tests {
                 assert!(v.iter().all(|x| *x >= -1e-15));
             }
             assert_eq!(b.eval(3.0).1, [0.0; 3]);
+            assert_eq!(b.eval(0.05).1, [0.0; 3]);
+            assert_eq!(b.eval(f64::NAN).1, [0.0; 3]);
+            // r_max belongs to the last interval: its last function is the last one.
+            let (first, v) = b.eval(2.5);
+            assert_eq!(first + degree.as_int(), b.len() - 1);
+            assert!((v[degree.as_int()] - 1.0).abs() < 1e-15);
         }
+        // Hat functions by hand: halfway through [0.35, 1.0] (third interval).
+        let b = Basis::with_knots(vec![0.1, 0.3, 0.35, 1.0, 2.5], Degree::Linear).unwrap();
+        let (first, v) = b.eval(0.675);
+        assert_eq!(first, 2);
+        assert!((v[0] - 0.5).abs() < 1e-15 && (v[1] - 0.5).abs() < 1e-15 && v[2] == 0.0);
+        // Quadratic B-splines by hand at the left end: (1 - t)^2 with t = (r - k0)/(k1 - k0).
+        let b = Basis::with_knots(vec![0.1, 0.3, 0.35, 1.0, 2.5], Degree::Quadratic).unwrap();
+        let (first, v) = b.eval(0.15);
+        assert_eq!(first, 0);
+        assert!((v[0] - 0.75f64.powi(2)).abs() < 1e-15, "{v:?}");
     }
 
     #[test]
     fn splines_inside_the_space_are_reproduced_exactly() {
-        // Piecewise linear with kinks at the knots (C0) and a C1 quadratic spline built from
-        // truncated powers: (r - k)_+^2 is C1 at k.
-        let knots = vec![0.0, 0.5, 1.2, 2.0, 3.0];
-        let lin = |r: f64| 1.0 + 2.0 * r - 3.0 * (r - 0.5).max(0.0) + 1.5 * (r - 2.0).max(0.0);
-        let quad = |r: f64| 0.5 - r + 0.7 * r * r - 1.1 * (r - 1.2).max(0.0).powi(2);
-        for (degree, f) in [
-            (Degree::Linear, &lin as &dyn Fn(f64) -> f64),
-            (Degree::Quadratic, &quad as &dyn Fn(f64) -> f64),
+        // Built by hand from truncated powers, independent of the B-spline code: a continuous
+        // piecewise linear function with kinks at the knots (C0), and a quadratic spline with
+        // (r - k)_+^2 terms, which are C1 at k. Both lie in the span, so LS reproduces them.
+        for knots in [
+            vec![0.0, 0.5, 1.2, 2.0, 3.0],
+            vec![0.05, 0.06, 0.2, 0.9, 1.0, 3.0],
         ] {
-            let fitter = Basis::with_knots(knots.clone(), degree).unwrap().fitter();
-            let fit = fitter.fit(f);
-            assert!(fit.rel_l2_error < 1e-10, "{degree:?}: {}", fit.rel_l2_error);
-            for i in 0..=97 {
-                let r = 3.0 * i as f64 / 97.0;
-                assert!((fitter.evaluate(&fit.coefficients, r) - f(r)).abs() < 1e-9);
+            let (lo, hi) = (knots[0], knots[knots.len() - 1]);
+            let kink = |r: f64, k: f64| (r - k).max(0.0);
+            let lin = |r: f64| {
+                1.0 + 2.0 * r
+                    + knots[1..knots.len() - 1]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &k)| [-3.0, 1.5, 0.7, -2.0][i % 4] * kink(r, k))
+                        .sum::<f64>()
+            };
+            let quad = |r: f64| {
+                0.5 - r
+                    + 0.7 * r * r
+                    + knots[1..knots.len() - 1]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &k)| [-1.1, 2.0, 0.4, -0.9][i % 4] * kink(r, k).powi(2))
+                        .sum::<f64>()
+            };
+            for (degree, f) in [
+                (Degree::Linear, &lin as &dyn Fn(f64) -> f64),
+                (Degree::Quadratic, &quad as &dyn Fn(f64) -> f64),
+            ] {
+                let fitter = Basis::with_knots(knots.clone(), degree).unwrap().fitter();
+                let fit = fitter.fit(f);
+                assert!(fit.rel_l2_error < 1e-10, "{degree:?}: {}", fit.rel_l2_error);
+                for i in 0..=97 {
+                    let r = lo + (hi - lo) * i as f64 / 97.0;
+                    let err = (fitter.evaluate(&fit.coefficients, r) - f(r)).abs();
+                    assert!(err < 1e-10, "{degree:?} at {r}: {err}");
+                }
             }
         }
     }
 
     #[test]
     fn the_fit_preserves_the_area_weighted_total() {
-        // Partition of unity puts constants in the span, so the r-weighted residual integrates
-        // to zero: int P r dr = int F r dr. Checked with an independent Simpson rule.
+        // Partition of unity puts constants in the span, so the r-weighted residual is
+        // orthogonal to 1: int P 2 pi r dr = int F 2 pi r dr over the domain. F's side is the
+        // closed-form disc integral of the dipole; P's side an independent Simpson rule.
         let d = Dipole::new(0.0041, 2.62, 1.3);
         let f = |r: f64| d.rd(r);
-        let b = Basis::choose(&[&f], 0.2, 40.0, 16, Degree::Linear).unwrap();
-        let fitter = b.fitter();
-        let fit = fitter.fit(&f);
-        let p = |r: f64| fitter.evaluate(&fit.coefficients, r);
-        let total_f = simpson_r(f, 0.2, 40.0, 400_000);
-        let total_p = simpson_r(p, 0.2, 40.0, 400_000);
-        assert!(
-            (total_p - total_f).abs() < 1e-4 * total_f,
-            "{total_p} vs {total_f}"
-        );
+        for degree in [Degree::Linear, Degree::Quadratic] {
+            let b = Basis::choose(&[&f], 0.2, 40.0, 16, degree).unwrap();
+            let fitter = b.fitter();
+            let fit = fitter.fit(&f);
+            let p = |r: f64| fitter.evaluate(&fit.coefficients, r);
+            let total_f = d.rd_disc(40.0) - d.rd_disc(0.2);
+            let total_p = 2.0 * std::f64::consts::PI * simpson_r(p, 0.2, 40.0, 2_000_000);
+            assert!(
+                (total_p - total_f).abs() < 1e-8 * total_f,
+                "{degree:?}: {total_p} vs {total_f}"
+            );
+            // The same through the basis integrals used by the transport precompute.
+            let via: f64 = b
+                .integrals_2pi_r(0.0, 100.0)
+                .iter()
+                .zip(&fit.coefficients)
+                .map(|(i, c)| i * c)
+                .sum();
+            assert!((via - total_f).abs() < 1e-8 * total_f, "{via} vs {total_f}");
+            assert!(fit.rel_total_error < 1e-8, "{}", fit.rel_total_error);
+        }
     }
 
     #[test]
-    fn marble_profile_fits_within_one_percent_at_32_coefficients() {
+    fn marble_profile_fits_at_32_coefficients_and_dp_beats_uniform() {
+        // Measured: rel L2 1.67e-3 with DP knots, 0.34 with uniform knots (factor ~200).
         let d = Dipole::new(0.0041, 2.62, 1.3);
         let f = |r: f64| d.rd(r);
         let hi = d.support_radius(1e-4);
         let chosen = Basis::choose(&[&f], 0.05, hi, 32, Degree::Linear).unwrap();
-        let fit = chosen.fitter().fit(&f);
-        assert!(fit.rel_l2_error < 1e-2, "DP knots: {}", fit.rel_l2_error);
-        // Independent check of the fitted values against the dipole at off-node radii, in the
-        // measure that matters (R_d r, the integrand of B), relative to its peak.
+        assert_eq!(chosen.len(), 32);
         let fitter = chosen.fitter();
-        let peak = (0..1000)
-            .map(|i| 0.05 + i as f64 * 0.01)
+        let fit = fitter.fit(&f);
+        assert!(fit.rel_l2_error < 2.5e-3, "DP knots: {}", fit.rel_l2_error);
+        // Independent check of the fitted values against eq. 4 at radii that are neither
+        // knots nor quadrature nodes, in the measure that matters (R_d r, the integrand of B),
+        // relative to its peak.
+        let peak = (0..4000)
+            .map(|i| 0.05 + i as f64 * 0.005)
             .map(|r| f(r) * r)
             .fold(0.0, f64::max);
-        for &r in &[0.07, 0.3, 1.1, 4.0, 20.0] {
+        for &r in &[0.0712, 0.3, 1.1, 4.0, 20.0] {
             let p = fitter.evaluate(&fit.coefficients, r);
             assert!(
-                (p - f(r)).abs() * r <= 0.02 * peak,
+                (p - f(r)).abs() * r <= 5e-3 * peak,
                 "r {r}: {p} vs {}",
                 f(r)
             );
         }
-        eprintln!(
-            "marble, 32 linear coefficients: rel L2 {:.2e}",
+        // The reported error against an independent fine Simpson rule.
+        let e2 = simpson_r(
+            |r| (f(r) - fitter.evaluate(&fit.coefficients, r)).powi(2),
+            0.05,
+            hi,
+            2_000_000,
+        );
+        let f2 = simpson_r(|r| f(r) * f(r), 0.05, hi, 2_000_000);
+        let independent = (e2 / f2).sqrt();
+        assert!(
+            (independent - fit.rel_l2_error).abs() < 0.05 * independent,
+            "{independent} vs {}",
             fit.rel_l2_error
         );
         let uniform = Basis::with_knots(uniform(0.05, hi, 31), Degree::Linear).unwrap();
         let fit_u = uniform.fitter().fit(&f);
         assert!(
-            fit_u.rel_l2_error > 5.0 * fit.rel_l2_error,
+            fit_u.rel_l2_error > 20.0 * fit.rel_l2_error,
             "DP {} vs uniform {}",
             fit.rel_l2_error,
             fit_u.rel_l2_error
@@ -550,25 +701,41 @@ mod tests {
         let d = Dipole::new(0.1, 2.0, 1.3);
         let f = |r: f64| d.rd(r);
         let hi = d.support_radius(1e-4);
-        let mut last = f64::INFINITY;
-        for n in [8, 16, 32, 64] {
-            let e = Basis::choose(&[&f], 0.02, hi, n, Degree::Linear)
+        for degree in [Degree::Linear, Degree::Quadratic] {
+            let mut last = f64::INFINITY;
+            for n in [8, 16, 32, 64] {
+                let e = Basis::choose(&[&f], 0.02, hi, n, degree)
+                    .unwrap()
+                    .fitter()
+                    .fit(&f)
+                    .rel_l2_error;
+                assert!(e < 0.7 * last, "{degree:?} {n}: {e} vs {last}");
+                last = e;
+            }
+        }
+        // A smooth function on the same uniform knots: O(h^2) against O(h^3).
+        let smooth = |r: f64| (-r * r).exp() * (1.0 + r);
+        for n in [8, 24] {
+            let err = |degree: Degree| {
+                let m = n - degree.as_int();
+                Basis::with_knots(uniform(0.0, 4.0, m), degree)
+                    .unwrap()
+                    .fitter()
+                    .fit(&smooth)
+                    .rel_l2_error
+            };
+            let (lin, quad) = (err(Degree::Linear), err(Degree::Quadratic));
+            eprintln!("smooth, {n} coefficients: linear {lin:.3e}, quadratic {quad:.3e}");
+            assert!(quad < lin, "{n}: quadratic {quad} vs linear {lin}");
+        }
+        let err = |degree| {
+            Basis::choose(&[&f], 0.02, hi, 24, degree)
                 .unwrap()
                 .fitter()
                 .fit(&f)
-                .rel_l2_error;
-            assert!(e < last, "{n}: {e} >= {last}");
-            last = e;
-        }
-        let lin = Basis::choose(&[&f], 0.02, hi, 24, Degree::Linear)
-            .unwrap()
-            .fitter()
-            .fit(&f);
-        let quad = Basis::choose(&[&f], 0.02, hi, 24, Degree::Quadratic)
-            .unwrap()
-            .fitter()
-            .fit(&f);
-        assert!(quad.rel_l2_error < lin.rel_l2_error);
+                .rel_l2_error
+        };
+        assert!(err(Degree::Quadratic) < err(Degree::Linear));
     }
 
     #[test]
@@ -592,25 +759,120 @@ mod tests {
 
     #[test]
     fn stiff_profile_stays_finite() {
+        // z_r = 1e-4 with a support of a few 1e-3: the DP must resolve the scale near r = 0.
         let d = Dipole::new(1.0, 1e4, 1.3);
         let f = |r: f64| d.rd(r);
-        let b = Basis::choose(&[&f], 0.0, d.support_radius(1e-6), 32, Degree::Quadratic).unwrap();
-        assert!(b.knots().windows(2).all(|w| w[1] > w[0]));
-        let fit = b.fitter().fit(&f);
-        assert!(fit.coefficients.iter().all(|c| c.is_finite()));
-        assert!(fit.rel_l2_error.is_finite());
+        let hi = d.support_radius(1e-6);
+        for degree in [Degree::Linear, Degree::Quadratic] {
+            let b = Basis::choose(&[&f], 0.0, hi, 32, degree).unwrap();
+            assert!(b.knots().windows(2).all(|w| w[1] > w[0]));
+            assert_eq!(b.domain(), (0.0, hi));
+            assert!(b.knots()[1] < d.z_r, "first knot {}", b.knots()[1]);
+            let fit = b.fitter().fit(&f);
+            assert!(fit.coefficients.iter().all(|c| c.is_finite()));
+            assert!(fit.rel_l2_error < 1e-2, "{degree:?}: {}", fit.rel_l2_error);
+            eprintln!(
+                "stiff {degree:?}: rel L2 {:.3e}, total {:.3e}",
+                fit.rel_l2_error, fit.rel_total_error
+            );
+            // Not exactly 0: Gauss-8 on the long last interval (7 e-folds of the tail) misses
+            // int F r dr by ~2e-7 of the total; the check rule sees it.
+            assert!(
+                fit.rel_total_error < 1e-5,
+                "{degree:?}: {}",
+                fit.rel_total_error
+            );
+        }
+        // Zero functions: no NaN.
+        let zero = |_r: f64| 0.0;
+        let fit = Basis::choose(&[&zero], 0.0, 1.0, 8, Degree::Linear)
+            .unwrap()
+            .fitter()
+            .fit(&zero);
+        assert_eq!((fit.rel_l2_error, fit.rel_total_error), (0.0, 0.0));
+        assert!(fit.coefficients.iter().all(|c| *c == 0.0));
     }
 
     #[test]
     fn bad_arguments_are_errors() {
         let f = |r: f64| (-r).exp();
-        assert!(Basis::choose(&[&f], 0.0, 1.0, 0, Degree::Linear).is_err());
-        assert!(Basis::choose(&[&f], 0.0, 1.0, 2, Degree::Quadratic).is_err());
-        assert!(Basis::choose(&[&f], 1.0, 1.0, 8, Degree::Linear).is_err());
-        assert!(Basis::choose(&[&f], 0.0, f64::NAN, 8, Degree::Linear).is_err());
+        let choose = |lo, hi, n, degree| Basis::choose(&[&f], lo, hi, n, degree);
+        assert!(choose(0.0, 1.0, 0, Degree::Linear).is_err());
+        assert!(choose(0.0, 1.0, 1, Degree::Linear).is_err());
+        assert!(choose(0.0, 1.0, 2, Degree::Quadratic).is_err());
+        assert!(choose(0.0, 1.0, 257, Degree::Linear).is_err());
+        assert!(choose(1.0, 1.0, 8, Degree::Linear).is_err());
+        assert!(choose(2.0, 1.0, 8, Degree::Linear).is_err());
+        assert!(choose(-1.0, 1.0, 8, Degree::Linear).is_err());
+        assert!(choose(0.0, f64::NAN, 8, Degree::Linear).is_err());
+        assert!(choose(f64::NAN, 1.0, 8, Degree::Linear).is_err());
+        assert!(choose(0.0, f64::INFINITY, 8, Degree::Linear).is_err());
+        assert!(choose(0.0, 1.0, 2, Degree::Linear).is_ok());
+        assert!(choose(0.0, 1.0, 256, Degree::Quadratic).is_ok());
         assert!(Basis::with_knots(vec![0.0, 1.0, 1.0], Degree::Linear).is_err());
-        assert!(Degree::from_int(3).is_err());
+        assert!(Basis::with_knots(vec![0.0], Degree::Linear).is_err());
+        assert!(Basis::with_knots(vec![-0.5, 1.0], Degree::Linear).is_err());
+        assert!(Basis::with_knots(vec![0.0, f64::NAN], Degree::Linear).is_err());
+        assert!(Basis::with_knots(vec![0.0, 2.0, 1.0], Degree::Linear).is_err());
+        assert!(Degree::from_int(0).is_err() && Degree::from_int(3).is_err());
+        assert_eq!(Degree::from_int(2), Ok(Degree::Quadratic));
         let nan = |_r: f64| f64::NAN;
         assert!(Basis::choose(&[&nan], 0.0, 1.0, 8, Degree::Linear).is_err());
+        let inf_at_zero = |r: f64| 1.0 / r;
+        assert!(Basis::choose(&[&inf_at_zero], 0.0, 1.0, 8, Degree::Linear).is_err());
+    }
+
+    #[test]
+    fn fitter_is_send_and_sync() {
+        fn check<T: Send + Sync>() {}
+        check::<Fitter>();
+        check::<Basis>();
+    }
+
+    /// `cargo test -p translucent-core --release basis::tests::report -- --ignored --nocapture`:
+    /// fit errors and the time of one fit (printed, not asserted).
+    #[test]
+    #[ignore]
+    fn report() {
+        let d = Dipole::new(0.0041, 2.62, 1.3);
+        let f = |r: f64| d.rd(r);
+        let hi = d.support_radius(1e-4);
+        eprintln!("marble green on [0.05, {hi:.3}] mm");
+        for degree in [Degree::Linear, Degree::Quadratic] {
+            for n in [8, 16, 32, 64, 128] {
+                let t = std::time::Instant::now();
+                let b = Basis::choose(&[&f], 0.05, hi, n, degree).unwrap();
+                let t_choose = t.elapsed();
+                let fitter = b.fitter();
+                let fit = fitter.fit(&f);
+                let m = n - degree.as_int();
+                let fu = Basis::with_knots(uniform(0.05, hi, m), degree)
+                    .unwrap()
+                    .fitter()
+                    .fit(&f);
+                eprintln!(
+                    "{degree:?} n={n:3}: DP rel L2 {:.3e} (total {:.1e}), uniform {:.3e}, ratio {:.1}, choose {:.2?}",
+                    fit.rel_l2_error,
+                    fit.rel_total_error,
+                    fu.rel_l2_error,
+                    fu.rel_l2_error / fit.rel_l2_error,
+                    t_choose
+                );
+            }
+        }
+        let fitter = Basis::choose(&[&f], 0.05, hi, 32, Degree::Linear)
+            .unwrap()
+            .fitter();
+        let reps = 2000;
+        let t = std::time::Instant::now();
+        let mut acc = 0.0;
+        for _ in 0..reps {
+            acc += fitter.fit(&f).coefficients[0];
+        }
+        let per = t.elapsed() / reps;
+        eprintln!("one 32-coefficient fit (incl. error estimate): {per:.2?} ({acc:.1e})");
+        let t = std::time::Instant::now();
+        let _ = Basis::choose(&[&f], 0.05, hi, 256, Degree::Quadratic).unwrap();
+        eprintln!("choose 256 coefficients: {:.2?}", t.elapsed());
     }
 }
