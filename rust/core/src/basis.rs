@@ -398,6 +398,10 @@ pub struct Fit {
     /// sqrt(int (F - P)^2 r dr / int F^2 r dr) over the domain, on check points that are not
     /// the fitting nodes (8-point Gauss on each half interval); 0 when F = 0.
     pub rel_l2_error: f64,
+    /// int |F - P| r dr / int |F| r dr on the same check points: bounds the relative error of
+    /// int_0^R (F - P) r dr for every R, so of B under locally uniform irradiance whatever
+    /// part of the domain a receiver sees; 0 when F = 0.
+    pub rel_l1_error: f64,
     /// |int (F - P) r dr| / int |F| r dr on the same check points; ~0 by partition of unity
     /// (what remains is quadrature error of the fitting nodes); 0 when F = 0.
     pub rel_total_error: f64,
@@ -487,13 +491,14 @@ impl Fitter {
         }
         let c = self.cholesky.solve(&rhs);
         let coefficients: Vec<f64> = c.iter().zip(&self.scale).map(|(x, s)| x * s).collect();
-        let (mut e2, mut f2, mut e1, mut f1) = (0.0, 0.0, 0.0, 0.0);
+        let (mut e2, mut f2, mut e1, mut f1, mut a1) = (0.0, 0.0, 0.0, 0.0, 0.0);
         for (r, wt, first, v) in &self.checks {
             let fr = f(*r);
             let pr: f64 = (0..=p).map(|k| coefficients[first + k] * v[k]).sum();
             e2 += wt * (fr - pr) * (fr - pr);
             f2 += wt * fr * fr;
             e1 += wt * (fr - pr);
+            a1 += wt * (fr - pr).abs();
             f1 += wt * fr.abs();
         }
         let ratio = |num: f64, den: f64| {
@@ -507,6 +512,7 @@ impl Fitter {
         };
         Fit {
             rel_l2_error: ratio(e2, f2).sqrt(),
+            rel_l1_error: ratio(a1, f1),
             rel_total_error: ratio(e1.abs(), f1),
             coefficients,
         }

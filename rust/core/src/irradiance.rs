@@ -67,11 +67,25 @@ pub struct IrradianceReport {
     pub lights_used: usize,
     /// Lights that emit nothing: no rays at all.
     pub lights_skipped: usize,
+    /// Lights that cannot reach the translucent mesh (a spot aimed away, an area light facing
+    /// away): no rays and no per-point work.
+    pub lights_unreached: usize,
     /// A black world: no environment rays.
     pub world_skipped: bool,
 }
 
+impl IrradianceReport {
+    /// The work of two estimates together (rays add up; light and world counts are the scene's).
+    pub fn merge(&self, other: &IrradianceReport) -> IrradianceReport {
+        IrradianceReport {
+            rays: self.rays + other.rays,
+            ..other.clone()
+        }
+    }
+}
+
 /// Irradiance at each point (with its unit normal) [W/unit^2 in the lights' units], and a report.
+/// The points lie on `scene.mesh`: lights that cannot reach its bounding box are left out.
 pub fn irradiance(
     scene: &Scene,
     tracer: &Tracer,
@@ -92,7 +106,13 @@ pub fn irradiance(
             settings.eta
         )));
     }
-    let lights: Vec<&Light> = scene.lights.iter().filter(|l| !l.is_black()).collect();
+    let (lo, hi) = scene.mesh.bounds();
+    let emitting: Vec<&Light> = scene.lights.iter().filter(|l| !l.is_black()).collect();
+    let lights: Vec<&Light> = emitting
+        .iter()
+        .copied()
+        .filter(|l| l.can_reach(lo, hi))
+        .collect();
     let world = (!scene.world.is_black()).then_some(&scene.world);
     let results: Vec<([f32; 3], u64)> = points
         .par_iter()
@@ -123,7 +143,8 @@ pub fn irradiance(
     let report = IrradianceReport {
         rays: results.iter().map(|r| r.1).sum(),
         lights_used: lights.len(),
-        lights_skipped: scene.lights.len() - lights.len(),
+        lights_skipped: scene.lights.len() - emitting.len(),
+        lights_unreached: emitting.len() - lights.len(),
         world_skipped: world.is_none(),
     };
     Ok((results.into_iter().map(|r| r.0).collect(), report))
@@ -504,6 +525,52 @@ mod tests {
         s.lights = vec![Light::point(Vec3::new(0.0, 0.0, -3.0), [5.0; 3]).unwrap()];
         let (_, rep) = eval(&s, &[Vec3::ZERO; 5], 1.3);
         assert_eq!(rep.rays, 0);
+    }
+
+    #[test]
+    fn lights_that_cannot_reach_the_mesh_cost_nothing() {
+        let mut s = scene(10.0, false);
+        let points = [Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0)];
+        // A spot 20 above the plane's middle aimed straight up, and an area light below the
+        // plane facing down: neither can reach it.
+        s.lights = vec![
+            Light::spot(Vec3::new(0.0, 0.0, 20.0), Vec3::Z, [50.0; 3], 1.0, 0.1).unwrap(),
+            Light::area(
+                Vec3::new(0.0, 0.0, -1.0),
+                -Vec3::Z,
+                Vec3::X,
+                1.0,
+                1.0,
+                [9.0; 3],
+            )
+            .unwrap(),
+        ];
+        let (i, rep) = eval(&s, &points, 1.3);
+        assert_eq!(rep.lights_unreached, 2);
+        assert_eq!(rep.lights_used, 0);
+        assert_eq!(rep.rays, 0);
+        assert!(i.iter().all(|x| *x == [0.0; 3]));
+        // Turned toward the plane, both are used and light it.
+        s.lights = vec![
+            Light::spot(Vec3::new(0.0, 0.0, 20.0), -Vec3::Z, [50.0; 3], 1.0, 0.1).unwrap(),
+            Light::area(
+                Vec3::new(0.0, 0.0, 1.0),
+                -Vec3::Z,
+                Vec3::X,
+                1.0,
+                1.0,
+                [9.0; 3],
+            )
+            .unwrap(),
+        ];
+        let (i, rep) = eval(&s, &points, 1.3);
+        assert_eq!((rep.lights_unreached, rep.lights_used), (0, 2));
+        assert!(rep.rays > 0 && i[0][0] > 0.0);
+        // A spot whose cone only grazes the plane's bounding ball is kept (conservative).
+        s.lights =
+            vec![Light::spot(Vec3::new(20.0, 0.0, 0.5), -Vec3::X, [50.0; 3], 0.2, 0.0).unwrap()];
+        let (_, rep) = eval(&s, &points, 1.3);
+        assert_eq!(rep.lights_unreached, 0);
     }
 
     #[test]

@@ -162,6 +162,45 @@ impl Light {
         };
         c.iter().all(|x| *x == 0.0)
     }
+
+    /// Whether the light can reach any point of the box [`lo`, `hi`] that bounds the
+    /// translucent surface: a spot whose cone misses the box's bounding ball, or an area light
+    /// with the whole box behind its one-sided front, reaches nothing and needs no work at all.
+    /// Conservative: `true` whenever it cannot tell.
+    pub fn can_reach(&self, lo: Vec3, hi: Vec3) -> bool {
+        let centre = 0.5 * (lo + hi);
+        let radius = 0.5 * (hi - lo).length() * 1.0001 + 1e-6;
+        match self {
+            Light::Sun { .. } | Light::Point { .. } => true,
+            Light::Spot {
+                position,
+                direction,
+                spot_size,
+                ..
+            } => {
+                // Cone-sphere test: the angle from the axis to the ball's centre, less the
+                // ball's angular radius, must fall inside the half angle.
+                let v = centre - *position;
+                let d = v.length();
+                if d <= radius {
+                    return true;
+                }
+                let to_centre = (v / d).dot(*direction).clamp(-1.0, 1.0).acos();
+                let angular_radius = (radius / d).clamp(-1.0, 1.0).asin();
+                to_centre - angular_radius < 0.5 * spot_size
+            }
+            Light::Area {
+                position,
+                direction,
+                ..
+            } => {
+                // The rectangle is one plane emitting to its front: a box wholly behind (or on)
+                // that plane receives nothing.
+                let extent = (0.5 * (hi - lo)).dot(direction.abs());
+                (centre - *position).dot(*direction) + extent > 0.0
+            }
+        }
+    }
 }
 
 impl World {

@@ -32,7 +32,8 @@ pub struct MeshReport {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SurfaceSample {
     pub position: Vec3,
-    /// Geometric (flat) normal of the triangle the sample lies on.
+    /// Shading normal: the vertex normals interpolated at the sample (as Cycles shades a
+    /// smooth mesh), the triangle's flat normal where they cancel.
     pub normal: Vec3,
     /// Area this sample stands for [unit^2]; the areas of all samples sum to the mesh area.
     pub area: f32,
@@ -160,6 +161,11 @@ impl Mesh {
         bounding_diagonal(&self.positions)
     }
 
+    /// The axis-aligned bounding box (lo, hi) of the vertices.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        bounds(&self.positions)
+    }
+
     /// Area-uniform samples with spacing about `spacing`: each triangle is split into k^2 equal
     /// sub-triangles, k = ceil(longest edge / spacing), and a sample sits at each sub-triangle's
     /// centroid carrying its area. Deterministic and evenly spread (Xu 2007 §6.1 asks for
@@ -177,7 +183,8 @@ impl Mesh {
                 continue;
             }
             let [a, b, c] = tri.map(|v| self.positions[v as usize]);
-            let normal = (b - a).cross(c - a).normalize_or_zero();
+            let flat = (b - a).cross(c - a).normalize_or_zero();
+            let corner_normals = tri.map(|v| self.normals[v as usize]);
             let longest = (b - a).length().max((c - b).length()).max((a - c).length());
             let k = ((longest / spacing).ceil() as usize).clamp(1, 4096);
             let sub_area = area / (k * k) as f32;
@@ -186,17 +193,25 @@ impl Mesh {
                 for j in 0..(k - i) {
                     // Upright sub-triangle (i, j), (i+1, j), (i, j+1).
                     let base = a + e1 * i as f32 + e2 * j as f32;
+                    let (u, v) = (
+                        (i as f32 + 1.0 / 3.0) / k as f32,
+                        (j as f32 + 1.0 / 3.0) / k as f32,
+                    );
                     out.push(SurfaceSample {
                         position: base + (e1 + e2) / 3.0,
-                        normal,
+                        normal: interpolated_normal(&corner_normals, u, v, flat),
                         area: sub_area,
                         triangle: t as u32,
                     });
                     // Inverted sub-triangle (i+1, j), (i, j+1), (i+1, j+1).
                     if i + j + 1 < k {
+                        let (u, v) = (
+                            (i as f32 + 2.0 / 3.0) / k as f32,
+                            (j as f32 + 2.0 / 3.0) / k as f32,
+                        );
                         out.push(SurfaceSample {
                             position: base + (e1 + e2) * (2.0 / 3.0),
-                            normal,
+                            normal: interpolated_normal(&corner_normals, u, v, flat),
                             area: sub_area,
                             triangle: t as u32,
                         });
@@ -239,11 +254,22 @@ impl Mesh {
     }
 }
 
-fn bounding_diagonal(points: &[Vec3]) -> f32 {
-    let (lo, hi) = points.iter().fold(
+/// The corner normals [n_a, n_b, n_c] interpolated at barycentric (1 - u - v, u, v) and
+/// normalised; `flat` where they cancel. Shared with the reference so both see the same surface.
+pub fn interpolated_normal(corners: &[Vec3; 3], u: f32, v: f32, flat: Vec3) -> Vec3 {
+    let n = corners[0] * (1.0 - u - v) + corners[1] * u + corners[2] * v;
+    n.try_normalize().unwrap_or(flat)
+}
+
+fn bounds(points: &[Vec3]) -> (Vec3, Vec3) {
+    points.iter().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
+    )
+}
+
+fn bounding_diagonal(points: &[Vec3]) -> f32 {
+    let (lo, hi) = bounds(points);
     (hi - lo).length()
 }
 

@@ -8,7 +8,7 @@
 //! agree to `rel_tol`.
 
 use crate::error::{Error, Result};
-use crate::mesh::Mesh;
+use crate::mesh::{interpolated_normal, Mesh};
 use crate::optics::{Dipole, Material};
 use crate::quadrature::GAUSS8;
 use glam::{DVec3, Vec3};
@@ -152,24 +152,34 @@ fn build_level(mesh: &Mesh, level: u32, irradiance: &IrradianceFn) -> Result<Lev
     let mut triangles = Vec::with_capacity(mesh.triangles().len());
     let mut first = Vec::with_capacity(mesh.triangles().len() + 1);
     let mut subs = Vec::new();
+    // The irradiance is taken with the interpolated vertex normals, as the methods and Cycles'
+    // smooth shading take it; the polar integral uses each patch's own plane.
+    let mut normals: Vec<Vec3> = Vec::new();
+    let kf = k as f32;
     for tri in mesh.triangles() {
         let [a, b, c] = tri.map(|v| pos[v as usize].as_dvec3());
+        let corner_normals = tri.map(|v| mesh.normals()[v as usize]);
         first.push(subs.len());
-        triangles.push(Patch::new(a, b, c));
+        let patch = Patch::new(a, b, c);
+        let flat = patch.normal.as_vec3();
+        triangles.push(patch);
         let (e1, e2) = ((b - a) / k as f64, (c - a) / k as f64);
         for i in 0..k {
             for j in 0..k - i {
                 let o = a + e1 * i as f64 + e2 * j as f64;
                 subs.push(Patch::new(o, o + e1, o + e2));
+                let (u, v) = ((i as f32 + 1.0 / 3.0) / kf, (j as f32 + 1.0 / 3.0) / kf);
+                normals.push(interpolated_normal(&corner_normals, u, v, flat));
                 if i + j + 1 < k {
                     subs.push(Patch::new(o + e1, o + e1 + e2, o + e2));
+                    let (u, v) = ((i as f32 + 2.0 / 3.0) / kf, (j as f32 + 2.0 / 3.0) / kf);
+                    normals.push(interpolated_normal(&corner_normals, u, v, flat));
                 }
             }
         }
     }
     first.push(subs.len());
     let points: Vec<Vec3> = subs.iter().map(|s| s.centroid.as_vec3()).collect();
-    let normals: Vec<Vec3> = subs.iter().map(|s| s.normal.as_vec3()).collect();
     let values = irradiance(&points, &normals, Density::Dense)?;
     if values.len() != subs.len() || values.iter().flatten().any(|x| !x.is_finite() || *x < 0.0) {
         return Err(Error::InvalidArgument(

@@ -7,8 +7,9 @@ use numpy::PyArray2;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::sync::Mutex;
 use translucent_core::basis::Degree;
-use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
+use translucent_core::irradiance::{irradiance, Density, IrradianceReport, IrradianceSettings};
 use translucent_core::optics::Material;
 use translucent_core::prt::{Backend, Evaluation, Prt, PrtSettings};
 use translucent_core::Vec3;
@@ -19,6 +20,8 @@ pub struct PyPrt {
     inner: Prt,
     last: Option<Evaluation>,
     backend_message: String,
+    /// The rays and lights of the precompute's irradiance estimates (samples and vertices).
+    lighting: IrradianceReport,
 }
 
 impl PyPrt {
@@ -76,7 +79,7 @@ impl PyPrt {
     #[new]
     #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
         tolerance = 1e-3, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
-        backend = "auto"))]
+        backend = "auto", fit_tolerance = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -91,6 +94,7 @@ impl PyPrt {
         area_samples: u32,
         progress: Option<Py<PyAny>>,
         backend: &str,
+        fit_tolerance: Option<f64>,
     ) -> PyResult<Self> {
         if !matches!(backend, "auto" | "gpu" | "cpu") {
             return Err(PyValueError::new_err(format!(
@@ -102,6 +106,7 @@ impl PyPrt {
         let degree = Degree::from_int(degree).map_err(crate::convert::to_py)?;
         let settings = PrtSettings {
             coefficients,
+            fit_tolerance,
             degree,
             samples,
             tolerance,
@@ -117,10 +122,15 @@ impl PyPrt {
         let tracer = scene.tracer();
         let progress = Progress::new(progress);
         let core_scene = &scene.scene;
+        let lighting = Mutex::new(IrradianceReport::default());
         let result = py.detach(|| {
             guard(|| {
                 let irradiance_fn = |p: &[Vec3], n: &[Vec3], d: Density| {
-                    irradiance(core_scene, &tracer, p, n, &irr.for_density(d)).map(|(v, _)| v)
+                    irradiance(core_scene, &tracer, p, n, &irr.for_density(d)).map(|(v, r)| {
+                        let mut total = lighting.lock().unwrap_or_else(|e| e.into_inner());
+                        *total = total.merge(&r);
+                        v
+                    })
                 };
                 let tick = |f: f32| progress.call(f);
                 Prt::precompute(
@@ -137,6 +147,7 @@ impl PyPrt {
             inner,
             last: None,
             backend_message: String::new(),
+            lighting: lighting.into_inner().unwrap_or_else(|e| e.into_inner()),
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -229,7 +240,21 @@ impl PyPrt {
         }
         d.set_item("fit_error", e.fit_error.to_vec())?;
         d.set_item("error_estimate", e.error_estimate.to_vec())?;
+        d.set_item(
+            "refresh_advised",
+            self.inner.refresh_advised(&e.error_estimate),
+        )?;
         Ok(Some(d))
+    }
+
+    /// Whether the last evaluation's error estimate says the material left the range the
+    /// knots and samples were chosen for (above 1 % and above 3x the representatives' own
+    /// estimate): precompute again with this material among `materials`. None before the first.
+    #[getter]
+    fn refresh_advised(&self) -> Option<bool> {
+        self.last
+            .as_ref()
+            .map(|e| self.inner.refresh_advised(&e.error_estimate))
     }
 
     /// What the precompute did, skipped, and how long each step took.
@@ -244,6 +269,15 @@ impl PyPrt {
         d.set_item("support_radius", r.support_radius)?;
         d.set_item("knots", r.knots.clone())?;
         d.set_item("coefficients", self.inner.basis().len())?;
+        d.set_item("basis_size_by_tolerance", r.basis_size_by_tolerance)?;
+        d.set_item("representative_error", r.representative_error)?;
+        d.set_item("rays", self.lighting.rays)?;
+        d.set_item("lights_used", self.lighting.lights_used)?;
+        d.set_item("lights_skipped_black", self.lighting.lights_skipped)?;
+        d.set_item("lights_unreached", self.lighting.lights_unreached)?;
+        d.set_item("world_skipped", self.lighting.world_skipped)?;
+        // Multiple scattering only (Xu 2007's diffuse term): no single-scattering work at all.
+        d.set_item("single_scattering", false)?;
         d.set_item("stored_channels", r.stored_channels)?;
         d.set_item("transport_bytes", r.transport_bytes)?;
         d.set_item("exact_samples", r.exact_samples)?;

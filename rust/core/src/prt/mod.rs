@@ -12,11 +12,11 @@
 mod layout;
 mod tree;
 
-use crate::basis::{Basis, Degree, Fitter};
+use crate::basis::{Basis, Degree, Fit, Fitter};
 use crate::error::{Error, Result};
 pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
-use crate::optics::{fresnel_transmittance, Material};
+use crate::optics::{fresnel_transmittance, Dipole, Material};
 use glam::{DVec3, Vec3};
 use layout::Transport;
 use rayon::prelude::*;
@@ -30,6 +30,14 @@ pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32
 /// Progress in [0, 1]; returning false cancels.
 pub type ProgressFn<'a> = dyn Fn(f32) -> bool + Sync + 'a;
 
+/// Basis sizes tried, smallest first, when the size is chosen by `fit_tolerance`.
+pub const BASIS_SIZES: [usize; 10] = [4, 6, 8, 12, 16, 24, 32, 48, 64, 96];
+
+/// An edit whose estimated error exceeds this, or `REFRESH_FACTOR` times what the
+/// representatives had, is outside what the knots and samples were chosen for.
+pub const REFRESH_FLOOR: f64 = 0.01;
+pub const REFRESH_FACTOR: f64 = 3.0;
+
 /// The most samples the default spacing asks for.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
 
@@ -37,7 +45,12 @@ pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
 #[derive(Debug, Clone, PartialEq)]
 pub struct PrtSettings {
     /// Basis size: the length of the per-vertex dot product for each channel (Xu's "coefficients").
+    /// With `fit_tolerance`, the largest size the choice may reach.
     pub coefficients: usize,
+    /// When set, the basis size is the smallest of `BASIS_SIZES` (up to `coefficients`) whose
+    /// estimated error on every representative is at most this (relative); unset, it is
+    /// `coefficients`.
+    pub fit_tolerance: Option<f64>,
     pub degree: Degree,
     /// Surface samples for the irradiance; `None` spaces them half the representatives'
     /// shortest length (z_r or 1/sigma_tr), between 4 per vertex (at least 20 000) and
@@ -56,6 +69,7 @@ impl Default for PrtSettings {
     fn default() -> Self {
         Self {
             coefficients: 32,
+            fit_tolerance: None,
             degree: Degree::Linear,
             samples: None,
             tolerance: 1e-3,
@@ -76,6 +90,11 @@ pub struct PrtReport {
     /// Support radius: samples beyond it are not visited [unit].
     pub support_radius: f64,
     pub knots: Vec<f64>,
+    /// Whether the basis size was chosen by `fit_tolerance` (else fixed by `coefficients`).
+    pub basis_size_by_tolerance: bool,
+    /// The largest estimated relative error of B over the representatives' channels with the
+    /// chosen basis and support: what an edit is compared with to advise a refresh.
+    pub representative_error: f64,
     /// 1 when every sample's irradiance has the same colour (one transport serves all three
     /// channels), else 3.
     pub stored_channels: usize,
@@ -114,6 +133,8 @@ pub struct Prt {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     near_radius: f64,
+    /// The support radius spans the whole mesh: nothing lies beyond it.
+    whole_mesh: bool,
     eta: f64,
     report: PrtReport,
 }
@@ -227,11 +248,13 @@ impl Prt {
         report.near_radius = near_radius;
 
         // Basis domain [near_radius, support] and knots by DP on the representatives (Xu §5).
-        let support = representatives
+        let wanted = representatives
             .iter()
             .flat_map(|m| m.dipoles())
             .map(|d| d.support_radius(settings.tolerance))
-            .fold(0.0, f64::max)
+            .fold(0.0, f64::max);
+        let whole_mesh = wanted >= f64::from(mesh.diagonal());
+        let support = wanted
             .min(f64::from(mesh.diagonal()))
             .max(2.0 * near_radius);
         report.support_radius = support;
@@ -248,18 +271,14 @@ impl Prt {
             })
             .collect();
         let refs: Vec<&dyn Fn(f64) -> f64> = functions.iter().map(|f| f.as_ref()).collect();
-        let basis = if refs.is_empty() {
+        let (basis, representative_error) = if refs.is_empty() {
             // Nothing diffuses beyond the disc: any knots will do; the fit will be ~0.
-            uniform_basis(near_radius, support, settings)?
+            (uniform_basis(near_radius, support, settings)?, 0.0)
         } else {
-            Basis::choose(
-                &refs,
-                near_radius,
-                support,
-                settings.coefficients,
-                settings.degree,
-            )?
+            choose_basis(&refs, &dipoles, near_radius, support, whole_mesh, settings)?
         };
+        report.basis_size_by_tolerance = settings.fit_tolerance.is_some();
+        report.representative_error = representative_error;
         report.knots = basis.knots().to_vec();
         tick(0.15)?;
 
@@ -314,6 +333,7 @@ impl Prt {
             positions: mesh.positions().to_vec(),
             normals: mesh.normals().to_vec(),
             near_radius,
+            whole_mesh,
             eta: settings.eta,
             report,
         })
@@ -403,17 +423,8 @@ impl Prt {
         let coeffs = std::array::from_fn(|c| {
             let d = material.dipole(c);
             let fit = self.fitter.fit(&|r| d.rd(r));
-            let total = d.rd_total();
-            let (share, tail) = if total > 0.0 {
-                (
-                    (d.rd_disc(hi) - d.rd_disc(lo)) / total,
-                    d.rd_tail(hi) / total,
-                )
-            } else {
-                (0.0, 0.0)
-            };
             fit_error[c] = fit.rel_l2_error;
-            estimate[c] = fit.rel_l2_error * share + tail;
+            estimate[c] = error_estimate(&fit, &d, lo, hi, self.whole_mesh);
             std::iter::once(d.rd_disc(self.near_radius) as f32)
                 .chain(fit.coefficients.iter().map(|x| *x as f32))
                 .collect()
@@ -423,6 +434,15 @@ impl Prt {
             fit_error,
             error_estimate: estimate,
         })
+    }
+
+    /// Whether an evaluation's estimated error says the material has left the range the knots
+    /// and samples were chosen for: above `REFRESH_FLOOR` and above `REFRESH_FACTOR` times the
+    /// representatives' own error. A new precompute with this material among the
+    /// representatives brings it back.
+    pub fn refresh_advised(&self, error_estimate: &[f64; 3]) -> bool {
+        let worst = error_estimate.iter().copied().fold(0.0, f64::max);
+        worst > REFRESH_FLOOR.max(REFRESH_FACTOR * self.report.representative_error)
     }
 
     /// Multiple-scattering radiosity B = sum_j c_j T_j per vertex and channel (Xu 2007 eq. 9
@@ -538,6 +558,13 @@ fn check_settings(representatives: &[Material], s: &PrtSettings) -> Result<()> {
             s.far_field
         )));
     }
+    if let Some(t) = s.fit_tolerance {
+        if !(t.is_finite() && t > 0.0 && t < 1.0) {
+            return Err(Error::InvalidArgument(format!(
+                "fit_tolerance {t} must lie in (0, 1)"
+            )));
+        }
+    }
     if let Some(n) = s.samples {
         if !(100..=50_000_000).contains(&n) {
             return Err(Error::InvalidArgument(format!(
@@ -630,6 +657,62 @@ fn within(tree: &SampleTree, p: DVec3, radius: f64) -> (f64, [f64; 3]) {
         }
     }
     (area, weight)
+}
+
+/// Estimated relative error of B for one channel: the fit's relative L1 error over the basis
+/// domain (it bounds the error of the profile's integral over any disc, so of B under locally
+/// uniform irradiance) weighted by the share of R_d,total the basis carries, plus the share
+/// beyond the support radius that is left out.
+/// When the support reaches across the whole mesh there is no surface beyond it, so nothing
+/// is left out and no tail is counted.
+fn error_estimate(fit: &Fit, d: &Dipole, lo: f64, hi: f64, whole_mesh: bool) -> f64 {
+    let total = d.rd_total();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    let share = (d.rd_disc(hi) - d.rd_disc(lo)) / total;
+    let tail = if whole_mesh {
+        0.0
+    } else {
+        d.rd_tail(hi) / total
+    };
+    fit.rel_l1_error * share + tail
+}
+
+/// Knots by DP on the representatives (Xu 2007 §5) with `settings.coefficients` functions, or,
+/// with a `fit_tolerance`, the smallest size of `BASIS_SIZES` that meets it. Returns the basis
+/// and the largest error estimate over the representatives.
+fn choose_basis(
+    refs: &[&dyn Fn(f64) -> f64],
+    dipoles: &[Dipole],
+    lo: f64,
+    hi: f64,
+    whole_mesh: bool,
+    settings: &PrtSettings,
+) -> Result<(Basis, f64)> {
+    let worst = |basis: &Basis| {
+        let fitter = basis.fitter();
+        dipoles
+            .iter()
+            .map(|d| error_estimate(&fitter.fit(&|r| d.rd(r)), d, lo, hi, whole_mesh))
+            .fold(0.0, f64::max)
+    };
+    let min_size = settings.degree.as_int() + 2;
+    if let Some(tol) = settings.fit_tolerance {
+        for &n in BASIS_SIZES
+            .iter()
+            .filter(|&&n| n >= min_size && n < settings.coefficients)
+        {
+            let basis = Basis::choose(refs, lo, hi, n, settings.degree)?;
+            let err = worst(&basis);
+            if err <= tol {
+                return Ok((basis, err));
+            }
+        }
+    }
+    let basis = Basis::choose(refs, lo, hi, settings.coefficients, settings.degree)?;
+    let err = worst(&basis);
+    Ok((basis, err))
 }
 
 fn uniform_basis(lo: f64, hi: f64, s: &PrtSettings) -> Result<Basis> {
@@ -986,6 +1069,82 @@ mod tests {
         assert!(
             s.worst_rms() <= bound.max(1e-6) && s.worst_rms() > 0.0,
             "{s:?} vs bound {bound}"
+        );
+    }
+
+    #[test]
+    #[allow(clippy::needless_range_loop)]
+    fn basis_size_follows_the_fit_tolerance() {
+        // Marble per mm on the 200 mm plane: a looser tolerance needs fewer functions, and
+        // each choice still meets the closed form F_t E R_d,total at the centre within its
+        // tolerance plus the 0.3 % the exact basis-free sum already shows there.
+        let mesh = plane(101, 200.0);
+        let m = Material::preset("marble", 1.0).unwrap();
+        let sizes: Vec<usize> = [3e-2, 3e-3]
+            .iter()
+            .map(|&tol| {
+                let settings = PrtSettings {
+                    fit_tolerance: Some(tol),
+                    coefficients: 96,
+                    samples: Some(200_000),
+                    ..Default::default()
+                };
+                let prt =
+                    Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
+                assert!(prt.report().basis_size_by_tolerance);
+                assert!(prt.report().representative_error <= tol);
+                let b = prt.radiosity(&m).unwrap().radiosity[centre(&mesh)];
+                let e = fresnel_transmittance(1.3, 1.0);
+                for c in 0..3 {
+                    let sp = m.sigma_s[c] * (1.0 - m.g);
+                    let expect = e * rd_total(m.sigma_a[c], sp, 1.3);
+                    let rel = (f64::from(b[c]) - expect).abs() / expect;
+                    assert!(rel < tol + 3e-3, "tol {tol} channel {c}: {rel}");
+                }
+                prt.basis().len()
+            })
+            .collect();
+        assert!(sizes[0] < sizes[1] && sizes[1] <= 96, "{sizes:?}");
+    }
+
+    #[test]
+    fn edits_far_from_the_representatives_advise_a_refresh() {
+        // 200 mm plane, marble per mm (1/sigma_tr ~ 8 mm): room for a support radius that does
+        // not reach across the whole plane.
+        let mesh = plane(41, 200.0);
+        let m = Material::preset("marble", 1.0).unwrap();
+        let settings = PrtSettings {
+            samples: Some(40_000),
+            ..Default::default()
+        };
+        let prt = Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
+        let scaled = |k: f64| {
+            Material::new(
+                m.sigma_a.map(|x| x * k),
+                m.sigma_s.map(|x| x * k),
+                m.g,
+                m.eta,
+            )
+            .unwrap()
+        };
+        let near = prt.radiosity(&m).unwrap();
+        assert!(!prt.refresh_advised(&near.error_estimate));
+        // A profile 3 times wider than the knots were placed for: part of it lies beyond the
+        // support radius and the estimate says so.
+        let wide = prt.radiosity(&scaled(0.3)).unwrap();
+        assert!(
+            prt.refresh_advised(&wide.error_estimate),
+            "{:?}",
+            wide.error_estimate
+        );
+        // A precompute for the new material brings the estimate back under the floor.
+        let again =
+            Prt::precompute(&mesh, &[scaled(0.3)], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
+        let e = again.radiosity(&scaled(0.3)).unwrap();
+        assert!(
+            !again.refresh_advised(&e.error_estimate),
+            "{:?}",
+            e.error_estimate
         );
     }
 

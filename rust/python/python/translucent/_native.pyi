@@ -105,9 +105,12 @@ class Prt:
         area_samples: int = 16,
         progress: Progress | None = None,
         backend: Literal["auto", "gpu", "cpu"] = "auto",
+        fit_tolerance: float | None = None,
     ) -> None:
         """`backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
-        "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none."""
+        "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none.
+        `fit_tolerance`: choose the basis size as the smallest (up to `coefficients`) whose
+        estimated relative error on `materials` is at most this, instead of fixing it."""
     def set_backend(self, backend: Literal["auto", "gpu", "cpu"], half: bool = False) -> str:
         """Moves edits to another device; returns which one (or why the CPU was kept).
         `half` stores the GPU transport as f16 (half the memory; see transport_f16_error)."""
@@ -123,9 +126,19 @@ class Prt:
         """(N, 3) multiple-scattering radiance toward the point `eye`, F_t B / pi; without an
         eye, the radiance leaving along each vertex normal."""
     @property
-    def last_eval(self) -> dict[str, float | list[float]] | None: ...
+    def last_eval(self) -> dict[str, float | bool | list[float]] | None:
+        """seconds, fit_seconds, dot_seconds, backend, fit_error and error_estimate (per channel,
+        relative), refresh_advised; GPU timings when the GPU ran it."""
     @property
-    def report(self) -> dict[str, float | int | list[float]]: ...
+    def refresh_advised(self) -> bool | None:
+        """True when the last evaluation's estimated error says the material left the range the
+        basis was chosen for (above 1 % and 3x the representatives' own): precompute again."""
+    @property
+    def report(self) -> dict[str, float | int | bool | list[float]]:
+        """What the precompute did and left out: samples, support_radius [unit], knots,
+        coefficients, basis_size_by_tolerance, representative_error, stored_channels, rays,
+        lights_used, lights_skipped_black, lights_unreached, world_skipped, skipped_beyond_support,
+        skipped_dark, single_scattering, seconds per step."""
     @property
     def eta(self) -> float: ...
     @property
