@@ -40,7 +40,9 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         row = layout.row()
         row.prop(s, "coefficients")
         row.prop(s, "degree", text="")
-        layout.prop(s, "backend")
+        row = layout.row()
+        row.prop(s, "backend")
+        row.prop(s, "auto_refresh")
         state = session.state(mat)
         if state == "running":
             job = session.JOBS[mat.name]
@@ -55,8 +57,10 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         if sess is not None and sess.last_error:
             err = ", ".join(f"{100 * e:.2f}" for e in sess.last_error)
             layout.label(text=f"Edit {1e3 * sess.last_seconds:.2f} ms, est. error {err} %")
-            if max(sess.last_error) > 0.05:
-                layout.label(text="Material far from the basis: precompute again", icon="ERROR")
+            if sess.refresh_advised:
+                text = sess.refresh_message if state == "running" or sess.refresh_message.startswith("refresh failed") else (
+                    "Material outside the basis' range: precompute again")
+                layout.label(text=text, icon="ERROR")
             for name in sess.not_shown:
                 layout.label(text=f"{name}: modifier changes vertex count, not shown", icon="ERROR")
         layout.operator("translucent.clear")

@@ -54,6 +54,12 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
     mm_per_unit: FloatProperty(name="mm per unit", description="Millimetres per scene unit (1000 for metres)", min=1e-6, default=1000.0)
     coefficients: IntProperty(name="Basis size", description="Coefficients of the piecewise polynomial basis (Xu 2007)", min=4, max=128, default=32)
     degree: EnumProperty(name="Degree", items=[("1", "Linear", "C0 piecewise linear"), ("2", "Quadratic", "C1 piecewise quadratic")], default="1")
+    auto_refresh: BoolProperty(
+        name="Auto refresh",
+        description="When an edit leaves the range the basis was chosen for (the error estimate says so), "
+        "precompute again in the background",
+        default=True,
+    )
     backend: EnumProperty(
         name="Device",
         items=[("auto", "Auto", "A GPU if there is one, else the CPU"), ("gpu", "GPU", "wgpu compute"), ("cpu", "CPU", "rayon")],

@@ -22,6 +22,10 @@ class Session:
     last_error: list[float] = field(default_factory=list)
     last_seconds: float = 0.0
     not_shown: list[str] = field(default_factory=list)
+    # The material (sigma_a, sigma_s, g) the basis and samples were chosen for.
+    chosen_for: tuple = ()
+    refresh_advised: bool = False
+    refresh_message: str = ""
 
 
 # material name -> Session
@@ -98,6 +102,10 @@ class Job:
         return not self._thread.is_alive() and (self.result is not None or self.error is not None)
 
 
+def _params(settings) -> tuple:
+    return (tuple(settings.sigma_a), tuple(settings.sigma_s), settings.g, settings.mm_per_unit)
+
+
 def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], export.ExportInfo, str]:
     """Exports what the material needs and creates (but does not start) its precompute job."""
     bl_scene = bl_scene or bpy.context.scene
@@ -107,11 +115,13 @@ def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], 
     scene, info = export.export_scene(objects, bl_scene=bl_scene)
     s = material.translucent
     job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend)
+    job.chosen_for = _params(s)
     return job, [o.name for o in objects], info, fingerprint(objects, bl_scene)
 
 
 def finish(material: bpy.types.Material, job: Job, objects, info, fp) -> Session:
     session = Session(job.result, info, objects, fp, material.translucent.eta)
+    session.chosen_for = job.chosen_for
     SESSIONS[material.name] = session
     edit(material)
     return session
@@ -145,6 +155,7 @@ def edit(material: bpy.types.Material) -> None:
     colors = prt.radiance(settings.material())
     s.last_error = list(prt.last_eval["error_estimate"])
     s.last_seconds = prt.last_eval["seconds"]
+    s.refresh_advised = bool(prt.last_eval["refresh_advised"])
     s.not_shown = []
     for name, values in writeback.split(colors, s.info).items():
         obj = bpy.data.objects.get(name)
@@ -153,3 +164,55 @@ def edit(material: bpy.types.Material) -> None:
         else:
             # A modifier changed the vertex count: the attribute cannot hold the values.
             s.not_shown.append(name)
+    if s.refresh_advised:
+        refresh(material)
+
+
+def refresh(material: bpy.types.Material) -> None:
+    """The edit left the range the basis and samples were chosen for (the error estimate says
+    so): precompute again for the current material in the background and swap the transport
+    in when it is done; the preview keeps showing, flagged by the panel, meanwhile. Headless,
+    it runs at once. Nothing happens while a job runs, or when the transport was already chosen
+    for these very settings (no loop)."""
+    s = SESSIONS.get(material.name)
+    if s is None or material.name in JOBS or not material.translucent.auto_refresh:
+        return
+    if s.chosen_for == _params(material.translucent):
+        return
+    try:
+        job, objects, info, fp = start(material)
+    except ValueError as e:
+        s.refresh_message = f"refresh failed: {e}"
+        return
+    JOBS[material.name] = job
+    s.refresh_message = "refreshing the basis for the new material"
+    name = material.name
+
+    def complete() -> None:
+        JOBS.pop(name, None)
+        mat = bpy.data.materials.get(name)
+        if mat is None:
+            return
+        if job.error is not None:
+            cur = SESSIONS.get(name)
+            if cur is not None:
+                cur.refresh_message = f"refresh failed: {job.error}"
+            return
+        finish(mat, job, objects, info, fp)
+
+    if bpy.app.background:
+        job.run_here()
+        complete()
+        return
+
+    def poll():
+        if not job.done:
+            return 0.2
+        complete()
+        for window in bpy.context.window_manager.windows:
+            for area in window.screen.areas:
+                area.tag_redraw()
+        return None
+
+    job.start()
+    bpy.app.timers.register(poll, first_interval=0.2)

@@ -122,3 +122,35 @@ def test_settings_survive_save_and_reload_but_transport_does_not(addon, tmp_path
     assert mat.translucent.enabled
     assert tuple(round(x, 4) for x in mat.translucent.sigma_a) == (0.01, 0.02, 0.03)
     assert session.state(mat) == "none", "transport is not saved: the panel asks for a precompute"
+
+
+def test_an_edit_outside_the_basis_range_is_flagged_and_refreshed(addon):
+    import bpy
+
+    from addon import session
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    s = mat.translucent
+    s.enabled = True
+    s.mm_per_unit = 1000.0
+    s.preset = "MARBLE"
+    s.auto_refresh = False
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    sess = session.SESSIONS[mat.name]
+    assert not sess.refresh_advised
+    marble = (tuple(s.sigma_a), tuple(s.sigma_s))
+    # Five times thinner: a profile five times wider than the knots and the support radius were
+    # chosen for (denser materials are safe: the receiver's disc is exact in the stiff limit).
+    s.sigma_s = tuple(0.2 * x for x in marble[1])
+    s.sigma_a = tuple(0.2 * x for x in marble[0])
+    flagged = max(sess.last_error)
+    assert sess.refresh_advised and flagged > 0.01
+    assert session.SESSIONS[mat.name] is sess, "no refresh while auto refresh is off"
+    # With auto refresh on, the next edit precomputes again for the material it shows.
+    s.auto_refresh = True
+    s.g = 0.0
+    fresh = session.SESSIONS[mat.name]
+    assert fresh is not sess and not fresh.refresh_advised
+    assert max(fresh.last_error) < flagged
+    assert fresh.chosen_for == session._params(s)
+    assert mat.name not in session.JOBS
