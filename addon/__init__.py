@@ -3,13 +3,13 @@
 Blender-side code only: settings (`properties`), operators, the material panel, scene export
 (`export`) and colour write-back (`writeback`). All maths lives in the native `translucent`
 module. Enable the preview on a material, press Precompute, then drag the sliders: the
-objects' "translucent_preview" colour attribute follows (show it with Solid shading, Color:
-Attribute).
+objects' "translucent_preview" colour attribute follows, and Solid viewports show it
+(`viewport`) until the preview is turned off.
 """
 
 import bpy
 
-from . import operators, properties, session
+from . import operators, properties, session, viewport
 
 
 class TRANSLUCENT_PT_material(bpy.types.Panel):
@@ -71,6 +71,7 @@ def _drop_sessions(*_args):
     """A loaded file starts without transport (it is not saved); the panel asks for a precompute."""
     session.SESSIONS.clear()
     session.JOBS.clear()
+    viewport.forget()
 
 
 classes = (TRANSLUCENT_PT_material,)
@@ -88,5 +89,6 @@ def unregister():
         bpy.app.handlers.load_post.remove(_drop_sessions)
     for cls in reversed(operators.classes + classes):
         bpy.utils.unregister_class(cls)
+    viewport.restore()
     properties.unregister()
     session.SESSIONS.clear()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import session, writeback
+from . import session, viewport, writeback
 
 
 def _material(context):
@@ -121,7 +121,9 @@ class TRANSLUCENT_OT_clear(bpy.types.Operator):
     def execute(self, context):
         mat = _material(context)
         session.SESSIONS.pop(mat.name, None)
-        for obj in session.objects_with(mat, context.scene):
+        objects = session.objects_with(mat, context.scene)
+        viewport.restore(objects)
+        for obj in objects:
             attr = obj.data.color_attributes.get(writeback.ATTRIBUTE)
             if attr is not None:
                 obj.data.color_attributes.remove(attr)

@@ -38,8 +38,25 @@ def _live_edit(self, context):
     session.edit(self.id_data)
 
 
+def _toggle(self, context):
+    """Turning the preview off puts the viewports and active colour attributes back; turning it
+    on again shows the transport if there is one."""
+    from . import viewport
+
+    mat = self.id_data
+    sess = session.SESSIONS.get(mat.name)
+    objects = [o for o in (bpy.data.objects.get(n) for n in sess.objects) if o is not None] if sess else []
+    if self.enabled and sess is not None:
+        session.edit(mat)
+        viewport.show(objects)
+    elif not self.enabled:
+        viewport.restore(objects or session.objects_with(mat))
+
+
 class TranslucentMaterialSettings(bpy.types.PropertyGroup):
-    enabled: BoolProperty(name="Preview", description="Show a subsurface-scattering preview of this material", default=False)
+    enabled: BoolProperty(
+        name="Preview", description="Show a subsurface-scattering preview of this material", default=False, update=_toggle
+    )
     preset: EnumProperty(name="Preset", items=_preset_items, update=_apply_preset)
     sigma_a: FloatVectorProperty(
         name="Absorption", description="sigma_a per channel [1/mm]", size=3, min=0.0, soft_max=10.0,

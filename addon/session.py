@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import export, writeback
+from . import export, viewport, writeback
 
 
 @dataclass
@@ -124,6 +124,7 @@ def finish(material: bpy.types.Material, job: Job, objects, info, fp) -> Session
     session.chosen_for = job.chosen_for
     SESSIONS[material.name] = session
     edit(material)
+    viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
     return session
 
 

@@ -154,3 +154,35 @@ def test_an_edit_outside_the_basis_range_is_flagged_and_refreshed(addon):
     assert max(fresh.last_error) < flagged
     assert fresh.chosen_for == session._params(s)
     assert mat.name not in session.JOBS
+
+
+def test_viewports_show_the_preview_and_get_back_what_they_had(addon):
+    import bpy
+
+    from addon import session, writeback
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    user = objs[1].data.color_attributes.new("Paint", "BYTE_COLOR", "CORNER")
+    objs[1].data.color_attributes.active_color_name = user.name
+    solid = [a.spaces.active.shading for s in bpy.data.screens for a in s.areas
+             if a.type == "VIEW_3D" and a.spaces.active.shading.type == "SOLID"]
+    assert solid, "the factory start-up file has Solid 3D viewports"
+    before = [sh.color_type for sh in solid]
+    mat.translucent.enabled = True
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    assert all(o.data.color_attributes.active_color_name == writeback.ATTRIBUTE for o in objs)
+    assert all(sh.color_type == "VERTEX" for sh in solid)
+    mat.translucent.enabled = False
+    assert objs[1].data.color_attributes.active_color_name == "Paint"
+    assert [sh.color_type for sh in solid] == before
+    # On again: shown again from the transport still in memory.
+    mat.translucent.enabled = True
+    assert objs[0].data.color_attributes.active_color_name == writeback.ATTRIBUTE
+    assert all(sh.color_type == "VERTEX" for sh in solid)
+    # Clearing the preview removes the attribute and puts everything back as well.
+    bpy.context.view_layer.objects.active = objs[1]
+    assert bpy.ops.translucent.clear() == {"FINISHED"}
+    assert mat.name not in session.SESSIONS
+    assert objs[1].data.color_attributes.active_color_name == "Paint"
+    assert all(o.data.color_attributes.get(writeback.ATTRIBUTE) is None for o in objs)
+    assert [sh.color_type for sh in solid] == before

@@ -1,0 +1,251 @@
+"""Error against run time (issue 5, point 3): every method and setting measured against the
+brute-force ground truth (the same dipole model, `translucent.reference_radiosity`) and
+against Cycles, next to the wall time of its precompute and of one edit. Cycles at several
+sample counts is its own curve (error against a high-sample Cycles bake), and EEVEE's own
+subsurface render is the peer an artist would otherwise use.
+
+Outputs in --out (default out/report): report.csv, report.png (log-log), report.md.
+Ground truth and Cycles results are cached under out/cache, so a second run re-renders
+nothing. Error metric (DESIGN.md): area-weighted relative RMS over the receiver vertices and
+max relative error, worst channel; for images, relative RMSE over the object's pixels.
+
+Run: .venv/bin/python blender_scripts/report.py [--materials marble skin1 ketchup]
+     [--receivers 100] [--model suzanne | stanford-bunny.obj ...] [--no-cycles] [--no-eevee]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import pathlib
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "blender_scripts"))
+
+import bpy  # noqa: E402
+
+import translucent  # noqa: E402
+from addon import export  # noqa: E402
+
+MM_PER_UNIT = 1000.0  # Blender units are metres
+CACHE = REPO / "out" / "cache"
+
+# PRT settings swept: (basis size, degree, fit tolerance or None).
+PRT_SETTINGS = [(8, 1, None), (16, 1, None), (32, 1, None), (64, 1, None), (16, 2, None), (32, 2, None),
+                (64, 1, 0.02), (64, 1, 0.005)]
+
+
+@dataclass
+class Row:
+    method: str
+    setting: str
+    material: str
+    against: str  # "ground truth" or "Cycles <spp> spp"
+    rms: float  # worst channel, relative
+    max: float
+    precompute_s: float = 0.0
+    edit_s: float = 0.0
+    estimate: float = float("nan")  # the method's own error estimate, worst channel
+    notes: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def time_s(self) -> float:
+        return self.precompute_s + self.edit_s
+
+
+def progress(i: int, n: int, what: str) -> None:
+    """A one-line progress bar on stderr for the long runs."""
+    width = 30
+    done = int(width * i / max(n, 1))
+    print(f"\r[{'#' * done}{'.' * (width - done)}] {i}/{n} {what[:60]:60s}", end="", file=sys.stderr, flush=True)
+    if i == n:
+        print(file=sys.stderr)
+
+
+def digest(*parts) -> str:
+    h = hashlib.sha256()
+    for p in parts:
+        h.update(p.tobytes() if isinstance(p, np.ndarray) else repr(p).encode())
+    return h.hexdigest()[:24]
+
+
+def ground_truth(scene_key: str, scene, material, receivers: np.ndarray, rel_tol: float) -> tuple[np.ndarray, float, dict]:
+    """The reference radiosity at `receivers`, cached on disk by scene, material and settings."""
+    key = digest(scene_key, material.sigma_a, material.sigma_s, material.g, material.eta, receivers, rel_tol)
+    path = CACHE / "reference" / f"{key}.npz"
+    if path.exists():
+        z = np.load(path, allow_pickle=False)
+        return z["values"], float(z["seconds"]), json.loads(str(z["info"]))
+    t0 = time.perf_counter()
+    values, info = translucent.reference_radiosity(
+        scene, material, rel_tol=rel_tol, receivers=receivers.tolist(), details=True
+    )
+    seconds = time.perf_counter() - t0
+    info = {k: (v if isinstance(v, (int, float, bool, str)) else str(v)) for k, v in info.items()}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, values=values, seconds=seconds, info=json.dumps(info))
+    return values, seconds, info
+
+
+def worst(err: dict) -> tuple[float, float]:
+    return float(max(err["rms"])), float(max(err["max"]))
+
+
+def prt_rows(scene, material, name, truth, receivers, weights, cycles=None) -> list[Row]:
+    """Each PRT setting: one precompute for the material, one (timed) edit, the errors."""
+    rows = []
+    for coefficients, degree, fit_tol in PRT_SETTINGS:
+        t0 = time.perf_counter()
+        prt = translucent.Prt(scene, material, coefficients=coefficients, degree=degree,
+                              fit_tolerance=fit_tol, backend="cpu")
+        pre = time.perf_counter() - t0
+        edits = []
+        for _ in range(5):
+            b = prt.radiosity(material)
+            edits.append(prt.last_eval["seconds"])
+        est = max(prt.last_eval["error_estimate"])
+        rep = prt.report
+        setting = f"{rep['coefficients']} coeff., degree {degree}" + (f", fit tol. {fit_tol:g}" if fit_tol else "")
+        rms, mx = worst(translucent.relative_error(b[receivers], truth, weights))
+        rows.append(Row("PRT (Xu 2007)", setting, name, "ground truth", rms, mx, pre, float(np.median(edits)), est,
+                        extra=dict(samples=rep["samples"], coefficients=rep["coefficients"])))
+        if cycles is not None:
+            radiance = prt.radiance(material)[receivers]
+            rms, mx = worst(translucent.relative_error(radiance, cycles["values"], weights))
+            rows.append(Row("PRT (Xu 2007)", setting, name, cycles["label"], rms, mx, pre,
+                            float(np.median(edits)), est))
+    return rows
+
+
+def build_scene(model: str):
+    """The demo's scene (Suzanne with Subdivision, point light, dim world) or a shared model
+    at 10 cm under the same light."""
+    import demo
+
+    suzanne, cam = demo.build_scene()
+    if model != "suzanne":
+        import models
+
+        p, t = models.load(model, diagonal=0.1)
+        mesh = bpy.data.meshes.new(model)
+        mesh.from_pydata(p.tolist(), [], t.tolist())
+        mesh.shade_smooth()
+        obj = bpy.data.objects.new(model, mesh)
+        bpy.context.scene.collection.objects.link(obj)
+        bpy.data.objects.remove(suzanne)
+        return obj, cam
+    return suzanne, cam
+
+
+def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    fields = ["method", "setting", "material", "against", "rms", "max", "precompute_s", "edit_s", "time_s",
+              "estimate", "notes"]
+    with open(out / "report.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(fields)
+        for r in rows:
+            d = asdict(r)
+            d["time_s"] = r.time_s
+            w.writerow([d[k] for k in fields])
+
+    lines = [f"# {title}", "",
+             "| method | setting | material | against | rel. RMS % | max rel. % | precompute s | edit ms | "
+             "own estimate % | notes |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        est = "" if np.isnan(r.estimate) else f"{100 * r.estimate:.2f}"
+        edit = f"{1e3 * r.edit_s:.2f}" if r.edit_s else ""
+        lines.append(f"| {r.method} | {r.setting} | {r.material} | {r.against} | {100 * r.rms:.2f} | "
+                     f"{100 * r.max:.1f} | {r.precompute_s:.2f} | {edit} | {est} | {r.notes} |")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    materials = sorted({r.material for r in rows})
+    colours = dict(zip(materials, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
+    for mat in materials:
+        c = colours[mat]
+        prt = [r for r in rows if r.method.startswith("PRT") and r.material == mat and r.against == "ground truth"]
+        if prt:
+            ax.scatter([r.edit_s for r in prt], [r.rms for r in prt], color=c, marker="o",
+                       label=f"PRT edit, {mat} (vs ground truth)")
+            ax.scatter([r.precompute_s for r in prt], [r.rms for r in prt], color=c, marker="o", facecolors="none",
+                       label=f"PRT precompute, {mat}")
+        prt_c = [r for r in rows if r.method.startswith("PRT") and r.material == mat and r.against.startswith("Cycles")]
+        if prt_c:
+            ax.scatter([r.edit_s for r in prt_c], [r.rms for r in prt_c], color=c, marker="^",
+                       label=f"PRT edit, {mat} (vs Cycles)")
+        cyc = sorted((r for r in rows if r.method.startswith("Cycles") and r.material == mat), key=lambda r: r.time_s)
+        if cyc:
+            ax.plot([r.time_s for r in cyc], [r.rms for r in cyc], color=c, marker="s", linestyle="--",
+                    label=f"Cycles bake by spp, {mat}")
+        eevee = [r for r in rows if r.method.startswith("EEVEE") and r.material == mat]
+        if eevee:
+            ax.scatter([r.time_s for r in eevee], [r.rms for r in eevee], color=c, marker="*", s=120,
+                       label=f"EEVEE render, {mat}")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time [s] (filled: one edit; hollow: precompute; Cycles/EEVEE: render)")
+    ax.set_ylabel("relative RMS error (worst channel)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=6, loc="best")
+    fig.tight_layout()
+    fig.savefig(out / "report.png", dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=str(REPO / "out" / "report"))
+    ap.add_argument("--model", default="suzanne", help="'suzanne' (built in) or a file in ../shared/models")
+    ap.add_argument("--materials", nargs="+", default=["marble", "skin1", "ketchup"])
+    ap.add_argument("--receivers", type=int, default=100, help="vertices the ground truth is computed at")
+    ap.add_argument("--rel-tol", type=float, default=2e-3, help="ground truth tolerance")
+    ap.add_argument("--no-cycles", action="store_true")
+    ap.add_argument("--no-eevee", action="store_true")
+    args = ap.parse_args(argv)
+    out = pathlib.Path(args.out)
+
+    obj, cam = build_scene(args.model)
+    scene, info = export.export_scene([obj])
+    p = np.asarray(scene.vertex_areas)  # part of the cache key via the scene digest below
+    scene_key = digest(args.model, scene.vertex_count, scene.triangle_count, p, info.lights, info.world)
+    rng = np.random.default_rng(1)
+    receivers = np.sort(rng.choice(scene.vertex_count, size=min(args.receivers, scene.vertex_count), replace=False))
+    weights = scene.vertex_areas[receivers, 0]
+    rows: list[Row] = []
+    steps = len(args.materials)
+    for i, name in enumerate(args.materials):
+        progress(i, steps, f"{name}: ground truth")
+        m = translucent.Material.preset(name, MM_PER_UNIT)
+        truth, ref_s, ref_info = ground_truth(scene_key, scene, m, receivers, args.rel_tol)
+        progress(i, steps, f"{name}: PRT settings")
+        rows += prt_rows(scene, m, name, truth, receivers, weights)
+        rows.append(Row("Reference (brute force)", f"rel. tol. {args.rel_tol:g}, level {ref_info.get('level')}", name,
+                        "ground truth", float(ref_info.get("estimated_rel_error", 0.0)), float("nan"), ref_s, 0.0,
+                        notes="its own convergence estimate"))
+    progress(steps, steps, "done")
+    title = (f"{args.model}: {scene.vertex_count} vertices, {len(receivers)} receivers; "
+             f"{translucent.__name__} on {sys.platform}, CPU")
+    write_outputs(rows, out, title)
+    print((out / "report.md").read_text())
+    print(f"CSV, PNG and Markdown in {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
