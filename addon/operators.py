@@ -16,7 +16,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
 
     bl_idname = "translucent.precompute"
     bl_label = "Precompute"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     material_name: bpy.props.StringProperty(options={"HIDDEN", "SKIP_SAVE"})
 

@@ -186,3 +186,30 @@ def test_viewports_show_the_preview_and_get_back_what_they_had(addon):
     assert objs[1].data.color_attributes.active_color_name == "Paint"
     assert all(o.data.color_attributes.get(writeback.ATTRIBUTE) is None for o in objs)
     assert [sh.color_type for sh in solid] == before
+
+
+def test_undo_and_redo_bring_back_settings_and_preview_together(addon):
+    import bpy
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    names = [o.name for o in objs]
+    s = mat.translucent
+    s.enabled = True
+    s.auto_refresh = False
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    assert bpy.ops.ed.undo_push(message="precompute") == {"FINISHED"}
+    first = [read_preview(o) for o in objs]
+    sigma_a = tuple(s.sigma_a)
+    # A slider drag in the UI pushes its own undo step; a script pushes it by hand.
+    s.sigma_a = (0.05, 0.05, 0.05)
+    assert bpy.ops.ed.undo_push(message="absorption") == {"FINISHED"}
+    second = [read_preview(bpy.data.objects[n]) for n in names]
+    assert not np.allclose(first[0], second[0])
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    assert tuple(bpy.data.materials["Wax"].translucent.sigma_a) == pytest.approx(sigma_a)
+    for n, f in zip(names, first):
+        np.testing.assert_array_equal(read_preview(bpy.data.objects[n]), f)
+    assert bpy.ops.ed.redo() == {"FINISHED"}
+    assert tuple(bpy.data.materials["Wax"].translucent.sigma_a) == pytest.approx((0.05, 0.05, 0.05))
+    for n, g in zip(names, second):
+        np.testing.assert_array_equal(read_preview(bpy.data.objects[n]), g)
