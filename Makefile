@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.deps-installed
 PYDEPS := bpy==5.0.1 "maturin>=1.7,<2" pytest hypothesis matplotlib trimesh
 
-.PHONY: setup build demo test test-rust test-python lint bench accuracy addon clean
+.PHONY: setup build demo test test-rust test-python lint bench accuracy report stiff addon clean
 
 # Mesa's software Vulkan (lavapipe) so the wgpu path runs without a GPU; GPU tests skip
 # with their reason where it cannot be installed.
@@ -59,6 +59,14 @@ addon: setup
 
 accuracy: build
 	$(PY) blender_scripts/accuracy_prt.py
+
+# Error against run time (CSV, PNG, Markdown in out/report); options: make report ARGS="--materials marble".
+report: build
+	$(PY) blender_scripts/report.py $(ARGS)
+
+# How far fixed knots hold (README table); needs ../shared/models.
+stiff: build
+	$(PY) blender_scripts/stiff_edits.py $(ARGS)
 
 clean:
 	cargo clean
