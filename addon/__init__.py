@@ -54,6 +54,10 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         elif state == "stale":
             layout.label(text="Scene or IOR changed: transport is stale, precompute again", icon="ERROR")
         sess = session.SESSIONS.get(mat.name)
+        if sess is not None:
+            col = layout.column(align=True)
+            for part in session.summary(sess).split("; "):
+                col.label(text=part)
         if sess is not None and sess.last_error:
             err = ", ".join(f"{100 * e:.2f}" for e in sess.last_error)
             layout.label(text=f"Edit {1e3 * sess.last_seconds:.2f} ms, est. error {err} %")

@@ -31,6 +31,8 @@ class ExportInfo:
     objects: list[ObjectRange] = field(default_factory=list)
     lights: list[str] = field(default_factory=list)
     skipped_lights: list[str] = field(default_factory=list)
+    # Mesh objects left out because they do not carry the previewed material.
+    skipped_objects: list[str] = field(default_factory=list)
     world: str = "black"
 
 

@@ -63,7 +63,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             return {"CANCELLED"}
         s = session.finish(mat, job, self._objects, self._info, self._fp)
         r = s.prt.report
-        self.report({"INFO"}, f"precomputed {r['vertices']} vertices in {r['seconds']:.2f} s; {s.prt.backend_message}")
+        self.report({"INFO"}, f"precomputed {r['vertices']} vertices: {session.summary(s)}; {s.prt.backend_message}")
         return {"FINISHED"}
 
     def execute(self, context):

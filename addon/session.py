@@ -113,6 +113,7 @@ def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], 
     if not objects:
         raise ValueError(f"no mesh object uses material {material.name!r}")
     scene, info = export.export_scene(objects, bl_scene=bl_scene)
+    info.skipped_objects = [o.name for o in bl_scene.objects if o.type == "MESH" and o not in objects]
     s = material.translucent
     job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend)
     job.chosen_for = _params(s)
@@ -126,6 +127,19 @@ def finish(material: bpy.types.Material, job: Job, objects, info, fp) -> Session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
     return session
+
+
+def summary(sess: Session) -> str:
+    """What the precompute did and left out, in one line for the status bar and the panel."""
+    r, info = sess.prt.report, sess.info
+    world = "world: no rays (black)" if r["world_skipped"] else f"world: {info.world}"
+    return (
+        f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped), "
+        f"{r['lights_used']} light(s) used, {r['lights_skipped_black'] + len(info.skipped_lights)} dark "
+        f"and {r['lights_unreached']} out of reach skipped, {world}; {r['samples']} samples, "
+        f"{r['coefficients']} coefficients, support radius {r['support_radius']:.4g} units, "
+        f"{r['rays']} rays, {r['seconds']:.2f} s"
+    )
 
 
 def state(material: bpy.types.Material) -> str:

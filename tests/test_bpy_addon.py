@@ -213,3 +213,25 @@ def test_undo_and_redo_bring_back_settings_and_preview_together(addon):
     assert tuple(bpy.data.materials["Wax"].translucent.sigma_a) == pytest.approx((0.05, 0.05, 0.05))
     for n, g in zip(names, second):
         np.testing.assert_array_equal(read_preview(bpy.data.objects[n]), g)
+
+
+def test_only_objects_carrying_the_material_are_exported_and_the_rest_is_reported(addon):
+    import bpy
+
+    from addon import session
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    bpy.ops.mesh.primitive_cube_add(size=0.05, location=(0.0, 0.0, -0.2))
+    other = bpy.context.active_object
+    dark = bpy.data.objects.new("Dark", bpy.data.lights.new("Dark", "POINT"))
+    dark.data.energy = 0.0
+    bpy.context.scene.collection.objects.link(dark)
+    bpy.context.view_layer.objects.active = objs[0]
+    mat.translucent.enabled = True
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    sess = session.SESSIONS[mat.name]
+    assert sess.info.skipped_objects == [other.name]
+    assert sess.prt.report["vertices"] == sum(len(o.data.vertices) for o in objs)
+    text = session.summary(sess)
+    assert "2 object(s) (1 without the material skipped)" in text
+    assert "1 light(s) used, 1 dark" in text and "no rays (black)" in text
