@@ -161,6 +161,62 @@ impl Mesh {
         bounding_diagonal(&self.positions)
     }
 
+    /// How much of a small disc around each vertex the surface covers: 1 inside the surface,
+    /// the sum of the incident triangles' angles over 2 pi on an open boundary (a hole's rim,
+    /// a plane's edge: 1/2 on a straight edge, 1/4 at a square corner), 0 for a vertex no
+    /// triangle of positive area uses. An edge is on the boundary when exactly one triangle of
+    /// positive area uses it.
+    pub fn vertex_coverage(&self) -> Vec<f32> {
+        use std::collections::HashMap;
+        // Vertices at the same position are one point of the surface (a seam split by an
+        // exporter is not a boundary).
+        let mut canonical: HashMap<[u32; 3], u32> = HashMap::new();
+        let weld: Vec<u32> = self
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                *canonical
+                    .entry(p.to_array().map(f32::to_bits))
+                    .or_insert(i as u32)
+            })
+            .collect();
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut angles = vec![0f64; self.positions.len()];
+        let mut used = vec![false; self.positions.len()];
+        for (tri, area) in self.triangles.iter().zip(&self.triangle_areas) {
+            if *area <= 0.0 {
+                continue;
+            }
+            let w = tri.map(|v| weld[v as usize]);
+            for k in 0..3 {
+                let (v, a, b) = (w[k], w[(k + 1) % 3], w[(k + 2) % 3]);
+                let p = self.positions[v as usize].as_dvec3();
+                let (ea, eb) = (
+                    self.positions[a as usize].as_dvec3() - p,
+                    self.positions[b as usize].as_dvec3() - p,
+                );
+                angles[v as usize] += ea.angle_between(eb);
+                used[v as usize] = true;
+                *edges.entry((v.min(a), v.max(a))).or_insert(0) += 1;
+            }
+        }
+        let mut boundary = vec![false; self.positions.len()];
+        for ((a, b), count) in edges {
+            if count == 1 {
+                boundary[a as usize] = true;
+                boundary[b as usize] = true;
+            }
+        }
+        weld.iter()
+            .map(|&v| match (used[v as usize], boundary[v as usize]) {
+                (false, _) => 0.0,
+                (true, false) => 1.0,
+                (true, true) => ((angles[v as usize] / std::f64::consts::TAU) as f32).min(1.0),
+            })
+            .collect()
+    }
+
     /// The axis-aligned bounding box (lo, hi) of the vertices.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         bounds(&self.positions)
@@ -276,6 +332,31 @@ fn bounding_diagonal(points: &[Vec3]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn coverage_is_one_inside_and_the_angle_share_on_the_boundary() {
+        // A 3 x 3 grid of vertices (2 x 2 squares, each split along its diagonal) plus one
+        // vertex no triangle uses.
+        let mut p: Vec<Vec3> = (0..9)
+            .map(|i| Vec3::new((i % 3) as f32, (i / 3) as f32, 0.0))
+            .collect();
+        p.push(Vec3::new(5.0, 5.0, 1.0));
+        let mut t = Vec::new();
+        for j in 0..2u32 {
+            for i in 0..2u32 {
+                let a = j * 3 + i;
+                t.push([a, a + 1, a + 4]);
+                t.push([a, a + 4, a + 3]);
+            }
+        }
+        let m = Mesh::new(p, t, None).unwrap();
+        let c = m.vertex_coverage();
+        assert_eq!(c[4], 1.0); // the centre
+        assert!((c[1] - 0.5).abs() < 1e-6); // middle of an edge: a half disc
+        assert!((c[2] - 0.25).abs() < 1e-6); // a square corner
+        assert!((c[0] - 0.25).abs() < 1e-6);
+        assert_eq!(c[9], 0.0); // isolated
+    }
 
     fn quad() -> Mesh {
         Mesh::new(

@@ -203,11 +203,10 @@ impl Dipole {
         if self.is_zero() {
             return 0.0;
         }
-        let r2 = r * r;
+        // hypot, not sqrt(r^2 + z^2): z = 1/sigma_t' may be ~1e300 for a vanishing extinction.
         let term = |z: f64| {
-            let d2 = r2 + z * z;
-            let d = d2.sqrt();
-            z * (self.sigma_tr + 1.0 / d) * (-self.sigma_tr * d).exp() / d2
+            let d = r.hypot(z);
+            z * (self.sigma_tr + 1.0 / d) * (-self.sigma_tr * d).exp() / d / d
         };
         self.alpha_prime / (4.0 * PI) * (term(self.z_r) + term(self.z_v))
     }
@@ -220,7 +219,7 @@ impl Dipole {
             return 0.0;
         }
         let pole = |z: f64| {
-            let d = (rho * rho + z * z).sqrt();
+            let d = rho.hypot(z);
             z * (-self.sigma_tr * d).exp() / d
         };
         0.5 * self.alpha_prime * (pole(self.z_r) + pole(self.z_v))
@@ -243,7 +242,7 @@ impl Dipole {
             return PI * rho * rho * self.rd(0.0);
         }
         let part = |z: f64| {
-            let d = (rho * rho + z * z).sqrt();
+            let d = rho.hypot(z);
             (-self.sigma_tr * z).exp() - z * (-self.sigma_tr * d).exp() / d
         };
         0.5 * self.alpha_prime * (part(self.z_r) + part(self.z_v))
@@ -256,7 +255,14 @@ impl Dipole {
             return 0.0;
         }
         let target = rel_tol.max(1e-15) * total;
-        let mut hi = self.z_v.max(1.0 / self.sigma_tr.max(1e-300)).min(1e300);
+        // Start at the decay length, or at the source depth where there is no absorption (the
+        // tail then falls as (z_r + z_v) / (2 rho) and the doubling reaches it quickly).
+        let decay = if self.sigma_tr > 0.0 {
+            (1.0 / self.sigma_tr).min(1e6 * self.z_v)
+        } else {
+            self.z_v
+        };
+        let mut hi = self.z_v.max(decay);
         while self.rd_tail(hi) > target && hi < 1e300 {
             hi *= 2.0;
         }

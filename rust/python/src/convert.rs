@@ -109,6 +109,17 @@ pub fn vec3_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
         .collect())
 }
 
+/// A count or index argument taken as i64 (so that a negative value reaches us instead of
+/// pyo3's OverflowError) and checked here: ValueError naming the argument.
+pub fn non_negative<T: TryFrom<i64>>(name: &str, value: i64) -> PyResult<T> {
+    if value < 0 {
+        return Err(PyValueError::new_err(format!(
+            "{name} = {value} must be >= 0"
+        )));
+    }
+    T::try_from(value).map_err(|_| PyValueError::new_err(format!("{name} = {value} is too large")))
+}
+
 /// An (M, 3) integer array of vertex indices, checked non-negative and below 2^32.
 pub fn triangle_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
     let arr = as_contiguous(value, "int64").map_err(|e| {

@@ -1,6 +1,6 @@
 //! `translucent.Prt`: precompute once, then evaluate any material in milliseconds.
 
-use crate::convert::{guard, rgb_array, to_py, vec3, Progress};
+use crate::convert::{guard, non_negative, rgb_array, to_py, vec3, Progress};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
@@ -85,13 +85,13 @@ impl PyPrt {
         py: Python<'_>,
         scene: PyRef<'_, PyScene>,
         materials: &Bound<'_, PyAny>,
-        coefficients: usize,
-        degree: u32,
-        samples: Option<usize>,
+        coefficients: i64,
+        degree: i64,
+        samples: Option<i64>,
         tolerance: f64,
         far_field: f64,
-        world_samples: u32,
-        area_samples: u32,
+        world_samples: i64,
+        area_samples: i64,
         progress: Option<Py<PyAny>>,
         backend: &str,
         fit_tolerance: Option<f64>,
@@ -101,6 +101,11 @@ impl PyPrt {
                 "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
             )));
         }
+        let coefficients: usize = non_negative("coefficients", coefficients)?;
+        let degree: u32 = non_negative("degree", degree)?;
+        let samples: Option<usize> = samples.map(|n| non_negative("samples", n)).transpose()?;
+        let world_samples: u32 = non_negative("world_samples", world_samples)?;
+        let area_samples: u32 = non_negative("area_samples", area_samples)?;
         let materials = materials_of(materials)?;
         let eta = materials.first().map(|m| m.eta).unwrap_or(1.3);
         let degree = Degree::from_int(degree).map_err(crate::convert::to_py)?;

@@ -1,6 +1,6 @@
 //! `translucent.reference_radiosity` and `translucent.relative_error`.
 
-use crate::convert::{float_rows, guard, rgb_array, to_py, Progress};
+use crate::convert::{float_rows, guard, non_negative, rgb_array, to_py, Progress};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use pyo3::exceptions::PyValueError;
@@ -24,10 +24,10 @@ pub fn reference_radiosity_py<'py>(
     scene: PyRef<'_, PyScene>,
     material: PyRef<'_, PyMaterial>,
     rel_tol: f64,
-    receivers: Option<Vec<i64>>,
-    max_level: u32,
-    world_samples: u32,
-    area_samples: u32,
+    receivers: Option<Bound<'py, PyAny>>,
+    max_level: i64,
+    world_samples: i64,
+    area_samples: i64,
     progress: Option<Py<PyAny>>,
     details: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
@@ -36,20 +36,27 @@ pub fn reference_radiosity_py<'py>(
             "rel_tol {rel_tol} must lie in (0, 1)"
         )));
     }
+    let max_level: u32 = non_negative("max_level", max_level)?;
+    let world_samples: u32 = non_negative("world_samples", world_samples)?;
+    let area_samples: u32 = non_negative("area_samples", area_samples)?;
     let n = scene.scene.mesh.vertex_count() as i64;
     let receivers: Option<Vec<u32>> = receivers
-        .map(|r| {
-            r.into_iter()
-                .map(|i| {
-                    if (0..n).contains(&i) {
-                        Ok(i as u32)
-                    } else {
-                        Err(PyValueError::new_err(format!(
-                            "receiver index {i} out of range for {n} vertices"
-                        )))
-                    }
-                })
-                .collect()
+        .map(|r| -> PyResult<Vec<u32>> {
+            let mut out = Vec::new();
+            for item in r.try_iter()? {
+                let item = item?;
+                let i = item
+                    .extract::<i64>()
+                    .ok()
+                    .filter(|i| (0..n).contains(i))
+                    .ok_or_else(|| {
+                        PyValueError::new_err(format!(
+                            "receiver index {item} out of range for {n} vertices"
+                        ))
+                    })?;
+                out.push(i as u32);
+            }
+            Ok(out)
         })
         .transpose()?;
     let m = material.inner;

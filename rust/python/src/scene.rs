@@ -209,6 +209,13 @@ impl PyScene {
             .expect("shape matches")
     }
 
+    /// Per-vertex share of a small disc the surface covers: 1 inside, the angle share on an
+    /// open boundary (1/2 on a straight edge), 0 for vertices no triangle uses. (N,) float32.
+    #[getter]
+    fn vertex_coverage<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<f32>> {
+        numpy::PyArray1::from_vec(py, self.scene.mesh.vertex_coverage())
+    }
+
     /// What mesh validation found that is not fatal.
     #[getter]
     fn mesh_report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -228,11 +235,14 @@ impl PyScene {
         &self,
         py: Python<'py>,
         eta: f64,
-        world_samples: u32,
-        area_samples: u32,
-        seed: u64,
+        world_samples: i64,
+        area_samples: i64,
+        seed: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         check_eta(eta)?;
+        let world_samples: u32 = crate::convert::non_negative("world_samples", world_samples)?;
+        let area_samples: u32 = crate::convert::non_negative("area_samples", area_samples)?;
+        let seed: u64 = crate::convert::non_negative("seed", seed)?;
         let settings = IrradianceSettings {
             eta,
             world_samples,

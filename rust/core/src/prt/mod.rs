@@ -246,6 +246,7 @@ impl Prt {
             .map(|p| within(&tree, p.as_dvec3(), exclusion))
             .collect();
         report.near_radius = near_radius;
+        let coverage = mesh.vertex_coverage();
 
         // Basis domain [near_radius, support] and knots by DP on the representatives (Xu §5).
         let wanted = representatives
@@ -300,6 +301,19 @@ impl Prt {
                 .map(|(k, row)| {
                     let v = first + k;
                     let (area, weight) = excluded[v];
+                    let full = std::f64::consts::PI * exclusion * exclusion;
+                    let (ring_outer, cover) = match coverage[v] {
+                        // Inside the surface: the disc of the samples' area, whole.
+                        c if c >= 1.0 => ((area / std::f64::consts::PI).sqrt(), 1.0),
+                        // A vertex no triangle uses: the samples around it say whether it
+                        // lies on the surface (whole disc) or off it (none).
+                        c if c <= 0.0 && area >= 0.9 * full => {
+                            ((area / std::f64::consts::PI).sqrt(), 1.0)
+                        }
+                        c if c <= 0.0 => (exclusion, (area / full).min(1.0)),
+                        // On an open boundary: the angle share of the exclusion disc.
+                        c => (exclusion, f64::from(c)),
+                    };
                     let receiver = Receiver {
                         position: mesh.positions()[v].as_dvec3(),
                         irradiance: project(&vertex_irradiance[v]),
@@ -308,7 +322,8 @@ impl Prt {
                         } else {
                             project(&vertex_irradiance[v])
                         },
-                        own_disc: (area / std::f64::consts::PI).sqrt(),
+                        ring_outer,
+                        coverage: cover,
                     };
                     transport_row(&tree, &basis, &far, exclusion, near_radius, &receiver, row)
                 })
@@ -764,8 +779,12 @@ struct Receiver {
     irradiance: [f32; 3],
     /// Mean irradiance of the samples the receiver's own disc replaces.
     ring_irradiance: [f32; 3],
-    /// Radius of the disc of the same area as the samples excluded around the receiver.
-    own_disc: f64,
+    /// Outer radius of the ring [near_radius, ring_outer] and the share of the disc the surface
+    /// covers: inside the surface, the disc of the same area as the excluded samples, share 1;
+    /// on an open boundary, the exclusion radius and the vertex's angle share (`Mesh::
+    /// vertex_coverage`), so a rim vertex sees the half disc that is there, not a whole one.
+    ring_outer: f64,
+    coverage: f64,
 }
 
 #[derive(Debug, Default, Clone, Copy)]
@@ -867,11 +886,11 @@ fn transport_row(
     }
     // The receiver's own disc: [0, near_radius] in closed form at edit time (slot 0 holds
     // I(x_o)); [near_radius, own_disc] through the basis with the ring's mean irradiance.
-    let ring = basis.integrals_2pi_r(near_radius, rx.own_disc.max(near_radius));
+    let ring = basis.integrals_2pi_r(near_radius, rx.ring_outer.max(near_radius));
     for c in 0..channels {
-        let i_ring = f64::from(rx.ring_irradiance[c]);
+        let i_ring = rx.coverage * f64::from(rx.ring_irradiance[c]);
         let out = &mut row[c * stride..(c + 1) * stride];
-        out[0] = rx.irradiance[c];
+        out[0] = (rx.coverage * f64::from(rx.irradiance[c])) as f32;
         for j in 0..n {
             out[j + 1] = (acc[c * n + j] + i_ring * ring[j]) as f32;
         }

@@ -84,6 +84,10 @@ class Scene:
     @property
     def light_count(self) -> int: ...
     @property
+    def vertex_coverage(self) -> npt.NDArray[np.float32]:
+        """(N,) share of a small disc around each vertex that the surface covers: 1 inside, the
+        angle share on an open boundary (1/2 on a straight edge), 0 for unused vertices."""
+    @property
     def vertex_areas(self) -> npt.NDArray[np.float32]:
         """(N, 1) area per vertex, the weights of error metrics."""
     @property
