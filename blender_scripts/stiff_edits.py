@@ -38,7 +38,8 @@ def measure(model: str, material: str, receivers: int, factors=FACTORS, rel_tol:
     rng = np.random.default_rng(3)
     idx = np.sort(rng.choice(scene.vertex_count, size=min(receivers, scene.vertex_count), replace=False))
     weights = scene.vertex_areas[idx, 0]
-    irr = scene.irradiance(eta=base.eta)[idx]
+    # On an open rim (the bunny has holes) only the covered share of the disc is surface.
+    irr = (scene.irradiance(eta=base.eta) * scene.vertex_coverage[:, None])[idx]
     rows = []
     for k in factors:
         m = scaled(base, k)
@@ -49,7 +50,8 @@ def measure(model: str, material: str, receivers: int, factors=FACTORS, rel_tol:
         ref, info = translucent.reference_radiosity(scene, m, rel_tol=rel_tol, receivers=idx.tolist(), details=True)
         ref_s = time.perf_counter() - t0
         err = translucent.relative_error(b, ref, weights)
-        # The limit sigma_t -> infinity is exact: B = I(x) R_d,total (Jensen 2001's diffuse limit).
+        # The limit sigma_t -> infinity is exact: B = c I(x) R_d,total (Jensen 2001's diffuse
+        # limit; c the vertex's coverage, 1 inside the surface).
         limit = translucent.relative_error(b, irr * np.array(m.total_diffuse_reflectance), weights)
         fresh = translucent.Prt(scene, m).radiosity(m)[idx] if refresh_check else None
         fresh_err = max(translucent.relative_error(fresh, ref, weights)["rms"]) if refresh_check else float("nan")
