@@ -66,7 +66,7 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
                     "Material outside the basis' range: precompute again")
                 layout.label(text=text, icon="ERROR")
             for name in sess.not_shown:
-                layout.label(text=f"{name}: modifier changes vertex count, not shown", icon="ERROR")
+                layout.label(text=f"{name}: mesh changed since the precompute, not shown", icon="ERROR")
         layout.operator("translucent.clear")
 
 

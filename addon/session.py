@@ -22,6 +22,9 @@ class Session:
     last_error: list[float] = field(default_factory=list)
     last_seconds: float = 0.0
     not_shown: list[str] = field(default_factory=list)
+    # Objects whose modifiers change the vertex count: for each original vertex, the evaluated
+    # vertex nearest to it (the modifier stack then interpolates the attribute for display).
+    remap: dict = field(default_factory=dict)
     # The material (sigma_a, sigma_s, g) the basis and samples were chosen for.
     chosen_for: tuple = ()
     refresh_advised: bool = False
@@ -102,6 +105,32 @@ class Job:
         return not self._thread.is_alive() and (self.result is not None or self.error is not None)
 
 
+def nearest_original_vertices(objects: list[str], info: export.ExportInfo) -> dict[str, np.ndarray]:
+    """For each object whose evaluated mesh has a different vertex count from its own mesh (a
+    Subdivision Surface, a Decimate...), the index of the evaluated vertex nearest to each of
+    its original vertices (world space, Blender's own kd-tree). Writing those values on the
+    original vertices lets the modifier stack interpolate the preview for display."""
+    from mathutils import Matrix, kdtree
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    out = {}
+    for r in info.objects:
+        obj = bpy.data.objects.get(r.name)
+        if obj is None or r.name not in objects or len(obj.data.vertices) == r.count:
+            continue
+        evaluated, _, _ = export.evaluated_mesh_arrays(obj, depsgraph)
+        tree = kdtree.KDTree(len(evaluated))
+        for i, p in enumerate(evaluated):
+            tree.insert(p.tolist(), i)
+        tree.balance()
+        co = np.empty(len(obj.data.vertices) * 3, np.float32)
+        obj.data.vertices.foreach_get("co", co)
+        m = np.array(Matrix(obj.matrix_world), dtype=np.float64)
+        world = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+        out[r.name] = np.array([tree.find(p.tolist())[1] for p in world], dtype=np.int64)
+    return out
+
+
 def _params(settings) -> tuple:
     return (tuple(settings.sigma_a), tuple(settings.sigma_s), settings.g, settings.mm_per_unit)
 
@@ -123,6 +152,7 @@ def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], 
 def finish(material: bpy.types.Material, job: Job, objects, info, fp) -> Session:
     session = Session(job.result, info, objects, fp, material.translucent.eta)
     session.chosen_for = job.chosen_for
+    session.remap = nearest_original_vertices(objects, info)
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
@@ -174,10 +204,14 @@ def edit(material: bpy.types.Material) -> None:
     s.not_shown = []
     for name, values in writeback.split(colors, s.info).items():
         obj = bpy.data.objects.get(name)
-        if obj is not None and len(obj.data.vertices) == len(values):
+        if obj is None:
+            continue
+        if len(obj.data.vertices) == len(values):
             writeback.write_colors(obj.data, values)
+        elif name in s.remap and len(s.remap[name]) == len(obj.data.vertices):
+            writeback.write_colors(obj.data, values[s.remap[name]])
         else:
-            # A modifier changed the vertex count: the attribute cannot hold the values.
+            # The mesh changed since the precompute: the attribute cannot hold the values.
             s.not_shown.append(name)
     if s.refresh_advised:
         refresh(material)

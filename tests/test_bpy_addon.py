@@ -235,3 +235,31 @@ def test_only_objects_carrying_the_material_are_exported_and_the_rest_is_reporte
     text = session.summary(sess)
     assert "2 object(s) (1 without the material skipped)" in text
     assert "1 light(s) used, 1 dark" in text and "no rays (black)" in text
+
+
+def test_a_subdivided_object_shows_the_preview_through_its_original_vertices(addon):
+    import bpy
+
+    from addon import session
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    sub = objs[1].modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = 1
+    before = mesh_hash(objs[1].data)
+    mat.translucent.enabled = True
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    sess = session.SESSIONS[mat.name]
+    assert sess.not_shown == []
+    r = next(r for r in sess.info.objects if r.name == objs[1].name)
+    assert r.count > len(objs[1].data.vertices), "the modifier adds vertices"
+    # Each original vertex holds the value of the evaluated vertex nearest to it: compare with
+    # a brute-force nearest search over the exported positions.
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    from addon import export
+
+    evaluated, _, _ = export.evaluated_mesh_arrays(objs[1], depsgraph)
+    co = np.array([tuple(objs[1].matrix_world @ v.co) for v in objs[1].data.vertices])
+    nearest = np.argmin(((co[:, None, :] - evaluated[None, :, :]) ** 2).sum(-1), axis=1)
+    values = sess.prt.radiance(mat.translucent.material())[r.start : r.start + r.count]
+    np.testing.assert_allclose(read_preview(objs[1]), values[nearest], rtol=1e-6)
+    assert mesh_hash(objs[1].data) == before
