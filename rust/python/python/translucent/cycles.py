@@ -1,0 +1,184 @@
+"""Mapping between (sigma_a, sigma_s, g, eta) and the inputs of Cycles' Principled BSDF with
+random-walk subsurface scattering, as Blender 5.0.1 turns them into a medium.
+
+What Cycles does (intern/cycles/kernel/closure/bssrdf.h and
+intern/cycles/kernel/integrator/subsurface_random_walk.h):
+
+- `bssrdf_setup`: anisotropy clamped to [0, 0.9], IOR to [1.01, 3.8].
+- `bssrdf_setup_radius`, method "Random Walk": d = radius * scale / (4 pi) per channel.
+- `subsurface_random_walk_remap(albedo, d, g)`: the single-scattering albedo alpha is a fit of
+  the surface albedo (Chiang et al. 2016, with Wrenninge et al.'s anisotropy terms A..F below),
+  clamped to [0, 0.999999]; sigma_t = (1 / d) / (1 - g).
+- `subsurface_random_walk_coefficients`: alpha below 0.2 is raised to 0.2 and the path's
+  throughput scaled by alpha / 0.2 instead, so such channels are not the same medium.
+
+Hence sigma_s = alpha sigma_t and sigma_a = (1 - alpha) sigma_t, in 1 / scene unit when the
+radius is in scene units. `to_principled` inverts this per channel (alpha is increasing in the
+albedo: bisection); `from_principled` is the forward map. Pure Python + numpy; the bpy helpers
+import bpy when called.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+MIN_ALPHA = 0.2  # subsurface_random_walk_coefficients: below, throughput scaling stands in
+MAX_ALPHA = 0.999999  # subsurface_random_walk_remap's clamp
+G_RANGE = (0.0, 0.9)  # bssrdf_setup's anisotropy clamp
+IOR_RANGE = (1.01, 3.8)  # bssrdf_setup's IOR clamp
+
+
+def _poly(g: float, c: tuple[float, ...]) -> float:
+    return sum(ci * g**i for i, ci in enumerate(c))
+
+
+def single_scattering_albedo(albedo: float, g: float) -> float:
+    """Cycles' `subsurface_random_walk_remap`: the single-scattering albedo for a surface
+    albedo (Base Color channel) and anisotropy g, before the clamp."""
+    a = _poly(g, (1.8260523782, -1.28451056436, -1.79904629312, 9.19393289202, -22.8215585862,
+                  32.0234874259, -23.6264803333, 7.21067002658))
+    b = 4.98511194385 + 0.127355959438 * math.exp(
+        _poly(g, (0.0, 31.1491581433, -201.847017512, 841.576016723, -2018.09288505, 2731.71560286,
+                  -1935.41424244, 559.009054474)))
+    c = _poly(g, (1.09686102424, -0.394704063468, 1.05258115941, -8.83963712726, 28.8643230661,
+                  -46.8802913581, 38.5402837518, -12.7181042538))
+    d = _poly(g, (0.496310210422, 0.360146581622, -2.15139309747, 17.8896899217, -55.2984010333,
+                  82.065982243, -58.5106008578, 15.8478295021))
+    e = 4.23190299701 + 0.00310603949088 * math.exp(
+        _poly(g, (0.0, 76.7316253952, -594.356773233, 2448.8834203, -5576.68528998, 7116.60171912,
+                  -4763.54467887, 1303.5318055)))
+    f = _poly(g, (2.40602999408, -2.51814844609, 9.18494908356, -79.2191708682, 259.082868209,
+                  -403.613804597, 302.85712436, -87.4370473567))
+    blend = albedo**0.25
+    return (1.0 - blend) * a * math.atan(b * albedo) ** c + blend * d * math.atan(e * albedo) ** f
+
+
+@dataclass
+class Principled:
+    """Principled BSDF inputs (subsurface method "Random Walk", Subsurface Weight 1)."""
+
+    base_color: tuple[float, float, float]
+    radius: tuple[float, float, float]  # Subsurface Radius, multiplied by `scale`
+    scale: float  # Subsurface Scale [scene units]
+    anisotropy: float
+    ior: float
+    # False where a channel's single-scattering albedo is below Cycles' 0.2, which Cycles
+    # renders by scaling the throughput instead (not the same medium).
+    exact: bool = True
+
+
+def _check_rgb(name: str, v) -> tuple[float, float, float]:
+    t = tuple(float(x) for x in (v if np.ndim(v) else (v, v, v)))
+    if len(t) != 3 or not all(math.isfinite(x) and x >= 0.0 for x in t):
+        raise ValueError(f"{name} must be three finite values >= 0, got {v!r}")
+    return t
+
+
+def from_principled(base_color, radius, scale: float, anisotropy: float, ior: float):
+    """The (sigma_a, sigma_s, g, eta) Cycles simulates for these Principled inputs, sigma in
+    1 / (the unit of radius * scale). Cycles' own clamps of g and IOR apply."""
+    base_color, radius = _check_rgb("base_color", base_color), _check_rgb("radius", radius)
+    if not (math.isfinite(scale) and scale > 0.0):
+        raise ValueError(f"scale {scale} must be > 0")
+    g = min(max(float(anisotropy), G_RANGE[0]), G_RANGE[1])
+    eta = min(max(float(ior), IOR_RANGE[0]), IOR_RANGE[1])
+    sigma_a, sigma_s = [], []
+    for albedo, r in zip(base_color, radius):
+        d = r * scale / (4.0 * math.pi)  # bssrdf_setup_radius, "Random Walk"
+        if d <= 0.0:
+            raise ValueError("a zero radius is a diffuse BSDF in Cycles, not a medium")
+        alpha = min(max(single_scattering_albedo(min(albedo, 1.0), g), 0.0), MAX_ALPHA)
+        sigma_t = 1.0 / max(d, 1e-16) / (1.0 - g)
+        sigma_s.append(alpha * sigma_t)
+        sigma_a.append((1.0 - alpha) * sigma_t)
+    return tuple(sigma_a), tuple(sigma_s), g, eta
+
+
+def to_principled(sigma_a, sigma_s, g: float = 0.0, eta: float = 1.3) -> Principled:
+    """Principled inputs for which Cycles simulates sigma_a, sigma_s [1 / scene unit], g, eta.
+    Raises ValueError for what Cycles cannot represent: g outside [0, 0.9], eta outside
+    [1.01, 3.8], a channel with no scattering or a single-scattering albedo above 0.999999."""
+    sigma_a, sigma_s = _check_rgb("sigma_a", sigma_a), _check_rgb("sigma_s", sigma_s)
+    if not (G_RANGE[0] <= g <= G_RANGE[1]):
+        raise ValueError(f"g = {g}: Cycles' random walk takes anisotropy in [0, 0.9]")
+    if not (IOR_RANGE[0] <= eta <= IOR_RANGE[1]):
+        raise ValueError(f"eta = {eta}: Cycles clamps the subsurface IOR to [1.01, 3.8]")
+    colour, radius, exact = [], [], True
+    for sa, ss in zip(sigma_a, sigma_s):
+        st = sa + ss
+        if ss <= 0.0 or st <= 0.0:
+            raise ValueError("every channel needs sigma_s > 0 for a random-walk medium")
+        alpha = ss / st
+        if alpha > MAX_ALPHA:
+            raise ValueError(f"single-scattering albedo {alpha} is above Cycles' clamp {MAX_ALPHA}")
+        exact &= alpha >= MIN_ALPHA
+        # Bisection on the increasing remap: albedo in [0, 1].
+        lo, hi = 0.0, 1.0
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            if single_scattering_albedo(mid, g) < alpha:
+                lo = mid
+            else:
+                hi = mid
+        colour.append(0.5 * (lo + hi))
+        d = 1.0 / (st * (1.0 - g))
+        radius.append(4.0 * math.pi * d)
+    scale = max(radius)
+    return Principled(tuple(colour), tuple(r / scale for r in radius), scale, g, eta, exact)
+
+
+def apply_to_principled(node, p: Principled) -> None:
+    """Set a Principled BSDF node's inputs for the random-walk medium `p` (Subsurface Weight 1)."""
+    node.subsurface_method = "RANDOM_WALK"
+    node.inputs["Base Color"].default_value = (*p.base_color, 1.0)
+    node.inputs["Subsurface Weight"].default_value = 1.0
+    node.inputs["Subsurface Radius"].default_value = p.radius
+    node.inputs["Subsurface Scale"].default_value = p.scale
+    node.inputs["Subsurface Anisotropy"].default_value = p.anisotropy
+    node.inputs["IOR"].default_value = p.ior
+
+
+def read_principled(node) -> Principled:
+    """The random-walk inputs of a Principled BSDF node (unconnected values)."""
+    i = node.inputs
+    return Principled(
+        tuple(i["Base Color"].default_value)[:3],
+        tuple(i["Subsurface Radius"].default_value),
+        float(i["Subsurface Scale"].default_value),
+        float(i["Subsurface Anisotropy"].default_value),
+        float(i["IOR"].default_value),
+    )
+
+
+def make_volume_material(name: str, sigma_a, sigma_s, g: float, eta: float):
+    """The second reference: a homogeneous volume (Volume Scatter + Volume Absorption, density
+    in 1 / scene unit) inside a smooth refractive boundary of IOR eta (Refraction BSDF,
+    roughness 0). Returns the new bpy material."""
+    import bpy
+
+    sigma_a, sigma_s = _check_rgb("sigma_a", sigma_a), _check_rgb("sigma_s", sigma_s)
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    out = nodes.new("ShaderNodeOutputMaterial")
+    glass = nodes.new("ShaderNodeBsdfRefraction")
+    glass.inputs["IOR"].default_value = eta
+    glass.inputs["Roughness"].default_value = 0.0
+    links.new(glass.outputs[0], out.inputs["Surface"])
+    # Per-channel coefficients: colour = sigma / density with density the largest channel.
+    scatter, absorb = nodes.new("ShaderNodeVolumeScatter"), nodes.new("ShaderNodeVolumeAbsorption")
+    ks, ka = max(sigma_s), max(sigma_a)
+    scatter.inputs["Color"].default_value = (*[s / ks if ks else 0.0 for s in sigma_s], 1.0)
+    scatter.inputs["Density"].default_value = ks
+    scatter.inputs["Anisotropy"].default_value = g
+    absorb.inputs["Color"].default_value = (*[1.0 - (a / ka if ka else 0.0) for a in sigma_a], 1.0)
+    absorb.inputs["Density"].default_value = ka
+    add = nodes.new("ShaderNodeAddShader")
+    links.new(scatter.outputs[0], add.inputs[0])
+    links.new(absorb.outputs[0], add.inputs[1])
+    links.new(add.outputs[0], out.inputs["Volume"])
+    return mat
