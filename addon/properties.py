@@ -38,12 +38,45 @@ def _live_edit(self, context):
     session.edit(self.id_data)
 
 
+def _principled(mat):
+    tree = mat.node_tree
+    if tree is None:
+        return None
+    return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+
+
+def read_from_principled(settings) -> bool:
+    """Start from the material's own Principled BSDF: its subsurface inputs mapped to the
+    medium Cycles would simulate (`translucent.cycles`). Returns whether it did."""
+    from translucent import cycles
+
+    node = _principled(settings.id_data)
+    if node is None or node.inputs["Subsurface Weight"].default_value <= 0.0:
+        return False
+    p = cycles.read_principled(node)
+    try:
+        sigma_a, sigma_s, g, eta = cycles.from_principled(p.base_color, p.radius, p.scale, p.anisotropy, p.ior)
+    except ValueError:
+        return False
+    k = settings.mm_per_unit  # coefficients are per scene unit; the panel shows them per mm
+    settings["sigma_a"] = tuple(x / k for x in sigma_a)
+    settings["sigma_s"] = tuple(x / k for x in sigma_s)
+    settings["g"] = g
+    settings["eta"] = min(eta, 2.5)
+    settings["preset"] = 0  # Custom
+    return True
+
+
 def _toggle(self, context):
-    """Turning the preview off puts the viewports and active colour attributes back; turning it
-    on again shows the transport if there is one."""
+    """Turning the preview on the first time starts from the material's Principled BSDF;
+    turning it off puts the viewports and active colour attributes back; on again shows the
+    transport if there is one."""
     from . import viewport
 
     mat = self.id_data
+    if self.enabled and not self.initialised:
+        self["initialised"] = True
+        read_from_principled(self)
     sess = session.SESSIONS.get(mat.name)
     objects = [o for o in (bpy.data.objects.get(n) for n in sess.objects) if o is not None] if sess else []
     if self.enabled and sess is not None:
@@ -56,6 +89,10 @@ def _toggle(self, context):
 class TranslucentMaterialSettings(bpy.types.PropertyGroup):
     enabled: BoolProperty(
         name="Preview", description="Show a subsurface-scattering preview of this material", default=False, update=_toggle
+    )
+    initialised: BoolProperty(
+        name="Initialised", description="Settings were read from the material once", default=False,
+        options={"HIDDEN"},
     )
     preset: EnumProperty(name="Preset", items=_preset_items, update=_apply_preset)
     sigma_a: FloatVectorProperty(

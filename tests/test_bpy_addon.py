@@ -263,3 +263,31 @@ def test_a_subdivided_object_shows_the_preview_through_its_original_vertices(add
     values = sess.prt.radiance(mat.translucent.material())[r.start : r.start + r.count]
     np.testing.assert_allclose(read_preview(objs[1]), values[nearest], rtol=1e-6)
     assert mesh_hash(objs[1].data) == before
+
+
+def test_enabling_the_preview_starts_from_the_principled_subsurface_inputs(addon):
+    import bpy
+
+    from translucent import cycles
+
+    mat = bpy.data.materials.new("Jade")
+    mat.use_nodes = True
+    node = mat.node_tree.nodes["Principled BSDF"]
+    target = cycles.to_principled((2.0, 5.0, 9.0), (300.0, 400.0, 500.0), 0.2, 1.4)  # per metre
+    cycles.apply_to_principled(node, target)
+    before = [tuple(i.default_value) if hasattr(i.default_value, "__len__") else i.default_value
+              for i in node.inputs if hasattr(i, "default_value")]
+    s = mat.translucent
+    s.mm_per_unit = 1000.0
+    s.enabled = True
+    np.testing.assert_allclose(np.array(s.sigma_a) * 1000.0, (2.0, 5.0, 9.0), rtol=1e-4)
+    np.testing.assert_allclose(np.array(s.sigma_s) * 1000.0, (300.0, 400.0, 500.0), rtol=1e-4)
+    assert s.g == pytest.approx(0.2) and s.eta == pytest.approx(1.4)
+    after = [tuple(i.default_value) if hasattr(i.default_value, "__len__") else i.default_value
+             for i in node.inputs if hasattr(i, "default_value")]
+    assert after == before, "the user's material is read, never written"
+    # Only the first time: later toggles keep the artist's edits.
+    s.sigma_a = (0.1, 0.1, 0.1)
+    s.enabled = False
+    s.enabled = True
+    assert tuple(s.sigma_a) == pytest.approx((0.1, 0.1, 0.1))
