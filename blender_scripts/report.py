@@ -126,6 +126,45 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None) -> l
     return rows
 
 
+def fresnel_t(eta: float) -> float:
+    """F_t at normal incidence, 1 - ((eta - 1) / (eta + 1))^2: radiance along the normal is
+    F_t B / pi (Xu 2007 eq. 2), what a vertex bake sees."""
+    return 1.0 - ((eta - 1.0) / (eta + 1.0)) ** 2
+
+
+def cycles_rows(obj, material, name, spp_list, reference_spp, receivers, weights):
+    """Cycles vertex bakes at each sample count against the high-sample bake."""
+    import cycles_reference as cr
+
+    ref, ref_s = cr.bake_vertices(obj, material, reference_spp)
+    label = f"Cycles {reference_spp} spp"
+    rows = []
+    for spp in spp_list:
+        values, seconds = cr.bake_vertices(obj, material, spp)
+        rms, mx = worst(translucent.relative_error(values[receivers], ref[receivers], weights))
+        rows.append(Row("Cycles random walk (bake)", f"{spp} spp", name, label, rms, mx, seconds, 0.0,
+                        notes="vertex bake, diffuse passes"))
+    return rows, dict(values=ref[receivers], label=label, seconds=ref_s)
+
+
+def eevee_rows(obj, material, name, samples_list, reference_spp):
+    """EEVEE's own subsurface scattering against a high-sample Cycles render of the camera view."""
+    import cycles_reference as cr
+
+    try:
+        truth, _ = cr.render_image(obj, material, reference_spp, "CYCLES")
+        rows = []
+        for samples in samples_list:
+            img, seconds = cr.render_image(obj, material, samples, "EEVEE")
+            rms, mx = cr.image_error(img, truth)
+            rows.append(Row("EEVEE", f"{samples} samples", name, f"Cycles {reference_spp} spp image", rms, mx,
+                            seconds, 0.0, notes="128 px render, object pixels"))
+        return rows
+    except RuntimeError as e:
+        print(f"EEVEE skipped: {e}", file=sys.stderr)
+        return []
+
+
 def build_scene(model: str):
     """The demo's scene (Suzanne with Subdivision, point light, dim world) or a shared model
     at 10 cm under the same light."""
@@ -217,11 +256,20 @@ def main(argv=None) -> int:
     ap.add_argument("--rel-tol", type=float, default=2e-3, help="ground truth tolerance")
     ap.add_argument("--no-cycles", action="store_true")
     ap.add_argument("--no-eevee", action="store_true")
+    ap.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64, 256], help="Cycles bake sample counts")
+    ap.add_argument("--reference-spp", type=int, default=1024, help="the high-sample Cycles bake and image")
+    ap.add_argument("--eevee-samples", type=int, nargs="+", default=[16, 64])
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
 
     obj, cam = build_scene(args.model)
     scene, info = export.export_scene([obj])
+    bake_obj = None
+    if not (args.no_cycles and args.no_eevee):
+        import demo
+
+        bake_obj = demo.preview_object(obj)  # the evaluated mesh as its own object (same vertices)
+        bake_obj.data.materials.clear()
     p = np.asarray(scene.vertex_areas)  # part of the cache key via the scene digest below
     scene_key = digest(args.model, scene.vertex_count, scene.triangle_count, p, info.lights, info.world)
     rng = np.random.default_rng(1)
@@ -233,11 +281,24 @@ def main(argv=None) -> int:
         progress(i, steps, f"{name}: ground truth")
         m = translucent.Material.preset(name, MM_PER_UNIT)
         truth, ref_s, ref_info = ground_truth(scene_key, scene, m, receivers, args.rel_tol)
+        cyc = None
+        if not args.no_cycles:
+            progress(i, steps, f"{name}: Cycles bakes")
+            rows_c, cyc = cycles_rows(bake_obj, m, name, args.spp, args.reference_spp, receivers, weights)
+            rows += rows_c
+            # The model itself against Cycles: the dipole's ground truth as radiance along the normal.
+            radiance = truth * (fresnel_t(m.eta) / np.pi)
+            rms, mx = worst(translucent.relative_error(radiance, cyc["values"], weights))
+            rows.append(Row("Dipole ground truth", "Jensen 2001, multiple scattering", name, cyc["label"], rms, mx,
+                            ref_s, 0.0, notes="the model's distance from Cycles' random walk"))
         progress(i, steps, f"{name}: PRT settings")
-        rows += prt_rows(scene, m, name, truth, receivers, weights)
+        rows += prt_rows(scene, m, name, truth, receivers, weights, cyc)
         rows.append(Row("Reference (brute force)", f"rel. tol. {args.rel_tol:g}, level {ref_info.get('level')}", name,
                         "ground truth", float(ref_info.get("estimated_rel_error", 0.0)), float("nan"), ref_s, 0.0,
                         notes="its own convergence estimate"))
+        if not args.no_eevee:
+            progress(i, steps, f"{name}: EEVEE")
+            rows += eevee_rows(bake_obj, m, name, args.eevee_samples, args.reference_spp)
     progress(steps, steps, "done")
     title = (f"{args.model}: {scene.vertex_count} vertices, {len(receivers)} receivers; "
              f"{translucent.__name__} on {sys.platform}, CPU")

@@ -1,0 +1,171 @@
+"""Cycles (and EEVEE) references of a scene built in bpy, cached on disk (issue 5, point 2).
+
+- `bake_vertices`: Cycles' per-vertex bake of the diffuse passes (direct + indirect + colour:
+  subsurface scattering lands there; specular reflection does not), with the material mapped
+  to a Principled BSDF random walk by `translucent.cycles`.
+- `render_image`: a camera render with Cycles or EEVEE (linear float RGBA).
+
+Each result is cached under out/cache/cycles/<key>.npz, the key hashing the evaluated
+geometry, the lights, the material and the settings; the wall time of the original render is
+stored with it, so reports can plot it without rendering again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import pathlib
+import tempfile
+import time
+
+import bpy
+import numpy as np
+
+import translucent
+from translucent import cycles
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+CACHE = REPO / "out" / "cache" / "cycles"
+
+
+def _scene_digest(objects) -> str:
+    h = hashlib.sha256()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for o in objects:
+        ev = o.evaluated_get(depsgraph)
+        mesh = ev.to_mesh()
+        co = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", co)
+        ev.to_mesh_clear()
+        h.update(co.tobytes())
+        h.update(np.array(o.matrix_world, np.float32).tobytes())
+    for o in bpy.context.scene.objects:
+        if o.type in {"LIGHT", "CAMERA"}:
+            h.update(np.array(o.matrix_world, np.float32).tobytes())
+            if o.type == "LIGHT":
+                d = o.data
+                h.update(repr((d.type, d.energy, tuple(d.color), d.shadow_soft_size)).encode())
+    w = bpy.context.scene.world
+    if w is not None and w.node_tree is not None:
+        bg = next((n for n in w.node_tree.nodes if n.type == "BACKGROUND"), None)
+        if bg is not None:
+            h.update(repr((tuple(bg.inputs["Color"].default_value), bg.inputs["Strength"].default_value)).encode())
+    return h.hexdigest()
+
+
+def _cached(key: str, compute):
+    path = CACHE / f"{key}.npz"
+    if path.exists():
+        z = np.load(path)
+        return z["values"], float(z["seconds"])
+    t0 = time.perf_counter()
+    values = compute()
+    seconds = time.perf_counter() - t0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, values=values, seconds=seconds)
+    return values, seconds
+
+
+def principled_material(material: translucent.Material, name: str = "Cycles reference") -> bpy.types.Material:
+    """A Principled BSDF random walk simulating `material` (coefficients per scene unit)."""
+    p = cycles.to_principled(material.sigma_a, material.sigma_s, material.g, material.eta)
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    cycles.apply_to_principled(mat.node_tree.nodes["Principled BSDF"], p)
+    return mat
+
+
+def _with_material(obj, mat):
+    old = [s.material for s in obj.material_slots]
+    if not obj.material_slots:
+        obj.data.materials.append(mat)
+    for s in obj.material_slots:
+        s.material = mat
+    return old
+
+
+def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples: int) -> tuple[np.ndarray, float]:
+    """Cycles' diffuse radiance (direct + indirect + colour) per vertex of `obj` (a mesh with
+    no modifiers), (N, 3), and the bake's wall time [s]."""
+    key = hashlib.sha256(repr(("bake", _scene_digest([obj]), material.sigma_a, material.sigma_s, material.g,
+                               material.eta, samples)).encode()).hexdigest()[:24]
+
+    def compute():
+        scene = bpy.context.scene
+        scene.render.engine = "CYCLES"
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = samples
+        scene.cycles.use_denoising = False
+        mat = principled_material(material)
+        old = _with_material(obj, mat)
+        mesh = obj.data
+        attr = mesh.color_attributes.new("cycles_bake", "FLOAT_COLOR", "POINT")
+        try:
+            mesh.color_attributes.active_color = attr
+            bpy.ops.object.select_all(action="DESELECT")
+            obj.select_set(True)
+            bpy.context.view_layer.objects.active = obj
+            bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT", "COLOR"}, target="VERTEX_COLORS")
+            px = np.empty(len(mesh.vertices) * 4, np.float32)
+            attr.data.foreach_get("color", px)
+        finally:
+            mesh.color_attributes.remove(mesh.color_attributes["cycles_bake"])
+            for s, m in zip(obj.material_slots, old):
+                s.material = m
+            bpy.data.materials.remove(mat)
+        return px.reshape(-1, 4)[:, :3]
+
+    return _cached(key, compute)
+
+
+def render_image(obj: bpy.types.Object, material: translucent.Material, samples: int, engine: str = "CYCLES",
+                 size: int = 128) -> tuple[np.ndarray, float]:
+    """A camera render of the scene with `obj` in the mapped material: (size, size, 4) linear
+    RGBA (alpha = coverage, transparent film), and its wall time [s]. `engine` is "CYCLES" or
+    "EEVEE" (Blender 5.0's EEVEE, its own screen-space subsurface scattering)."""
+    key = hashlib.sha256(repr(("image", engine, _scene_digest([obj]), material.sigma_a, material.sigma_s,
+                               material.g, material.eta, samples, size)).encode()).hexdigest()[:24]
+
+    def compute():
+        scene = bpy.context.scene
+        if engine == "CYCLES":
+            scene.render.engine = "CYCLES"
+            scene.cycles.device = "CPU"
+            scene.cycles.samples = samples
+            scene.cycles.use_denoising = False
+        else:
+            names = [e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items]
+            eevee = next((n for n in ("BLENDER_EEVEE", "BLENDER_EEVEE_NEXT") if n in names), None)
+            if eevee is None:
+                raise RuntimeError(f"no EEVEE engine in this Blender (engines: {names})")
+            scene.render.engine = eevee
+            scene.eevee.taa_render_samples = samples
+        scene.render.film_transparent = True
+        scene.render.resolution_x = scene.render.resolution_y = size
+        scene.view_settings.view_transform = "Standard"
+        scene.render.image_settings.file_format = "OPEN_EXR"
+        mat = principled_material(material)
+        old = _with_material(obj, mat)
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                scene.render.filepath = str(pathlib.Path(tmp) / "frame.exr")
+                bpy.ops.render.render(write_still=True)
+                img = bpy.data.images.load(scene.render.filepath)
+                px = np.array(img.pixels[:], dtype=np.float32).reshape(size, size, 4)[::-1]
+                bpy.data.images.remove(img)
+        finally:
+            for s, m in zip(obj.material_slots, old):
+                s.material = m
+            bpy.data.materials.remove(mat)
+        return px
+
+    return _cached(key, compute)
+
+
+def image_error(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """Relative RMSE and max relative error over the object's pixels (truth alpha > 0.99),
+    worst channel (DESIGN.md's image metric)."""
+    mask = truth[..., 3] > 0.99
+    e, t = estimate[mask][:, :3].astype(np.float64), truth[mask][:, :3].astype(np.float64)
+    rms = np.sqrt(((e - t) ** 2).mean(axis=0) / np.maximum((t**2).mean(axis=0), 1e-30))
+    mx = (np.abs(e - t) / np.maximum(t, 1e-3 * t.max())).max(axis=0)
+    return float(rms.max()), float(mx.max())
