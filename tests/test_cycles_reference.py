@@ -1,0 +1,44 @@
+"""Cycles references are cached on disk by scene, material and settings (issue 5, point 2):
+a second request returns the stored result without rendering; any change of input renders
+again. Values are finite, non-negative, one per vertex."""
+
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.bpy
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "blender_scripts"))
+
+
+def test_bakes_are_cached_and_keyed_by_their_inputs(empty_blend, tmp_path, monkeypatch):
+    bpy = empty_blend
+    import cycles_reference as cr
+
+    import translucent
+
+    monkeypatch.setattr(cr, "CACHE", tmp_path)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.05, segments=16, ring_count=8)
+    obj = bpy.context.active_object
+    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    light.data.energy = 5.0
+    light.location = (0.1, -0.2, 0.2)
+    bpy.context.scene.collection.objects.link(light)
+    m = translucent.Material.preset("skin1", mm_per_unit=1000.0)
+    first, seconds = cr.bake_vertices(obj, m, 2)
+    assert first.shape == (len(obj.data.vertices), 3)
+    assert np.all(np.isfinite(first)) and first.min() >= 0 and first.max() > 0
+    assert len(list(tmp_path.glob("*.npz"))) == 1 and seconds > 0
+    calls = []
+    monkeypatch.setattr(bpy.ops.object, "bake", lambda **kw: calls.append(kw))
+    again, seconds_again = cr.bake_vertices(obj, m, 2)
+    assert calls == [] and seconds_again == seconds, "served from the cache, with the original time"
+    np.testing.assert_array_equal(again, first)
+    # Another sample count, or a moved light, is another key: it bakes (here the stand-in).
+    cr.bake_vertices(obj, m, 3)
+    assert len(calls) == 1
+    light.location.x += 0.01
+    cr.bake_vertices(obj, m, 2)
+    assert len(calls) == 2
+    assert obj.data.color_attributes.get("cycles_bake") is None, "the bake's attribute is removed"
