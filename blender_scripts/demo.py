@@ -3,10 +3,13 @@ a 10 cm Suzanne with a Subdivision Surface modifier, a point light and a world c
 
 Exports the evaluated scene through the add-on's exporter, precomputes PRT transport once,
 evaluates three of Jensen's measured materials, measures each against the ground truth,
-writes the radiance into the add-on's colour attribute and renders one PNG per material with
-Cycles (an Emission shader reading the attribute). Prints a table of error and time.
+writes the radiance into the add-on's colour attribute, renders it headless as the viewport
+shows it (Workbench, flat, colour by attribute: <preset>.png) and renders the same scene with
+Cycles' random walk in the mapped Principled BSDF (<preset>_cycles.png), side by side in
+<preset>_vs_cycles.png. Prints a table of error and time.
 
 Run: .venv/bin/python blender_scripts/demo.py [--out out/demo] [--presets marble skin1 ketchup]
+     [--cycles-samples 64]
 """
 
 from __future__ import annotations
@@ -89,14 +92,51 @@ def preview_object(source: bpy.types.Object) -> bpy.types.Object:
 
 
 def render(path: pathlib.Path) -> None:
+    """The preview as the viewport shows it: Workbench, flat lighting, colour by attribute."""
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.display.shading.light = "FLAT"
+    scene.display.shading.color_type = "VERTEX"
+    scene.render.resolution_x = scene.render.resolution_y = 256
+    scene.render.film_transparent = False
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+
+
+def render_cycles(source: bpy.types.Object, preview: bpy.types.Object, material, samples: int,
+                  path: pathlib.Path) -> None:
+    """The same scene in Cycles: the source object (modifiers and all) in a Principled BSDF
+    random walk mapped from `material` (translucent.cycles); the preview object hidden."""
+    from translucent import cycles
+
+    mat = bpy.data.materials.new("Cycles " + path.stem)
+    mat.use_nodes = True
+    cycles.apply_to_principled(
+        mat.node_tree.nodes["Principled BSDF"],
+        cycles.to_principled(material.sigma_a, material.sigma_s, material.g, material.eta),
+    )
+    source.data.materials.clear()
+    source.data.materials.append(mat)
+    source.hide_render, preview.hide_render = False, True
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.cycles.samples = 8
+    scene.cycles.samples = samples
     scene.render.resolution_x = scene.render.resolution_y = 256
     scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = str(path)
     bpy.ops.render.render(write_still=True)
+    source.hide_render, preview.hide_render = True, False
+
+
+def side_by_side(left: pathlib.Path, right: pathlib.Path, path: pathlib.Path) -> None:
+    import matplotlib.image as mpimg
+
+    a, b = mpimg.imread(left), mpimg.imread(right)
+    mpimg.imsave(path, np.concatenate([a[..., :3], b[..., :3]], axis=1))
 
 
 def main() -> int:
@@ -104,6 +144,7 @@ def main() -> int:
     ap.add_argument("--out", default=str(REPO / "out" / "demo"))
     ap.add_argument("--presets", nargs="+", default=["marble", "skin1", "ketchup"])
     ap.add_argument("--receivers", type=int, default=100, help="vertices the ground truth is computed at")
+    ap.add_argument("--cycles-samples", type=int, default=64, help="samples of the Cycles render beside each preview")
     args = ap.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -149,9 +190,14 @@ def main() -> int:
         rows.append((f"  ground truth {name} at {len(receivers)} vertices", ref_s, ""))
         radiance = prt.radiance(m, eye)
         writeback.write_colors(preview.data, radiance)
+        preview.data.color_attributes.active_color_name = writeback.ATTRIBUTE
         t0 = time.perf_counter()
         render(out / f"{name}.png")
-        rows.append((f"  render {name}.png (Cycles CPU, emission of the attribute)", time.perf_counter() - t0, ""))
+        rows.append((f"  render {name}.png (Workbench, the attribute as the viewport shows it)", time.perf_counter() - t0, ""))
+        t0 = time.perf_counter()
+        render_cycles(suzanne, preview, m, args.cycles_samples, out / f"{name}_cycles.png")
+        side_by_side(out / f"{name}.png", out / f"{name}_cycles.png", out / f"{name}_vs_cycles.png")
+        rows.append((f"  render {name}_cycles.png (Cycles random walk, {args.cycles_samples} spp)", time.perf_counter() - t0, ""))
 
     print(f"\n{'step':58s} {'seconds':>9s}  error against ground truth (R/G/B)")
     for step, sec, note in rows:

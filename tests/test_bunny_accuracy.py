@@ -31,9 +31,10 @@ def test_demo_main_job_runs_end_to_end(tmp_path):
 
     out = subprocess.run(
         [sys.executable, str(REPO / "blender_scripts" / "demo.py"), "--out", str(tmp_path),
-         "--presets", "marble", "--receivers", "20"],
+         "--presets", "marble", "--receivers", "20", "--cycles-samples", "4"],
         capture_output=True, text=True, timeout=600,
     )
     assert out.returncode == 0, out.stderr[-3000:]
     assert "error against ground truth" in out.stdout
     assert (tmp_path / "marble.png").stat().st_size > 1000
+    assert (tmp_path / "marble_vs_cycles.png").stat().st_size > 1000
