@@ -111,3 +111,22 @@ def test_a_thick_slab_in_cycles_reflects_the_mapped_base_colour(empty_blend):
     measured = px.reshape(-1, 3).mean(axis=0)
     ratio = measured / np.array(p.base_color)
     assert np.all(ratio > 0.8) and np.all(ratio < 1.02), ratio
+
+
+@pytest.mark.bpy
+def test_volume_reference_material_holds_the_coefficients(empty_blend):
+    """The second reference: Volume Scatter (density x colour = sigma_s, anisotropy g) plus
+    Volume Absorption (density x (1 - colour) = sigma_a) inside a smooth Refraction BSDF of
+    IOR eta; the coefficients read back from the nodes as Cycles defines them."""
+    mat = cycles.make_volume_material("Milk", (0.5, 1.0, 3.0), (400.0, 500.0, 600.0), 0.3, 1.35)
+    nodes = {n.type: n for n in mat.node_tree.nodes}
+    sc, ab, glass = nodes["VOLUME_SCATTER"], nodes["VOLUME_ABSORPTION"], nodes["BSDF_REFRACTION"]
+    sigma_s = np.array(sc.inputs["Color"].default_value[:3]) * sc.inputs["Density"].default_value
+    sigma_a = (1 - np.array(ab.inputs["Color"].default_value[:3])) * ab.inputs["Density"].default_value
+    np.testing.assert_allclose(sigma_s, (400.0, 500.0, 600.0), rtol=1e-6)
+    np.testing.assert_allclose(sigma_a, (0.5, 1.0, 3.0), rtol=1e-6)
+    assert sc.inputs["Anisotropy"].default_value == pytest.approx(0.3)
+    assert glass.inputs["IOR"].default_value == pytest.approx(1.35)
+    assert glass.inputs["Roughness"].default_value == 0.0
+    out = nodes["OUTPUT_MATERIAL"]
+    assert out.inputs["Volume"].is_linked and out.inputs["Surface"].links[0].from_node == glass
