@@ -126,6 +126,21 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None) -> l
     return rows
 
 
+def machine() -> str:
+    """The CPU model and core count, for the report's title."""
+    import os
+
+    model = "unknown CPU"
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} cores"
+
+
 def fresnel_t(eta: float) -> float:
     """F_t at normal incidence, 1 - ((eta - 1) / (eta + 1))^2: radiance along the normal is
     F_t B / pi (Xu 2007 eq. 2), what a vertex bake sees."""
@@ -301,7 +316,7 @@ def main(argv=None) -> int:
             rows += eevee_rows(bake_obj, m, name, args.eevee_samples, args.reference_spp)
     progress(steps, steps, "done")
     title = (f"{args.model}: {scene.vertex_count} vertices, {len(receivers)} receivers; "
-             f"{translucent.__name__} on {sys.platform}, CPU")
+             f"{machine()}; PRT edits on the CPU, median of 5")
     write_outputs(rows, out, title)
     print((out / "report.md").read_text())
     print(f"CSV, PNG and Markdown in {out}")
