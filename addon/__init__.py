@@ -1,4 +1,5 @@
-"""Translucent: subsurface-scattering preview for Blender (Jensen dipole, PRT after Xu 2007).
+"""Translucent: subsurface-scattering preview for Blender (Cycles' random walk or Jensen's
+dipole, PRT after Xu 2007).
 
 Blender-side code only: settings (`properties`), operators, the material panel, scene export
 (`export`) and colour write-back (`writeback`). All maths lives in the native `translucent`
@@ -30,13 +31,27 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         mat = context.material
         s = mat.translucent
         layout.active = s.enabled
-        layout.prop(s, "preset")
+        layout.prop(s, "profile")
+        layout.prop(s, "source", expand=True)
+        if s.source == "PRINCIPLED":
+            p = properties.principled_inputs(mat)
+            if p is None:
+                layout.label(text="No Principled BSDF: using the coefficients below", icon="ERROR")
+            else:
+                col = layout.column(align=True)
+                col.label(text=f"Radius {', '.join(f'{r:.3g}' for r in p.radius)} x Scale {p.scale:.3g}, "
+                          f"Anisotropy {p.anisotropy:.2f}, IOR {p.ior:.3g}")
+                col.label(text=f"Subsurface Weight {p.subsurface_weight:.2f}, Roughness {p.roughness:.2f}, "
+                          f"Metallic {p.metallic:.2f}, Transmission {p.transmission:.2f}")
+        else:
+            layout.prop(s, "preset")
         col = layout.column()
+        col.enabled = s.source == "CUSTOM"
         col.prop(s, "sigma_a")
         col.prop(s, "sigma_s")
         col.prop(s, "g")
         col.prop(s, "eta")
-        col.prop(s, "mm_per_unit")
+        layout.prop(s, "mm_per_unit")
         row = layout.row()
         row.prop(s, "coefficients")
         row.prop(s, "degree", text="")
@@ -52,8 +67,11 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         if state == "none":
             layout.label(text="No transport: press Precompute", icon="INFO")
         elif state == "stale":
-            layout.label(text="Scene or IOR changed: transport is stale, precompute again", icon="ERROR")
+            layout.label(text="Scene, profile or (dipole) IOR changed: transport is stale, precompute again",
+                         icon="ERROR")
         sess = session.SESSIONS.get(mat.name)
+        if sess is not None and sess.edit_message:
+            layout.label(text=sess.edit_message, icon="TIME" if mat.name in session.PREPARING else "ERROR")
         if sess is not None:
             col = layout.column(align=True)
             for part in session.summary(sess).split("; "):
@@ -86,11 +104,14 @@ def register():
     for cls in operators.classes + classes:
         bpy.utils.register_class(cls)
     bpy.app.handlers.load_post.append(_drop_sessions)
+    bpy.app.handlers.depsgraph_update_post.append(session.follow_principled)
 
 
 def unregister():
     if _drop_sessions in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(_drop_sessions)
+    if session.follow_principled in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(session.follow_principled)
     for cls in reversed(operators.classes + classes):
         bpy.utils.unregister_class(cls)
     viewport.restore()

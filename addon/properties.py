@@ -1,5 +1,11 @@
 """Settings of the preview, stored on the material (they save with the .blend file).
-Coefficients are shown per millimetre (Jensen's table units); `mm_per_unit` converts."""
+Coefficients are shown per millimetre (Jensen's table units); `mm_per_unit` converts.
+
+Where the medium comes from (`source`): the material's own Principled BSDF, followed as the
+artist edits it (every input that changes Cycles' subsurface answer: Base Color, Subsurface
+Weight, Radius, Scale, Anisotropy, IOR, Specular IOR Level, Roughness, Metallic, Transmission),
+or custom coefficients and Jensen's presets. The profile (`profile`): Cycles' random walk, what
+a Cycles render shows (the default), or Jensen's dipole, the papers' model."""
 
 from __future__ import annotations
 
@@ -31,40 +37,65 @@ def _apply_preset(self, context):
     self["sigma_s"] = m.sigma_s
     self["g"] = 0.0
     self["eta"] = m.eta
+    self["source"] = 1  # Custom: a preset is the artist's choice over the node
     _live_edit(self, context)
+
+
+def _coefficient_edit(self, context):
+    """An explicit coefficient edit means custom coefficients from now on."""
+    if self.source == "PRINCIPLED":
+        self["source"] = 1
+    session.edit(self.id_data)
 
 
 def _live_edit(self, context):
     session.edit(self.id_data)
 
 
-def _principled(mat):
-    tree = mat.node_tree
+def principled_node(mat):
+    tree = getattr(mat, "node_tree", None)
     if tree is None:
         return None
     return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
 
 
-def read_from_principled(settings) -> bool:
-    """Start from the material's own Principled BSDF: its subsurface inputs mapped to the
-    medium Cycles would simulate (`translucent.cycles`). Returns whether it did."""
+def principled_inputs(mat):
+    """The Principled BSDF inputs Cycles' subsurface answer depends on (`cycles.Principled`),
+    or None when the material has no Principled BSDF."""
     from translucent import cycles
 
-    node = _principled(settings.id_data)
+    node = principled_node(mat)
+    return None if node is None else cycles.read_principled(node)
+
+
+def read_from_principled(settings) -> bool:
+    """Start from the material's own Principled BSDF: its subsurface inputs mapped to the
+    medium Cycles would simulate, shown in the coefficient fields; from then on the preview
+    follows the node (`source`). Returns whether it did."""
+    node = principled_node(settings.id_data)
     if node is None or node.inputs["Subsurface Weight"].default_value <= 0.0:
         return False
-    p = cycles.read_principled(node)
     try:
-        sigma_a, sigma_s, g, eta = cycles.from_principled(p.base_color, p.radius, p.scale, p.anisotropy, p.ior)
+        show_medium(settings, principled_inputs(settings.id_data).material())
     except ValueError:
         return False
-    k = settings.mm_per_unit  # coefficients are per scene unit; the panel shows them per mm
-    settings["sigma_a"] = tuple(x / k for x in sigma_a)
-    settings["sigma_s"] = tuple(x / k for x in sigma_s)
-    settings["g"] = g
-    settings["eta"] = min(eta, 2.5)
     settings["preset"] = 0  # Custom
+    settings["source"] = 0  # Principled BSDF
     return True
+
+
+def show_medium(settings, m) -> None:
+    """Show the medium `m` (per scene unit) in the coefficient fields (per mm), without
+    triggering their edit callbacks; only what differs is written (no update loops)."""
+    k = settings.mm_per_unit
+    values = {"sigma_a": tuple(x / k for x in m.sigma_a), "sigma_s": tuple(x / k for x in m.sigma_s),
+              "g": m.g, "eta": min(m.eta, 2.5)}
+    for key, v in values.items():
+        old = getattr(settings, key)
+        same = all(abs(a - b) <= 1e-7 * max(abs(b), 1e-12) for a, b in zip(old, v)) if isinstance(v, tuple) else (
+            abs(old - v) <= 1e-7)
+        if not same:
+            settings[key] = v
 
 
 def _toggle(self, context):
@@ -94,17 +125,33 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
         name="Initialised", description="Settings were read from the material once", default=False,
         options={"HIDDEN"},
     )
+    source: EnumProperty(
+        name="Medium",
+        items=[("PRINCIPLED", "Principled BSDF", "Follow the material's Principled BSDF as it is edited (Cycles' mapping)"),
+               ("CUSTOM", "Custom", "The coefficients below, or one of Jensen's measured presets")],
+        default="CUSTOM", update=_live_edit,
+    )
+    profile: EnumProperty(
+        name="Profile",
+        items=[("CYCLES", "Cycles Random Walk", "Cycles' random walk tabulated, with the Principled layers: "
+                "what a Cycles render shows"),
+               ("DIPOLE", "Dipole", "Jensen's dipole (Jensen 2001), the model of the papers the methods follow")],
+        default="CYCLES", update=_live_edit,
+    )
     preset: EnumProperty(name="Preset", items=_preset_items, update=_apply_preset)
     sigma_a: FloatVectorProperty(
         name="Absorption", description="sigma_a per channel [1/mm]", size=3, min=0.0, soft_max=10.0,
-        default=(0.0021, 0.0041, 0.0071), precision=4, update=_live_edit,
+        default=(0.0021, 0.0041, 0.0071), precision=4, update=_coefficient_edit,
     )
     sigma_s: FloatVectorProperty(
         name="Scattering", description="sigma_s per channel [1/mm]", size=3, min=0.0, soft_max=50.0,
-        default=(2.19, 2.62, 3.00), precision=3, update=_live_edit,
+        default=(2.19, 2.62, 3.00), precision=3, update=_coefficient_edit,
     )
-    g: FloatProperty(name="Anisotropy g", description="Phase-function mean cosine", min=-0.99, max=0.99, default=0.0, update=_live_edit)
-    eta: FloatProperty(name="IOR", description="Relative index of refraction (changing it needs a new precompute)", min=1.0, max=2.5, default=1.3)
+    g: FloatProperty(name="Anisotropy g", description="Phase-function mean cosine (Cycles: 0 to 0.9)", min=-0.99,
+                     max=0.99, default=0.0, update=_coefficient_edit)
+    eta: FloatProperty(name="IOR", description="Relative index of refraction (the dipole needs a new precompute "
+                       "when it changes; Cycles' profile does not)", min=1.0, max=2.5, default=1.3,
+                       update=_coefficient_edit)
     mm_per_unit: FloatProperty(name="mm per unit", description="Millimetres per scene unit (1000 for metres)", min=1e-6, default=1000.0)
     coefficients: IntProperty(name="Basis size", description="Coefficients of the piecewise polynomial basis (Xu 2007)", min=4, max=128, default=32)
     degree: EnumProperty(name="Degree", items=[("1", "Linear", "C0 piecewise linear"), ("2", "Quadratic", "C1 piecewise quadratic")], default="1")
@@ -121,13 +168,21 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
     )
 
     def material(self):
-        """The translucent.Material these settings describe, in scene units."""
+        """The translucent.Material these settings describe, in scene units: the Principled
+        BSDF's medium and layers when following it, else the coefficients."""
         import translucent
 
+        if self.source == "PRINCIPLED":
+            p = principled_inputs(self.id_data)
+            if p is not None:
+                return p.material()
         k = self.mm_per_unit
         return translucent.Material(
             tuple(x * k for x in self.sigma_a), tuple(x * k for x in self.sigma_s), g=self.g, eta=self.eta
         )
+
+    def profile_name(self) -> str:
+        return self.profile.lower()
 
 
 def register():

@@ -19,6 +19,12 @@ class Session:
     objects: list[str]
     fingerprint: str
     eta: float
+    # "cycles" or "dipole": the profile the transport was precomputed for.
+    profile: str = "cycles"
+    # The Principled inputs last shown (when following the node), to notice edits.
+    principled_key: str = ""
+    # Why the last edit was not shown (a Principled input Cycles would not take, ...).
+    edit_message: str = ""
     last_error: list[float] = field(default_factory=list)
     last_seconds: float = 0.0
     not_shown: list[str] = field(default_factory=list)
@@ -35,6 +41,8 @@ class Session:
 SESSIONS: dict[str, Session] = {}
 # material name -> running precompute job
 JOBS: dict[str, "Job"] = {}
+# material name -> worker thread building Cycles' walk tables for the current material
+PREPARING: dict[str, threading.Thread] = {}
 
 
 def objects_with(material: bpy.types.Material, scene: bpy.types.Scene | None = None) -> list[bpy.types.Object]:
@@ -132,7 +140,13 @@ def nearest_original_vertices(objects: list[str], info: export.ExportInfo) -> di
 
 
 def _params(settings) -> tuple:
-    return (tuple(settings.sigma_a), tuple(settings.sigma_s), settings.g, settings.mm_per_unit)
+    """What the basis and samples were chosen for: the medium and layers, and the profile."""
+    try:
+        m = settings.material()
+    except ValueError:
+        return ()
+    return (m.sigma_a, m.sigma_s, m.g, m.eta, m.roughness, m.subsurface_weight, m.metallic, m.transmission,
+            settings.profile)
 
 
 def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], export.ExportInfo, str]:
@@ -144,13 +158,15 @@ def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], 
     scene, info = export.export_scene(objects, bl_scene=bl_scene)
     info.skipped_objects = [o.name for o in bl_scene.objects if o.type == "MESH" and o not in objects]
     s = material.translucent
-    job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend)
+    job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend,
+              profile=s.profile_name())
     job.chosen_for = _params(s)
+    job.profile = s.profile_name()
     return job, [o.name for o in objects], info, fingerprint(objects, bl_scene)
 
 
 def finish(material: bpy.types.Material, job: Job, objects, info, fp) -> Session:
-    session = Session(job.result, info, objects, fp, material.translucent.eta)
+    session = Session(job.result, info, objects, fp, material.translucent.eta, profile=job.profile)
     session.chosen_for = job.chosen_for
     session.remap = nearest_original_vertices(objects, info)
     SESSIONS[material.name] = session
@@ -179,7 +195,9 @@ def state(material: bpy.types.Material) -> str:
     s = SESSIONS.get(material.name)
     if s is None:
         return "none"
-    if abs(s.eta - material.translucent.eta) > 1e-9:
+    if s.profile != material.translucent.profile_name():
+        return "stale"
+    if s.profile == "dipole" and abs(s.eta - material.translucent.eta) > 1e-9:
         return "stale"
     objects = [bpy.data.objects.get(n) for n in s.objects]
     if any(o is None for o in objects) or fingerprint(objects, bpy.context.scene) != s.fingerprint:
@@ -187,17 +205,46 @@ def state(material: bpy.types.Material) -> str:
     return "ready"
 
 
+def principled_key(material: bpy.types.Material) -> str:
+    """The Principled inputs the preview follows, as a string to compare."""
+    from .properties import principled_inputs
+
+    return repr(principled_inputs(material))
+
+
 def edit(material: bpy.types.Material) -> None:
     """Refit and re-evaluate the material, and write every object's preview attribute."""
+    import translucent
+
+    from .properties import show_medium
+
     s = SESSIONS.get(material.name)
     if s is None or not material.translucent.enabled:
         return
     settings = material.translucent
-    if abs(s.eta - settings.eta) > 1e-9:
-        return  # a new IOR needs a new precompute; the panel says so
+    if settings.source == "PRINCIPLED":
+        s.principled_key = principled_key(material)
+    try:
+        m = settings.material()
+    except ValueError as e:
+        s.edit_message = f"not shown: {e}"
+        return
+    if settings.source == "PRINCIPLED":
+        show_medium(settings, m)
+    if s.profile != settings.profile_name():
+        return  # another profile needs a new precompute; the panel says so
+    if s.profile == "dipole" and abs(s.eta - m.eta) > 1e-9:
+        return  # the dipole's irradiance holds the IOR's Fresnel factor: precompute again
+    if s.profile == "cycles" and not translucent.profile_ready(m) and not _prepare_tables(material, m):
+        return  # the walk tables for a new g, Roughness or IOR are being built; old preview kept
+    s.edit_message = ""
     prt = s.prt
     # Radiance leaving along each normal: a view-independent viewport colour.
-    colors = prt.radiance(settings.material())
+    try:
+        colors = prt.radiance(m)
+    except ValueError as e:
+        s.edit_message = f"not shown: {e}"
+        return
     s.last_error = list(prt.last_eval["error_estimate"])
     s.last_seconds = prt.last_eval["seconds"]
     s.refresh_advised = bool(prt.last_eval["refresh_advised"])
@@ -215,6 +262,65 @@ def edit(material: bpy.types.Material) -> None:
             s.not_shown.append(name)
     if s.refresh_advised:
         refresh(material)
+
+
+def _prepare_tables(material: bpy.types.Material, m) -> bool:
+    """Cycles' walk tables for `m` (new g, Roughness or IOR): built at once headless (returns
+    True), else on a worker thread that never touches bpy, the edit running again when they are
+    ready (returns False; the old preview stays up meanwhile)."""
+    import translucent
+
+    name = material.name
+    if bpy.app.background:
+        translucent.prepare_profile(m)
+        return True
+    s = SESSIONS[name]
+    if name in PREPARING:
+        return False
+    s.edit_message = f"building Cycles' walk table (g {m.g:.2f}, Roughness {m.roughness:.2f}, IOR {m.eta:.2f})"
+    errors = []
+
+    def work():
+        try:
+            translucent.prepare_profile(m)
+        except Exception as e:  # reported by the timer below, on the main thread
+            errors.append(e)
+
+    thread = threading.Thread(target=work, daemon=True)
+    PREPARING[name] = thread
+    thread.start()
+
+    def poll():
+        if thread.is_alive():
+            return 0.2
+        PREPARING.pop(name, None)
+        mat = bpy.data.materials.get(name)
+        if mat is not None:
+            if errors:
+                cur = SESSIONS.get(name)
+                if cur is not None:
+                    cur.edit_message = f"not shown: {errors[0]}"
+            else:
+                edit(mat)
+            for window in bpy.context.window_manager.windows:
+                for area in window.screen.areas:
+                    area.tag_redraw()
+        return None
+
+    bpy.app.timers.register(poll, first_interval=0.2)
+    return False
+
+
+@bpy.app.handlers.persistent
+def follow_principled(*_args) -> None:
+    """depsgraph_update_post: a previewed material that follows its Principled BSDF is shown
+    again when any input it reads has changed (cheap when none did)."""
+    for name, s in list(SESSIONS.items()):
+        mat = bpy.data.materials.get(name)
+        if mat is None or not mat.translucent.enabled or mat.translucent.source != "PRINCIPLED":
+            continue
+        if principled_key(mat) != s.principled_key:
+            edit(mat)
 
 
 def refresh(material: bpy.types.Material) -> None:

@@ -65,9 +65,14 @@ def _cached(key: str, compute):
     return values, seconds
 
 
+def _material_key(material: translucent.Material) -> tuple:
+    return (material.sigma_a, material.sigma_s, material.g, material.eta, material.roughness,
+            material.subsurface_weight, material.metallic, material.transmission)
+
+
 def principled_material(material: translucent.Material, name: str = "Cycles reference") -> bpy.types.Material:
-    """A Principled BSDF random walk simulating `material` (coefficients per scene unit)."""
-    p = cycles.to_principled(material.sigma_a, material.sigma_s, material.g, material.eta)
+    """A Principled BSDF random walk simulating `material` (medium per scene unit, layers)."""
+    p = cycles.principled_for(material)
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     cycles.apply_to_principled(mat.node_tree.nodes["Principled BSDF"], p)
@@ -83,11 +88,14 @@ def _with_material(obj, mat):
     return old
 
 
-def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples: int) -> tuple[np.ndarray, float]:
+def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples: int, direct_only: bool = False,
+                  seed: int = 0) -> tuple[np.ndarray, float]:
     """Cycles' diffuse radiance (direct + indirect + colour) per vertex of `obj` (a mesh with
-    no modifiers), (N, 3), and the bake's wall time [s]."""
-    key = hashlib.sha256(repr(("bake", _scene_digest([obj]), material.sigma_a, material.sigma_s, material.g,
-                               material.eta, samples)).encode()).hexdigest()[:24]
+    no modifiers), (N, 3), and the bake's wall time [s]. `direct_only` leaves out indirect
+    light (the object's own interreflection); `seed` is Cycles' sampling seed."""
+    extra = () if not direct_only and seed == 0 else (direct_only, seed)
+    key = hashlib.sha256(repr(("bake", _scene_digest([obj]), *_material_key(material)[:4], samples, *extra,
+                               *_material_key(material)[4:])).encode()).hexdigest()[:24]
 
     def compute():
         scene = bpy.context.scene
@@ -95,6 +103,7 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
         scene.cycles.device = "CPU"
         scene.cycles.samples = samples
         scene.cycles.use_denoising = False
+        scene.cycles.seed = seed
         mat = principled_material(material)
         old = _with_material(obj, mat)
         mesh = obj.data
@@ -104,7 +113,8 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
             bpy.ops.object.select_all(action="DESELECT")
             obj.select_set(True)
             bpy.context.view_layer.objects.active = obj
-            bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT", "COLOR"}, target="VERTEX_COLORS")
+            passes = {"DIRECT", "COLOR"} if direct_only else {"DIRECT", "INDIRECT", "COLOR"}
+            bpy.ops.object.bake(type="DIFFUSE", pass_filter=passes, target="VERTEX_COLORS")
             px = np.empty(len(mesh.vertices) * 4, np.float32)
             attr.data.foreach_get("color", px)
         finally:
@@ -122,8 +132,8 @@ def render_image(obj: bpy.types.Object, material: translucent.Material, samples:
     """A camera render of the scene with `obj` in the mapped material: (size, size, 4) linear
     RGBA (alpha = coverage, transparent film), and its wall time [s]. `engine` is "CYCLES" or
     "EEVEE" (Blender 5.0's EEVEE, its own screen-space subsurface scattering)."""
-    key = hashlib.sha256(repr(("image", engine, _scene_digest([obj]), material.sigma_a, material.sigma_s,
-                               material.g, material.eta, samples, size)).encode()).hexdigest()[:24]
+    key = hashlib.sha256(repr(("image", engine, _scene_digest([obj]), *_material_key(material)[:4], samples, size,
+                               *_material_key(material)[4:])).encode()).hexdigest()[:24]
 
     def compute():
         scene = bpy.context.scene

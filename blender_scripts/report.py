@@ -78,16 +78,21 @@ def digest(*parts) -> str:
     return h.hexdigest()[:24]
 
 
-def ground_truth(scene_key: str, scene, material, receivers: np.ndarray, rel_tol: float) -> tuple[np.ndarray, float, dict]:
-    """The reference radiosity at `receivers`, cached on disk by scene, material and settings."""
-    key = digest(scene_key, material.sigma_a, material.sigma_s, material.g, material.eta, receivers, rel_tol)
+def ground_truth(scene_key: str, scene, material, receivers: np.ndarray, rel_tol: float,
+                 profile: str = "cycles") -> tuple[np.ndarray, float, dict]:
+    """The reference radiosity of `profile` at `receivers`, cached on disk by scene, material
+    and settings."""
+    layers = (material.roughness, material.subsurface_weight, material.metallic, material.transmission,
+              material.base_color)
+    key = digest(scene_key, material.sigma_a, material.sigma_s, material.g, material.eta, receivers, rel_tol,
+                 *((profile, layers) if profile != "dipole" else ()))
     path = CACHE / "reference" / f"{key}.npz"
     if path.exists():
         z = np.load(path, allow_pickle=False)
         return z["values"], float(z["seconds"]), json.loads(str(z["info"]))
     t0 = time.perf_counter()
     values, info = translucent.reference_radiosity(
-        scene, material, rel_tol=rel_tol, receivers=receivers.tolist(), details=True
+        scene, material, rel_tol=rel_tol, receivers=receivers.tolist(), details=True, profile=profile
     )
     seconds = time.perf_counter() - t0
     info = {k: (v if isinstance(v, (int, float, bool, str)) else str(v)) for k, v in info.items()}

@@ -102,9 +102,11 @@ def test_bad_prt_arguments_raise_value_error():
         translucent.Prt(s, m, degree=3)
     with pytest.raises(ValueError, match="tolerance"):
         translucent.Prt(s, m, tolerance=2.0)
-    prt = translucent.Prt(s, m)
+    prt = translucent.Prt(s, m, profile="dipole")
     with pytest.raises(ValueError, match="eta"):
         prt.radiosity(translucent.Material(m.sigma_a, m.sigma_s, eta=1.5))
+    with pytest.raises(ValueError, match="profile"):
+        translucent.Prt(s, m, profile="burley")
     with pytest.raises(ValueError, match="receiver index"):
         translucent.reference_radiosity(s, m, receivers=[len(p)])
     with pytest.raises(ValueError, match="same length"):
@@ -121,7 +123,7 @@ def test_sun_on_plane_matches_closed_form_through_the_whole_api(theta):
     s = translucent.Scene(p, t)
     s.add_sun((math.sin(theta), 0.0, -math.cos(theta)), irradiance=3.0)
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)
-    b = translucent.Prt(s, m).radiosity(m)
+    b = translucent.Prt(s, m, profile="dipole").radiosity(m)
     assert b.shape == (len(p), 3) and b.dtype == np.float32
     v = centre_index(p)
     e = fresnel_t(1.3, math.cos(theta)) * 3.0 * math.cos(theta)
@@ -136,7 +138,7 @@ def test_radiance_is_fresnel_over_pi_times_radiosity():
     s = translucent.Scene(p, t)
     s.add_sun((0, 0, -1), 1.0)
     m = translucent.Material.preset("skin1")
-    prt = translucent.Prt(s, m)
+    prt = translucent.Prt(s, m, profile="dipole")
     b = prt.radiosity(m)
     eye = np.array([0.0, 0.3, 0.3])
     l = prt.radiance(m, eye)

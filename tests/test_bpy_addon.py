@@ -291,3 +291,56 @@ def test_enabling_the_preview_starts_from_the_principled_subsurface_inputs(addon
     s.enabled = False
     s.enabled = True
     assert tuple(s.sigma_a) == pytest.approx((0.1, 0.1, 0.1))
+
+
+def test_the_preview_follows_the_principled_bsdf_with_cycles_profile(addon):
+    """Following the node (the default when it has subsurface): every input Cycles' answer
+    depends on is read as it changes, the preview is Cycles' profile for exactly those inputs,
+    and the node itself is never written."""
+    import bpy
+
+    import translucent
+    from addon import session
+
+    mat, objs, _ = scene_with_two_spheres(bpy)
+    node = mat.node_tree.nodes["Principled BSDF"]  # Blender 5.0 materials always have nodes
+    node.inputs["Subsurface Weight"].default_value = 1.0
+    node.inputs["Subsurface Scale"].default_value = 0.01
+    node.inputs["Base Color"].default_value = (0.8, 0.5, 0.3, 1.0)
+    s = mat.translucent
+    s.enabled = True
+    assert s.source == "PRINCIPLED" and s.profile == "CYCLES"
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    sess = session.SESSIONS[mat.name]
+    assert sess.prt.profile == "cycles"
+
+    def expected():
+        p = (tuple(node.inputs["Base Color"].default_value)[:3], tuple(node.inputs["Subsurface Radius"].default_value),
+             node.inputs["Subsurface Scale"].default_value)
+        m = translucent.Material.from_principled(
+            *p, anisotropy=node.inputs["Subsurface Anisotropy"].default_value, ior=node.inputs["IOR"].default_value,
+            roughness=node.inputs["Roughness"].default_value,
+            subsurface_weight=node.inputs["Subsurface Weight"].default_value,
+            metallic=node.inputs["Metallic"].default_value,
+            transmission=node.inputs["Transmission Weight"].default_value)
+        return sess.prt.radiance(m)[: len(objs[0].data.vertices)]
+
+    np.testing.assert_allclose(read_preview(objs[0]), expected(), rtol=1e-5, atol=1e-7)
+    before = read_preview(objs[0])
+    for socket, value in [("Roughness", 0.2), ("Subsurface Weight", 0.6), ("IOR", 1.6), ("Metallic", 0.25),
+                          ("Subsurface Anisotropy", 0.3)]:
+        node.inputs[socket].default_value = value
+        bpy.context.view_layer.update()  # the depsgraph handler sees the edit
+        assert session.state(mat) == "ready", socket  # no new precompute for any of them
+        now = read_preview(objs[0])
+        assert not np.allclose(now, before), f"{socket} did not change the preview"
+        np.testing.assert_allclose(now, expected(), rtol=1e-5, atol=1e-7)
+        before = now
+    # The coefficient fields show the medium followed (per mm), g as Cycles clamps it.
+    assert s.g == pytest.approx(0.3)
+    # Switching to the dipole asks for a precompute; an explicit coefficient edit means Custom.
+    s.profile = "DIPOLE"
+    assert session.state(mat) == "stale"
+    s.profile = "CYCLES"
+    s.sigma_a = (0.01, 0.01, 0.01)
+    assert s.source == "CUSTOM"

@@ -50,7 +50,7 @@ def marble_prt():
     scene.add_sun((0.3, 0.2, -1.0), irradiance=2.0)
     scene.add_point_light((2.0, -1.0, 1.5), power=50.0)
     scene.set_world(color=(0.1, 0.1, 0.1))
-    return translucent.Prt(scene, translucent.Material.preset("marble", mm_per_unit=10.0), samples=20_000, world_samples=16)
+    return translucent.Prt(scene, translucent.Material.preset("marble", mm_per_unit=10.0), samples=20_000, world_samples=16, profile="dipole")
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -75,7 +75,7 @@ def test_precompute_survives_extreme_materials_and_scales(sa, ss, eta, scale, de
     scene = translucent.Scene(p, t)
     scene.add_sun((0.0, 0.0, -1.0), irradiance=1.0)
     m = translucent.Material(sa, ss, g=0.0, eta=eta)
-    prt = translucent.Prt(scene, m, degree=degree, samples=2_000)
+    prt = translucent.Prt(scene, m, degree=degree, samples=2_000, profile="dipole")
     b = prt.radiosity(m)
     assert np.all(np.isfinite(b)) and np.all(b >= 0)
     # Lit from above, the top can hold at most R_d,total x the light it receives.
@@ -277,7 +277,7 @@ def test_prt_on_a_small_sphere_is_finite_non_negative_and_bounded(p, other, scal
     scene = translucent.Scene(pos, tri)
     scene.add_sun((sun[0], sun[1], -1.0), irradiance=1.0)
     scene.set_world(color=(world, world, world))
-    prt = translucent.Prt(scene, m, samples=2000, world_samples=16, backend="cpu")
+    prt = translucent.Prt(scene, m, samples=2000, world_samples=16, backend="cpu", profile="dipole")
     limit = np.array(m.total_diffuse_reflectance) * (1.0 + math.pi * world)
     for mat in (m, o):
         b = prt.radiosity(mat)
@@ -302,7 +302,7 @@ def test_sun_on_a_plane_gives_the_closed_form_bracket_at_the_centre(p, scale, th
     pos, tri = plane(41, scale)
     scene = translucent.Scene(pos, tri)
     scene.add_sun((math.sin(theta), 0.0, -math.cos(theta)), irradiance=1.0)
-    b = translucent.Prt(scene, m, samples=40_000, backend="cpu").radiosity(m)[centre_index(pos)]
+    b = translucent.Prt(scene, m, samples=40_000, backend="cpu", profile="dipole").radiosity(m)[centre_index(pos)]
     i = fresnel_t(m.eta, math.cos(theta)) * math.cos(theta)
     for c in range(3):
         hi = i * disc_integral(m, c, scale / math.sqrt(2))
@@ -344,7 +344,7 @@ def test_scaling_mesh_and_coefficients_together_changes_nothing(k, decimal, p):
         scene.set_world(color=(0.2, 0.2, 0.2))
         ms = translucent.Material(tuple(x / scale for x in m.sigma_a), tuple(x / scale for x in m.sigma_s),
                                   g=m.g, eta=m.eta)
-        return translucent.Prt(scene, ms, samples=5000, world_samples=16, backend="cpu").radiosity(ms)
+        return translucent.Prt(scene, ms, samples=5000, world_samples=16, backend="cpu", profile="dipole").radiosity(ms)
 
     b1, bs = run(1.0), run(s)
     assert np.all(np.isfinite(bs)) and np.all(bs >= 0)
@@ -368,16 +368,16 @@ def test_bad_prt_and_reference_arguments_raise_value_error(n_bad, value, rel_tol
                   dict(backend="tpu")]
     for kw in bad_kwargs:
         with pytest.raises(ValueError):
-            translucent.Prt(scene, m, **kw)
-    prt = translucent.Prt(scene, m, samples=500, backend="cpu")
+            translucent.Prt(scene, m, **kw, profile="dipole")
+    prt = translucent.Prt(scene, m, samples=500, backend="cpu", profile="dipole")
     with pytest.raises(ValueError, match="eta"):
         prt.radiosity(translucent.Material(m.sigma_a, m.sigma_s, eta=1.5))
     with pytest.raises(ValueError, match="eye"):
         prt.radiance(m, eye=(value if not math.isfinite(value) else math.nan, 0.0, 1.0))
     with pytest.raises(ValueError, match="rel_tol"):
-        translucent.reference_radiosity(scene, m, rel_tol=rel_tol, receivers=[0])
+        translucent.reference_radiosity(scene, m, rel_tol=rel_tol, receivers=[0], profile="dipole")
     with pytest.raises(ValueError, match="receiver index"):
-        translucent.reference_radiosity(scene, m, receivers=[0, receiver])
+        translucent.reference_radiosity(scene, m, receivers=[0, receiver], profile="dipole")
 
 
 # ------------------------------------------------------------ bugs found, fixed: regressions
@@ -393,4 +393,4 @@ def test_negative_integer_arguments_raise_value_error(kw):
     pos, tri = plane(5, 1.0)
     scene = translucent.Scene(pos, tri)
     with pytest.raises(ValueError, match=next(iter(kw))):
-        translucent.Prt(scene, translucent.Material.preset("marble", 10.0), backend="cpu", **kw)
+        translucent.Prt(scene, translucent.Material.preset("marble", 10.0), backend="cpu", **kw, profile="dipole")

@@ -531,7 +531,7 @@ impl Fitter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optics::Dipole;
+    use crate::profiles::Dipole;
 
     /// int_a^b f r dr by composite Simpson: an independent quadrature.
     fn simpson_r(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {

@@ -1,19 +1,28 @@
-//! translucent-core: homogeneous subsurface scattering on triangle meshes with Jensen's dipole.
-//! Pure Rust; the Python binding lives in its own crate. One module per concept (DESIGN.md).
+//! translucent-core: homogeneous subsurface scattering on triangle meshes, for any radial
+//! profile (Jensen's dipole, Cycles' random walk). Pure Rust; the Python binding lives in its
+//! own crate. One module per concept (DESIGN.md), grouped as the README's layout is.
 
-pub mod basis;
-pub mod error;
-pub mod gpu;
-pub mod irradiance;
-pub mod lights;
-pub mod mesh;
-pub mod metrics;
-pub mod optics;
-pub mod prt;
-pub mod quadrature;
-pub mod raytrace;
-pub mod reference;
-pub mod scene;
+// Shared: what every method uses.
+pub mod error; // the one error type
+pub mod gpu; // one wgpu context and the per-method kernels
+pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
+pub mod lights; // Blender/Cycles lights and the world
+pub mod mesh; // validated triangle meshes, surface samples, vertex areas
+pub mod metrics; // area-weighted relative error
+pub mod optics; // material, Fresnel, measured data, Principled layers
+pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated
+pub mod quadrature; // Gauss–Legendre and Simpson rules
+pub mod raytrace; // BVH and shadow rays (obvhs)
+pub mod scene; // a mesh with its lights
+
+// Shared by the PRT method, kept apart so other methods may use it.
+pub mod basis; // Xu 2007 §5 piecewise polynomial basis and its constrained fit
+
+// Methods.
+pub mod prt; // Xu et al. 2007: precomputed transport, live material edits
+
+// Reference.
+pub mod reference; // brute-force integration of the same model: the ground truth
 
 pub use error::{Error, Result};
 pub use glam::Vec3;

@@ -1,17 +1,18 @@
-//! Ground truth: B(x_o) = ∫_A R_d(|x_o − x|) I(x) dA by direct integration over the mesh, to a
-//! stated tolerance. It shares only the dipole (`optics`) and the irradiance callback with the
-//! methods it judges: no basis, no sample clusters, no discs.
+//! Ground truth: B(x_o) = ∫_A R(|x_o − x|) I(x) dA by direct integration over the mesh, to a
+//! stated tolerance, for any radial profile R (`profiles`). It shares only the profile and the
+//! irradiance callback with the methods it judges: no basis, no sample clusters, no discs.
 //!
 //! Triangles are split uniformly into 4^level sub-triangles carrying the irradiance at their
-//! centroid. The dipole is integrated over each sub-triangle exactly (polar form below) where it
+//! centroid. The profile is integrated over each sub-triangle exactly (polar form below) where it
 //! varies across it, by the centroid rule where it does not; the level grows until two levels
 //! agree to `rel_tol`. The sub-triangles that touch the receiver carry the irradiance linearly
-//! interpolated from their corners instead, so that a stiff material, whose R_d lives within a
-//! sub-triangle of the receiver, tends to R_d,total I(x_o) as the model says.
+//! interpolated from their corners instead, so that a stiff material, whose R lives within a
+//! sub-triangle of the receiver, tends to R_total I(x_o) as the model says.
 
 use crate::error::{Error, Result};
 use crate::mesh::{interpolated_normal, Mesh};
-use crate::optics::{Dipole, Material};
+use crate::optics::Material;
+use crate::profiles::{Model, Profile, RadialProfile};
 use crate::quadrature::GAUSS8;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -31,6 +32,8 @@ pub struct ReferenceSettings {
     pub max_level: u32,
     /// Most sub-triangles a level may have.
     pub max_nodes: usize,
+    /// The radial profile integrated.
+    pub model: Model,
 }
 
 impl Default for ReferenceSettings {
@@ -39,6 +42,7 @@ impl Default for ReferenceSettings {
             rel_tol: 1e-3,
             max_level: 4,
             max_nodes: 4_000_000,
+            model: Model::Dipole,
         }
     }
 }
@@ -89,20 +93,21 @@ impl Patch {
     }
 }
 
-/// ∫_T R_d(|x − y|) dA(y) over a planar triangle, exactly up to the angular quadrature.
+/// ∫_T R(|x − y|) dA(y) over a planar triangle, exactly up to the angular quadrature.
 /// Drop x onto T's plane (height h, foot q). In polar coordinates about q,
-/// ∫_0^ρ R_d(sqrt(s^2 + h^2)) s ds = (M(sqrt(ρ^2 + h^2)) − M(h)) / 2π with M = `rd_disc`,
+/// ∫_0^ρ R(sqrt(s^2 + h^2)) s ds = (M(sqrt(ρ^2 + h^2)) − M(h)) / 2π with M the profile's
+/// disc integral,
 /// so only the angle remains: a signed sum over the triangles (q, edge). This is the
 /// semi-analytic point-to-triangle form factor of Mertens et al. 2003 (§4, eqs. 8–19) with the
 /// radial integral in closed form.
-fn triangle_integral(x: DVec3, p: &Patch, dip: &Dipole) -> f64 {
+fn triangle_integral(x: DVec3, p: &Patch, dip: &Profile) -> f64 {
     if p.area <= 0.0 {
         return 0.0;
     }
     let h = (x - p.corners[0]).dot(p.normal);
     let q = x - h * p.normal;
     let h = h.abs();
-    let base = dip.rd_disc(h);
+    let base = dip.disc_integral(h);
     let mut total = 0.0;
     for i in 0..3 {
         let (a, b) = (p.corners[i], p.corners[(i + 1) % 3]);
@@ -129,7 +134,7 @@ fn triangle_integral(x: DVec3, p: &Patch, dip: &Dipole) -> f64 {
             for (t, w) in GAUSS8 {
                 let psi = mid + 0.5 * step * t;
                 let rho = d / psi.cos();
-                sum += w * 0.5 * step * (dip.rd_disc((rho * rho + h * h).sqrt()) - base);
+                sum += w * 0.5 * step * (dip.disc_integral((rho * rho + h * h).sqrt()) - base);
             }
         }
         total += sign * sum;
@@ -137,13 +142,14 @@ fn triangle_integral(x: DVec3, p: &Patch, dip: &Dipole) -> f64 {
     total / (2.0 * PI)
 }
 
-/// ∫_P R_d(|x − y|) (y − x) dA(y) over a triangle P with x at its corner `c`: the first moment
+/// ∫_P R(|x − y|) (y − x) dA(y) over a triangle P with x at its corner `c`: the first moment
 /// that, with `triangle_integral`, integrates a linear irradiance exactly. Polar about x: only
 /// the opposite edge bounds the region, at rho(psi) = d / cos(psi), and the radial integral
 /// R2(rho) = ∫_0^rho s^2 R_d(s) ds is by parts rho m(rho) − ∫_0^rho m(s) ds with
 /// m(s) = ∫_0^s R_d(t) t dt = M(s)/2π − M(0)/2π in closed form, the remaining integral by
-/// Gauss–Legendre on intervals doubling from z_r / 2 (m bends on the scale z_r near 0).
-fn corner_moment(p: &Patch, c: usize, dip: &Dipole) -> DVec3 {
+/// Gauss–Legendre on intervals doubling from half the profile's near length (m bends on that
+/// scale near 0).
+fn corner_moment(p: &Patch, c: usize, dip: &Profile) -> DVec3 {
     let x = p.corners[c];
     let (a, b) = (p.corners[(c + 1) % 3], p.corners[(c + 2) % 3]);
     let edge = b - a;
@@ -158,11 +164,11 @@ fn corner_moment(p: &Patch, c: usize, dip: &Dipole) -> DVec3 {
         return DVec3::ZERO;
     }
     let n_e = (foot - x) / d;
-    let m0 = dip.rd_disc(0.0);
-    let m = |s: f64| (dip.rd_disc(s) - m0) / (2.0 * PI);
+    let m0 = dip.disc_integral(0.0);
+    let m = |s: f64| (dip.disc_integral(s) - m0) / (2.0 * PI);
     let r2 = |rho: f64| {
         let mut integral = 0.0;
-        let (mut lo, mut hi) = (0.0, (0.5 * dip.z_r).min(rho));
+        let (mut lo, mut hi) = (0.0, (0.5 * dip.length_scales().near).min(rho));
         while lo < rho {
             let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
             integral += GAUSS8
@@ -190,10 +196,10 @@ fn corner_moment(p: &Patch, c: usize, dip: &Dipole) -> DVec3 {
     sum
 }
 
-/// ∫_P R_d(|x − y|) I(y) dA over the sub-triangle P that has the receiver x at its corner `c`,
+/// ∫_P R(|x − y|) I(y) dA over the sub-triangle P that has the receiver x at its corner `c`,
 /// I linear between the corner values `corner_irr`: I_c K0 + Σ (I_j − I_c) K1 · w_j, with
 /// w_j the dual vectors of P's edges from x (y − x = α u_1 + β u_2, α = (y − x) · w_1).
-fn corner_integral(p: &Patch, c: usize, dip: &Dipole, corner_irr: [f64; 3]) -> f64 {
+fn corner_integral(p: &Patch, c: usize, dip: &Profile, corner_irr: [f64; 3]) -> f64 {
     let x = p.corners[c];
     let (u1, u2) = (p.corners[(c + 1) % 3] - x, p.corners[(c + 2) % 3] - x);
     let k0 = triangle_integral(x, p, dip);
@@ -328,12 +334,14 @@ fn build_level(mesh: &Mesh, level: u32, irradiance: &IrradianceFn) -> Result<Lev
     })
 }
 
-/// How fast R_d bends at distance r: its exponential rate plus the geometric 1/r (1/z near 0).
-fn curvature_scale(dip: &Dipole, r: f64) -> f64 {
-    dip.sigma_tr + 2.0 / r.max(dip.z_r)
+/// How fast R bends at distance r: its exponential rate plus the geometric 1/r (1/near
+/// length near 0).
+fn curvature_scale(dip: &Profile, r: f64) -> f64 {
+    let s = dip.length_scales();
+    1.0 / s.decay + 2.0 / r.max(s.near)
 }
 
-fn radiosity_at(x: DVec3, lv: &Level, dips: &[Dipole; 3], support: &[f64; 3]) -> ([f64; 3], u64) {
+fn radiosity_at(x: DVec3, lv: &Level, dips: &[Profile; 3], support: &[f64; 3]) -> ([f64; 3], u64) {
     let mut b = [0.0f64; 3];
     let mut skipped = 0u64;
     for (t, tri) in lv.triangles.iter().enumerate() {
@@ -349,7 +357,7 @@ fn radiosity_at(x: DVec3, lv: &Level, dips: &[Dipole; 3], support: &[f64; 3]) ->
                 continue;
             }
             if d > 2.0 * tri.diam && tri.diam * curvature_scale(&dips[c], d) < SMOOTH {
-                b[c] += lv.weight[t][c] * dips[c].rd(d);
+                b[c] += lv.weight[t][c] * dips[c].value(d);
                 continue;
             }
             let own = fan.map(|corner| (corner, lv.corner_subs[t][corner]));
@@ -368,7 +376,7 @@ fn radiosity_at(x: DVec3, lv: &Level, dips: &[Dipole; 3], support: &[f64; 3]) ->
                 }
                 let ds = (x - sub.centroid).length();
                 if ds > 2.0 * sub.diam && sub.diam * curvature_scale(&dips[c], ds) < SMOOTH {
-                    b[c] += i * sub.area * dips[c].rd(ds);
+                    b[c] += i * sub.area * dips[c].value(ds);
                 } else {
                     b[c] += i * triangle_integral(x, sub, &dips[c]);
                 }
@@ -406,8 +414,33 @@ pub fn reference_radiosity(
         }
         None => (0..n as u32).collect(),
     };
-    let dips = material.dipoles();
-    let support = dips.map(|d| d.support_radius(TAIL_SHARE * settings.rel_tol));
+    let dips = settings.model.profiles(material)?;
+    let support = std::array::from_fn(|c| dips[c].support_radius(TAIL_SHARE * settings.rel_tol));
+    // Light returned at the entry point itself (a diffuse lobe beside the profile): the
+    // receiver's own irradiance, once.
+    let point = if dips.iter().any(|d| d.point_mass() > 0.0) {
+        let p: Vec<Vec3> = receivers
+            .iter()
+            .map(|&v| mesh.positions()[v as usize])
+            .collect();
+        let n: Vec<Vec3> = receivers
+            .iter()
+            .map(|&v| mesh.normals()[v as usize])
+            .collect();
+        let values = irradiance(&p, &n, Density::Receivers)?;
+        if values.len() != p.len() || values.iter().flatten().any(|x| !x.is_finite() || *x < 0.0) {
+            return Err(Error::InvalidArgument(
+                "the irradiance callback returned a wrong count or a negative/non-finite value"
+                    .into(),
+            ));
+        }
+        values
+            .iter()
+            .map(|i| std::array::from_fn(|c| dips[c].point_mass() * f64::from(i[c])))
+            .collect()
+    } else {
+        vec![[0.0f64; 3]; receivers.len()]
+    };
     let weights: Vec<f64> = receivers
         .iter()
         .map(|&v| f64::from(mesh.vertex_areas()[v as usize]).max(1e-300))
@@ -474,7 +507,8 @@ pub fn reference_radiosity(
     result.radiosity = previous
         .unwrap_or_default()
         .iter()
-        .map(|b| b.map(|x| x as f32))
+        .zip(&point)
+        .map(|(b, p)| std::array::from_fn(|c| (b[c] + p[c]) as f32))
         .collect();
     result.seconds = start.elapsed().as_secs_f64();
     Ok(result)
@@ -500,10 +534,11 @@ fn worst_rel_rms(a: &[[f64; 3]], b: &[[f64; 3]], w: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::profiles::Dipole;
 
     /// Brute-force 2-D Gauss product rule over the triangle (Duffy-free: the receiver is kept
     /// off the triangle or the kernel is smooth at this resolution), subdividing k x k.
-    fn brute(x: DVec3, p: &Patch, dip: &Dipole, k: usize) -> f64 {
+    fn brute(x: DVec3, p: &Patch, dip: &Profile, k: usize) -> f64 {
         let [a, b, c] = p.corners;
         let (e1, e2) = ((b - a) / k as f64, (c - a) / k as f64);
         let mut sum = 0.0;
@@ -521,7 +556,7 @@ mod tests {
                             let (u, v) = (0.5 * (u + 1.0), 0.5 * (v + 1.0));
                             let y = tri[0] + u * ((tri[1] - tri[0]) + v * (tri[2] - tri[1]));
                             // Jacobian of the collapsed map: 2 A u (times 1/4 for [0, 1]^2).
-                            sum += 0.25 * wu * wv * 2.0 * area * u * dip.rd((x - y).length());
+                            sum += 0.25 * wu * wv * 2.0 * area * u * dip.value((x - y).length());
                         }
                     }
                 }
@@ -537,7 +572,7 @@ mod tests {
             DVec3::new(3.0, 0.2, 0.0),
             DVec3::new(0.5, 2.0, 0.3),
         );
-        let dip = Dipole::new(0.05, 1.5, 1.3);
+        let dip = Profile::Dipole(Dipole::new(0.05, 1.5, 1.3));
         for x in [
             p.centroid,                                           // inside, in plane
             p.centroid + p.normal * 0.4,                          // above
@@ -678,7 +713,7 @@ mod tests {
 
     /// Brute-force 2-D Gauss product rule of R_d times a linear field over the triangle, on
     /// a k x k split: independent of the polar form and its radial integration by parts.
-    fn brute_linear(x: DVec3, p: &Patch, dip: &Dipole, irr: [f64; 3], k: usize) -> f64 {
+    fn brute_linear(x: DVec3, p: &Patch, dip: &Profile, irr: [f64; 3], k: usize) -> f64 {
         let [a, b, c] = p.corners;
         let mut sum = 0.0;
         for i in 0..k {
@@ -708,7 +743,8 @@ mod tests {
                             );
                             let y = at((u, v));
                             let i_y = irr[0] * (1.0 - u - v) + irr[1] * u + irr[2] * v;
-                            sum += 0.25 * ws * wt * 2.0 * area * s * dip.rd((x - y).length()) * i_y;
+                            sum +=
+                                0.25 * ws * wt * 2.0 * area * s * dip.value((x - y).length()) * i_y;
                         }
                     }
                 }
@@ -725,7 +761,7 @@ mod tests {
             DVec3::new(0.5, 2.0, 0.3),
         );
         let irr = [1.0, 0.2, 2.5];
-        for dip in [Dipole::new(0.05, 1.5, 1.3), Dipole::new(0.01, 0.3, 1.3)] {
+        for dip in [Dipole::new(0.05, 1.5, 1.3), Dipole::new(0.01, 0.3, 1.3)].map(Profile::Dipole) {
             for corner in 0..3 {
                 // The field rotated so that `irr[corner]` sits at that corner of the patch.
                 let rotated: [f64; 3] = std::array::from_fn(|j| irr[(j + 3 - corner) % 3]);

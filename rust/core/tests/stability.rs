@@ -41,7 +41,8 @@ use std::f64::consts::PI;
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
 use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
-use translucent_core::optics::{fresnel_transmittance, Dipole, Material};
+use translucent_core::optics::{fresnel_transmittance, Material};
+use translucent_core::profiles::Dipole;
 use translucent_core::prt::{Prt, PrtSettings};
 use translucent_core::raytrace::Tracer;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
@@ -373,7 +374,7 @@ proptest! {
         u in prop::collection::vec(0.0f64..4.0, 6),
     ) {
         let m = p.material();
-        for (c, d) in m.dipoles().iter().enumerate() {
+        for (c, d) in Dipole::all(&m).iter().enumerate() {
             let total = d.rd_total();
             prop_assert!(total.is_finite() && (0.0..=1.0).contains(&total), "{c}: total {total}");
             let jensen = jensen_rd_total(m.sigma_a[c], m.sigma_s_prime()[c], m.eta);
@@ -451,7 +452,7 @@ proptest! {
         // The step in ln p (in g itself for g).
         let step = eps;
         for c in 0..3 {
-            let (d0, d1) = (m.dipole(c), q.dipole(c));
+            let (d0, d1) = (Dipole::of(&m, c), Dipole::of(&q, c));
             // R_d,total.
             let (t0, t1) = (d0.rd_total(), d1.rd_total());
             prop_assert!(t1.is_finite() && t1 >= 0.0);
@@ -773,7 +774,7 @@ proptest! {
                 prop_assert!(all_finite_non_negative(&l));
             }
             if mat == m {
-                let total = m.dipoles().map(|d| d.rd_total());
+                let total = Dipole::all(&m).map(|d| d.rd_total());
                 for v in &b {
                     for ch in 0..3 {
                         let limit = total[ch] * i_max;
@@ -820,7 +821,7 @@ proptest! {
         let b = lit.prt(&[m], Some(40_000)).unwrap().radiosity(&m).unwrap().radiosity;
         let centre = nearest(lit.mesh(), Vec3::ZERO);
         let i = entering(1.0, theta, m.eta);
-        for (c, d) in m.dipoles().iter().enumerate() {
+        for (c, d) in Dipole::all(&m).iter().enumerate() {
             // M(rho) = R_d,total - tail(rho), without the cancellation on thin planes.
             let hi = i * d.rd_disc(s / 2f64.sqrt());
             let lo = i * (d.rd_disc(s / 2.0) - 1e-3 * d.rd_total());
@@ -1069,12 +1070,12 @@ proptest! {
         let spacing = prt.report().sample_spacing;
         let truth = lit.reference(&m, &[0, 1, 2], 1e-3);
         prop_assert!(all_finite_non_negative(&truth));
-        for (ch, d) in m.dipoles().iter().enumerate() {
+        for (ch, d) in Dipole::all(&m).iter().enumerate() {
             for v in &b {
                 prop_assert!(f64::from(v[ch]) <= 1.05 * d.rd_total() * i + 1e-30);
             }
         }
-        let resolved = m.dipoles().iter().all(|d| d.is_zero() || d.rd_disc(1.5 * spacing) <= 0.05 * d.rd_total());
+        let resolved = Dipole::all(&m).iter().all(|d| d.is_zero() || d.rd_disc(1.5 * spacing) <= 0.05 * d.rd_total());
         if resolved {
             let e = rel_rms(lit.mesh(), &b, &truth, &[0, 1, 2]);
             prop_assert!(e <= 0.01, "rel. RMS {e} against the reference\n PRT {b:?}\n ref {truth:?}");
@@ -1129,7 +1130,7 @@ proptest! {
 
 fn vanishing_extinction_stays_finite() {
     let m = Material::new([0.0; 3], [1e-300; 3], 0.0, 1.3).unwrap();
-    let d = m.dipole(0);
+    let d = Dipole::of(&m, 0);
     assert_eq!(
         d.rd_total(),
         1.0,
@@ -1148,7 +1149,7 @@ fn vanishing_extinction_stays_finite() {
 #[test]
 
 fn support_radius_without_absorption_is_finite() {
-    let d = Material::preset("spectralon", 1.0).unwrap().dipole(0);
+    let d = Dipole::of(&Material::preset("spectralon", 1.0).unwrap(), 0);
     let r = d.support_radius(1e-3);
     let expect = (d.z_r + d.z_v) / 2e-3;
     assert!(

@@ -20,5 +20,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<prt::PyPrt>()?;
     m.add_function(wrap_pyfunction!(reference::reference_radiosity_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::relative_error, m)?)?;
+    m.add_function(wrap_pyfunction!(material::prepare_profile, m)?)?;
+    m.add_function(wrap_pyfunction!(material::profile_ready, m)?)?;
+    m.add_function(wrap_pyfunction!(material::set_table_cache, m)?)?;
+    m.add_function(wrap_pyfunction!(material::table_cache, m)?)?;
+    m.add_function(wrap_pyfunction!(material::single_scattering_albedo, m)?)?;
+    m.add_function(wrap_pyfunction!(material::layer_weight, m)?)?;
     Ok(())
 }

@@ -1,14 +1,23 @@
-//! `translucent.Material`.
+//! `translucent.Material`, its Principled BSDF constructor, and the walk tables' cache.
 
-use crate::convert::{rgb, to_py};
+use crate::convert::{guard, rgb, to_py, Progress};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use translucent_core::optics::Material;
+use translucent_core::optics::principled::{self, PrincipledInputs};
+use translucent_core::optics::{Layers, Material};
+use translucent_core::profiles::{table, Model, RadialProfile};
 
-/// A homogeneous translucent material (Jensen 2001 dipole). Coefficients in 1/scene unit.
+/// A homogeneous translucent material: the medium (coefficients in 1/scene unit) and the
+/// Principled BSDF layers Cycles puts around its subsurface lobe.
 #[pyclass(name = "Material", module = "translucent", frozen)]
 #[derive(Clone)]
 pub struct PyMaterial {
     pub inner: Material,
+}
+
+/// "cycles" or "dipole" as a core model.
+pub fn model(profile: &str) -> PyResult<Model> {
+    Model::parse(profile).map_err(to_py)
 }
 
 #[pymethods]
@@ -24,6 +33,68 @@ impl PyMaterial {
         let inner = Material::new(rgb("sigma_a", sigma_a)?, rgb("sigma_s", sigma_s)?, g, eta)
             .map_err(to_py)?;
         Ok(Self { inner })
+    }
+
+    /// The medium and layers Cycles 5.0 renders for a Principled BSDF with subsurface method
+    /// "Random Walk" (keywords as Blender names the inputs; radius x scale in scene units).
+    #[staticmethod]
+    #[pyo3(signature = (base_color, radius, scale, anisotropy = 0.0, ior = 1.5, roughness = 0.5,
+        subsurface_weight = 1.0, metallic = 0.0, transmission = 0.0, specular_ior_level = 0.5))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_principled(
+        base_color: &Bound<'_, PyAny>,
+        radius: &Bound<'_, PyAny>,
+        scale: f64,
+        anisotropy: f64,
+        ior: f64,
+        roughness: f64,
+        subsurface_weight: f64,
+        metallic: f64,
+        transmission: f64,
+        specular_ior_level: f64,
+    ) -> PyResult<Self> {
+        let inputs = PrincipledInputs {
+            base_color: rgb("base_color", base_color)?,
+            radius: rgb("radius", radius)?,
+            scale,
+            anisotropy,
+            ior,
+            roughness,
+            subsurface_weight,
+            metallic,
+            transmission,
+            specular_ior_level,
+        };
+        Ok(Self {
+            inner: Material::from_principled(&inputs).map_err(to_py)?,
+        })
+    }
+
+    /// The same medium under other Principled layers (each in [0, 1]).
+    #[pyo3(signature = (roughness = None, subsurface_weight = None, metallic = None,
+        transmission = None, base_color = None))]
+    fn with_layers(
+        &self,
+        roughness: Option<f64>,
+        subsurface_weight: Option<f64>,
+        metallic: Option<f64>,
+        transmission: Option<f64>,
+        base_color: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let l = self.inner.layers;
+        let layers = Layers {
+            roughness: roughness.unwrap_or(l.roughness),
+            subsurface_weight: subsurface_weight.unwrap_or(l.subsurface_weight),
+            metallic: metallic.unwrap_or(l.metallic),
+            transmission: transmission.unwrap_or(l.transmission),
+            base_color: match base_color {
+                Some(b) => rgb("base_color", b)?,
+                None => l.base_color,
+            },
+        };
+        Ok(Self {
+            inner: self.inner.with_layers(layers).map_err(to_py)?,
+        })
     }
 
     /// One of Jensen 2001's measured materials; `mm_per_unit` millimetres per scene unit.
@@ -62,18 +133,150 @@ impl PyMaterial {
     fn eta(&self) -> f64 {
         self.inner.eta
     }
-    /// R_d,total per channel (Jensen 2001 closed form): the albedo of a thick slab.
+    #[getter]
+    fn roughness(&self) -> f64 {
+        self.inner.layers.roughness
+    }
+    #[getter]
+    fn subsurface_weight(&self) -> f64 {
+        self.inner.layers.subsurface_weight
+    }
+    #[getter]
+    fn metallic(&self) -> f64 {
+        self.inner.layers.metallic
+    }
+    #[getter]
+    fn transmission(&self) -> f64 {
+        self.inner.layers.transmission
+    }
+    #[getter]
+    fn base_color(&self) -> (f64, f64, f64) {
+        let b = self.inner.layers.base_color;
+        (b[0], b[1], b[2])
+    }
+
+    /// R_d,total per channel (Jensen 2001 closed form): the dipole's albedo of a thick slab.
     #[getter]
     fn total_diffuse_reflectance(&self) -> (f64, f64, f64) {
-        let d = self.inner.dipoles();
+        let d = translucent_core::profiles::Dipole::all(&self.inner);
         (d[0].rd_total(), d[1].rd_total(), d[2].rd_total())
+    }
+
+    /// The radiance factor of a thick slab under uniform irradiance E seen at view cosine
+    /// `cos_view`: L = factor x E / pi, per channel, i.e. what a render of the slab under a
+    /// white world of radiance 1 shows. Cycles: W(mu) (walk total + diffuse lobe); dipole:
+    /// F_t(mu) R_d,total. Builds the walk tables when they are missing (seconds).
+    #[pyo3(signature = (profile = "cycles", cos_view = 1.0))]
+    fn slab_reflectance(
+        &self,
+        py: Python<'_>,
+        profile: &str,
+        cos_view: f64,
+    ) -> PyResult<(f64, f64, f64)> {
+        let model = model(profile)?;
+        if !(cos_view.is_finite() && (0.0..=1.0).contains(&cos_view)) {
+            return Err(PyValueError::new_err(format!(
+                "cos_view {cos_view} must lie in [0, 1]"
+            )));
+        }
+        let m = self.inner;
+        let profiles = py
+            .detach(|| guard(|| model.profiles(&m)))
+            .map_err(|e| e.into_py(None))?;
+        let w = model.exit_weight(&m, cos_view);
+        let r = |c: usize| w * (profiles[c].total() + profiles[c].point_mass());
+        Ok((r(0), r(1), r(2)))
     }
 
     fn __repr__(&self) -> String {
         let m = &self.inner;
+        let l = &m.layers;
         format!(
-            "Material(sigma_a={:?}, sigma_s={:?}, g={}, eta={})",
-            m.sigma_a, m.sigma_s, m.g, m.eta
+            "Material(sigma_a={:?}, sigma_s={:?}, g={}, eta={}, roughness={}, \
+             subsurface_weight={}, metallic={}, transmission={}, base_color={:?})",
+            m.sigma_a,
+            m.sigma_s,
+            m.g,
+            m.eta,
+            l.roughness,
+            l.subsurface_weight,
+            l.metallic,
+            l.transmission,
+            l.base_color
         )
     }
+}
+
+/// Builds (or reads from the cache folder) the random-walk tables `material` needs under the
+/// Cycles profile; returns the seconds it took (0 when they were in memory). Releases the GIL:
+/// call it from a worker thread to keep a UI live while g, Roughness or IOR change.
+#[pyfunction]
+#[pyo3(signature = (material, progress = None))]
+pub fn prepare_profile(
+    py: Python<'_>,
+    material: PyRef<'_, PyMaterial>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<f64> {
+    let m = material.inner;
+    let progress = Progress::new(progress);
+    py.detach(|| {
+        guard(|| {
+            let start = std::time::Instant::now();
+            let keys = table::TableKey::of(&m).map_err(|e| match e {
+                translucent_core::Error::InvalidArgument(s) => {
+                    translucent_core::Error::InvalidMaterial(s)
+                }
+                other => other,
+            })?;
+            let tick = |f: f32| progress.call(f);
+            for (key, _) in keys {
+                table::walk_table_with_progress(
+                    &key,
+                    if progress.is_set() { Some(&tick) } else { None },
+                )?;
+            }
+            Ok(start.elapsed().as_secs_f64())
+        })
+    })
+    .map_err(|e| e.into_py(Some(&progress)))
+}
+
+/// Whether every walk table `material` needs is in memory (an edit will not wait for one).
+#[pyfunction]
+pub fn profile_ready(material: PyRef<'_, PyMaterial>) -> bool {
+    table::tables_ready(&material.inner)
+}
+
+/// Where the walk tables are kept between sessions (None: memory only). Returns the folder
+/// in use after the call.
+#[pyfunction]
+#[pyo3(signature = (path = None))]
+pub fn set_table_cache(path: Option<std::path::PathBuf>) -> Option<String> {
+    table::set_cache_dir(path);
+    table_cache()
+}
+
+/// The folder the walk tables are kept in, if any.
+#[pyfunction]
+pub fn table_cache() -> Option<String> {
+    table::get_cache_dir().map(|p| p.to_string_lossy().into_owned())
+}
+
+/// Cycles' `subsurface_random_walk_remap`: the single-scattering albedo for a Base Color
+/// channel and anisotropy g (before the clamp to [0, 0.999999]).
+#[pyfunction]
+pub fn single_scattering_albedo(albedo: f64, g: f64) -> f64 {
+    principled::single_scattering_albedo(albedo, g)
+}
+
+/// What the Principled BSDF's specular layer leaves to the lobes under it at view cosine
+/// `cos_view`: 1 - E_spec (Cycles' `closure_layering_weight`).
+#[pyfunction]
+pub fn layer_weight(roughness: f64, cos_view: f64, ior: f64) -> PyResult<f64> {
+    if ![roughness, cos_view, ior].iter().all(|x| x.is_finite()) || ior < 1.0 {
+        return Err(PyValueError::new_err(
+            "roughness, cos_view and ior must be finite, ior >= 1",
+        ));
+    }
+    Ok(principled::layer_weight(roughness, cos_view, ior))
 }

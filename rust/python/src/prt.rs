@@ -79,7 +79,7 @@ impl PyPrt {
     #[new]
     #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
         tolerance = 1e-3, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
-        backend = "auto", fit_tolerance = None))]
+        backend = "auto", fit_tolerance = None, profile = "cycles"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -95,7 +95,9 @@ impl PyPrt {
         progress: Option<Py<PyAny>>,
         backend: &str,
         fit_tolerance: Option<f64>,
+        profile: &str,
     ) -> PyResult<Self> {
+        let model = crate::material::model(profile)?;
         if !matches!(backend, "auto" | "gpu" | "cpu") {
             return Err(PyValueError::new_err(format!(
                 "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
@@ -107,7 +109,12 @@ impl PyPrt {
         let world_samples: u32 = non_negative("world_samples", world_samples)?;
         let area_samples: u32 = non_negative("area_samples", area_samples)?;
         let materials = materials_of(materials)?;
-        let eta = materials.first().map(|m| m.eta).unwrap_or(1.3);
+        // The irradiance's Fresnel factor: the dipole's smooth boundary, or none for Cycles'
+        // walk (it leaves into a plain Lambertian BSDF).
+        let eta = materials
+            .first()
+            .map(|m| model.irradiance_eta(m))
+            .unwrap_or(1.3);
         let degree = Degree::from_int(degree).map_err(crate::convert::to_py)?;
         let settings = PrtSettings {
             coefficients,
@@ -117,6 +124,7 @@ impl PyPrt {
             tolerance,
             far_field,
             eta,
+            model,
         };
         let irr = IrradianceSettings {
             eta,
@@ -189,7 +197,9 @@ impl PyPrt {
         self.backend_message.clone()
     }
 
-    /// Multiple-scattering radiosity B per vertex, (N, 3) float32 (Xu 2007 eq. 9 without F_t/pi).
+    /// Radiosity B per vertex, (N, 3) float32: the profile summed over the lit surface (Xu 2007
+    /// eq. 9 without the exit weight / pi); for Cycles' profile, the subsurface lobe and the
+    /// diffuse lobe beside it, before the specular layer.
     fn radiosity<'py>(
         &mut self,
         py: Python<'py>,
@@ -205,8 +215,9 @@ impl PyPrt {
         Ok(out)
     }
 
-    /// Multiple-scattering radiance toward the point `eye`, L_d = F_t B / pi, (N, 3) float32;
-    /// without `eye`, the radiance leaving along each vertex normal.
+    /// Radiance toward the point `eye`, L = W(w_o) B / pi, (N, 3) float32, W the profile's exit
+    /// weight (dipole: F_t; Cycles: what the Principled specular layer leaves); without `eye`,
+    /// the radiance leaving along each vertex normal (what a Cycles bake records).
     #[pyo3(signature = (material, eye = None))]
     fn radiance<'py>(
         &mut self,
@@ -268,6 +279,7 @@ impl PyPrt {
         let r = self.inner.report();
         let d = PyDict::new(py);
         d.set_item("vertices", r.vertices)?;
+        d.set_item("profile", r.model)?;
         d.set_item("samples", r.samples)?;
         d.set_item("sample_spacing", r.sample_spacing)?;
         d.set_item("near_radius", r.near_radius)?;
@@ -297,9 +309,17 @@ impl PyPrt {
         Ok(d)
     }
 
+    /// The relative IOR of the irradiance's Fresnel factor (1 for Cycles' profile, whose
+    /// walk leaves through an index-matched boundary).
     #[getter]
     fn eta(&self) -> f64 {
         self.inner.eta()
+    }
+
+    /// "cycles" or "dipole".
+    #[getter]
+    fn profile(&self) -> &'static str {
+        self.inner.model().name()
     }
 
     #[getter]

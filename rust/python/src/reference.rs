@@ -11,12 +11,15 @@ use translucent_core::metrics;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::Vec3;
 
-/// Ground-truth radiosity by direct integration over the mesh (no basis, no clusters).
+/// Ground-truth radiosity by direct integration over the mesh (no basis, no clusters) of the
+/// `profile` ("cycles": Cycles' random walk tabulated, with the Principled lobes; "dipole").
+/// Levels grow until two agree to `rel_tol`, up to `max_level` and `max_nodes` sub-triangles.
 /// Returns (K, 3) float32 for the `receivers` (all vertices by default). With `details=True`
 /// returns (radiosity, dict) with the level reached, the estimated error and the seconds.
 #[pyfunction]
 #[pyo3(signature = (scene, material, rel_tol = 1e-3, receivers = None, max_level = 4,
-    world_samples = 64, area_samples = 16, progress = None, details = false))]
+    world_samples = 64, area_samples = 16, progress = None, details = false, profile = "cycles",
+    max_nodes = 4_000_000))]
 #[allow(clippy::too_many_arguments)]
 #[pyo3(name = "reference_radiosity")]
 pub fn reference_radiosity_py<'py>(
@@ -30,7 +33,11 @@ pub fn reference_radiosity_py<'py>(
     area_samples: i64,
     progress: Option<Py<PyAny>>,
     details: bool,
+    profile: &str,
+    max_nodes: i64,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let max_nodes: usize = non_negative("max_nodes", max_nodes)?;
+    let model = crate::material::model(profile)?;
     if !(rel_tol.is_finite() && rel_tol > 0.0 && rel_tol < 1.0) {
         return Err(PyValueError::new_err(format!(
             "rel_tol {rel_tol} must lie in (0, 1)"
@@ -61,7 +68,7 @@ pub fn reference_radiosity_py<'py>(
         .transpose()?;
     let m = material.inner;
     let irr = IrradianceSettings {
-        eta: m.eta,
+        eta: model.irradiance_eta(&m),
         world_samples,
         area_samples,
         seed: 1,
@@ -69,7 +76,8 @@ pub fn reference_radiosity_py<'py>(
     let settings = ReferenceSettings {
         rel_tol,
         max_level,
-        ..Default::default()
+        max_nodes,
+        model,
     };
     let tracer = scene.tracer();
     let core_scene = &scene.scene;

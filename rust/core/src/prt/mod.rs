@@ -6,8 +6,11 @@
 //! - far samples are summed by cluster through a moment tree (`tree`), so the precompute grows
 //!   as n log n instead of vertices x samples;
 //! - the part of the integral closer than the sample spacing is a disc around the receiver,
-//!   integrated in closed form with the dipole itself (`Dipole::rd_disc`), so a stiff material
-//!   tends to the diffuse-BRDF limit R_d,total I(x) whatever the knots.
+//!   integrated with the profile's own disc integral (`RadialProfile::disc_integral`), so a
+//!   stiff material tends to the diffuse-BRDF limit R_total I(x) whatever the knots.
+//!
+//! The radial profile is any of `profiles` (the dipole of the paper, or Cycles' random walk):
+//! the transport holds geometry and light only, and the profile enters through the fit.
 
 mod layout;
 mod tree;
@@ -16,7 +19,8 @@ use crate::basis::{Basis, Degree, Fit, Fitter};
 use crate::error::{Error, Result};
 pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
-use crate::optics::{fresnel_transmittance, Dipole, Material};
+use crate::optics::Material;
+use crate::profiles::{Model, Profile, RadialProfile};
 use glam::{DVec3, Vec3};
 use layout::Transport;
 use rayon::prelude::*;
@@ -61,8 +65,11 @@ pub struct PrtSettings {
     /// Opening ratio of the far field: a cluster of radius rho at distance d is summed by its
     /// moments when rho <= far_field (d - rho). 0 sums every sample exactly (brute force).
     pub far_field: f64,
-    /// Relative index of refraction the irradiance (its Fresnel factor) was computed for.
+    /// Relative index of refraction the irradiance (its Fresnel factor) was computed for:
+    /// `Model::irradiance_eta` of the materials (1 for Cycles' index-matched walk).
     pub eta: f64,
+    /// The radial profile the basis is chosen for and edits are fitted to.
+    pub model: Model,
 }
 
 impl Default for PrtSettings {
@@ -75,6 +82,7 @@ impl Default for PrtSettings {
             tolerance: 1e-3,
             far_field: 0.25,
             eta: 1.3,
+            model: Model::Dipole,
         }
     }
 }
@@ -90,6 +98,8 @@ pub struct PrtReport {
     /// Support radius: samples beyond it are not visited [unit].
     pub support_radius: f64,
     pub knots: Vec<f64>,
+    /// The radial profile ("dipole" or "cycles").
+    pub model: &'static str,
     /// Whether the basis size was chosen by `fit_tolerance` (else fixed by `coefficients`).
     pub basis_size_by_tolerance: bool,
     /// The largest estimated relative error of B over the representatives' channels with the
@@ -132,10 +142,15 @@ pub struct Prt {
     gpu: Option<crate::gpu::GpuEvaluator>,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
+    /// I(x_o) per vertex, for the profiles' point mass (not scaled by the rim coverage: a
+    /// diffuse lobe returns the light where it arrives, whatever surface lies around).
+    vertex_irradiance: Vec<[f32; 3]>,
     near_radius: f64,
     /// The support radius spans the whole mesh: nothing lies beyond it.
     whole_mesh: bool,
+    /// The index of refraction of the irradiance's Fresnel factor.
     eta: f64,
+    model: Model,
     report: PrtReport,
 }
 
@@ -145,6 +160,9 @@ pub struct Prt {
 pub struct Coefficients {
     /// Per channel: [M(near_radius), c_0 .. c_{n-1}].
     pub vectors: [Vec<f32>; 3],
+    /// Per channel: the profile's point mass (light returned where it entered: Cycles'
+    /// diffuse lobe), added as point_mass x I(x_o) after the dot product.
+    pub point_mass: [f64; 3],
     /// Relative L2 error of the fitted profile over the basis domain (Xu eq. 18).
     pub fit_error: [f64; 3],
     /// Estimated relative error of B (see `Evaluation::error_estimate`).
@@ -158,8 +176,8 @@ pub struct Evaluation {
     pub radiosity: Vec<[f32; 3]>,
     /// Relative L2 error of the fitted profile over the basis domain, per channel (Xu eq. 18).
     pub fit_error: [f64; 3],
-    /// Estimated relative error of B per channel: fit error weighted by the share of
-    /// R_d,total the basis carries, plus the tail beyond the support radius.
+    /// Estimated relative error of B per channel: fit error weighted by the share of the
+    /// profile's total the basis carries, plus the tail beyond the support radius.
     pub error_estimate: [f64; 3],
     pub fit_seconds: f64,
     /// The whole dot product, GPU transfers included.
@@ -188,13 +206,21 @@ impl Prt {
         tick(0.0)?;
         let mut report = PrtReport {
             vertices: mesh.vertex_count(),
+            model: settings.model.name(),
             ..Default::default()
         };
+        let profiles: Vec<Profile> = representatives
+            .iter()
+            .map(|m| settings.model.profiles(m))
+            .collect::<Result<Vec<_>>>()?
+            .into_iter()
+            .flatten()
+            .collect();
 
         // Samples and their irradiance (Xu 2007 §6.1), and the irradiance at the receivers.
         let spacing = match settings.samples {
             Some(count) => mesh.spacing_for_sample_count(count),
-            None => default_spacing(mesh, representatives),
+            None => default_spacing(mesh, &profiles),
         };
         let samples = mesh.surface_samples(spacing)?;
         let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
@@ -239,7 +265,7 @@ impl Prt {
         // material lives there); the ring out to the equal-area radius goes through the basis
         // with the mean irradiance of the samples it replaces (right across shadow edges).
         let exclusion = 1.5 * f64::from(spacing);
-        let near_radius = 0.5 * f64::from(spacing);
+        let near_radius = 0.25 * f64::from(spacing);
         let excluded: Vec<(f64, [f64; 3])> = mesh
             .positions()
             .par_iter()
@@ -249,34 +275,29 @@ impl Prt {
         let coverage = mesh.vertex_coverage();
 
         // Basis domain [near_radius, support] and knots by DP on the representatives (Xu §5).
-        let wanted = representatives
+        let wanted = profiles
             .iter()
-            .flat_map(|m| m.dipoles())
-            .map(|d| d.support_radius(settings.tolerance))
+            .map(|p| p.support_radius(settings.tolerance))
             .fold(0.0, f64::max);
         let whole_mesh = wanted >= f64::from(mesh.diagonal());
         let support = wanted
             .min(f64::from(mesh.diagonal()))
             .max(2.0 * near_radius);
         report.support_radius = support;
-        let dipoles: Vec<_> = representatives
+        let shaping: Vec<&Profile> = profiles
             .iter()
-            .flat_map(|m| m.dipoles())
-            .filter(|d| d.rd_tail(near_radius) > 1e-12 * d.rd_total())
+            .filter(|p| p.tail(near_radius) > 1e-12 * p.total())
             .collect();
-        let functions: Vec<Box<dyn Fn(f64) -> f64>> = dipoles
+        let functions: Vec<Box<dyn Fn(f64) -> f64 + '_>> = shaping
             .iter()
-            .map(|d| {
-                let d = *d;
-                Box::new(move |r: f64| d.rd(r)) as Box<dyn Fn(f64) -> f64>
-            })
+            .map(|p| Box::new(move |r: f64| p.value(r)) as Box<dyn Fn(f64) -> f64>)
             .collect();
         let refs: Vec<&dyn Fn(f64) -> f64> = functions.iter().map(|f| f.as_ref()).collect();
         let (basis, representative_error) = if refs.is_empty() {
             // Nothing diffuses beyond the disc: any knots will do; the fit will be ~0.
             (uniform_basis(near_radius, support, settings)?, 0.0)
         } else {
-            choose_basis(&refs, &dipoles, near_radius, support, whole_mesh, settings)?
+            choose_basis(&refs, &shaping, near_radius, support, whole_mesh, settings)?
         };
         report.basis_size_by_tolerance = settings.fit_tolerance.is_some();
         report.representative_error = representative_error;
@@ -347,9 +368,11 @@ impl Prt {
             gpu: None,
             positions: mesh.positions().to_vec(),
             normals: mesh.normals().to_vec(),
+            vertex_irradiance,
             near_radius,
             whole_mesh,
             eta: settings.eta,
+            model: settings.model,
             report,
         })
     }
@@ -414,38 +437,48 @@ impl Prt {
         self.fitter.basis()
     }
 
+    /// The index of refraction of the irradiance's Fresnel factor (1 for Cycles' profile).
     pub fn eta(&self) -> f64 {
         self.eta
+    }
+
+    pub fn model(&self) -> Model {
+        self.model
     }
 
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
     }
 
-    /// Fits the material's R_d on the basis (Xu 2007 eq. 8, 18) and returns, per channel, the
-    /// coefficient vector of the dot product: [M(near_radius), c_0 .. c_{n-1}].
+    /// Fits the material's profile R on the basis (Xu 2007 eq. 8, 18) and returns, per
+    /// channel, the coefficient vector of the dot product: [M(near_radius), c_0 .. c_{n-1}],
+    /// M the profile's disc integral, and the profile's point mass.
     pub fn coefficients(&self, material: &Material) -> Result<Coefficients> {
-        if (material.eta - self.eta).abs() > 1e-9 {
+        let eta = self.model.irradiance_eta(material);
+        if (eta - self.eta).abs() > 1e-9 {
             return Err(Error::InvalidArgument(format!(
                 "this transport was precomputed for eta = {}, the material has eta = {}: \
                  precompute again for the new index of refraction",
-                self.eta, material.eta
+                self.eta, eta
             )));
         }
+        let profiles = self.model.profiles(material)?;
         let (lo, hi) = self.basis().domain();
         let mut fit_error = [0.0; 3];
         let mut estimate = [0.0; 3];
         let coeffs = std::array::from_fn(|c| {
-            let d = material.dipole(c);
-            let fit = self.fitter.fit(&|r| d.rd(r));
+            let p = &profiles[c];
+            let fit = self.fitter.fit(&|r| p.value(r));
             fit_error[c] = fit.rel_l2_error;
-            estimate[c] = error_estimate(&fit, &d, lo, hi, self.whole_mesh);
-            std::iter::once(d.rd_disc(self.near_radius) as f32)
+            estimate[c] = error_estimate(&fit, p, lo, hi, self.whole_mesh);
+            let near = p.disc_integral(self.near_radius);
+            std::iter::once(near as f32)
                 .chain(fit.coefficients.iter().map(|x| *x as f32))
                 .collect()
         });
         Ok(Coefficients {
             vectors: coeffs,
+            point_mass: std::array::from_fn(|c| profiles[c].point_mass()),
             fit_error,
             error_estimate: estimate,
         })
@@ -467,13 +500,20 @@ impl Prt {
         let c = self.coefficients(material)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let (radiosity, gpu) = match &self.gpu {
+        let (mut radiosity, gpu) = match &self.gpu {
             Some(gpu) => {
                 let (b, t) = gpu.dot(&self.transport.scaled(&c.vectors).concat())?;
                 (b, Some(t))
             }
             None => (self.transport.dot(&c.vectors), None),
         };
+        if c.point_mass.iter().any(|&m| m > 0.0) {
+            let k = c.point_mass.map(|m| m as f32);
+            radiosity
+                .par_iter_mut()
+                .zip(self.vertex_irradiance.par_iter())
+                .for_each(|(b, i)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * i[ch]));
+        }
         Ok(Evaluation {
             radiosity,
             fit_error: c.fit_error,
@@ -484,9 +524,10 @@ impl Prt {
         })
     }
 
-    /// Multiple-scattering radiance toward `eye`: L_d = F_t(eta, w_o) B / pi (Xu 2007 eq. 2).
-    /// Vertices facing away from the eye get 0. Without an eye, the radiance leaving along
-    /// each vertex normal (a view-independent preview colour).
+    /// Multiple-scattering radiance toward `eye`: L_d = W(w_o) B / pi, W the model's exit
+    /// weight (`Model::exit_weight`: F_t(eta, w_o) for the dipole, Xu 2007 eq. 2; what
+    /// Cycles' specular layer lets through for its walk). Vertices facing away from the eye get
+    /// 0. Without an eye, the radiance leaving along each vertex normal (what a bake sees).
     pub fn radiance(&self, material: &Material, eye: Option<Vec3>) -> Result<Evaluation> {
         if let Some(eye) = eye.filter(|e| !e.is_finite()) {
             return Err(Error::InvalidArgument(format!("eye {eye:?} is not finite")));
@@ -498,10 +539,11 @@ impl Prt {
                 &self.positions,
                 &self.normals,
                 eye,
-                self.eta,
+                &|cos_o| self.model.exit_weight(material, cos_o),
             ),
             None => {
-                let k = (fresnel_transmittance(self.eta, 1.0) / std::f64::consts::PI) as f32;
+                let w = self.model.exit_weight(material, 1.0);
+                let k = (w / std::f64::consts::PI) as f32;
                 e.radiosity.iter_mut().for_each(|b| *b = b.map(|x| x * k));
             }
         }
@@ -509,39 +551,33 @@ impl Prt {
     }
 }
 
-/// Turns radiosity into outgoing radiance toward `eye` in place: L_d = F_t(eta, w_o) B / pi.
+/// Turns radiosity into outgoing radiance toward `eye` in place: L_d = W(cos_o) B / pi with
+/// `exit_weight` W (`Model::exit_weight`).
 pub fn radiance_from_radiosity(
     values: &mut [[f32; 3]],
     positions: &[Vec3],
     normals: &[Vec3],
     eye: Vec3,
-    eta: f64,
+    exit_weight: &(dyn Fn(f64) -> f64 + Sync),
 ) {
     values
         .par_iter_mut()
         .zip(positions.par_iter().zip(normals.par_iter()))
         .for_each(|(b, (p, n))| {
             let cos_o = n.dot((eye - *p).normalize_or_zero());
-            let k = (fresnel_transmittance(eta, f64::from(cos_o)) / std::f64::consts::PI) as f32;
+            let k = (exit_weight(f64::from(cos_o)) / std::f64::consts::PI) as f32;
             *b = b.map(|x| x * k);
         });
 }
 
-/// Half the shortest length over which any representative's R_d changes (its source depth
-/// z_r or its decay length 1/sigma_tr), so the sample sum resolves the profile; bounded by the
-/// sample counts `PrtSettings::samples` documents.
-fn default_spacing(mesh: &Mesh, representatives: &[Material]) -> f32 {
-    let shortest = representatives
+/// Half the shortest length over which any representative's profile changes (`LengthScales`:
+/// the dipole's source depth z_r or decay length 1/sigma_tr), so the sample sum resolves the
+/// profile; bounded by the sample counts `PrtSettings::samples` documents.
+fn default_spacing(mesh: &Mesh, profiles: &[Profile]) -> f32 {
+    let shortest = profiles
         .iter()
-        .flat_map(|m| m.dipoles())
-        .filter(|d| !d.is_zero())
-        .map(|d| {
-            if d.sigma_tr > 0.0 {
-                d.z_r.min(1.0 / d.sigma_tr)
-            } else {
-                d.z_r
-            }
-        })
+        .filter(|p| !p.is_zero())
+        .map(|p| p.length_scales().shortest())
         .fold(f64::INFINITY, f64::min);
     let least = (4 * mesh.vertex_count()).max(20_000);
     let spacing = (0.5 * shortest).min(f64::from(mesh.diagonal())) as f32;
@@ -589,11 +625,12 @@ fn check_settings(representatives: &[Material], s: &PrtSettings) -> Result<()> {
     }
     if let Some(m) = representatives
         .iter()
-        .find(|m| (m.eta - s.eta).abs() > 1e-9)
+        .find(|m| (s.model.irradiance_eta(m) - s.eta).abs() > 1e-9)
     {
         return Err(Error::InvalidArgument(format!(
             "all materials must share the eta the irradiance is computed for ({}), found {}",
-            s.eta, m.eta
+            s.eta,
+            s.model.irradiance_eta(m)
         )));
     }
     Ok(())
@@ -676,21 +713,17 @@ fn within(tree: &SampleTree, p: DVec3, radius: f64) -> (f64, [f64; 3]) {
 
 /// Estimated relative error of B for one channel: the fit's relative L1 error over the basis
 /// domain (it bounds the error of the profile's integral over any disc, so of B under locally
-/// uniform irradiance) weighted by the share of R_d,total the basis carries, plus the share
-/// beyond the support radius that is left out.
+/// uniform irradiance) weighted by the share of the profile's total the basis carries, plus
+/// the share beyond the support radius that is left out.
 /// When the support reaches across the whole mesh there is no surface beyond it, so nothing
 /// is left out and no tail is counted.
-fn error_estimate(fit: &Fit, d: &Dipole, lo: f64, hi: f64, whole_mesh: bool) -> f64 {
-    let total = d.rd_total();
+fn error_estimate(fit: &Fit, p: &Profile, lo: f64, hi: f64, whole_mesh: bool) -> f64 {
+    let total = p.total() + p.point_mass();
     if total <= 0.0 {
         return 0.0;
     }
-    let share = (d.rd_disc(hi) - d.rd_disc(lo)) / total;
-    let tail = if whole_mesh {
-        0.0
-    } else {
-        d.rd_tail(hi) / total
-    };
+    let share = (p.disc_integral(hi) - p.disc_integral(lo)) / total;
+    let tail = if whole_mesh { 0.0 } else { p.tail(hi) / total };
     fit.rel_l1_error * share + tail
 }
 
@@ -699,7 +732,7 @@ fn error_estimate(fit: &Fit, d: &Dipole, lo: f64, hi: f64, whole_mesh: bool) -> 
 /// and the largest error estimate over the representatives.
 fn choose_basis(
     refs: &[&dyn Fn(f64) -> f64],
-    dipoles: &[Dipole],
+    profiles: &[&Profile],
     lo: f64,
     hi: f64,
     whole_mesh: bool,
@@ -707,9 +740,9 @@ fn choose_basis(
 ) -> Result<(Basis, f64)> {
     let worst = |basis: &Basis| {
         let fitter = basis.fitter();
-        dipoles
+        profiles
             .iter()
-            .map(|d| error_estimate(&fitter.fit(&|r| d.rd(r)), d, lo, hi, whole_mesh))
+            .map(|p| error_estimate(&fitter.fit(&|r| p.value(r)), p, lo, hi, whole_mesh))
             .fold(0.0, f64::max)
     };
     let min_size = settings.degree.as_int() + 2;

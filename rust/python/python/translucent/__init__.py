@@ -1,9 +1,16 @@
 """Translucent: real-time subsurface-scattering preview with stated error and speed.
 
-Jensen's dipole BSSRDF on triangle meshes; PRT material editing after Xu et al. 2007.
-Lengths are in scene units, coefficients in 1/scene unit, light units follow Blender/Cycles
-(sun Strength = W/m^2, point/spot/area Power = W, world colour = radiance).
+Any radial profile on triangle meshes: Cycles' random walk (the default: what a Cycles render
+of the Principled BSDF shows) or Jensen's dipole (the papers' model); PRT material editing after
+Xu et al. 2007. Lengths are in scene units, coefficients in 1/scene unit, light units follow
+Blender/Cycles (sun Strength = W/m^2, point/spot/area Power = W, world colour = radiance).
+
+The random-walk tables are kept in $TRANSLUCENT_CACHE, else $XDG_CACHE_HOME/translucent, else
+~/.cache/translucent (`set_table_cache(None)` keeps them in memory only).
 """
+
+import os
+import pathlib
 
 from ._native import (
     Cancelled,
@@ -11,9 +18,24 @@ from ._native import (
     Prt,
     Scene,
     __version__,
+    layer_weight,
+    prepare_profile,
+    profile_ready,
     reference_radiosity,
     relative_error,
+    set_table_cache,
+    table_cache,
 )
+
+
+def _default_cache() -> pathlib.Path:
+    if os.environ.get("TRANSLUCENT_CACHE"):
+        return pathlib.Path(os.environ["TRANSLUCENT_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or pathlib.Path.home() / ".cache"
+    return pathlib.Path(base) / "translucent"
+
+
+set_table_cache(str(_default_cache() / "tables"))
 
 __all__ = [
     "Cancelled",
@@ -21,6 +43,11 @@ __all__ = [
     "Prt",
     "Scene",
     "__version__",
+    "layer_weight",
+    "prepare_profile",
+    "profile_ready",
     "reference_radiosity",
     "relative_error",
+    "set_table_cache",
+    "table_cache",
 ]

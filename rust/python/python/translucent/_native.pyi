@@ -16,10 +16,37 @@ Progress = Callable[[float], bool | None]
 class Cancelled(RuntimeError):
     """Raised when a progress callback returned False."""
 
+Profile = Literal["cycles", "dipole"]
+
 class Material:
-    """Homogeneous translucent material for the dipole model (Jensen 2001)."""
+    """A homogeneous translucent material: the medium (coefficients in 1/scene unit, g, eta)
+    and the Principled BSDF layers Cycles puts around its subsurface lobe."""
 
     def __init__(self, sigma_a: RGB, sigma_s: RGB, g: float = 0.0, eta: float = 1.3) -> None: ...
+    @staticmethod
+    def from_principled(
+        base_color: RGB,
+        radius: RGB,
+        scale: float,
+        anisotropy: float = 0.0,
+        ior: float = 1.5,
+        roughness: float = 0.5,
+        subsurface_weight: float = 1.0,
+        metallic: float = 0.0,
+        transmission: float = 0.0,
+        specular_ior_level: float = 0.5,
+    ) -> Material:
+        """What Cycles 5.0 renders for a Principled BSDF (subsurface method "Random Walk"):
+        sigma = Chiang's remap of the Base Color over d = radius x scale / (4 pi), g clamped to
+        [0, 0.9], and the layers. Inputs Blender would refuse raise ValueError."""
+    def with_layers(
+        self,
+        roughness: float | None = None,
+        subsurface_weight: float | None = None,
+        metallic: float | None = None,
+        transmission: float | None = None,
+        base_color: RGB | None = None,
+    ) -> Material: ...
     @staticmethod
     def preset(name: str, mm_per_unit: float = 1000.0) -> Material:
         """Jensen 2001's measured material `name`; `mm_per_unit` mm per scene unit (1000 = metres)."""
@@ -34,7 +61,22 @@ class Material:
     @property
     def eta(self) -> float: ...
     @property
-    def total_diffuse_reflectance(self) -> tuple[float, float, float]: ...
+    def roughness(self) -> float: ...
+    @property
+    def subsurface_weight(self) -> float: ...
+    @property
+    def metallic(self) -> float: ...
+    @property
+    def transmission(self) -> float: ...
+    @property
+    def base_color(self) -> tuple[float, float, float]: ...
+    @property
+    def total_diffuse_reflectance(self) -> tuple[float, float, float]:
+        """The dipole's R_d,total per channel (Jensen 2001)."""
+    def slab_reflectance(
+        self, profile: Profile = "cycles", cos_view: float = 1.0
+    ) -> tuple[float, float, float]:
+        """A thick slab's radiance under a white world of radiance 1, seen at `cos_view`."""
 
 class Scene:
     """A triangle mesh with its lights and world."""
@@ -110,8 +152,11 @@ class Prt:
         progress: Progress | None = None,
         backend: Literal["auto", "gpu", "cpu"] = "auto",
         fit_tolerance: float | None = None,
+        profile: Profile = "cycles",
     ) -> None:
-        """`backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
+        """`profile`: "cycles" (Cycles' random walk with the Principled layers: what a Cycles
+        render shows) or "dipole" (Jensen's dipole, the papers' model).
+        `backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
         "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none.
         `fit_tolerance`: choose the basis size as the smallest (up to `coefficients`) whose
         estimated relative error on `materials` is at most this, instead of fixing it."""
@@ -125,10 +170,10 @@ class Prt:
     @property
     def backend_message(self) -> str: ...
     def radiosity(self, material: Material) -> npt.NDArray[np.float32]:
-        """(N, 3) multiple-scattering radiosity B per vertex."""
+        """(N, 3) radiosity B per vertex: the profile summed over the lit surface."""
     def radiance(self, material: Material, eye: Vec3 | None = None) -> npt.NDArray[np.float32]:
-        """(N, 3) multiple-scattering radiance toward the point `eye`, F_t B / pi; without an
-        eye, the radiance leaving along each vertex normal."""
+        """(N, 3) radiance toward the point `eye`, W(w_o) B / pi (W: F_t for the dipole, what the
+        specular layer leaves for Cycles); without an eye, along each vertex normal (a bake)."""
     @property
     def last_eval(self) -> dict[str, float | bool | list[float]] | None:
         """seconds, fit_seconds, dot_seconds, backend, fit_error and error_estimate (per channel,
@@ -144,7 +189,10 @@ class Prt:
         lights_used, lights_skipped_black, lights_unreached, world_skipped, skipped_beyond_support,
         skipped_dark, single_scattering, seconds per step."""
     @property
-    def eta(self) -> float: ...
+    def eta(self) -> float:
+        """The IOR of the irradiance's Fresnel factor (1 for the Cycles profile)."""
+    @property
+    def profile(self) -> Profile: ...
     @property
     def vertex_count(self) -> int: ...
 
@@ -159,6 +207,8 @@ def reference_radiosity(
     area_samples: int = 16,
     progress: Progress | None = None,
     details: Literal[False] = False,
+    profile: Profile = "cycles",
+    max_nodes: int = 4_000_000,
 ) -> npt.NDArray[np.float32]: ...
 @overload
 def reference_radiosity(
@@ -172,8 +222,22 @@ def reference_radiosity(
     progress: Progress | None = None,
     *,
     details: Literal[True],
+    profile: Profile = "cycles",
+    max_nodes: int = 4_000_000,
 ) -> tuple[npt.NDArray[np.float32], dict[str, object]]: ...
 def relative_error(
     estimate: ArrayN3, truth: ArrayN3, weights: npt.ArrayLike | None = None
 ) -> dict[str, list[float]]:
     """Area-weighted relative RMS and max relative error per channel."""
+def prepare_profile(material: Material, progress: Progress | None = None) -> float:
+    """Builds (or reads from the table cache) the random-walk tables `material` needs under the
+    Cycles profile; seconds taken. Releases the GIL."""
+def profile_ready(material: Material) -> bool:
+    """Whether an edit with `material` will find its walk tables in memory."""
+def set_table_cache(path: str | None = None) -> str | None:
+    """Folder the walk tables are kept in between sessions (None: memory only)."""
+def table_cache() -> str | None: ...
+def single_scattering_albedo(albedo: float, g: float) -> float:
+    """Cycles' subsurface_random_walk_remap (before its clamp to [0, 0.999999])."""
+def layer_weight(roughness: float, cos_view: float, ior: float) -> float:
+    """1 - E_spec: what the Principled specular layer leaves to the lobes under it."""

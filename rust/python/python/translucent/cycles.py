@@ -25,40 +25,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _native
+
 MIN_ALPHA = 0.2  # subsurface_random_walk_coefficients: below, throughput scaling stands in
 MAX_ALPHA = 0.999999  # subsurface_random_walk_remap's clamp
 G_RANGE = (0.0, 0.9)  # bssrdf_setup's anisotropy clamp
 IOR_RANGE = (1.01, 3.8)  # bssrdf_setup's IOR clamp
 
 
-def _poly(g: float, c: tuple[float, ...]) -> float:
-    return sum(ci * g**i for i, ci in enumerate(c))
-
-
 def single_scattering_albedo(albedo: float, g: float) -> float:
     """Cycles' `subsurface_random_walk_remap`: the single-scattering albedo for a surface
-    albedo (Base Color channel) and anisotropy g, before the clamp."""
-    a = _poly(g, (1.8260523782, -1.28451056436, -1.79904629312, 9.19393289202, -22.8215585862,
-                  32.0234874259, -23.6264803333, 7.21067002658))
-    b = 4.98511194385 + 0.127355959438 * math.exp(
-        _poly(g, (0.0, 31.1491581433, -201.847017512, 841.576016723, -2018.09288505, 2731.71560286,
-                  -1935.41424244, 559.009054474)))
-    c = _poly(g, (1.09686102424, -0.394704063468, 1.05258115941, -8.83963712726, 28.8643230661,
-                  -46.8802913581, 38.5402837518, -12.7181042538))
-    d = _poly(g, (0.496310210422, 0.360146581622, -2.15139309747, 17.8896899217, -55.2984010333,
-                  82.065982243, -58.5106008578, 15.8478295021))
-    e = 4.23190299701 + 0.00310603949088 * math.exp(
-        _poly(g, (0.0, 76.7316253952, -594.356773233, 2448.8834203, -5576.68528998, 7116.60171912,
-                  -4763.54467887, 1303.5318055)))
-    f = _poly(g, (2.40602999408, -2.51814844609, 9.18494908356, -79.2191708682, 259.082868209,
-                  -403.613804597, 302.85712436, -87.4370473567))
-    blend = albedo**0.25
-    return (1.0 - blend) * a * math.atan(b * albedo) ** c + blend * d * math.atan(e * albedo) ** f
+    albedo (Base Color channel) and anisotropy g, before the clamp (the native module's)."""
+    return _native.single_scattering_albedo(float(albedo), float(g))
 
 
 @dataclass
 class Principled:
-    """Principled BSDF inputs (subsurface method "Random Walk", Subsurface Weight 1)."""
+    """Principled BSDF inputs (subsurface method "Random Walk") that change Cycles' diffuse
+    answer; Blender's names and defaults."""
 
     base_color: tuple[float, float, float]
     radius: tuple[float, float, float]  # Subsurface Radius, multiplied by `scale`
@@ -68,6 +52,19 @@ class Principled:
     # False where a channel's single-scattering albedo is below Cycles' 0.2, which Cycles
     # renders by scaling the throughput instead (not the same medium).
     exact: bool = True
+    roughness: float = 0.5
+    subsurface_weight: float = 1.0
+    metallic: float = 0.0
+    transmission: float = 0.0
+    specular_ior_level: float = 0.5
+
+    def material(self):
+        """The translucent.Material Cycles renders for these inputs (medium and layers)."""
+        return _native.Material.from_principled(
+            self.base_color, self.radius, self.scale, anisotropy=self.anisotropy, ior=self.ior,
+            roughness=self.roughness, subsurface_weight=self.subsurface_weight, metallic=self.metallic,
+            transmission=self.transmission, specular_ior_level=self.specular_ior_level,
+        )
 
 
 def _check_rgb(name: str, v) -> tuple[float, float, float]:
@@ -79,22 +76,14 @@ def _check_rgb(name: str, v) -> tuple[float, float, float]:
 
 def from_principled(base_color, radius, scale: float, anisotropy: float, ior: float):
     """The (sigma_a, sigma_s, g, eta) Cycles simulates for these Principled inputs, sigma in
-    1 / (the unit of radius * scale). Cycles' own clamps of g and IOR apply."""
-    base_color, radius = _check_rgb("base_color", base_color), _check_rgb("radius", radius)
-    if not (math.isfinite(scale) and scale > 0.0):
-        raise ValueError(f"scale {scale} must be > 0")
-    g = min(max(float(anisotropy), G_RANGE[0]), G_RANGE[1])
+    1 / (the unit of radius * scale). Cycles' own clamps of g and IOR apply (the walk's IOR is
+    clamped to [1.01, 3.8]; eta here is that clamp of `ior`)."""
+    m = _native.Material.from_principled(
+        _check_rgb("base_color", base_color), _check_rgb("radius", radius), float(scale),
+        anisotropy=float(anisotropy), ior=min(max(float(ior), 1.0), 5.0),
+    )
     eta = min(max(float(ior), IOR_RANGE[0]), IOR_RANGE[1])
-    sigma_a, sigma_s = [], []
-    for albedo, r in zip(base_color, radius):
-        d = r * scale / (4.0 * math.pi)  # bssrdf_setup_radius, "Random Walk"
-        if d <= 0.0:
-            raise ValueError("a zero radius is a diffuse BSDF in Cycles, not a medium")
-        alpha = min(max(single_scattering_albedo(min(albedo, 1.0), g), 0.0), MAX_ALPHA)
-        sigma_t = 1.0 / max(d, 1e-16) / (1.0 - g)
-        sigma_s.append(alpha * sigma_t)
-        sigma_a.append((1.0 - alpha) * sigma_t)
-    return tuple(sigma_a), tuple(sigma_s), g, eta
+    return m.sigma_a, m.sigma_s, m.g, eta
 
 
 def to_principled(sigma_a, sigma_s, g: float = 0.0, eta: float = 1.3) -> Principled:
@@ -130,19 +119,47 @@ def to_principled(sigma_a, sigma_s, g: float = 0.0, eta: float = 1.3) -> Princip
     return Principled(tuple(colour), tuple(r / scale for r in radius), scale, g, eta, exact)
 
 
+def principled_for(material) -> Principled:
+    """The Principled inputs Cycles renders `material` with: its medium through `to_principled`
+    and its layers (Roughness, Subsurface Weight, Metallic, Transmission)."""
+    p = to_principled(material.sigma_a, material.sigma_s, material.g, material.eta)
+    p.roughness = material.roughness
+    p.subsurface_weight = material.subsurface_weight
+    p.metallic = material.metallic
+    p.transmission = material.transmission
+    if material.subsurface_weight < 1.0:
+        # The diffuse lobe's colour is the Base Color: only the medium's own is available.
+        if any(abs(a - b) > 1e-6 for a, b in zip(material.base_color, p.base_color)):
+            raise ValueError("a diffuse lobe needs the Base Color the medium maps to; build the material "
+                             "with Material.from_principled")
+    return p
+
+
+# Principled inputs that change Cycles' diffuse answer, by Blender's socket names.
+_SOCKETS = {
+    "roughness": "Roughness",
+    "subsurface_weight": "Subsurface Weight",
+    "metallic": "Metallic",
+    "transmission": "Transmission Weight",
+    "specular_ior_level": "Specular IOR Level",
+}
+
+
 def apply_to_principled(node, p: Principled) -> None:
-    """Set a Principled BSDF node's inputs for the random-walk medium `p` (Subsurface Weight 1)."""
+    """Set a Principled BSDF node's inputs to `p` (method "Random Walk")."""
     node.subsurface_method = "RANDOM_WALK"
     node.inputs["Base Color"].default_value = (*p.base_color, 1.0)
-    node.inputs["Subsurface Weight"].default_value = 1.0
     node.inputs["Subsurface Radius"].default_value = p.radius
     node.inputs["Subsurface Scale"].default_value = p.scale
     node.inputs["Subsurface Anisotropy"].default_value = p.anisotropy
     node.inputs["IOR"].default_value = p.ior
+    for field, socket in _SOCKETS.items():
+        node.inputs[socket].default_value = getattr(p, field)
 
 
 def read_principled(node) -> Principled:
-    """The random-walk inputs of a Principled BSDF node (unconnected values)."""
+    """Every input of a Principled BSDF node that changes Cycles' subsurface answer
+    (unconnected values)."""
     i = node.inputs
     return Principled(
         tuple(i["Base Color"].default_value)[:3],
@@ -150,6 +167,7 @@ def read_principled(node) -> Principled:
         float(i["Subsurface Scale"].default_value),
         float(i["Subsurface Anisotropy"].default_value),
         float(i["IOR"].default_value),
+        **{field: float(i[socket].default_value) for field, socket in _SOCKETS.items()},
     )
 
 

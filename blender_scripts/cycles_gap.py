@@ -1,0 +1,148 @@
+"""What is left between the preview and Cycles (issue 9, point 5), per scene and material.
+
+The preview (PRT, radiance along the normal as a vertex bake records it) with each profile
+against a Cycles 5.0 vertex bake of the diffuse passes of the same Principled material, and
+that distance taken apart:
+- Cycles' own noise: two bakes with different seeds, rms(a - b) / sqrt(2);
+- interreflection: the bake with and without indirect light (the object's own light);
+- the half-space assumption (curvature, thin parts): the profile's ground truth, which is the
+  half-space model integrated exactly over the mesh, against Cycles' direct light;
+- PRT's own error: PRT against that ground truth.
+Errors are area-weighted relative RMS (worst channel); the preview-vs-Cycles figures over all
+vertices, those involving the ground truth over `--receivers` random vertices. Everything
+rendered is cached (out/cache), so a second run only recomputes PRT.
+
+Run: .venv/bin/python blender_scripts/cycles_gap.py [--models suzanne stanford-bunny.obj]
+     [--materials marble skin1 ketchup aniso08] [--spp 1024] [--receivers 60] [--out out/gap]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+
+import numpy as np
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "blender_scripts"))
+
+import bpy  # noqa: E402,F401
+
+import translucent  # noqa: E402
+from addon import export  # noqa: E402
+
+MM_PER_UNIT = 1000.0
+
+
+def material(name: str) -> translucent.Material:
+    """Jensen's measured presets at 1 mm = 1/1000 unit, mapped to Principled inputs (with
+    Blender's default Roughness 0.5), or a Principled material with Subsurface Anisotropy 0.8."""
+    if name == "aniso08":
+        return translucent.Material.from_principled(
+            base_color=(0.85, 0.65, 0.5), radius=(1.0, 0.45, 0.25), scale=0.005, anisotropy=0.8, ior=1.45,
+            roughness=0.5)
+    return translucent.Material.preset(name, MM_PER_UNIT)
+
+
+def rel(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> float:
+    """Area-weighted relative RMS of a against b, worst channel."""
+    return float(max(translucent.relative_error(a, b, w)["rms"]))
+
+
+def ratio(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
+    """Area-weighted mean ratio sum(w a) / sum(w b) per channel."""
+    return [float((w * a[:, c]).sum() / max((w * b[:, c]).sum(), 1e-30)) for c in range(3)]
+
+
+def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float) -> list[dict]:
+    import cycles_reference as cr
+    import demo
+    import report
+
+    obj, _ = report.build_scene(model)
+    scene, info = export.export_scene([obj])
+    bake_obj = demo.preview_object(obj)
+    bake_obj.data.materials.clear()
+    w_all = scene.vertex_areas[:, 0]
+    rng = np.random.default_rng(1)
+    idx = np.sort(rng.choice(scene.vertex_count, size=min(receivers, scene.vertex_count), replace=False))
+    w = w_all[idx]
+    scene_key = report.digest(model, scene.vertex_count, scene.triangle_count, np.asarray(scene.vertex_areas),
+                              info.lights, info.world)
+    rows = []
+    for name in names:
+        m = material(name)
+        cyc, cyc_s = cr.bake_vertices(bake_obj, m, spp)
+        cyc2, _ = cr.bake_vertices(bake_obj, m, spp, seed=1)
+        direct, _ = cr.bake_vertices(bake_obj, m, spp, direct_only=True)
+        # The noise of one bake: two seeds differ by sqrt(2) of it.
+        row = dict(model=model, material=name, vertices=scene.vertex_count, spp=spp, bake_s=cyc_s,
+                   noise=rel(cyc, cyc2, w_all) / np.sqrt(2.0),
+                   interreflection_rms=rel(direct, cyc, w_all),
+                   interreflection_share=[1 - r for r in ratio(direct, cyc, w_all)])
+        for profile in ("cycles", "dipole"):
+            t0 = time.perf_counter()
+            prt = translucent.Prt(scene, m, profile=profile, backend="cpu")
+            pre = time.perf_counter() - t0
+            preview = prt.radiance(m)
+            edit = prt.last_eval["seconds"]
+            row[profile] = dict(vs_cycles=rel(preview, cyc, w_all), ratio=ratio(preview, cyc, w_all),
+                                vs_direct=rel(preview, direct, w_all), precompute_s=pre, edit_ms=1e3 * edit,
+                                estimate=max(prt.last_eval["error_estimate"]))
+            if profile == "cycles" or m.g == 0.0:
+                gt = report.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
+                # Along the normal, as the bake looks: L = W(1) B / pi.
+                exit_weight = (translucent.layer_weight(m.roughness, 1.0, m.eta) if profile == "cycles"
+                               else report.fresnel_t(m.eta))
+                gt_radiance = gt * exit_weight / np.pi
+                row[profile]["prt_vs_truth"] = rel(prt.radiosity(m)[idx], gt, w)
+                row[profile]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
+                row[profile]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    pct = lambda x: f"{100 * x:.1f}"  # noqa: E731
+    lines = [
+        "| scene | material | preview (Cycles profile) vs Cycles % | mean ratio | dipole vs Cycles % | "
+        "Cycles noise % | interreflection % (share) | half-space model vs Cycles direct % | PRT vs its ground truth % |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        c, d = r["cycles"], r["dipole"]
+        lines.append(
+            f"| {r['model']} | {r['material']} | **{pct(c['vs_cycles'])}** | "
+            f"{', '.join(f'{x:.3f}' for x in c['ratio'])} | {pct(d['vs_cycles'])} | {pct(r['noise'])} | "
+            f"{pct(r['interreflection_rms'])} ({', '.join(pct(x) for x in r['interreflection_share'])}) | "
+            f"{pct(c.get('truth_vs_direct', float('nan')))} | {pct(c.get('prt_vs_truth', float('nan')))} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--models", nargs="+", default=["suzanne", "stanford-bunny.obj"])
+    ap.add_argument("--materials", nargs="+", default=["marble", "skin1", "ketchup", "aniso08"])
+    ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--receivers", type=int, default=60)
+    ap.add_argument("--rel-tol", type=float, default=2e-3)
+    ap.add_argument("--out", default=str(REPO / "out" / "gap"))
+    args = ap.parse_args(argv)
+    rows = []
+    for model in args.models:
+        rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "gap.json").write_text(json.dumps(rows, indent=1))
+    (out / "gap.md").write_text(table(rows) + "\n")
+    print(table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,183 @@
+//! A homogeneous translucent material: its scattering and absorption coefficients, phase
+//! function and index of refraction (Xu 2007 Table 1), and the Principled BSDF layers Cycles
+//! puts over its subsurface lobe. Which radial profile carries light under the surface is
+//! chosen apart from the material (`profiles`).
+
+use super::measured::{MEASURED, MEASURED_ETA};
+use crate::error::{Error, Result};
+
+/// Number of colour channels (RGB) every per-channel quantity carries.
+pub const CHANNELS: usize = 3;
+
+/// A homogeneous translucent material. Coefficients are in inverse scene units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Material {
+    /// Absorption coefficient sigma_a per channel [1/unit].
+    pub sigma_a: [f64; CHANNELS],
+    /// Scattering coefficient sigma_s per channel [1/unit].
+    pub sigma_s: [f64; CHANNELS],
+    /// Mean cosine of the phase function (g > 0 scatters forward).
+    pub g: f64,
+    /// Relative index of refraction (medium over outside), >= 1.
+    pub eta: f64,
+    /// What sits over and beside the subsurface lobe in Cycles' Principled BSDF; only the
+    /// Cycles profile reads it (the dipole has its own smooth Fresnel boundary).
+    pub layers: Layers,
+}
+
+/// The Principled BSDF inputs besides the medium that change Cycles' diffuse answer
+/// (Blender 5.0 names; see `optics::principled`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Layers {
+    /// Roughness of the dielectric specular layer on top (Cycles squares it).
+    pub roughness: f64,
+    /// Subsurface Weight: the subsurface lobe's share; the rest is a diffuse lobe.
+    pub subsurface_weight: f64,
+    pub metallic: f64,
+    pub transmission: f64,
+    /// Base Color: the diffuse lobe's albedo where Subsurface Weight < 1.
+    pub base_color: [f64; CHANNELS],
+}
+
+impl Default for Layers {
+    /// Blender's Principled BSDF defaults with the subsurface lobe at full weight.
+    fn default() -> Self {
+        Self {
+            roughness: 0.5,
+            subsurface_weight: 1.0,
+            metallic: 0.0,
+            transmission: 0.0,
+            base_color: [0.8; CHANNELS],
+        }
+    }
+}
+
+impl Layers {
+    /// Every input finite and in [0, 1] (Blender's slider ranges).
+    pub fn validate(&self) -> Result<()> {
+        let unit = [
+            ("roughness", self.roughness),
+            ("subsurface_weight", self.subsurface_weight),
+            ("metallic", self.metallic),
+            ("transmission", self.transmission),
+        ];
+        let colour = self.base_color.map(|c| ("base_color", c));
+        for (name, v) in unit.into_iter().chain(colour) {
+            if !v.is_finite() || !(0.0..=1.0).contains(&v) {
+                return Err(Error::InvalidMaterial(format!(
+                    "{name} = {v}: must lie in [0, 1]"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Material {
+    /// A validated material: coefficients finite and >= 0, |g| < 1, 1 <= eta <= 5, with the
+    /// default Principled layers.
+    pub fn new(sigma_a: [f64; 3], sigma_s: [f64; 3], g: f64, eta: f64) -> Result<Self> {
+        for (name, v) in [("sigma_a", sigma_a), ("sigma_s", sigma_s)] {
+            for (c, x) in v.iter().enumerate() {
+                if !x.is_finite() || *x < 0.0 {
+                    return Err(Error::InvalidMaterial(format!(
+                        "{name}[{c}] = {x}: coefficients must be finite and >= 0 (1/scene unit)"
+                    )));
+                }
+            }
+        }
+        if !g.is_finite() || g.abs() >= 1.0 {
+            return Err(Error::InvalidMaterial(format!(
+                "g = {g}: the phase-function mean cosine must lie in (-1, 1)"
+            )));
+        }
+        if !eta.is_finite() || !(1.0..=5.0).contains(&eta) {
+            return Err(Error::InvalidMaterial(format!(
+                "eta = {eta}: the relative index of refraction must lie in [1, 5]"
+            )));
+        }
+        Ok(Self {
+            sigma_a,
+            sigma_s,
+            g,
+            eta,
+            layers: Layers::default(),
+        })
+    }
+
+    /// The same medium under other Principled layers (validated).
+    pub fn with_layers(self, layers: Layers) -> Result<Self> {
+        layers.validate()?;
+        Ok(Self { layers, ..self })
+    }
+
+    /// One of Jensen 2001's measured materials (g = 0, so sigma_s = sigma_s'), converted to
+    /// inverse scene units with `mm_per_unit` millimetres per scene unit (1000 for metres).
+    pub fn preset(name: &str, mm_per_unit: f64) -> Result<Self> {
+        if !mm_per_unit.is_finite() || mm_per_unit <= 0.0 {
+            return Err(Error::InvalidArgument(format!(
+                "mm_per_unit = {mm_per_unit}: must be finite and > 0"
+            )));
+        }
+        let key = name.to_ascii_lowercase();
+        let (_, sp, sa) = MEASURED.iter().find(|(n, _, _)| *n == key).ok_or_else(|| {
+            let names: Vec<&str> = MEASURED.iter().map(|m| m.0).collect();
+            Error::InvalidArgument(format!(
+                "unknown preset {name:?}; known presets: {}",
+                names.join(", ")
+            ))
+        })?;
+        Material::new(
+            sa.map(|x| x * mm_per_unit),
+            sp.map(|x| x * mm_per_unit),
+            0.0,
+            MEASURED_ETA,
+        )
+    }
+
+    /// Reduced scattering coefficient sigma_s' = (1 - g) sigma_s (Xu 2007, Table 1).
+    pub fn sigma_s_prime(&self) -> [f64; 3] {
+        self.sigma_s.map(|s| (1.0 - self.g) * s)
+    }
+
+    /// Extinction sigma_t = sigma_a + sigma_s (Xu 2007, Table 1).
+    pub fn sigma_t(&self) -> [f64; 3] {
+        std::array::from_fn(|c| self.sigma_a[c] + self.sigma_s[c])
+    }
+
+    /// Single-scattering albedo sigma_s / sigma_t per channel (0 where nothing interacts).
+    pub fn albedo(&self) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            let t = self.sigma_a[c] + self.sigma_s[c];
+            if t > 0.0 {
+                self.sigma_s[c] / t
+            } else {
+                0.0
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_scale_with_units_and_reject_unknown_names() {
+        let mm = Material::preset("marble", 1.0).unwrap();
+        let m = Material::preset("Marble", 1000.0).unwrap();
+        assert!((m.sigma_s[0] - 2190.0).abs() < 1e-9);
+        assert!((mm.sigma_a[2] - 0.0071).abs() < 1e-15);
+        assert!(Material::preset("jade", 1.0).is_err());
+        assert!(Material::preset("marble", 0.0).is_err());
+    }
+
+    #[test]
+    fn material_rejects_unphysical_parameters() {
+        assert!(Material::new([-1.0, 0.0, 0.0], [1.0; 3], 0.0, 1.3).is_err());
+        assert!(Material::new([0.0; 3], [f64::NAN, 1.0, 1.0], 0.0, 1.3).is_err());
+        assert!(Material::new([0.0; 3], [1.0; 3], 1.0, 1.3).is_err());
+        assert!(Material::new([0.0; 3], [1.0; 3], 0.0, 0.9).is_err());
+        assert!(Material::new([0.0; 3], [1.0; 3], 0.99, 2.5).is_ok());
+    }
+}

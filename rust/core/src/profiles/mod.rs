@@ -1,0 +1,256 @@
+//! Radial diffusion profiles R(r): how much of the light entering at one point leaves at
+//! distance r, per unit area. Every method sums a profile over the mesh and none of them
+//! knows which profile it sums (pbrt-v4's `bssrdf.h` keeps profiles apart from integrators
+//! the same way). Two implementations:
+//! - `Dipole`: Jensen et al. 2001's dipole, the papers' model (closed forms);
+//! - `WalkProfile`: the radial exit profile of Cycles' random walk in a half-space, tabulated
+//!   by Monte Carlo over single-scattering albedo x optical radius (`walk`, `table`); with
+//!   the Principled layers it is what Cycles renders.
+
+pub mod dipole;
+pub mod table;
+pub mod walk;
+
+pub use dipole::Dipole;
+pub use table::{WalkProfile, WalkTable};
+
+use crate::error::{Error, Result};
+use crate::optics::{fresnel_transmittance, principled, Material};
+
+/// Which radial profile (and exit weight) a method sums.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Model {
+    /// Jensen's dipole with a smooth Fresnel boundary: the papers' model.
+    Dipole,
+    /// Cycles' random walk (Blender 5.0, Principled BSDF "Random Walk") with its layers.
+    Cycles,
+}
+
+impl Model {
+    pub fn parse(name: &str) -> Result<Model> {
+        match name.to_ascii_lowercase().as_str() {
+            "dipole" => Ok(Model::Dipole),
+            "cycles" => Ok(Model::Cycles),
+            other => Err(Error::InvalidArgument(format!(
+                "profile {other:?}: choose 'cycles' or 'dipole'"
+            ))),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Dipole => "dipole",
+            Model::Cycles => "cycles",
+        }
+    }
+
+    /// The relative index of refraction light crosses on its way in at the lit point, for the
+    /// irradiance's Fresnel factor (Xu 2007 eq. 3). Cycles' walk leaves through an
+    /// index-matched boundary into a plain Lambertian BSDF (no Fresnel): 1.
+    pub fn irradiance_eta(self, material: &Material) -> f64 {
+        match self {
+            Model::Dipole => material.eta,
+            Model::Cycles => 1.0,
+        }
+    }
+
+    /// The factor turning radiosity B into radiance toward a viewer at cosine `cos_o`, times
+    /// pi: L = exit_weight B / pi. Dipole: F_t(eta, cos_o) (Xu 2007 eq. 2). Cycles: what the
+    /// dielectric specular layer leaves to the layers under it, 1 - E_spec(cos_o)
+    /// (`principled::layer_weight`).
+    pub fn exit_weight(self, material: &Material, cos_o: f64) -> f64 {
+        match self {
+            Model::Dipole => fresnel_transmittance(material.eta, cos_o),
+            Model::Cycles => {
+                if cos_o <= 0.0 {
+                    0.0
+                } else {
+                    principled::layer_weight(material.layers.roughness, cos_o, material.eta)
+                }
+            }
+        }
+    }
+
+    /// The three channels' profiles of `material` under this model. For Cycles the walk tables
+    /// of the material's (g, IOR, Roughness) are looked up, and built when they are missing
+    /// (`table::tables_for`); g must lie in Cycles' [0, 0.9].
+    pub fn profiles(self, material: &Material) -> Result<[Profile; 3]> {
+        match self {
+            Model::Dipole => Ok(Dipole::all(material).map(Profile::Dipole)),
+            Model::Cycles => {
+                let tables = table::tables_for(material)?;
+                Ok(std::array::from_fn(|c| {
+                    Profile::Walk(WalkProfile::new(&tables, material, c))
+                }))
+            }
+        }
+    }
+}
+
+/// Lengths a profile changes over, which sample spacing, knots and quadrature follow.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LengthScales {
+    /// Over which R changes near the entry point: the dipole's source depth z_r, the walk's
+    /// reduced mean free path [unit].
+    pub near: f64,
+    /// e-folding length of the tail: 1/sigma_tr (infinite without absorption) [unit].
+    pub decay: f64,
+}
+
+impl LengthScales {
+    /// The shorter of the two: half of it is the default sample spacing.
+    pub fn shortest(&self) -> f64 {
+        self.near.min(self.decay)
+    }
+}
+
+/// A radial profile of one colour channel. Lengths in scene units, R in 1/unit^2.
+pub trait RadialProfile {
+    /// R(r) >= 0, per unit area.
+    fn value(&self, r: f64) -> f64;
+    /// The near field, 2 pi int_0^rho R(r) r dr (non-decreasing in rho, 0 at 0).
+    fn disc_integral(&self, rho: f64) -> f64;
+    /// 2 pi int_rho^inf R(r) r dr = total - disc_integral(rho), kept accurate far out.
+    fn tail(&self, rho: f64) -> f64;
+    /// 2 pi int_0^inf R(r) r dr <= 1: the albedo of a thick slab.
+    fn total(&self) -> f64;
+    /// Light returned at the entry point itself, a Dirac delta at r = 0 apart from R (Cycles'
+    /// diffuse lobe beside the subsurface one when Subsurface Weight < 1).
+    fn point_mass(&self) -> f64 {
+        0.0
+    }
+    /// The smallest radius beyond which at most `rel_tol` of the total remains.
+    fn support_radius(&self, rel_tol: f64) -> f64;
+    fn length_scales(&self) -> LengthScales;
+    /// Nothing diffuses (no scattering).
+    fn is_zero(&self) -> bool {
+        self.total() <= 0.0
+    }
+}
+
+/// Any of the profiles (enum dispatch).
+#[derive(Debug, Clone)]
+pub enum Profile {
+    Dipole(Dipole),
+    Walk(WalkProfile),
+}
+
+macro_rules! dispatch {
+    ($self:ident, $p:ident => $e:expr) => {
+        match $self {
+            Profile::Dipole($p) => $e,
+            Profile::Walk($p) => $e,
+        }
+    };
+}
+
+impl RadialProfile for Profile {
+    fn value(&self, r: f64) -> f64 {
+        dispatch!(self, p => p.value(r))
+    }
+    fn disc_integral(&self, rho: f64) -> f64 {
+        dispatch!(self, p => p.disc_integral(rho))
+    }
+    fn tail(&self, rho: f64) -> f64 {
+        dispatch!(self, p => p.tail(rho))
+    }
+    fn total(&self) -> f64 {
+        dispatch!(self, p => p.total())
+    }
+    fn point_mass(&self) -> f64 {
+        dispatch!(self, p => p.point_mass())
+    }
+    fn support_radius(&self, rel_tol: f64) -> f64 {
+        dispatch!(self, p => p.support_radius(rel_tol))
+    }
+    fn length_scales(&self) -> LengthScales {
+        dispatch!(self, p => p.length_scales())
+    }
+    fn is_zero(&self) -> bool {
+        dispatch!(self, p => p.is_zero())
+    }
+}
+
+/// The smallest radius beyond which at most `rel_tol` of `p`'s total remains, by doubling
+/// from `start` and bisection on the (non-increasing) tail.
+pub(crate) fn support_by_bisection(p: &impl RadialProfile, rel_tol: f64, start: f64) -> f64 {
+    let total = p.total();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    let target = rel_tol.max(1e-15) * total;
+    let mut hi = start.max(f64::MIN_POSITIVE);
+    while p.tail(hi) > target && hi < 1e300 {
+        hi *= 2.0;
+    }
+    let mut lo = 0.0;
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if p.tail(mid) > target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= 1e-12 * hi {
+            break;
+        }
+    }
+    hi
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    //! The property every profile must have, checked on each implementation.
+    use super::*;
+    use crate::quadrature::simpson;
+    use std::f64::consts::PI;
+
+    /// value, disc_integral, tail, total and support_radius describe one function: the disc
+    /// integral is the quadrature of 2 pi r R (on a grid finer than the profile's near
+    /// length), disc + tail = total <= 1, R >= 0, the support radius leaves its tolerance.
+    pub(crate) fn check_profile(p: &impl RadialProfile, quad_tol: f64) {
+        let total = p.total();
+        assert!(
+            total.is_finite() && (0.0..=1.0 + 1e-12).contains(&total),
+            "total {total}"
+        );
+        if p.is_zero() {
+            return;
+        }
+        let s = p.length_scales();
+        assert!(s.near > 0.0 && s.decay > 0.0, "{s:?}");
+        let support = p.support_radius(1e-3);
+        assert!(
+            (p.tail(support) - 1e-3 * total).abs() <= 1e-6 * total,
+            "support radius: tail {} of total {total}",
+            p.tail(support)
+        );
+        // Quadrature on a geometric grid from near/1000 (the part below by the disc itself).
+        let mut rho = 1e-3 * s.near;
+        let mut acc = p.disc_integral(rho);
+        while rho < support {
+            let next = (rho * 1.05).min(support);
+            acc += simpson(|r| 2.0 * PI * r * p.value(r), rho, next, 16);
+            rho = next;
+            let disc = p.disc_integral(rho);
+            assert!(p.value(rho) >= 0.0, "R({rho}) < 0");
+            assert!(
+                (acc - disc).abs() <= quad_tol * total,
+                "disc integral at {rho}: closed {disc} vs quadrature {acc} (total {total})"
+            );
+            assert!((disc + p.tail(rho) - total).abs() <= 1e-9 * total);
+        }
+    }
+
+    #[test]
+    fn the_dipole_is_a_profile() {
+        for (sa, sp, eta) in [
+            (0.0041, 2.62, 1.3),
+            (0.061, 0.18, 1.3),
+            (0.0, 5.0, 1.0),
+            (1.0, 1e4, 2.5),
+        ] {
+            check_profile(&Dipole::new(sa, sp, eta), 1e-6);
+        }
+    }
+}

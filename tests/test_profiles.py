@@ -1,0 +1,156 @@
+"""Issue 9 through the Python API: the Cycles profile (Cycles 5.0's random walk tabulated, with
+the Principled layers) as the default, the dipole beside it, and what each answers against
+something other than itself: Cycles' own renders and tables, the linearity of the lobes, the
+plane's closed form."""
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+import translucent
+from test_api import centre_index, plane
+
+# Blender 5.0.1, 128 spp: a 1 x 1 x 0.5 m slab under a white world seen from above, sigma_a
+# (2, 6, 20) and sigma_s 60 per metre, g 0, Roughness 0.5, Specular IOR Level 0 (no specular
+# layer; the walk enters through IOR 1.01): tests/test_cycles_mapping.py renders it.
+CYCLES_SLAB = (0.604, 0.433, 0.244)
+# Cycles 5.0's estimate of the Principled specular layer's albedo (its ggx_gen_schlick_ior_s,
+# ggx_E, ggx_Eavg tables), IOR 1.5, Roughness 0.5, at view cosine 1 and 0.5.
+CYCLES_E_SPEC = {1.0: 0.0374, 0.5: 0.0692}
+
+
+def slab_material():
+    return translucent.Material((2.0, 6.0, 20.0), 60.0, g=0.0, eta=1.01).with_layers(roughness=0.5)
+
+
+def sun_plane(n=81, size=1.0, theta=0.0, strength=1.0):
+    p, t = plane(n, size)
+    s = translucent.Scene(p, t)
+    s.add_sun((math.sin(theta), 0.0, -math.cos(theta)), irradiance=strength)
+    return p, s
+
+
+def test_the_cycles_profile_is_the_default_and_the_dipole_stays_selectable():
+    p, s = sun_plane(21, 0.1)
+    m = translucent.Material.preset("skin1")
+    assert translucent.Prt(s, m, backend="cpu").profile == "cycles"
+    assert translucent.Prt(s, m, backend="cpu", profile="dipole").profile == "dipole"
+    assert translucent.Prt(s, m, backend="cpu").report["profile"] == "cycles"
+
+
+def test_slab_reflectance_predicts_the_cycles_slab_render():
+    got = slab_material().slab_reflectance("cycles")
+    for c in range(3):
+        assert got[c] == pytest.approx(CYCLES_SLAB[c], rel=0.02), (c, got)
+    # The dipole, for comparison, is far from it (the reason for the Cycles profile).
+    dip = slab_material().slab_reflectance("dipole")
+    assert max(abs(d / c - 1) for d, c in zip(dip, CYCLES_SLAB)) > 0.05
+
+
+def test_prt_on_a_sun_lit_plane_gives_the_cycles_slab_at_the_centre():
+    """Sun of Strength 1 at normal incidence on a 1 m plane of the slab's medium: B at the
+    centre is what Cycles' slab reflects under a white world (E = pi there, L = R E / pi);
+    the plane's rim leaves out the tail beyond 50 cm (< 1 % for the reddest channel)."""
+    p, s = sun_plane(81, 1.0)
+    m = slab_material()
+    b = translucent.Prt(s, m, backend="cpu").radiosity(m)[centre_index(p)]
+    w = translucent.layer_weight(0.5, 1.0, 1.01)
+    assert w > 0.9999  # IOR 1.01: no specular layer to speak of
+    for c in range(3):
+        assert b[c] == pytest.approx(CYCLES_SLAB[c], rel=0.02), (c, b)
+
+
+def test_radiance_carries_what_the_specular_layer_leaves():
+    """L = W(mu) B / pi with W = 1 - E_spec: along the normal, and at 60 degrees."""
+    p, s = sun_plane(21, 0.1)
+    m = translucent.Material.preset("marble").with_layers(roughness=0.5)
+    m = translucent.Material(m.sigma_a, m.sigma_s, g=0.0, eta=1.5).with_layers(roughness=0.5)
+    prt = translucent.Prt(s, m, backend="cpu")
+    b = prt.radiosity(m)
+    v = centre_index(p)
+    along = prt.radiance(m)
+    np.testing.assert_allclose(along[v], b[v] * (1 - CYCLES_E_SPEC[1.0]) / math.pi, rtol=5e-3)
+    eye = p[v] + np.array([0.0, math.sin(math.pi / 3), 0.5]) * 0.2
+    at_60 = prt.radiance(m, eye)
+    np.testing.assert_allclose(at_60[v], b[v] * (1 - CYCLES_E_SPEC[0.5]) / math.pi, rtol=5e-3)
+
+
+def test_the_lobes_add_up_as_cycles_weighs_them():
+    """Subsurface Weight w: B = w B_walk + (1 - w) Base Color I(x); Metallic m and
+    Transmission t scale both by (1 - m)(1 - t). Exact, since B is linear in the weights."""
+    p, s = sun_plane(21, 0.1)
+    full = translucent.Material.from_principled((0.8, 0.5, 0.3), (1.0, 0.5, 0.2), 0.01)
+    prt = translucent.Prt(s, full, backend="cpu")
+    b_full = prt.radiosity(full)
+    irr = s.irradiance(eta=1.0)  # Cycles' exit is a plain Lambertian: no Fresnel
+    half = full.with_layers(subsurface_weight=0.4)
+    expect = 0.4 * b_full + 0.6 * np.array(full.base_color) * irr
+    np.testing.assert_allclose(prt.radiosity(half), expect, rtol=2e-5, atol=1e-7)
+    metal = full.with_layers(metallic=0.3, transmission=0.5)
+    np.testing.assert_allclose(prt.radiosity(metal), 0.35 * b_full, rtol=2e-5, atol=1e-7)
+
+
+def test_ior_edits_are_live_and_g_outside_cycles_range_is_an_error():
+    p, s = sun_plane(21, 0.1)
+    m = translucent.Material.preset("skin1")
+    prt = translucent.Prt(s, m, backend="cpu")
+    b = prt.radiosity(m)
+    other = translucent.Material(m.sigma_a, m.sigma_s, g=0.0, eta=1.6)
+    b2 = prt.radiosity(other)  # no new precompute: Cycles' exit has no Fresnel factor
+    assert np.all(np.isfinite(b2)) and not np.array_equal(b, b2)
+    with pytest.raises(ValueError, match="dipole"):
+        prt.radiosity(translucent.Material(m.sigma_a, m.sigma_s, g=-0.3))
+    with pytest.raises(ValueError, match=r"\[0, 0.9\]"):
+        translucent.Prt(s, translucent.Material(m.sigma_a, m.sigma_s, g=0.95), backend="cpu")
+    forward = translucent.Material(m.sigma_a, m.sigma_s, g=0.8)
+    b3 = prt.radiosity(forward)
+    assert np.all(b3[centre_index(p)] < b[centre_index(p)])  # forward scattering goes deeper
+
+
+def test_from_principled_holds_the_inputs_cycles_reads():
+    m = translucent.Material.from_principled(
+        base_color=(0.9, 0.6, 0.4), radius=(1.0, 0.4, 0.2), scale=0.05, anisotropy=0.95, ior=1.45,
+        roughness=0.3, subsurface_weight=0.8, metallic=0.1, transmission=0.2,
+    )
+    assert m.g == 0.9  # Cycles clamps the anisotropy
+    assert (m.roughness, m.subsurface_weight, m.metallic, m.transmission) == (0.3, 0.8, 0.1, 0.2)
+    assert m.base_color == pytest.approx((0.9, 0.6, 0.4))
+    # d = radius scale / (4 pi), sigma_t = 1 / (d (1 - g)) (bssrdf_setup_radius).
+    d = 1.0 * 0.05 / (4 * math.pi)
+    assert sum(m.sigma_a[:1] + m.sigma_s[:1]) == pytest.approx(1 / (d * 0.1), rel=1e-9)
+    for bad in (dict(metallic=1.5), dict(roughness=-0.1), dict(scale=0.0), dict(radius=(1, 0, 1)),
+                dict(base_color=(float("nan"), 0.5, 0.5)), dict(specular_ior_level=2.0)):
+        args = dict(base_color=0.5, radius=1.0, scale=0.1) | bad
+        with pytest.raises(ValueError):
+            translucent.Material.from_principled(**args)
+
+
+def test_reference_and_prt_agree_for_the_cycles_profile_with_a_diffuse_lobe():
+    p, t = plane(41, 0.1)
+    s = translucent.Scene(p, t)
+    s.add_spot_light((0.0, 0.0, 0.05), (0, 0, -1), power=5.0, spot_size=1.2, blend=0.3)
+    m = translucent.Material.preset("skin1").with_layers(subsurface_weight=0.7, base_color=0.6)
+    b = translucent.Prt(s, m, backend="cpu").radiosity(m)
+    idx = list(range(0, len(p), 7))
+    ref = translucent.reference_radiosity(s, m, rel_tol=1e-3, receivers=idx)
+    err = translucent.relative_error(b[idx], ref, s.vertex_areas[idx, 0])
+    assert max(err["rms"]) < 0.02, err
+
+
+def test_tables_are_prepared_once_and_kept_on_disk(tmp_path):
+    old = translucent.table_cache()
+    try:
+        assert translucent.set_table_cache(str(tmp_path)) == str(tmp_path)
+        m = translucent.Material((0.5, 1.0, 2.0), 40.0, g=0.37, eta=1.44).with_layers(roughness=0.15)
+        assert not translucent.profile_ready(m)
+        seconds = translucent.prepare_profile(m)
+        assert seconds > 0 and translucent.profile_ready(m)
+        assert translucent.prepare_profile(m) == 0.0 or translucent.prepare_profile(m) < 1e-3
+        files = sorted(os.listdir(tmp_path))
+        assert len(files) == 2, files  # g = 0.37 lies between the tables at 0.35 and 0.40
+        with pytest.raises(translucent.Cancelled):
+            translucent.prepare_profile(m.with_layers(roughness=0.9), progress=lambda f: False)
+    finally:
+        translucent.set_table_cache(old)
