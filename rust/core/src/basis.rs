@@ -106,6 +106,19 @@ impl Basis {
         coefficients: usize,
         degree: Degree,
     ) -> Result<Basis> {
+        Self::choose_weighted(functions, r_min, r_max, coefficients, degree, &|_| 1.0)
+    }
+
+    /// As `choose`, with the objective int (F - L F)^2 w(r) r dr: `weight` w > 0 says where
+    /// the fit must be good besides the area weight (see `Fitter::weighted`).
+    pub fn choose_weighted(
+        functions: &[&dyn Fn(f64) -> f64],
+        r_min: f64,
+        r_max: f64,
+        coefficients: usize,
+        degree: Degree,
+        weight: &dyn Fn(f64) -> f64,
+    ) -> Result<Basis> {
         let p = degree.as_int();
         if coefficients < p + 1 || coefficients > MAX_COEFFICIENTS {
             return Err(Error::InvalidArgument(format!(
@@ -140,6 +153,17 @@ impl Basis {
                 fine_r.push(r);
                 fine_w.push(r * h);
             }
+        }
+        // Normalisation below uses the plain area weight; the DP cost the weighted one.
+        let fine_cost_w: Vec<f64> = fine_r
+            .iter()
+            .zip(&fine_w)
+            .map(|(&r, &w)| w * weight(r).max(0.0))
+            .collect();
+        if fine_cost_w.iter().any(|w| !w.is_finite()) {
+            return Err(Error::InvalidArgument(
+                "the fit weight is not finite on the basis domain".into(),
+            ));
         }
         // Each representative sampled at the candidates and on the fine grid, normalised.
         let mut samples: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
@@ -178,7 +202,7 @@ impl Basis {
             let mut suu = 0.0;
             for b in a + 1..g {
                 for q in (b - 1) * SUB..b * SUB {
-                    let (u, w) = (fine_r[q] - ra, fine_w[q]);
+                    let (u, w) = (fine_r[q] - ra, fine_cost_w[q]);
                     suu += w * u * u;
                     for (i, (at_k, at_f)) in samples.iter().enumerate() {
                         let gq = at_f[q] - at_k[a];
@@ -317,7 +341,12 @@ impl Basis {
 
     /// The least-squares projector onto this basis, factored once.
     pub fn fitter(&self) -> Fitter {
-        Fitter::new(self.clone())
+        Fitter::new(self.clone(), &|_| 1.0)
+    }
+
+    /// A fitter minimising int (F - P)^2 w(r) r dr (see `Fitter::weighted`).
+    pub fn fitter_weighted(&self, weight: &dyn Fn(f64) -> f64) -> Fitter {
+        Fitter::new(self.clone(), weight)
     }
 }
 
@@ -376,13 +405,21 @@ fn candidate_knots(lo: f64, start: f64, hi: f64, count: usize) -> Vec<f64> {
 }
 
 /// Least-squares projection onto a basis (Xu 2007 eq. 18) with the area weight r: minimises
-/// int (F - P)^2 r dr over the domain, because B = int R_d I dA weighs the profile by 2 pi r.
-/// The normal matrix depends only on the knots and is factored once (Cholesky).
+/// int (F - P)^2 w(r) r dr over the domain, because B = int R_d I dA weighs the profile by
+/// 2 pi r, subject to int P r dr = int F r dr (the profile's total over the domain is kept
+/// exactly). w = 1 is eq. 18 (and then the constraint holds by itself: partition of unity).
+/// A weight growing where F is small (`weighted`) keeps the tail's relative error down, which
+/// is what receivers lit only from afar (the far side of an object) see.
+/// The normal matrix depends only on the knots and the weight, and is factored once (Cholesky).
 #[derive(Debug, Clone)]
 pub struct Fitter {
     basis: Basis,
-    /// Gauss nodes: radius, weight (Gauss weight x r x Jacobian), first function, values.
-    nodes: Vec<(f64, f64, usize, [f64; 3])>,
+    /// Gauss nodes: radius, fit weight (Gauss weight x r x Jacobian x w(r)), area weight
+    /// (without w), first function, values.
+    nodes: Vec<(f64, f64, f64, usize, [f64; 3])>,
+    /// G^-1 a and a . G^-1 a for the total constraint, a_j = int phi_j r dr.
+    g_inv_a: Vec<f64>,
+    a_g_inv_a: f64,
     /// Check points for the reported error: Gauss on the two halves of each interval.
     checks: Vec<(f64, f64, usize, [f64; 3])>,
     /// Jacobi scaling diag(G)^-1/2 of the normal matrix.
@@ -408,7 +445,7 @@ pub struct Fit {
 }
 
 impl Fitter {
-    fn new(basis: Basis) -> Fitter {
+    fn new(basis: Basis, weight: &dyn Fn(f64) -> f64) -> Fitter {
         let n = basis.len();
         let p = basis.degree.as_int();
         let mut nodes = Vec::new();
@@ -418,7 +455,9 @@ impl Fitter {
             for (x, wt) in GAUSS8 {
                 let r = mid + half * x;
                 let (first, v) = basis.eval(r);
-                nodes.push((r, wt * half * r, first, v));
+                let w = weight(r);
+                let w = if w.is_finite() && w > 0.0 { w } else { 1.0 };
+                nodes.push((r, wt * half * r * w, wt * half * r, first, v));
             }
             // Check rule: the same Gauss rule on each half of the interval. Its nodes are not
             // the fitting nodes, so the reported error is not the LS residual at its own nodes,
@@ -433,8 +472,10 @@ impl Fitter {
             }
         }
         let mut g = DMatrix::<f64>::zeros(n, n);
-        for (_, wt, first, v) in &nodes {
+        let mut area = DVector::<f64>::zeros(n);
+        for (_, wt, wa, first, v) in &nodes {
             for a in 0..=p {
+                area[first + a] += wa * v[a];
                 for b in 0..=p {
                     g[(first + a, first + b)] += wt * v[a] * v[b];
                 }
@@ -461,9 +502,18 @@ impl Fitter {
                     .expect("a unit-diagonal Gram matrix with a ridge is positive definite")
             }
         };
+        let mut scaled_area = area.clone();
+        for (x, s) in scaled_area.iter_mut().zip(&scale) {
+            *x *= s;
+        }
+        let solved = cholesky.solve(&scaled_area);
+        let g_inv_a: Vec<f64> = solved.iter().zip(&scale).map(|(x, s)| x * s).collect();
+        let a_g_inv_a = area.iter().zip(&g_inv_a).map(|(a, b)| a * b).sum();
         Fitter {
             basis,
             nodes,
+            g_inv_a,
+            a_g_inv_a,
             checks,
             scale,
             cholesky,
@@ -479,18 +529,31 @@ impl Fitter {
         let n = self.basis.len();
         let p = self.basis.degree.as_int();
         let mut rhs = DVector::<f64>::zeros(n);
-        for (r, wt, first, v) in &self.nodes {
+        let mut total = 0.0;
+        for (r, wt, wa, first, v) in &self.nodes {
             let fr = f(*r);
+            total += wa * fr;
             for k in 0..=p {
                 rhs[first + k] += wt * fr * v[k];
             }
         }
-        // c = S (S G S)^-1 S b.
+        // c = S (S G S)^-1 S b, then the total constraint a . c = int F r dr by a Lagrange
+        // multiplier: c + lambda G^-1 a.
         for (x, s) in rhs.iter_mut().zip(&self.scale) {
             *x *= s;
         }
         let c = self.cholesky.solve(&rhs);
-        let coefficients: Vec<f64> = c.iter().zip(&self.scale).map(|(x, s)| x * s).collect();
+        let mut coefficients: Vec<f64> = c.iter().zip(&self.scale).map(|(x, s)| x * s).collect();
+        if self.a_g_inv_a > 0.0 {
+            let mut kept = 0.0;
+            for (_, _, wa, first, v) in &self.nodes {
+                kept += wa * (0..=p).map(|k| coefficients[first + k] * v[k]).sum::<f64>();
+            }
+            let lambda = (total - kept) / self.a_g_inv_a;
+            for (c, g) in coefficients.iter_mut().zip(&self.g_inv_a) {
+                *c += lambda * g;
+            }
+        }
         let (mut e2, mut f2, mut e1, mut f1, mut a1) = (0.0, 0.0, 0.0, 0.0, 0.0);
         for (r, wt, first, v) in &self.checks {
             let fr = f(*r);

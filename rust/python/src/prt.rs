@@ -78,7 +78,7 @@ impl PyPrt {
     /// and may return False to cancel (raises `translucent.Cancelled`).
     #[new]
     #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
-        tolerance = 1e-3, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
+        tolerance = 1e-5, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
         backend = "auto", fit_tolerance = None, profile = "cycles"))]
     #[allow(clippy::too_many_arguments)]
     fn new(

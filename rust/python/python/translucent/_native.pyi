@@ -145,7 +145,7 @@ class Prt:
         coefficients: int = 32,
         degree: Literal[1, 2] = 1,
         samples: int | None = None,
-        tolerance: float = 1e-3,
+        tolerance: float = 1e-5,
         far_field: float = 0.25,
         world_samples: int = 64,
         area_samples: int = 16,
