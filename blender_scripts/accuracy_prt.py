@@ -2,7 +2,7 @@
 skin1 and ketchup at 32 coefficients; area-weighted relative RMS and max relative error per
 channel over a random subset of receiver vertices (the reference is the slow part).
 
-Run: .venv/bin/python blender_scripts/accuracy_prt.py [--receivers 400] [--model NAME]
+Run: .venv/bin/python blender_scripts/accuracy_prt.py [--receivers 400] [--model NAME] [--profile dipole]
 """
 
 from __future__ import annotations
@@ -22,7 +22,8 @@ import translucent  # noqa: E402
 PRESETS = ("marble", "skin1", "ketchup")
 
 
-def evaluate(model: str, receivers: int, coefficients: int, rel_tol: float, seed: int = 7) -> list[dict]:
+def evaluate(model: str, receivers: int, coefficients: int, rel_tol: float, seed: int = 7,
+             profile: str = "cycles") -> list[dict]:
     p, t = models.load(model, diagonal=0.1)
     scene = models.standard_scene(p, t)
     mats = {name: translucent.Material.preset(name, mm_per_unit=1000.0) for name in PRESETS}
@@ -32,12 +33,14 @@ def evaluate(model: str, receivers: int, coefficients: int, rel_tol: float, seed
     rows = []
     for name, m in mats.items():
         t0 = time.perf_counter()
-        prt = translucent.Prt(scene, m, coefficients=coefficients)
+        # The ground truth integrates the direct-light model: PRT without the object's own light.
+        prt = translucent.Prt(scene, m, coefficients=coefficients, profile=profile, interreflection=False)
         pre = time.perf_counter() - t0
         b = prt.radiosity(m)[idx]
         edit = prt.last_eval["seconds"]
         t0 = time.perf_counter()
-        ref, info = translucent.reference_radiosity(scene, m, rel_tol=rel_tol, receivers=idx.tolist(), details=True)
+        ref, info = translucent.reference_radiosity(scene, m, rel_tol=rel_tol, receivers=idx.tolist(), details=True,
+                                                    profile=profile)
         ref_s = time.perf_counter() - t0
         err = translucent.relative_error(b, ref, weights)
         rows.append(
@@ -54,9 +57,10 @@ def main() -> int:
     ap.add_argument("--receivers", type=int, default=400)
     ap.add_argument("--coefficients", type=int, default=32)
     ap.add_argument("--rel-tol", type=float, default=1e-3)
+    ap.add_argument("--profile", default="cycles", choices=["cycles", "dipole"])
     args = ap.parse_args()
-    rows = evaluate(args.model, args.receivers, args.coefficients, args.rel_tol)
-    print(f"{args.model} at 10 cm, {args.coefficients} coefficients, {args.receivers} receivers")
+    rows = evaluate(args.model, args.receivers, args.coefficients, args.rel_tol, profile=args.profile)
+    print(f"{args.model} at 10 cm, {args.profile} profile, {args.coefficients} coefficients, {args.receivers} receivers")
     print("| material | rel. RMS (R, G, B) % | max rel. (R, G, B) % | PRT estimate % | precompute s | edit ms | reference s (level, est. err %) |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:

@@ -1,10 +1,11 @@
 """Benchmark of the PRT method (issue 3, point 9). Prints medians of several runs and the
 machine; timings live here, never in tests.
 
-1. Precompute: the Stanford bunny scaled to 10 cm, marble, 32 coefficients (budget: 20 s on
-   the 2-core CI machine).
+0. Cycles' random-walk table: the build of one table (Monte Carlo of the walk), g = 0 and 0.8.
+1. Precompute: the Stanford bunny scaled to 10 cm, marble, 32 coefficients, Cycles' profile and
+   the dipole (budget: 20 s on the 2-core CI machine).
 2. One edit (coefficient fit + dot product, 3 channels) on a >= 120k-vertex mesh (the bunny
-   subdivided once; budget: 5 ms on the CPU).
+   subdivided once; budget: 5 ms on the CPU), Cycles' profile.
 
 Run: `make bench` (or .venv/bin/python blender_scripts/bench_prt.py [--runs N]).
 """
@@ -45,22 +46,36 @@ def main() -> int:
     print(f"machine: {machine()}")
     print(f"translucent {translucent.__version__}")
 
+    # Tables from scratch: the cache in memory only, a new Roughness per run (a new table).
+    cache = translucent.table_cache()
+    translucent.set_table_cache(None)
+    for g in (0.0, 0.8):
+        builds = []
+        for k in range(args.runs):
+            m = translucent.Material((0.1, 0.2, 0.3), 50.0, g=g, eta=1.4).with_layers(roughness=0.15 + 0.1 * k)
+            builds.append(translucent.prepare_profile(m))
+        print(f"walk table, g {g}: build median {statistics.median(builds):.2f} s over {args.runs} tables "
+              "(100 albedos x 96 radii; kept on disk after the first build)")
+    translucent.set_table_cache(cache)
+
     marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
     p, t = models.load("stanford-bunny.obj", diagonal=0.1)
     scene = models.standard_scene(p, t)
-    times, reports = [], []
-    for _ in range(args.runs):
-        t0 = time.perf_counter()
-        prt = translucent.Prt(scene, marble, coefficients=32)
-        times.append(time.perf_counter() - t0)
-        reports.append(prt.report)
-    r = reports[-1]
-    print(
-        f"\nprecompute, bunny 10 cm ({scene.vertex_count} vertices, {r['samples']} samples), marble, "
-        f"32 coefficients: median {statistics.median(times):.2f} s over {args.runs} runs "
-        f"(irradiance {r['seconds_irradiance']:.2f} s, tree {r['seconds_tree']:.2f} s, "
-        f"transport {r['seconds_transport']:.2f} s) [budget 20 s]"
-    )
+    translucent.prepare_profile(marble)
+    for profile in ("cycles", "dipole"):
+        times, reports = [], []
+        for _ in range(args.runs):
+            t0 = time.perf_counter()
+            prt = translucent.Prt(scene, marble, coefficients=32, profile=profile)
+            times.append(time.perf_counter() - t0)
+            reports.append(prt.report)
+        r = reports[-1]
+        print(
+            f"\nprecompute, bunny 10 cm ({scene.vertex_count} vertices, {r['samples']} samples), marble, "
+            f"{profile} profile, 32 coefficients: median {statistics.median(times):.2f} s over {args.runs} runs "
+            f"(irradiance {r['seconds_irradiance']:.2f} s, tree {r['seconds_tree']:.2f} s, "
+            f"transport {r['seconds_transport']:.2f} s) [budget 20 s]"
+        )
 
     # Growth: the same surface with 4x the vertices and 4x the samples. Brute force (Xu 2007
     # §6.1) would take 16x; the clustered far field should take a little over 4x.

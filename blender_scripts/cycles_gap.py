@@ -53,6 +53,10 @@ def rel(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> float:
     return float(max(translucent.relative_error(a, b, w)["rms"]))
 
 
+def rel_channels(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
+    return [float(x) for x in translucent.relative_error(a, b, w)["rms"]]
+
+
 def ratio(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
     """Area-weighted mean ratio sum(w a) / sum(w b) per channel."""
     return [float((w * a[:, c]).sum() / max((w * b[:, c]).sum(), 1e-30)) for c in range(3)]
@@ -91,15 +95,20 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
             preview = prt.radiance(m)
             edit = prt.last_eval["seconds"]
             row[profile] = dict(vs_cycles=rel(preview, cyc, w_all), ratio=ratio(preview, cyc, w_all),
+                                vs_cycles_channels=rel_channels(preview, cyc, w_all),
+                                interreflection_share=prt.report["interreflection_share"],
                                 vs_direct=rel(preview, direct, w_all), precompute_s=pre, edit_ms=1e3 * edit,
                                 estimate=max(prt.last_eval["error_estimate"]))
             if profile == "cycles" or m.g == 0.0:
                 gt = report.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
+                # The ground truth is the direct-light model: PRT without the bounce against it.
+                direct_prt = prt if not prt.report["interreflection_rays"] else translucent.Prt(
+                    scene, m, profile=profile, backend="cpu", interreflection=False)
                 # Along the normal, as the bake looks: L = W(1) B / pi.
                 exit_weight = (translucent.layer_weight(m.roughness, 1.0, m.eta) if profile == "cycles"
                                else report.fresnel_t(m.eta))
                 gt_radiance = gt * exit_weight / np.pi
-                row[profile]["prt_vs_truth"] = rel(prt.radiosity(m)[idx], gt, w)
+                row[profile]["prt_vs_truth"] = rel(direct_prt.radiosity(m)[idx], gt, w)
                 row[profile]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
                 row[profile]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
         rows.append(row)

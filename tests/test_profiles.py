@@ -187,3 +187,47 @@ def test_the_far_side_of_a_sun_lit_marble_sphere_is_within_one_percent(profile):
     assert max(near) < 0.002, near
     # The estimate covers what it measured, on both sides.
     assert max(prt.last_eval["error_estimate"]) >= max(max(far), max(near))
+
+
+def test_the_objects_own_light_adds_where_it_can_fall_back_and_nowhere_else():
+    """Interreflection (on by default with Cycles' profile): a convex sphere cannot light
+    itself, so B is unchanged to the bit; two faces of a V under a sun light each other, so
+    each vertex of the V gains, by at most the light its partner sends (view factor <= 1)."""
+    from test_stability import sphere
+
+    p, t = sphere(12, 0.05)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.2, 0.1, -1.0), 2.0)
+    m = translucent.Material.preset("skin1")
+    on = translucent.Prt(s, m, backend="cpu")
+    off = translucent.Prt(s, m, backend="cpu", interreflection=False)
+    assert on.report["interreflection_rays"] == 144 * len(p) and off.report["interreflection_rays"] == 0
+    np.testing.assert_array_equal(on.radiosity(m), off.radiosity(m))
+    assert translucent.Prt(s, m, backend="cpu", profile="dipole").report["interreflection_rays"] == 0
+
+    # A V of two 10 cm squares at 60 degrees, opening upwards, lit from above.
+    n = 21
+    u = np.linspace(0.0, 0.1, n, dtype=np.float32)
+    a, b = np.meshgrid(u, u)
+    half = math.radians(30.0)
+    left = np.stack([-a.ravel() * math.sin(half), b.ravel(), a.ravel() * math.cos(half)], 1)
+    right = np.stack([a.ravel() * math.sin(half), b.ravel(), a.ravel() * math.cos(half)], 1)
+    idx = np.arange(n * n).reshape(n, n)
+    quads = np.stack([idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()], 1)
+    tl = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    pts = np.vstack([left, right])
+    tris = np.vstack([tl, tl + n * n])
+    normal = np.cross(pts[tris[:, 1]] - pts[tris[:, 0]], pts[tris[:, 2]] - pts[tris[:, 0]])
+    tris[normal[:, 2] < 0] = tris[normal[:, 2] < 0][:, ::-1]  # both faces look up, into the V
+    v = translucent.Scene(pts, tris)
+    v.add_sun((0.0, 0.0, -1.0), 2.0)
+    on = translucent.Prt(v, m, backend="cpu")
+    off = translucent.Prt(v, m, backend="cpu", interreflection=False)
+    b_on, b_off = on.radiosity(m), off.radiosity(m)
+    assert np.all(b_on >= b_off - 1e-7)
+    gain = (b_on - b_off).sum(axis=0) / b_off.sum(axis=0)
+    assert np.all(gain > 0.02), gain  # the faces see each other over a large solid angle
+    # Bounded by the partner's whole outgoing light times the receiving slab's albedo.
+    albedo = np.array(m.slab_reflectance("cycles"))
+    assert np.all(gain < albedo * 1.05), (gain, albedo)
+    assert on.report["interreflection_share"] == pytest.approx(gain.max(), rel=0.05)

@@ -5,6 +5,7 @@
 // Shared: what every method uses.
 pub mod error; // the one error type
 pub mod gpu; // one wgpu context and the per-method kernels
+pub mod interreflection; // the object's own light falling back on it (ray cast)
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
 pub mod lights; // Blender/Cycles lights and the world
 pub mod mesh; // validated triangle meshes, surface samples, vertex areas

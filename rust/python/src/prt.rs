@@ -79,7 +79,8 @@ impl PyPrt {
     #[new]
     #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
         tolerance = 1e-5, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
-        backend = "auto", fit_tolerance = None, profile = "cycles"))]
+        backend = "auto", fit_tolerance = None, profile = "cycles", interreflection = None,
+        interreflection_rays = 144))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -96,8 +97,20 @@ impl PyPrt {
         backend: &str,
         fit_tolerance: Option<f64>,
         profile: &str,
+        interreflection: Option<bool>,
+        interreflection_rays: i64,
     ) -> PyResult<Self> {
         let model = crate::material::model(profile)?;
+        let rays: usize = non_negative("interreflection_rays", interreflection_rays)?;
+        if !(1..=1_000_000).contains(&rays) {
+            return Err(PyValueError::new_err(format!(
+                "interreflection_rays {rays} must lie in [1, 1000000]"
+            )));
+        }
+        // By default what the profile's renderer shows: Cycles has the object's own light, the
+        // dipole papers do not.
+        let bounce = interreflection.unwrap_or(model == translucent_core::profiles::Model::Cycles);
+        let strata = ((rays as f64).sqrt().round() as usize).max(1);
         if !matches!(backend, "auto" | "gpu" | "cpu") {
             return Err(PyValueError::new_err(format!(
                 "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
@@ -125,6 +138,7 @@ impl PyPrt {
             far_field,
             eta,
             model,
+            interreflection: bounce.then_some(strata),
         };
         let irr = IrradianceSettings {
             eta,
@@ -303,6 +317,9 @@ impl PyPrt {
         d.set_item("skipped_dark", r.skipped_dark)?;
         d.set_item("far_field_distance_bound", r.far_field_distance_bound)?;
         d.set_item("seconds_irradiance", r.seconds_irradiance)?;
+        d.set_item("interreflection_rays", r.interreflection_rays)?;
+        d.set_item("interreflection_share", r.interreflection_share)?;
+        d.set_item("seconds_interreflection", r.seconds_interreflection)?;
         d.set_item("seconds_tree", r.seconds_tree)?;
         d.set_item("seconds_transport", r.seconds_transport)?;
         d.set_item("seconds", r.seconds_total)?;

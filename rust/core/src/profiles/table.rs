@@ -439,6 +439,14 @@ impl WalkProfile {
                 *c += w * x;
             }
         }
+        // Each table row is non-decreasing in rho, but the cubic in u between rows (and the blend
+        // between tables) need not be at noise level: keep the running maximum, so that the disc
+        // integral never falls and never exceeds the total (found by the stability suite).
+        let mut top = 0.0f64;
+        for c in cum.iter_mut() {
+            top = top.max(*c);
+            *c = top;
+        }
         let slopes = monotone_slopes(radii, &cum);
         let walked = albedo.clamp(MIN_ALBEDO, MAX_ALBEDO);
         let sigma_t_prime = sigma_t * (1.0 - walked * material.g);

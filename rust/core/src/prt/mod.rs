@@ -73,6 +73,9 @@ pub struct PrtSettings {
     pub eta: f64,
     /// The radial profile the basis is chosen for and edits are fitted to.
     pub model: Model,
+    /// The object's own light falling back on it (`interreflection`): `strata` x `strata`
+    /// rays per vertex, or None for direct light only.
+    pub interreflection: Option<usize>,
 }
 
 impl Default for PrtSettings {
@@ -86,6 +89,7 @@ impl Default for PrtSettings {
             far_field: 0.25,
             eta: 1.3,
             model: Model::Dipole,
+            interreflection: None,
         }
     }
 }
@@ -122,6 +126,11 @@ pub struct PrtReport {
     /// at the chosen opening ratio (Taylor remainder of |x_o - x| about the cluster centre).
     pub far_field_distance_bound: f64,
     pub seconds_irradiance: f64,
+    /// Rays cast for the object's own light (0 when interreflection is off), and the share of
+    /// the representative's B it adds (area-weighted mean over the vertices, worst channel).
+    pub interreflection_rays: u64,
+    pub interreflection_share: f64,
+    pub seconds_interreflection: f64,
     pub seconds_tree: f64,
     pub seconds_transport: f64,
     pub seconds_total: f64,
@@ -154,7 +163,22 @@ pub struct Prt {
     /// The index of refraction of the irradiance's Fresnel factor.
     eta: f64,
     model: Model,
+    /// The object's own light: what it adds per vertex, and the source albedo it was computed
+    /// with (see `Bounce`).
+    bounce: Option<Bounce>,
     report: PrtReport,
+}
+
+/// One bounce of the object's own light, computed at the precompute for the first
+/// representative and carried to any edit: the indirect irradiance E_ind per vertex (rays cast
+/// from each vertex, `interreflection`), which the receiver turns into radiosity locally,
+/// B += (R_total + point mass) E_ind (indirect light varies slowly against the profile), scaled
+/// per channel by how much more or less light the edited material sends out than the
+/// representative did (the ratio of their slab albedos seen along the normal).
+#[derive(Debug, Clone)]
+struct Bounce {
+    irradiance: Vec<[f32; 3]>,
+    source_albedo: [f64; 3],
 }
 
 /// A material projected on the basis: the dot-product coefficients per channel and the fit's
@@ -369,8 +393,7 @@ impl Prt {
         report.stored_channels = channels;
         report.seconds_transport = t_transport.elapsed().as_secs_f64();
         report.seconds_total = start.elapsed().as_secs_f64();
-        tick(1.0)?;
-        Ok(Prt {
+        let mut prt = Prt {
             fitter,
             transport,
             gpu: None,
@@ -381,8 +404,45 @@ impl Prt {
             whole_mesh,
             eta: settings.eta,
             model: settings.model,
+            bounce: None,
             report,
-        })
+        };
+        if let Some(strata) = settings.interreflection.filter(|&s| s > 0) {
+            let t_bounce = Instant::now();
+            let rep = &representatives[0];
+            let direct = prt.radiosity(rep)?.radiosity;
+            let tracer = crate::raytrace::Tracer::new(mesh);
+            let model = settings.model;
+            let irradiance = crate::interreflection::indirect_irradiance(
+                mesh,
+                &tracer,
+                &direct,
+                &|cos| model.exit_weight(rep, cos),
+                strata,
+            );
+            let source_albedo = slab_albedo(model, rep)?;
+            let receiving = lobe_totals(model, rep)?;
+            let (mut added, mut had) = ([0.0f64; 3], [0.0f64; 3]);
+            for ((e, b), w) in irradiance.iter().zip(&direct).zip(mesh.vertex_areas()) {
+                for c in 0..3 {
+                    added[c] += f64::from(*w) * receiving[c] * f64::from(e[c]);
+                    had[c] += f64::from(*w) * f64::from(b[c]);
+                }
+            }
+            prt.report.interreflection_share = (0..3)
+                .filter(|&c| had[c] > 0.0)
+                .map(|c| added[c] / had[c])
+                .fold(0.0, f64::max);
+            prt.report.interreflection_rays = (mesh.vertex_count() * strata * strata) as u64;
+            prt.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();
+            prt.bounce = Some(Bounce {
+                irradiance,
+                source_albedo,
+            });
+            prt.report.seconds_total = start.elapsed().as_secs_f64();
+        }
+        tick(1.0)?;
+        Ok(prt)
     }
 
     /// Moves the dot product to a GPU (uploading the transport once), or back to the CPU.
@@ -522,6 +582,21 @@ impl Prt {
                 .zip(self.vertex_irradiance.par_iter())
                 .for_each(|(b, i)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * i[ch]));
         }
+        if let Some(bounce) = &self.bounce {
+            let albedo = slab_albedo(self.model, material)?;
+            let receiving = lobe_totals(self.model, material)?;
+            let k: [f32; 3] = std::array::from_fn(|ch| {
+                if bounce.source_albedo[ch] > 0.0 {
+                    (receiving[ch] * albedo[ch] / bounce.source_albedo[ch]) as f32
+                } else {
+                    0.0
+                }
+            });
+            radiosity
+                .par_iter_mut()
+                .zip(bounce.irradiance.par_iter())
+                .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
+        }
         Ok(Evaluation {
             radiosity,
             fit_error: c.fit_error,
@@ -557,6 +632,19 @@ impl Prt {
         }
         Ok(e)
     }
+}
+
+/// What a thick slab of `material` returns per unit irradiance, profile and lobes: the
+/// profile's total plus its point mass, per channel.
+fn lobe_totals(model: Model, material: &Material) -> Result<[f64; 3]> {
+    let p = model.profiles(material)?;
+    Ok(std::array::from_fn(|c| p[c].total() + p[c].point_mass()))
+}
+
+/// The slab's albedo seen along the normal: the exit weight times `lobe_totals`.
+fn slab_albedo(model: Model, material: &Material) -> Result<[f64; 3]> {
+    let w = model.exit_weight(material, 1.0);
+    Ok(lobe_totals(model, material)?.map(|t| w * t))
 }
 
 /// Turns radiosity into outgoing radiance toward `eye` in place: L_d = W(cos_o) B / pi with

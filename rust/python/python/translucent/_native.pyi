@@ -153,9 +153,14 @@ class Prt:
         backend: Literal["auto", "gpu", "cpu"] = "auto",
         fit_tolerance: float | None = None,
         profile: Profile = "cycles",
+        interreflection: bool | None = None,
+        interreflection_rays: int = 144,
     ) -> None:
         """`profile`: "cycles" (Cycles' random walk with the Principled layers: what a Cycles
         render shows) or "dipole" (Jensen's dipole, the papers' model).
+        `interreflection`: add the object's own light falling back on it (one bounce, ray cast
+        with `interreflection_rays` per vertex); None: on for "cycles" (Cycles shows it), off for
+        "dipole".
         `backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
         "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none.
         `fit_tolerance`: choose the basis size as the smallest (up to `coefficients`) whose

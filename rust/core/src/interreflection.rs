@@ -1,0 +1,159 @@
+//! The object's own light falling back on it (Cycles' indirect light from the object): the
+//! irradiance each vertex receives from the radiance the mesh sends out, by ray casting.
+//!
+//! E_ind(x) = int_H L(y(w), -w) (n . w) dw, y(w) the first surface point along w, L the
+//! outgoing radiance there, L = W(mu_y) B(y) / pi with B interpolated from the vertices and W
+//! the profile's exit weight (`Model::exit_weight`). Cosine-weighted directions on a stratified
+//! grid (rotated per vertex) give E_ind = pi mean L. Rays that leave the mesh, or meet the
+//! inside of a surface, bring nothing.
+
+use crate::mesh::{interpolated_normal, Mesh};
+use crate::raytrace::Tracer;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// Irradiance per vertex from the mesh's own outgoing light. `radiosity` per vertex (B),
+/// `exit_weight(cos)` the factor from B / pi to radiance at view cosine cos; `strata` x
+/// `strata` rays per vertex.
+pub fn indirect_irradiance(
+    mesh: &Mesh,
+    tracer: &Tracer,
+    radiosity: &[[f32; 3]],
+    exit_weight: &(dyn Fn(f64) -> f64 + Sync),
+    strata: usize,
+) -> Vec<[f32; 3]> {
+    let strata = strata.max(1);
+    let rays = (strata * strata) as f32;
+    mesh.positions()
+        .par_iter()
+        .zip(mesh.normals().par_iter())
+        .enumerate()
+        .map(|(v, (&p, &n))| {
+            if n == Vec3::ZERO {
+                return [0.0; 3];
+            }
+            let (t, b) = n.any_orthonormal_pair();
+            let origin = tracer.offset_origin(p, n);
+            // A per-vertex rotation of the strata (a hash of the index): no shared pattern.
+            let shift = (v as u32).wrapping_mul(2_654_435_761) as f32 / u32::MAX as f32;
+            let mut sum = [0f32; 3];
+            for i in 0..strata {
+                for j in 0..strata {
+                    // Cosine-weighted: r = sqrt(u), phi = 2 pi v (Malley's method).
+                    let u = (i as f32 + 0.5) / strata as f32;
+                    let w = ((j as f32 + 0.5) / strata as f32 + shift).fract();
+                    let (r, phi) = (u.sqrt(), 2.0 * PI * w);
+                    let z = (1.0 - u).max(0.0).sqrt();
+                    let dir = (t * (r * phi.cos()) + b * (r * phi.sin()) + n * z).normalize();
+                    if let Some(l) =
+                        radiance_along(mesh, tracer, radiosity, exit_weight, origin, dir)
+                    {
+                        for c in 0..3 {
+                            sum[c] += l[c];
+                        }
+                    }
+                }
+            }
+            sum.map(|s| PI * s / rays)
+        })
+        .collect()
+}
+
+/// The radiance arriving at `origin` along `dir` from the mesh, if the ray meets the outside
+/// of a surface.
+fn radiance_along(
+    mesh: &Mesh,
+    tracer: &Tracer,
+    radiosity: &[[f32; 3]],
+    exit_weight: &(dyn Fn(f64) -> f64 + Sync),
+    origin: Vec3,
+    dir: Vec3,
+) -> Option<[f32; 3]> {
+    let hit = tracer.intersect(origin, dir, f32::INFINITY)?;
+    let tri = mesh.triangles()[hit.triangle as usize];
+    let [a, b, c] = tri.map(|i| mesh.positions()[i as usize]);
+    let y = origin + dir * hit.t;
+    // Barycentric coordinates of y in (a, b, c).
+    let (e1, e2, d) = (b - a, c - a, y - a);
+    let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d20, d21) = (d.dot(e1), d.dot(e2));
+    let den = d00 * d11 - d01 * d01;
+    if den <= 0.0 {
+        return None;
+    }
+    let bv = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
+    let bw = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - bv);
+    let bu = 1.0 - bv - bw;
+    let flat = e1.cross(e2).normalize_or_zero();
+    let normal = interpolated_normal(&tri.map(|i| mesh.normals()[i as usize]), bv, bw, flat);
+    let cos = -normal.dot(dir);
+    if cos <= 0.0 || flat.dot(dir) >= 0.0 {
+        return None; // the inside of a surface: no light leaves it toward the origin
+    }
+    let w = exit_weight(f64::from(cos)) as f32 / PI;
+    let [ra, rb, rc] = tri.map(|i| radiosity[i as usize]);
+    Some(std::array::from_fn(|k| {
+        w * (bu * ra[k] + bv * rb[k] + bw * rc[k])
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two parallel unit-normal squares facing each other at distance h (a box without
+    /// sides): the lower one receives from the upper one, of uniform radiosity B and a
+    /// Lambertian exit (W = 1), E = B F with F the view factor of parallel squares (Howell's
+    /// catalogue, C-11), at the centre of the lower square the point-to-square form factor.
+    #[test]
+    fn facing_squares_exchange_the_view_factor() {
+        let n = 41;
+        let mut p = Vec::new();
+        let mut t = Vec::new();
+        for (z, flip) in [(0.0f32, false), (1.0, true)] {
+            let base = p.len() as u32;
+            for j in 0..n {
+                for i in 0..n {
+                    let x = 4.0 * (i as f32 / (n - 1) as f32 - 0.5);
+                    let y = 4.0 * (j as f32 / (n - 1) as f32 - 0.5);
+                    p.push(Vec3::new(x, y, z));
+                }
+            }
+            for j in 0..n - 1 {
+                for i in 0..n - 1 {
+                    let a = base + (j * n + i) as u32;
+                    let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
+                    if flip {
+                        t.push([a, d, b]);
+                        t.push([a, c, d]);
+                    } else {
+                        t.push([a, b, d]);
+                        t.push([a, d, c]);
+                    }
+                }
+            }
+        }
+        let mesh = Mesh::new(p, t, None).unwrap();
+        let tracer = Tracer::new(&mesh);
+        let b = vec![[1.0f32, 0.5, 0.0]; mesh.vertex_count()];
+        let e = indirect_irradiance(&mesh, &tracer, &b, &|_| 1.0, 24);
+        // Centre of the lower square: a point under a 4 x 4 square at height 1. The point-to-
+        // rectangle form factor (Howell C-15 for a parallel rectangle with the point under a
+        // corner, times four quarters): F = 4 * (1/2pi) [A/sqrt(1+A^2) atan(B/sqrt(1+A^2))
+        // + B/sqrt(1+B^2) atan(A/sqrt(1+B^2))] with A = B = 2.
+        let (a2, b2) = (2.0f64, 2.0f64);
+        let quarter = (a2 / (1.0 + a2 * a2).sqrt() * (b2 / (1.0 + a2 * a2).sqrt()).atan()
+            + b2 / (1.0 + b2 * b2).sqrt() * (a2 / (1.0 + b2 * b2).sqrt()).atan())
+            / (2.0 * std::f64::consts::PI);
+        let f = 4.0 * quarter;
+        let centre = (n / 2) * n + n / 2;
+        let got = e[centre];
+        assert!(
+            (f64::from(got[0]) - f).abs() < 0.02 * f,
+            "E {} vs view factor {f}",
+            got[0]
+        );
+        assert!((got[1] - 0.5 * got[0]).abs() < 1e-6 && got[2] == 0.0);
+    }
+}
