@@ -102,13 +102,11 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
             if profile == "cycles" or m.g == 0.0:
                 gt = report.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
                 # The ground truth is the direct-light model: PRT without the bounce against it.
-                direct_prt = prt if not prt.report["interreflection_rays"] else translucent.Prt(
-                    scene, m, profile=profile, backend="cpu", interreflection=False)
                 # Along the normal, as the bake looks: L = W(1) B / pi.
                 exit_weight = (translucent.layer_weight(m.roughness, 1.0, m.eta) if profile == "cycles"
                                else report.fresnel_t(m.eta))
                 gt_radiance = gt * exit_weight / np.pi
-                row[profile]["prt_vs_truth"] = rel(direct_prt.radiosity(m)[idx], gt, w)
+                row[profile]["prt_vs_truth"] = rel(prt.radiosity(m, interreflection=False)[idx], gt, w)
                 row[profile]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
                 row[profile]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
         rows.append(row)

@@ -1,6 +1,8 @@
-"""Error against run time (issue 5, point 3): every method and setting measured against the
-brute-force ground truth (the same dipole model, `translucent.reference_radiosity`) and
-against Cycles, next to the wall time of its precompute and of one edit. Cycles at several
+"""Error against run time (issue 5, point 3; issue 9, point 7): every method, setting and
+profile measured against the brute-force ground truth of the same profile
+(`translucent.reference_radiosity`) and against Cycles, next to the wall time of its precompute
+and of one edit. Both profiles are measured: Cycles' random walk (the default: PRT with the
+object's own light) and Jensen's dipole (the papers' model). Cycles at several
 sample counts is its own curve (error against a high-sample Cycles bake), and EEVEE's own
 subsurface render is the peer an artist would otherwise use.
 
@@ -105,13 +107,16 @@ def worst(err: dict) -> tuple[float, float]:
     return float(max(err["rms"])), float(max(err["max"]))
 
 
-def prt_rows(scene, material, name, truth, receivers, weights, cycles=None) -> list[Row]:
-    """Each PRT setting: one precompute for the material, one (timed) edit, the errors."""
+def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, profile="cycles") -> list[Row]:
+    """Each PRT setting: one precompute for the material, one (timed) edit, the errors against
+    the ground truth (direct light, as the reference integrates it) and, with the object's own
+    light as Cycles has it, against Cycles."""
     rows = []
+    method = f"PRT (Xu 2007), {profile} profile"
     for coefficients, degree, fit_tol in PRT_SETTINGS:
         t0 = time.perf_counter()
         prt = translucent.Prt(scene, material, coefficients=coefficients, degree=degree,
-                              fit_tolerance=fit_tol, backend="cpu")
+                              fit_tolerance=fit_tol, backend="cpu", profile=profile, interreflection=False)
         pre = time.perf_counter() - t0
         edits = []
         for _ in range(5):
@@ -121,13 +126,19 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None) -> l
         rep = prt.report
         setting = f"{rep['coefficients']} coeff., degree {degree}" + (f", fit tol. {fit_tol:g}" if fit_tol else "")
         rms, mx = worst(translucent.relative_error(b[receivers], truth, weights))
-        rows.append(Row("PRT (Xu 2007)", setting, name, "ground truth", rms, mx, pre, float(np.median(edits)), est,
+        rows.append(Row(method, setting, name, "ground truth", rms, mx, pre, float(np.median(edits)), est,
                         extra=dict(samples=rep["samples"], coefficients=rep["coefficients"])))
-        if cycles is not None:
-            radiance = prt.radiance(material)[receivers]
-            rms, mx = worst(translucent.relative_error(radiance, cycles["values"], weights))
-            rows.append(Row("PRT (Xu 2007)", setting, name, cycles["label"], rms, mx, pre,
-                            float(np.median(edits)), est))
+        if cycles is not None and (coefficients, degree, fit_tol) == (32, 1, None):
+            t0 = time.perf_counter()
+            full = translucent.Prt(scene, material, coefficients=coefficients, degree=degree, backend="cpu",
+                                   profile=profile, interreflection=profile == "cycles")
+            pre_full = time.perf_counter() - t0
+            radiance = full.radiance(material)
+            edit = full.last_eval["seconds"]
+            rms, mx = worst(translucent.relative_error(radiance, cycles["all"], cycles["weights"]))
+            bounce = ", with the object's own light" if full.report["interreflection_rays"] else ""
+            rows.append(Row(method, setting + bounce, name, cycles["label"] + ", all vertices", rms, mx, pre_full,
+                            edit, est, notes="what the artist sees against what Cycles renders"))
     return rows
 
 
@@ -164,7 +175,7 @@ def cycles_rows(obj, material, name, spp_list, reference_spp, receivers, weights
         rms, mx = worst(translucent.relative_error(values[receivers], ref[receivers], weights))
         rows.append(Row("Cycles random walk (bake)", f"{spp} spp", name, label, rms, mx, seconds, 0.0,
                         notes="vertex bake, diffuse passes"))
-    return rows, dict(values=ref[receivers], label=label, seconds=ref_s)
+    return rows, dict(values=ref[receivers], all=ref, label=label, seconds=ref_s)
 
 
 def eevee_rows(obj, material, name, samples_list, reference_spp):
@@ -237,16 +248,19 @@ def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
     colours = dict(zip(materials, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
     for mat in materials:
         c = colours[mat]
-        prt = [r for r in rows if r.method.startswith("PRT") and r.material == mat and r.against == "ground truth"]
-        if prt:
-            ax.scatter([r.edit_s for r in prt], [r.rms for r in prt], color=c, marker="o",
-                       label=f"PRT edit, {mat} (vs ground truth)")
-            ax.scatter([r.precompute_s for r in prt], [r.rms for r in prt], color=c, marker="o", facecolors="none",
-                       label=f"PRT precompute, {mat}")
-        prt_c = [r for r in rows if r.method.startswith("PRT") and r.material == mat and r.against.startswith("Cycles")]
-        if prt_c:
-            ax.scatter([r.edit_s for r in prt_c], [r.rms for r in prt_c], color=c, marker="^",
-                       label=f"PRT edit, {mat} (vs Cycles)")
+        for profile, marker in (("cycles", "o"), ("dipole", "D")):
+            ours = [r for r in rows if r.method.startswith("PRT") and profile in r.method and r.material == mat]
+            prt = [r for r in ours if r.against == "ground truth"]
+            if prt:
+                ax.scatter([r.edit_s for r in prt], [r.rms for r in prt], color=c, marker=marker,
+                           label=f"PRT edit, {profile}, {mat} (vs its ground truth)")
+                ax.scatter([r.precompute_s for r in prt], [r.rms for r in prt], color=c, marker=marker,
+                           facecolors="none", label=f"PRT precompute, {profile}, {mat}")
+            prt_c = [r for r in ours if r.against.startswith("Cycles")]
+            if prt_c:
+                ax.scatter([r.edit_s for r in prt_c], [r.rms for r in prt_c], color=c,
+                           marker="^" if profile == "cycles" else "v", s=60,
+                           label=f"PRT edit, {profile}, {mat} (vs Cycles)")
         cyc = sorted((r for r in rows if r.method.startswith("Cycles") and r.material == mat), key=lambda r: r.time_s)
         if cyc:
             ax.plot([r.time_s for r in cyc], [r.rms for r in cyc], color=c, marker="s", linestyle="--",
@@ -279,6 +293,7 @@ def main(argv=None) -> int:
     ap.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64, 256], help="Cycles bake sample counts")
     ap.add_argument("--reference-spp", type=int, default=1024, help="the high-sample Cycles bake and image")
     ap.add_argument("--eevee-samples", type=int, nargs="+", default=[16, 64])
+    ap.add_argument("--profiles", nargs="+", default=["cycles", "dipole"], choices=["cycles", "dipole"])
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
 
@@ -298,24 +313,29 @@ def main(argv=None) -> int:
     rows: list[Row] = []
     steps = len(args.materials)
     for i, name in enumerate(args.materials):
-        progress(i, steps, f"{name}: ground truth")
         m = translucent.Material.preset(name, MM_PER_UNIT)
-        truth, ref_s, ref_info = ground_truth(scene_key, scene, m, receivers, args.rel_tol)
         cyc = None
         if not args.no_cycles:
             progress(i, steps, f"{name}: Cycles bakes")
             rows_c, cyc = cycles_rows(bake_obj, m, name, args.spp, args.reference_spp, receivers, weights)
+            cyc["weights"] = scene.vertex_areas[:, 0]
             rows += rows_c
-            # The model itself against Cycles: the dipole's ground truth as radiance along the normal.
-            radiance = truth * (fresnel_t(m.eta) / np.pi)
-            rms, mx = worst(translucent.relative_error(radiance, cyc["values"], weights))
-            rows.append(Row("Dipole ground truth", "Jensen 2001, multiple scattering", name, cyc["label"], rms, mx,
-                            ref_s, 0.0, notes="the model's distance from Cycles' random walk"))
-        progress(i, steps, f"{name}: PRT settings")
-        rows += prt_rows(scene, m, name, truth, receivers, weights, cyc)
-        rows.append(Row("Reference (brute force)", f"rel. tol. {args.rel_tol:g}, level {ref_info.get('level')}", name,
-                        "ground truth", float(ref_info.get("estimated_rel_error", 0.0)), float("nan"), ref_s, 0.0,
-                        notes="its own convergence estimate"))
+        for profile in args.profiles:
+            progress(i, steps, f"{name}: ground truth, {profile}")
+            truth, ref_s, ref_info = ground_truth(scene_key, scene, m, receivers, args.rel_tol, profile)
+            if cyc is not None:
+                # The model itself (direct light, integrated exactly) against Cycles, along the normal.
+                w = translucent.layer_weight(m.roughness, 1.0, m.eta) if profile == "cycles" else fresnel_t(m.eta)
+                rms, mx = worst(translucent.relative_error(truth * (w / np.pi), cyc["values"], weights))
+                rows.append(Row(f"{profile.capitalize()} ground truth", "direct light, exact integral", name,
+                                cyc["label"], rms, mx, ref_s, 0.0,
+                                notes="the model's distance from Cycles' random walk (no interreflection)"))
+            progress(i, steps, f"{name}: PRT settings, {profile}")
+            rows += prt_rows(scene, m, name, truth, receivers, weights, cyc, profile)
+            rows.append(Row(f"Reference (brute force), {profile}", f"rel. tol. {args.rel_tol:g}, level "
+                            f"{ref_info.get('level')}", name, "ground truth",
+                            float(ref_info.get("estimated_rel_error", 0.0)), float("nan"), ref_s, 0.0,
+                            notes="its own convergence estimate"))
         if not args.no_eevee:
             progress(i, steps, f"{name}: EEVEE")
             rows += eevee_rows(bake_obj, m, name, args.eevee_samples, args.reference_spp)

@@ -214,15 +214,18 @@ impl PyPrt {
     /// Radiosity B per vertex, (N, 3) float32: the profile summed over the lit surface (Xu 2007
     /// eq. 9 without the exit weight / pi); for Cycles' profile, the subsurface lobe and the
     /// diffuse lobe beside it, before the specular layer.
+    /// `interreflection=False` leaves out the object's own light even where it was precomputed.
+    #[pyo3(signature = (material, interreflection = true))]
     fn radiosity<'py>(
         &mut self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
+        interreflection: bool,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let inner = &self.inner;
         let e = py
-            .detach(|| inner.radiosity(&m))
+            .detach(|| inner.radiosity_with(&m, interreflection))
             .map_err(crate::convert::to_py)?;
         let out = rgb_array(py, &e.radiosity);
         self.last = Some(e);

@@ -564,6 +564,12 @@ impl Prt {
     /// Multiple-scattering radiosity B = sum_j c_j T_j per vertex and channel (Xu 2007 eq. 9
     /// without the F_t/pi factor).
     pub fn radiosity(&self, material: &Material) -> Result<Evaluation> {
+        self.radiosity_with(material, true)
+    }
+
+    /// As `radiosity`; `bounce` false leaves out the object's own light even where it was
+    /// precomputed (direct light only: what the ground truth integrates).
+    pub fn radiosity_with(&self, material: &Material, bounce: bool) -> Result<Evaluation> {
         let t0 = Instant::now();
         let c = self.coefficients(material)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
@@ -582,7 +588,7 @@ impl Prt {
                 .zip(self.vertex_irradiance.par_iter())
                 .for_each(|(b, i)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * i[ch]));
         }
-        if let Some(bounce) = &self.bounce {
+        if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
             let albedo = slab_albedo(self.model, material)?;
             let receiving = lobe_totals(self.model, material)?;
             let k: [f32; 3] = std::array::from_fn(|ch| {

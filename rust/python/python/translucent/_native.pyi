@@ -174,8 +174,9 @@ class Prt:
     def backend(self) -> Literal["gpu", "cpu"]: ...
     @property
     def backend_message(self) -> str: ...
-    def radiosity(self, material: Material) -> npt.NDArray[np.float32]:
-        """(N, 3) radiosity B per vertex: the profile summed over the lit surface."""
+    def radiosity(self, material: Material, interreflection: bool = True) -> npt.NDArray[np.float32]:
+        """(N, 3) radiosity B per vertex: the profile summed over the lit surface (with the
+        object's own light where it was precomputed, unless `interreflection` is False)."""
     def radiance(self, material: Material, eye: Vec3 | None = None) -> npt.NDArray[np.float32]:
         """(N, 3) radiance toward the point `eye`, W(w_o) B / pi (W: F_t for the dipole, what the
         specular layer leaves for Cycles); without an eye, along each vertex normal (a bake)."""
