@@ -42,6 +42,11 @@ pub const BASIS_SIZES: [usize; 10] = [4, 6, 8, 12, 16, 24, 32, 48, 64, 96];
 pub const REFRESH_FLOOR: f64 = 0.01;
 pub const REFRESH_FACTOR: f64 = 3.0;
 
+/// Bounces of the object's own light: each returns a fraction (albedo x the view factor of
+/// what a point sees of the object, 0.2-0.3 in a concave character) of the one before, so
+/// three leave about a percent of the series.
+pub const INTERREFLECTION_BOUNCES: usize = 3;
+
 /// The most samples the default spacing asks for.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
 
@@ -169,9 +174,10 @@ pub struct Prt {
     report: PrtReport,
 }
 
-/// One bounce of the object's own light, computed at the precompute for the first
-/// representative and carried to any edit: the indirect irradiance E_ind per vertex (rays cast
-/// from each vertex, `interreflection`), which the receiver turns into radiosity locally,
+/// The object's own light, computed at the precompute for the first representative
+/// (`INTERREFLECTION_BOUNCES` bounces) and carried to any edit: the indirect irradiance E_ind
+/// per vertex (rays cast from each vertex, `interreflection`), which the receiver turns into
+/// radiosity locally,
 /// B += (R_total + point mass) E_ind (indirect light varies slowly against the profile), scaled
 /// per channel by how much more or less light the edited material sends out than the
 /// representative did (the ratio of their slab albedos seen along the normal).
@@ -413,15 +419,25 @@ impl Prt {
             let direct = prt.radiosity(rep)?.radiosity;
             let tracer = crate::raytrace::Tracer::new(mesh);
             let model = settings.model;
-            let irradiance = crate::interreflection::indirect_irradiance(
-                mesh,
-                &tracer,
-                &direct,
-                &|cos| model.exit_weight(rep, cos),
-                strata,
-            );
             let source_albedo = slab_albedo(model, rep)?;
             let receiving = lobe_totals(model, rep)?;
+            // Bounce after bounce: the light sent out is the direct B plus what the indirect
+            // irradiance of the previous pass returns, (R_total + point mass) E_ind.
+            let mut irradiance = vec![[0f32; 3]; mesh.vertex_count()];
+            for _ in 0..INTERREFLECTION_BOUNCES {
+                let sent: Vec<[f32; 3]> = direct
+                    .iter()
+                    .zip(&irradiance)
+                    .map(|(b, e)| std::array::from_fn(|c| b[c] + (receiving[c] as f32) * e[c]))
+                    .collect();
+                irradiance = crate::interreflection::indirect_irradiance(
+                    mesh,
+                    &tracer,
+                    &sent,
+                    &|cos| model.exit_weight(rep, cos),
+                    strata,
+                );
+            }
             let (mut added, mut had) = ([0.0f64; 3], [0.0f64; 3]);
             for ((e, b), w) in irradiance.iter().zip(&direct).zip(mesh.vertex_areas()) {
                 for c in 0..3 {
@@ -433,7 +449,8 @@ impl Prt {
                 .filter(|&c| had[c] > 0.0)
                 .map(|c| added[c] / had[c])
                 .fold(0.0, f64::max);
-            prt.report.interreflection_rays = (mesh.vertex_count() * strata * strata) as u64;
+            prt.report.interreflection_rays =
+                (INTERREFLECTION_BOUNCES * mesh.vertex_count() * strata * strata) as u64;
             prt.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();
             prt.bounce = Some(Bounce {
                 irradiance,
