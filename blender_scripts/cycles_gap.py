@@ -30,7 +30,10 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "blender_scripts"))
 
-import bpy  # noqa: E402,F401
+try:
+    import bpy  # noqa: E402,F401
+except ImportError:  # the table alone needs no Blender
+    bpy = None
 
 import translucent  # noqa: E402
 from addon import export  # noqa: E402
