@@ -7,7 +7,7 @@
 //! grid (rotated per vertex) give E_ind = pi mean L. Rays that leave the mesh, or meet the
 //! inside of a surface, bring nothing.
 
-use crate::mesh::{interpolated_normal, Mesh};
+use crate::mesh::{barycentric, interpolated_normal, Mesh};
 use crate::raytrace::Tracer;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -72,19 +72,10 @@ fn radiance_along(
 ) -> Option<[f32; 3]> {
     let hit = tracer.intersect(origin, dir, f32::INFINITY)?;
     let tri = mesh.triangles()[hit.triangle as usize];
-    let [a, b, c] = tri.map(|i| mesh.positions()[i as usize]);
+    let corners = tri.map(|i| mesh.positions()[i as usize]);
     let y = origin + dir * hit.t;
-    // Barycentric coordinates of y in (a, b, c).
-    let (e1, e2, d) = (b - a, c - a, y - a);
-    let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (d20, d21) = (d.dot(e1), d.dot(e2));
-    let den = d00 * d11 - d01 * d01;
-    if den <= 0.0 {
-        return None;
-    }
-    let bv = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
-    let bw = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - bv);
-    let bu = 1.0 - bv - bw;
+    let [bu, bv, bw] = barycentric(&corners, y)?;
+    let (e1, e2) = (corners[1] - corners[0], corners[2] - corners[0]);
     let flat = e1.cross(e2).normalize_or_zero();
     let normal = interpolated_normal(&tri.map(|i| mesh.normals()[i as usize]), bv, bw, flat);
     let cos = -normal.dot(dir);

@@ -9,6 +9,7 @@ pub mod interreflection; // the object's own light falling back on it (ray cast)
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
 pub mod lights; // Blender/Cycles lights and the world
 pub mod mesh; // validated triangle meshes, surface samples, vertex areas
+pub mod mesh_walk; // Cycles' random walk traced inside the mesh: its answer per vertex
 pub mod metrics; // area-weighted relative error
 pub mod optics; // material, Fresnel, measured data, Principled layers
 pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated

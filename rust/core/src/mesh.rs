@@ -310,6 +310,22 @@ impl Mesh {
     }
 }
 
+/// Barycentric coordinates (w_a, w_b, w_c) of `y`, projected on the plane of `corners`,
+/// clamped into the triangle; None for a degenerate triangle.
+pub fn barycentric(corners: &[Vec3; 3], y: Vec3) -> Option<[f32; 3]> {
+    let [a, b, c] = *corners;
+    let (e1, e2, d) = (b - a, c - a, y - a);
+    let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d20, d21) = (d.dot(e1), d.dot(e2));
+    let den = d00 * d11 - d01 * d01;
+    if den <= 0.0 || !den.is_finite() {
+        return None;
+    }
+    let bv = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
+    let bw = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - bv);
+    Some([1.0 - bv - bw, bv, bw])
+}
+
 /// The corner normals [n_a, n_b, n_c] interpolated at barycentric (1 - u - v, u, v) and
 /// normalised; `flat` where they cancel. Shared with the reference so both see the same surface.
 pub fn interpolated_normal(corners: &[Vec3; 3], u: f32, v: f32, flat: Vec3) -> Vec3 {

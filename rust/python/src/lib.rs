@@ -19,6 +19,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scene::PyScene>()?;
     m.add_class::<prt::PyPrt>()?;
     m.add_function(wrap_pyfunction!(reference::reference_radiosity_py, m)?)?;
+    m.add_function(wrap_pyfunction!(reference::reference_radiance_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::relative_error, m)?)?;
     m.add_function(wrap_pyfunction!(material::prepare_profile, m)?)?;
     m.add_function(wrap_pyfunction!(material::profile_ready, m)?)?;

@@ -11,7 +11,14 @@ use std::sync::Mutex;
 use translucent_core::basis::Degree;
 use translucent_core::irradiance::{irradiance, Density, IrradianceReport, IrradianceSettings};
 use translucent_core::optics::Material;
+use translucent_core::prt::geometry::GeometrySettings;
+
+/// The walks' default ray budget: 20 M rays (about 8 s on 2 cores), and at most 2500 per
+/// vertex (a small mesh needs fewer for the same noise per area).
+const DEFAULT_WALK_RAYS: u64 = 20_000_000;
+const WALK_RAYS_PER_VERTEX: u64 = 2500;
 use translucent_core::prt::{Backend, Evaluation, Prt, PrtSettings};
+
 use translucent_core::Vec3;
 
 /// Precomputed transport (Xu 2007) of a scene for materials near `materials`.
@@ -80,7 +87,7 @@ impl PyPrt {
     #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
         tolerance = 1e-5, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
         backend = "auto", fit_tolerance = None, profile = "cycles", interreflection = None,
-        interreflection_rays = 144))]
+        interreflection_rays = 144, walks = None, walk_vertices = 1000, walk_rays = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -99,6 +106,9 @@ impl PyPrt {
         profile: &str,
         interreflection: Option<bool>,
         interreflection_rays: i64,
+        walks: Option<i64>,
+        walk_vertices: i64,
+        walk_rays: Option<i64>,
     ) -> PyResult<Self> {
         let model = crate::material::model(profile)?;
         let rays: usize = non_negative("interreflection_rays", interreflection_rays)?;
@@ -111,6 +121,33 @@ impl PyPrt {
         // dipole papers do not.
         let bounce = interreflection.unwrap_or(model == translucent_core::profiles::Model::Cycles);
         let strata = ((rays as f64).sqrt().round() as usize).max(1);
+        // Walks through the mesh: by default with Cycles' profile (its walk is what Cycles
+        // renders) as many as `walk_rays` rays allow; never for the dipole (it has no walk).
+        // `walks=N` asks for exactly N per walked vertex and channel, 0 for none.
+        let walk_rays: u64 = match walk_rays {
+            Some(r) => non_negative("walk_rays", r)?,
+            None => {
+                DEFAULT_WALK_RAYS.min(WALK_RAYS_PER_VERTEX * scene.scene.mesh.vertex_count() as u64)
+            }
+        };
+        let walk_vertices: usize = non_negative("walk_vertices", walk_vertices)?;
+        let geometry = match walks {
+            Some(w) => {
+                let w: usize = non_negative("walks", w)?;
+                (w > 0).then(|| GeometrySettings {
+                    walks: w,
+                    rays: 0,
+                    vertices: walk_vertices,
+                    ..GeometrySettings::default()
+                })
+            }
+            None if model == translucent_core::profiles::Model::Cycles => Some(GeometrySettings {
+                rays: walk_rays,
+                vertices: walk_vertices,
+                ..GeometrySettings::default()
+            }),
+            None => None,
+        };
         if !matches!(backend, "auto" | "gpu" | "cpu") {
             return Err(PyValueError::new_err(format!(
                 "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
@@ -139,6 +176,7 @@ impl PyPrt {
             eta,
             model,
             interreflection: bounce.then_some(strata),
+            geometry,
         };
         let irr = IrradianceSettings {
             eta,
@@ -323,6 +361,23 @@ impl PyPrt {
         d.set_item("interreflection_rays", r.interreflection_rays)?;
         d.set_item("interreflection_share", r.interreflection_share)?;
         d.set_item("seconds_interreflection", r.seconds_interreflection)?;
+        match &r.geometry {
+            Some(g) => {
+                let w = PyDict::new(py);
+                w.set_item("walked_vertices", g.walked_vertices)?;
+                w.set_item("skipped_flat", g.skipped_flat)?;
+                w.set_item("walks_per_vertex", g.walks_per_vertex)?;
+                w.set_item("walks", g.walks)?;
+                w.set_item("rays", g.rays)?;
+                w.set_item("spacing", g.spacing)?;
+                w.set_item("kernel_radius", g.kernel_radius)?;
+                w.set_item("noise", g.noise.to_vec())?;
+                w.set_item("share", g.share.to_vec())?;
+                w.set_item("seconds", g.seconds)?;
+                d.set_item("walks", w)?;
+            }
+            None => d.set_item("walks", py.None())?,
+        }
         d.set_item("seconds_tree", r.seconds_tree)?;
         d.set_item("seconds_transport", r.seconds_transport)?;
         d.set_item("seconds", r.seconds_total)?;

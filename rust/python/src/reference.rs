@@ -1,4 +1,5 @@
-//! `translucent.reference_radiosity` and `translucent.relative_error`.
+//! `translucent.reference_radiosity`, `translucent.reference_radiance` (walks through the
+//! mesh) and `translucent.relative_error`.
 
 use crate::convert::{float_rows, guard, non_negative, rgb_array, to_py, Progress};
 use crate::material::PyMaterial;
@@ -7,7 +8,9 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
+use translucent_core::mesh_walk::{walk_radiosity, MeshWalkSettings};
 use translucent_core::metrics;
+use translucent_core::profiles::Model;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::Vec3;
 
@@ -46,26 +49,7 @@ pub fn reference_radiosity_py<'py>(
     let max_level: u32 = non_negative("max_level", max_level)?;
     let world_samples: u32 = non_negative("world_samples", world_samples)?;
     let area_samples: u32 = non_negative("area_samples", area_samples)?;
-    let n = scene.scene.mesh.vertex_count() as i64;
-    let receivers: Option<Vec<u32>> = receivers
-        .map(|r| -> PyResult<Vec<u32>> {
-            let mut out = Vec::new();
-            for item in r.try_iter()? {
-                let item = item?;
-                let i = item
-                    .extract::<i64>()
-                    .ok()
-                    .filter(|i| (0..n).contains(i))
-                    .ok_or_else(|| {
-                        PyValueError::new_err(format!(
-                            "receiver index {item} out of range for {n} vertices"
-                        ))
-                    })?;
-                out.push(i as u32);
-            }
-            Ok(out)
-        })
-        .transpose()?;
+    let receivers = receiver_indices(receivers, scene.scene.mesh.vertex_count())?;
     let m = material.inner;
     let irr = IrradianceSettings {
         eta: model.irradiance_eta(&m),
@@ -141,4 +125,119 @@ pub fn relative_error<'py>(
     d.set_item("rms", s.rel_rms.to_vec())?;
     d.set_item("max", s.rel_max.to_vec())?;
     Ok(d)
+}
+
+/// Cycles' answer per vertex without Blender: the radiance leaving each receiver along its
+/// normal (as a vertex bake records it, L = W(1) B / pi) from Cycles 5.0's random walk traced
+/// inside the mesh (`mesh_walk`), `walks` per vertex and channel, lit by the scene's direct
+/// light. Only `profile="cycles"`: the dipole is not a walk. Returns (K, 3) float32 for the
+/// `receivers` (all vertices by default); with `details=True` (radiance, dict) with its
+/// standard error per receiver, the walks' own noise (area-weighted relative RMS per channel),
+/// walks, rays and seconds.
+#[pyfunction]
+#[pyo3(signature = (scene, material, profile = "cycles", walks = 256, receivers = None,
+    seed = 0, world_samples = 64, area_samples = 16, progress = None, details = false))]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(name = "reference_radiance")]
+pub fn reference_radiance_py<'py>(
+    py: Python<'py>,
+    scene: PyRef<'_, PyScene>,
+    material: PyRef<'_, PyMaterial>,
+    profile: &str,
+    walks: i64,
+    receivers: Option<Bound<'py, PyAny>>,
+    seed: u64,
+    world_samples: i64,
+    area_samples: i64,
+    progress: Option<Py<PyAny>>,
+    details: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    if crate::material::model(profile)? != Model::Cycles {
+        return Err(PyValueError::new_err(
+            "reference_radiance traces Cycles' random walk (profile='cycles'); for the dipole \
+             use reference_radiosity(..., profile='dipole')",
+        ));
+    }
+    let walks: usize = non_negative("walks", walks)?;
+    let world_samples: u32 = non_negative("world_samples", world_samples)?;
+    let area_samples: u32 = non_negative("area_samples", area_samples)?;
+    let receivers = receiver_indices(receivers, scene.scene.mesh.vertex_count())?;
+    let m = material.inner;
+    let irr = IrradianceSettings {
+        eta: 1.0,
+        world_samples,
+        area_samples,
+        seed: 1,
+    };
+    let settings = MeshWalkSettings {
+        walks,
+        seed: MeshWalkSettings::default().seed ^ seed,
+        ..MeshWalkSettings::default()
+    };
+    let tracer = scene.tracer();
+    let core_scene = &scene.scene;
+    let progress = Progress::new(progress);
+    let result = py
+        .detach(|| {
+            guard(|| {
+                let mesh = &core_scene.mesh;
+                let (e, _) = irradiance(
+                    core_scene,
+                    &tracer,
+                    mesh.positions(),
+                    mesh.normals(),
+                    &irr.for_density(Density::Receivers),
+                )?;
+                let tick = |f: f32| progress.call(f);
+                walk_radiosity(
+                    mesh,
+                    &tracer,
+                    &m,
+                    &e,
+                    receivers.as_deref(),
+                    &settings,
+                    if progress.is_set() { Some(&tick) } else { None },
+                )
+            })
+        })
+        .map_err(|e| e.into_py(Some(&progress)))?;
+    let k = (Model::Cycles.exit_weight(&m, 1.0) / std::f64::consts::PI) as f32;
+    let to_radiance =
+        |v: &[[f32; 3]]| -> Vec<[f32; 3]> { v.iter().map(|b| b.map(|x| x * k)).collect() };
+    let values = rgb_array(py, &to_radiance(&result.radiosity));
+    if !details {
+        return Ok(values.into_any());
+    }
+    let d = PyDict::new(py);
+    d.set_item("std_error", rgb_array(py, &to_radiance(&result.std_error)))?;
+    d.set_item("noise", result.noise.to_vec())?;
+    d.set_item("walks", result.walks)?;
+    d.set_item("rays", result.rays)?;
+    d.set_item("channels_skipped", result.channels_skipped)?;
+    d.set_item("seconds", result.seconds)?;
+    Ok((values, d).into_pyobject(py)?.into_any())
+}
+
+/// Receiver vertex indices from any iterable of ints, each in [0, n).
+fn receiver_indices(receivers: Option<Bound<'_, PyAny>>, n: usize) -> PyResult<Option<Vec<u32>>> {
+    let n = n as i64;
+    receivers
+        .map(|r| -> PyResult<Vec<u32>> {
+            let mut out = Vec::new();
+            for item in r.try_iter()? {
+                let item = item?;
+                let i = item
+                    .extract::<i64>()
+                    .ok()
+                    .filter(|i| (0..n).contains(i))
+                    .ok_or_else(|| {
+                        PyValueError::new_err(format!(
+                            "receiver index {item} out of range for {n} vertices"
+                        ))
+                    })?;
+                out.push(i as u32);
+            }
+            Ok(out)
+        })
+        .transpose()
 }

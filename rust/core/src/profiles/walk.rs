@@ -269,25 +269,8 @@ impl Walker {
         self.edges_sq.partition_point(|&e| e <= r_sq)
     }
 
-    /// The entry direction (depth grows along +z): the normal refracted by 1/IOR through a
-    /// GGX microfacet normal sampled from the visible normals seen along the normal, which at
-    /// normal view is D(h) cos(theta_h) (Cycles `subsurface_entry_bounce`, Heitz 2018).
     fn entry(&self, u: f64, v: f64) -> DVec3 {
-        if self.entry_alpha <= 0.0 {
-            return DVec3::Z;
-        }
-        // GGX: tan^2 theta_h = alpha^2 u / (1 - u) samples D(h) cos(theta_h).
-        let tan2 = self.entry_alpha * self.entry_alpha * u / (1.0 - u).max(1e-300);
-        let cos_h = 1.0 / (1.0 + tan2).sqrt();
-        let sin_h = (1.0 - cos_h * cos_h).max(0.0).sqrt();
-        let phi = 2.0 * PI * v;
-        // In the outside frame (normal +z): h, and wi = the normal.
-        let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
-        let eta = self.inv_ior;
-        let arg = 1.0 - eta * eta * (1.0 - cos_h * cos_h);
-        let wo = -eta * DVec3::Z + (eta * cos_h - arg.max(0.0).sqrt().max(1e-7)) * h;
-        // Into the depth frame: depth = -z.
-        DVec3::new(wo.x, wo.y, -wo.z).normalize()
+        entry_direction(self.entry_alpha, self.inv_ior, u, v)
     }
 
     /// One walk: adds its exits to `early` (the first ANISOTROPIC_BOUNCES bounces, per bounce
@@ -410,10 +393,32 @@ impl Walker {
     }
 }
 
+/// The entry direction in a frame whose depth grows along +z: the normal refracted by
+/// 1/IOR (`inv_ior`) through a GGX microfacet normal of `alpha` (Roughness^2) sampled from the
+/// visible normals seen along the normal, which at normal view is D(h) cos(theta_h) (Cycles
+/// `subsurface_entry_bounce`, Heitz 2018). (u, v) in [0, 1)^2.
+pub(crate) fn entry_direction(alpha: f64, inv_ior: f64, u: f64, v: f64) -> DVec3 {
+    if alpha <= 0.0 {
+        return DVec3::Z;
+    }
+    // GGX: tan^2 theta_h = alpha^2 u / (1 - u) samples D(h) cos(theta_h).
+    let tan2 = alpha * alpha * u / (1.0 - u).max(1e-300);
+    let cos_h = 1.0 / (1.0 + tan2).sqrt();
+    let sin_h = (1.0 - cos_h * cos_h).max(0.0).sqrt();
+    let phi = 2.0 * PI * v;
+    // In the outside frame (normal +z): h, and wi = the normal.
+    let h = DVec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+    let eta = inv_ior;
+    let arg = 1.0 - eta * eta * (1.0 - cos_h * cos_h);
+    let wo = -eta * DVec3::Z + (eta * cos_h - arg.max(0.0).sqrt().max(1e-7)) * h;
+    // Into the depth frame: depth = -z.
+    DVec3::new(wo.x, wo.y, -wo.z).normalize()
+}
+
 /// The i-th point of a 5-dimensional Kronecker sequence (Roberts' R_5: multiples of the
 /// powers of 1/phi_5, phi_5 the real root of x^6 = x + 1), shifted by the seed: stratified in
 /// every dimension, unbiased over the shift.
-fn first_numbers(i: usize, seed: u64) -> [f64; 5] {
+pub(crate) fn first_numbers(i: usize, seed: u64) -> [f64; 5] {
     const PHI5: f64 = 1.167_303_978_261_418_7;
     std::array::from_fn(|k| {
         let step = PHI5.powi(-(k as i32 + 1));
@@ -423,16 +428,16 @@ fn first_numbers(i: usize, seed: u64) -> [f64; 5] {
 }
 
 /// A uniform number in [0, 1) with 53 random bits.
-fn uniform(rng: &mut impl Rng) -> f64 {
+pub(crate) fn uniform(rng: &mut impl Rng) -> f64 {
     (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
 /// A free-flight length of unit rate.
-fn exponential(rng: &mut impl Rng) -> f64 {
+pub(crate) fn exponential(rng: &mut impl Rng) -> f64 {
     -(1.0 - uniform(rng)).ln()
 }
 
-fn isotropic(rng: &mut impl Rng) -> DVec3 {
+pub(crate) fn isotropic(rng: &mut impl Rng) -> DVec3 {
     let cos = 1.0 - 2.0 * uniform(rng);
     let sin = (1.0 - cos * cos).max(0.0).sqrt();
     let phi = 2.0 * PI * uniform(rng);
@@ -441,7 +446,7 @@ fn isotropic(rng: &mut impl Rng) -> DVec3 {
 
 /// A direction scattered from `dir` by Henyey–Greenstein(g), g > 0 forward; the inversion
 /// Cycles uses (`volume_henyey_greenstein_sample`).
-fn henyey_greenstein(u: f64, v: f64, dir: DVec3, g: f64) -> DVec3 {
+pub(crate) fn henyey_greenstein(u: f64, v: f64, dir: DVec3, g: f64) -> DVec3 {
     let mut cos = 1.0 - 2.0 * u;
     if g.abs() >= 1e-3 {
         let k = (1.0 - g * g) / (1.0 - g * cos);

@@ -12,6 +12,7 @@
 //! The radial profile is any of `profiles` (the dipole of the paper, or Cycles' random walk):
 //! the transport holds geometry and light only, and the profile enters through the fit.
 
+pub mod geometry;
 mod layout;
 mod tree;
 
@@ -21,6 +22,7 @@ pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
 use crate::optics::Material;
 use crate::profiles::{Model, Profile, RadialProfile};
+use geometry::{GeometryReport, GeometrySettings, GeometryTerm};
 use glam::{DVec3, Vec3};
 use layout::Transport;
 use rayon::prelude::*;
@@ -81,6 +83,9 @@ pub struct PrtSettings {
     /// The object's own light falling back on it (`interreflection`): `strata` x `strata`
     /// rays per vertex, or None for direct light only.
     pub interreflection: Option<usize>,
+    /// Cycles' walk through the mesh (`geometry`): the mesh's own shape (thin and curved
+    /// parts) in the transport, Cycles' model only; None for the half-space profile alone.
+    pub geometry: Option<GeometrySettings>,
 }
 
 impl Default for PrtSettings {
@@ -95,6 +100,7 @@ impl Default for PrtSettings {
             eta: 1.3,
             model: Model::Dipole,
             interreflection: None,
+            geometry: None,
         }
     }
 }
@@ -139,6 +145,8 @@ pub struct PrtReport {
     pub seconds_tree: f64,
     pub seconds_transport: f64,
     pub seconds_total: f64,
+    /// The walks through the mesh, when asked for.
+    pub geometry: Option<GeometryReport>,
 }
 
 /// Where the per-edit dot product runs.
@@ -171,6 +179,8 @@ pub struct Prt {
     /// The object's own light: what it adds per vertex, and the source albedo it was computed
     /// with (see `Bounce`).
     bounce: Option<Bounce>,
+    /// What the walks through the mesh add to the half-space profile (`geometry`).
+    geometry: Option<GeometryTerm>,
     report: PrtReport,
 }
 
@@ -411,8 +421,26 @@ impl Prt {
             eta: settings.eta,
             model: settings.model,
             bounce: None,
+            geometry: None,
             report,
         };
+        if let Some(g) = &settings.geometry {
+            let rep = &representatives[0];
+            let halfspace = prt.radiosity_with(rep, false)?.radiosity;
+            let tracer = crate::raytrace::Tracer::new(mesh);
+            let term = GeometryTerm::compute(
+                mesh,
+                &tracer,
+                rep,
+                &prt.vertex_irradiance,
+                &halfspace,
+                g,
+                None,
+            )?;
+            prt.report.geometry = Some(term.report.clone());
+            prt.geometry = Some(term);
+            prt.report.seconds_total = start.elapsed().as_secs_f64();
+        }
         if let Some(strata) = settings.interreflection.filter(|&s| s > 0) {
             let t_bounce = Instant::now();
             let rep = &representatives[0];
@@ -575,7 +603,13 @@ impl Prt {
     /// representatives brings it back.
     pub fn refresh_advised(&self, error_estimate: &[f64; 3]) -> bool {
         let worst = error_estimate.iter().copied().fold(0.0, f64::max);
-        worst > REFRESH_FLOOR.max(REFRESH_FACTOR * self.report.representative_error)
+        // The walks' own noise is there at the representatives too: part of the baseline.
+        let noise = self
+            .report
+            .geometry
+            .as_ref()
+            .map_or(0.0, |g| g.noise.iter().copied().fold(0.0, f64::max));
+        worst > REFRESH_FLOOR.max(REFRESH_FACTOR * (self.report.representative_error + noise))
     }
 
     /// Multiple-scattering radiosity B = sum_j c_j T_j per vertex and channel (Xu 2007 eq. 9
@@ -605,6 +639,13 @@ impl Prt {
                 .zip(self.vertex_irradiance.par_iter())
                 .for_each(|(b, i)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * i[ch]));
         }
+        let mut error_estimate = c.error_estimate;
+        if let Some(g) = &self.geometry {
+            let added = g.add_to(&mut radiosity, material)?;
+            for (e, a) in error_estimate.iter_mut().zip(added) {
+                *e += a;
+            }
+        }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
             let albedo = slab_albedo(self.model, material)?;
             let receiving = lobe_totals(self.model, material)?;
@@ -623,7 +664,7 @@ impl Prt {
         Ok(Evaluation {
             radiosity,
             fit_error: c.fit_error,
-            error_estimate: c.error_estimate,
+            error_estimate,
             fit_seconds,
             dot_seconds: t1.elapsed().as_secs_f64(),
             gpu,
@@ -732,6 +773,20 @@ fn check_settings(representatives: &[Material], s: &PrtSettings) -> Result<()> {
         if !(t.is_finite() && t > 0.0 && t < 1.0) {
             return Err(Error::InvalidArgument(format!(
                 "fit_tolerance {t} must lie in (0, 1)"
+            )));
+        }
+    }
+    if let Some(g) = &s.geometry {
+        if s.model != Model::Cycles {
+            return Err(Error::InvalidArgument(format!(
+                "walks through the mesh are Cycles' random walk: the {} profile has none",
+                s.model.name()
+            )));
+        }
+        if !(1..=1 << 20).contains(&g.walks) || g.vertices == 0 {
+            return Err(Error::InvalidArgument(format!(
+                "walks {} must lie in [1, 2^20] and vertices {} be > 0",
+                g.walks, g.vertices
             )));
         }
     }

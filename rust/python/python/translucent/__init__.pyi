@@ -7,6 +7,7 @@ from ._native import (
     layer_weight as layer_weight,
     prepare_profile as prepare_profile,
     profile_ready as profile_ready,
+    reference_radiance as reference_radiance,
     reference_radiosity as reference_radiosity,
     relative_error as relative_error,
     set_table_cache as set_table_cache,

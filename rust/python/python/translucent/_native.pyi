@@ -231,6 +231,36 @@ def reference_radiosity(
     profile: Profile = "cycles",
     max_nodes: int = 4_000_000,
 ) -> tuple[npt.NDArray[np.float32], dict[str, object]]: ...
+@overload
+def reference_radiance(
+    scene: Scene,
+    material: Material,
+    profile: Literal["cycles"] = "cycles",
+    walks: int = 256,
+    receivers: Sequence[int] | None = None,
+    seed: int = 0,
+    world_samples: int = 64,
+    area_samples: int = 16,
+    progress: Progress | None = None,
+    details: Literal[False] = False,
+) -> npt.NDArray[np.float32]:
+    """Cycles' answer without Blender: radiance along each receiver's normal (as a vertex bake
+    records it) from Cycles 5.0's random walk traced inside the mesh, `walks` per vertex and
+    channel, direct light. Releases the GIL."""
+@overload
+def reference_radiance(
+    scene: Scene,
+    material: Material,
+    profile: Literal["cycles"] = "cycles",
+    walks: int = 256,
+    receivers: Sequence[int] | None = None,
+    seed: int = 0,
+    world_samples: int = 64,
+    area_samples: int = 16,
+    progress: Progress | None = None,
+    *,
+    details: Literal[True],
+) -> tuple[npt.NDArray[np.float32], dict[str, object]]: ...
 def relative_error(
     estimate: ArrayN3, truth: ArrayN3, weights: npt.ArrayLike | None = None
 ) -> dict[str, list[float]]:

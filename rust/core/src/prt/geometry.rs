@@ -1,0 +1,546 @@
+//! The mesh's geometry in PRT's transport: what Cycles' walk through the actual mesh adds to,
+//! or takes from, the half-space profile (light through ears and noses, out of the inside of a
+//! curve, lost through a thin part's far side).
+//!
+//! At the precompute, walks (`mesh_walk`) enter at a well-spread subset of the vertices and
+//! the difference D = B_walk - B_halfspace is taken there for the first representative, per
+//! channel. D is smooth on the scale of the diffusion length, so it is carried to every vertex
+//! by a kernel average over the walked vertices facing the same way (which also averages the
+//! walks' noise down). An edit keeps dot products: per channel, D / A (A the thick slab's
+//! albedo, total + point mass) is looked up at the edited channel's diffusion length
+//! L = 1 / sigma_tr, interpolated in ln L between the three channels the precompute walked,
+//! and scaled by the edited A. An edit whose L leaves the walked range by more than
+//! `LENGTH_MARGIN` is flagged (the error estimate grows, a refresh is advised).
+//!
+//! Vertices whose neighbourhood within the reach of the walks is flat (every walked vertex
+//! within it lies within `FLAT_TOLERANCE` L of the tangent plane and faces the same way) get
+//! D = 0 without walks: there the half-space table is the walk.
+
+use crate::error::Result;
+use crate::mesh::Mesh;
+use crate::mesh_walk::{walk_radiosity, MeshWalkResult, MeshWalkSettings};
+use crate::optics::{Material, CHANNELS};
+use crate::profiles::{Model, RadialProfile};
+use crate::raytrace::Tracer;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// How far (as a factor on the diffusion length) an edit may go beyond the walked channels
+/// before the geometry term is called stale.
+pub const LENGTH_MARGIN: f64 = 1.5;
+/// Flat enough to skip the walks: every walked vertex within reach lies within this many
+/// diffusion lengths of the tangent plane.
+pub const FLAT_TOLERANCE: f64 = 0.02;
+/// Kernel radius in units of the walked vertices' spacing.
+const KERNEL_SPACINGS: f32 = 2.0;
+/// Walks per vertex the ray budget aims at when it chooses how many vertices to walk.
+const TARGET_WALKS: usize = 256;
+/// Points per s^2 a greedy Poisson disc of spacing s leaves on a mesh's vertices (measured on
+/// Suzanne and the bunny: about 1 / 1.9 s^2).
+const SPREAD_DENSITY: f64 = 1.9;
+/// Reach of the walks in diffusion lengths, for the flatness test.
+const REACH_LENGTHS: f64 = 3.0;
+
+/// How the geometry term is computed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeometrySettings {
+    /// Walks per walked vertex and channel in the first pass; more follow, up to `rays`.
+    pub walks: usize,
+    /// Rays the walks may cast in all (one per flight): short-reaching materials get many
+    /// more walks per vertex for the same time.
+    pub rays: u64,
+    /// At most this many walks per vertex and channel.
+    pub max_walks: usize,
+    /// Vertices walked (spread over the surface) in the first pass, and when the walks per
+    /// vertex are fixed (`rays` 0).
+    pub vertices: usize,
+    pub seed: u64,
+}
+
+impl Default for GeometrySettings {
+    fn default() -> Self {
+        Self {
+            walks: 16,
+            rays: 20_000_000,
+            max_walks: 4096,
+            vertices: 1000,
+            seed: MeshWalkSettings::default().seed,
+        }
+    }
+}
+
+/// What the geometry term cost and what it left out.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GeometryReport {
+    /// Vertices the walks entered at.
+    pub walked_vertices: usize,
+    /// Candidate vertices found flat: no walks.
+    pub skipped_flat: usize,
+    pub walks_per_vertex: usize,
+    pub walks: u64,
+    pub rays: u64,
+    /// Spacing of the walked vertices and the kernel radius [unit].
+    pub spacing: f64,
+    pub kernel_radius: f64,
+    /// The term's own noise after the kernel average, area-weighted relative RMS of B, per
+    /// channel.
+    pub noise: [f64; 3],
+    /// Area-weighted RMS of D relative to B, per channel: how much geometry changed.
+    pub share: [f64; 3],
+    pub seconds: f64,
+}
+
+/// D / A per vertex and channel at the three walked diffusion lengths.
+#[derive(Debug, Clone)]
+pub struct GeometryTerm {
+    per_albedo: Vec<[f32; 3]>,
+    /// ln L of the walked channels, with the channel index, sorted.
+    lengths: Vec<(f64, usize)>,
+    /// Relative noise per channel (added to the error estimate).
+    noise: [f64; 3],
+    pub report: GeometryReport,
+}
+
+/// Diffusion length 1 / sigma_tr of each channel's profile (capped at a large multiple of the
+/// near length where nothing is absorbed), and the slab albedo A.
+fn lengths_and_albedos(model: Model, m: &Material) -> Result<([f64; 3], [f64; 3])> {
+    let p = model.profiles(m)?;
+    let l = std::array::from_fn(|c| {
+        let s = p[c].length_scales();
+        s.decay.min(1e6 * s.near).max(1e-30)
+    });
+    Ok((l, std::array::from_fn(|c| p[c].total() + p[c].point_mass())))
+}
+
+impl GeometryTerm {
+    /// Walks `mesh` for `material` (Cycles' model), lit by `irradiance` per vertex, against
+    /// `halfspace` (B of the half-space profile per vertex, direct light, point mass included).
+    #[allow(clippy::too_many_arguments)]
+    pub fn compute(
+        mesh: &Mesh,
+        tracer: &Tracer,
+        material: &Material,
+        irradiance: &[[f32; 3]],
+        halfspace: &[[f32; 3]],
+        settings: &GeometrySettings,
+        progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
+    ) -> Result<GeometryTerm> {
+        let start = Instant::now();
+        let (lengths, albedo) = lengths_and_albedos(Model::Cycles, material)?;
+        let shortest = lengths.iter().copied().fold(f64::INFINITY, f64::min);
+        let longest = lengths.iter().copied().fold(0.0, f64::max);
+        let n = mesh.vertex_count();
+        // Flat neighbourhoods get D = 0 and no walks.
+        let reach = (REACH_LENGTHS * longest) as f32;
+        let tolerance = (FLAT_TOLERANCE * shortest) as f32;
+        let select = |count: usize| -> (f32, Vec<u32>, Vec<u32>) {
+            let spacing = (mesh.area() / (SPREAD_DENSITY * count as f64)).sqrt() as f32;
+            let candidates = if count >= n {
+                (0..n as u32)
+                    .filter(|&v| mesh.normals()[v as usize] != Vec3::ZERO)
+                    .collect()
+            } else {
+                spread(mesh, spacing)
+            };
+            let flat = flat_vertices(mesh, &candidates, reach, tolerance);
+            let walked = candidates
+                .iter()
+                .zip(&flat)
+                .filter(|(_, f)| !**f)
+                .map(|(v, _)| *v)
+                .collect();
+            (spacing, candidates, walked)
+        };
+        let walk = |walked: &[u32], walks: usize, seed: u64, from: f32, to: f32| {
+            let tick = progress.map(|p| move |f: f32| p(from + (to - from) * f));
+            walk_radiosity(
+                mesh,
+                tracer,
+                material,
+                irradiance,
+                Some(walked),
+                &MeshWalkSettings {
+                    walks,
+                    seed,
+                    ..MeshWalkSettings::default()
+                },
+                tick.as_ref().map(|f| f as _),
+            )
+        };
+        let (mut spacing, mut candidates, mut walked) =
+            select(settings.vertices.clamp(1, n.max(1)));
+        let first = walk(&walked, settings.walks, settings.seed, 0.0, 0.2)?;
+        // Rays per walk (all channels) from this first pass; the budget then buys either more
+        // walked vertices (short-reaching materials: finer detail for the same rays) or more
+        // walks at the same ones.
+        let per_walk = first.rays as f64 / (walked.len() * settings.walks).max(1) as f64;
+        let budget_walks = |vertices: usize| {
+            ((settings.rays as f64 / (per_walk * vertices as f64).max(1.0)) as usize)
+                .min(settings.max_walks)
+        };
+        let wanted = (settings.rays as f64 / (per_walk * TARGET_WALKS as f64).max(1.0)) as usize;
+        let (walks, walks_per_vertex) = if settings.rays > 0
+            && wanted as f64 > 1.5 * candidates.len() as f64
+            && candidates.len() < n
+        {
+            (spacing, candidates, walked) = select(wanted.min(n));
+            let w = budget_walks(walked.len()).max(settings.walks);
+            (walk(&walked, w, settings.seed ^ 0x5eed, 0.2, 1.0)?, w)
+        } else {
+            let more = budget_walks(walked.len()).saturating_sub(settings.walks);
+            if more > 0 && !walked.is_empty() {
+                let second = walk(&walked, more, settings.seed ^ 0x5eed, 0.2, 1.0)?;
+                (
+                    combine(&first, &second, settings.walks, more),
+                    settings.walks + more,
+                )
+            } else {
+                (first, settings.walks)
+            }
+        };
+        // Per candidate: D and its variance (flat ones: exactly 0).
+        let mut diff = vec![([0f32; 3], [0f32; 3]); candidates.len()];
+        let mut k = 0;
+        for (i, &v) in candidates.iter().enumerate() {
+            // `walked` is the candidates in order, less the flat ones.
+            if walked.get(k) != Some(&v) {
+                continue;
+            }
+            let (b, se) = (walks.radiosity[k], walks.std_error[k]);
+            let h = halfspace[v as usize];
+            diff[i] = (
+                std::array::from_fn(|c| b[c] - h[c]),
+                std::array::from_fn(|c| se[c] * se[c]),
+            );
+            k += 1;
+        }
+        let radius = KERNEL_SPACINGS * spacing;
+        let grid = Grid::new(mesh, &candidates, radius);
+        let smoothed: Vec<([f32; 3], [f32; 3])> = (0..n)
+            .into_par_iter()
+            .map(|v| grid.average(mesh, v as u32, &candidates, &diff))
+            .collect();
+        let areas = mesh.vertex_areas();
+        let mut sums = [[0f64; 3]; 3]; // noise^2, D^2, B^2 (area-weighted)
+        for ((d, var), (b, a)) in smoothed.iter().zip(halfspace.iter().zip(areas)) {
+            for c in 0..3 {
+                let a = f64::from(*a);
+                sums[0][c] += a * f64::from(var[c]);
+                sums[1][c] += a * f64::from(d[c]).powi(2);
+                sums[2][c] += a * f64::from(b[c] + d[c]).powi(2);
+            }
+        }
+        let rel = |i: usize| -> [f64; 3] {
+            std::array::from_fn(|c| {
+                if sums[2][c] > 0.0 {
+                    (sums[i][c] / sums[2][c]).sqrt()
+                } else {
+                    0.0
+                }
+            })
+        };
+        let (noise, share) = (rel(0), rel(1));
+        let per_albedo = smoothed
+            .iter()
+            .map(|(d, _)| {
+                std::array::from_fn(|c| {
+                    if albedo[c] > 0.0 {
+                        (f64::from(d[c]) / albedo[c]) as f32
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        let mut sorted: Vec<(f64, usize)> = (0..CHANNELS)
+            .filter(|&c| albedo[c] > 0.0)
+            .map(|c| (lengths[c].ln(), c))
+            .collect();
+        sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Ok(GeometryTerm {
+            per_albedo,
+            lengths: sorted,
+            noise,
+            report: GeometryReport {
+                walked_vertices: walked.len(),
+                skipped_flat: candidates.len() - walked.len(),
+                walks_per_vertex,
+                walks: walks.walks,
+                rays: walks.rays,
+                spacing: f64::from(spacing),
+                kernel_radius: f64::from(radius),
+                noise,
+                share,
+                seconds: start.elapsed().as_secs_f64(),
+            },
+        })
+    }
+
+    /// Adds the term for `material` to `radiosity` (per vertex, direct light) and returns, per
+    /// channel, the error it may add: its noise, and 1 where the edit's diffusion length left
+    /// the walked range by more than LENGTH_MARGIN (a refresh is advised).
+    pub fn add_to(&self, radiosity: &mut [[f32; 3]], material: &Material) -> Result<[f64; 3]> {
+        if self.lengths.is_empty() {
+            return Ok([0.0; 3]);
+        }
+        let (lengths, albedo) = lengths_and_albedos(Model::Cycles, material)?;
+        let mut error = self.noise;
+        // Per channel: the two walked channels bracketing ln L and their weights.
+        let picks: [([usize; 2], [f32; 2]); 3] = std::array::from_fn(|c| {
+            let x = lengths[c].ln();
+            let (lo, hi) = (self.lengths[0], self.lengths[self.lengths.len() - 1]);
+            if x - hi.0 > LENGTH_MARGIN.ln() || lo.0 - x > LENGTH_MARGIN.ln() {
+                error[c] = 1.0;
+            }
+            if x <= lo.0 {
+                return ([lo.1, lo.1], [1.0, 0.0]);
+            }
+            if x >= hi.0 {
+                return ([hi.1, hi.1], [1.0, 0.0]);
+            }
+            let i = self
+                .lengths
+                .partition_point(|l| l.0 <= x)
+                .clamp(1, self.lengths.len() - 1);
+            let (a, b) = (self.lengths[i - 1], self.lengths[i]);
+            let t = if b.0 > a.0 {
+                (x - a.0) / (b.0 - a.0)
+            } else {
+                0.0
+            } as f32;
+            ([a.1, b.1], [1.0 - t, t])
+        });
+        let scale = albedo.map(|a| a as f32);
+        radiosity
+            .par_iter_mut()
+            .zip(self.per_albedo.par_iter())
+            .for_each(|(b, d)| {
+                for c in 0..3 {
+                    let ([i, j], [wi, wj]) = picks[c];
+                    b[c] = (b[c] + scale[c] * (wi * d[i] + wj * d[j])).max(0.0);
+                }
+            });
+        Ok(error)
+    }
+}
+
+/// Two runs of walks at the same vertices as one: the walk-weighted mean and its standard
+/// error.
+fn combine(a: &MeshWalkResult, b: &MeshWalkResult, na: usize, nb: usize) -> MeshWalkResult {
+    let (wa, wb) = (na as f32, nb as f32);
+    let n = wa + wb;
+    let mix = |x: &[[f32; 3]], y: &[[f32; 3]], f: &dyn Fn(f32, f32) -> f32| -> Vec<[f32; 3]> {
+        x.iter()
+            .zip(y)
+            .map(|(p, q)| std::array::from_fn(|c| f(p[c], q[c])))
+            .collect()
+    };
+    MeshWalkResult {
+        radiosity: mix(&a.radiosity, &b.radiosity, &|p, q| (wa * p + wb * q) / n),
+        std_error: mix(&a.std_error, &b.std_error, &|p, q| {
+            ((wa * p).powi(2) + (wb * q).powi(2)).sqrt() / n
+        }),
+        noise: std::array::from_fn(|c| {
+            ((f64::from(wa) * a.noise[c]).powi(2) + (f64::from(wb) * b.noise[c]).powi(2)).sqrt()
+                / f64::from(n)
+        }),
+        walks: a.walks + b.walks,
+        rays: a.rays + b.rays,
+        channels_skipped: a.channels_skipped,
+        seconds: a.seconds + b.seconds,
+    }
+}
+
+/// A deterministic, well-spread subset of the vertices about `spacing` apart (greedy
+/// Poisson-disc over the vertices in a fixed scrambled order).
+fn spread(mesh: &Mesh, spacing: f32) -> Vec<u32> {
+    let n = mesh.vertex_count() as u32;
+    let mut order: Vec<u32> = (0..n).collect();
+    order.sort_by_key(|&v| v.wrapping_mul(2_654_435_761).rotate_left(7));
+    let cell = spacing.max(f32::MIN_POSITIVE);
+    let mut taken: HashMap<[i32; 3], Vec<u32>> = HashMap::new();
+    let key = |p: Vec3| (p / cell).floor().as_ivec3().to_array();
+    let mut out = Vec::new();
+    for v in order {
+        if mesh.normals()[v as usize] == Vec3::ZERO {
+            continue;
+        }
+        let p = mesh.positions()[v as usize];
+        let k = key(p);
+        let near = (-1..=1).any(|dx| {
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dz| {
+                    taken
+                        .get(&[k[0] + dx, k[1] + dy, k[2] + dz])
+                        .is_some_and(|l| {
+                            l.iter()
+                                .any(|&u| mesh.positions()[u as usize].distance(p) < spacing)
+                        })
+                })
+            })
+        });
+        if !near {
+            taken.entry(k).or_default().push(v);
+            out.push(v);
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+/// Per candidate: whether every other candidate within `reach` lies within `tolerance` of its
+/// tangent plane and faces within 10 degrees of its normal.
+fn flat_vertices(mesh: &Mesh, candidates: &[u32], reach: f32, tolerance: f32) -> Vec<bool> {
+    let grid = Grid::new(mesh, candidates, reach);
+    candidates
+        .par_iter()
+        .map(|&v| {
+            let (p, n) = (mesh.positions()[v as usize], mesh.normals()[v as usize]);
+            let mut flat = true;
+            grid.visit(p, |i| {
+                let u = candidates[i] as usize;
+                let (q, m) = (mesh.positions()[u], mesh.normals()[u]);
+                if q.distance(p) < reach && ((q - p).dot(n).abs() > tolerance || m.dot(n) < 0.985) {
+                    flat = false;
+                }
+            });
+            flat
+        })
+        .collect()
+}
+
+/// A uniform hash grid over candidate vertices.
+struct Grid {
+    cell: f32,
+    cells: HashMap<[i32; 3], Vec<usize>>,
+}
+
+impl Grid {
+    fn new(mesh: &Mesh, candidates: &[u32], cell: f32) -> Grid {
+        let cell = cell.max(f32::MIN_POSITIVE);
+        let mut cells: HashMap<[i32; 3], Vec<usize>> = HashMap::new();
+        for (i, &v) in candidates.iter().enumerate() {
+            let k = (mesh.positions()[v as usize] / cell)
+                .floor()
+                .as_ivec3()
+                .to_array();
+            cells.entry(k).or_default().push(i);
+        }
+        Grid { cell, cells }
+    }
+
+    fn visit(&self, p: Vec3, mut f: impl FnMut(usize)) {
+        let k = (p / self.cell).floor().as_ivec3().to_array();
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(list) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                        list.iter().for_each(|&i| f(i));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Kernel average of the candidates' D at vertex v, (1 - d^2/R^2)^2 times the cosine
+    /// between the normals (candidates facing away are left out: the two sides of an ear),
+    /// and the variance of that average.
+    fn average(
+        &self,
+        mesh: &Mesh,
+        v: u32,
+        candidates: &[u32],
+        diff: &[([f32; 3], [f32; 3])],
+    ) -> ([f32; 3], [f32; 3]) {
+        let (p, n) = (mesh.positions()[v as usize], mesh.normals()[v as usize]);
+        let r2 = self.cell * self.cell;
+        let mut wsum = 0f32;
+        let (mut acc, mut var) = ([0f32; 3], [0f32; 3]);
+        self.visit(p, |i| {
+            let u = candidates[i] as usize;
+            let d2 = mesh.positions()[u].distance_squared(p);
+            let cos = mesh.normals()[u].dot(n);
+            if d2 < r2 && cos > 0.0 {
+                let w = (1.0 - d2 / r2).powi(2) * cos;
+                wsum += w;
+                for c in 0..3 {
+                    acc[c] += w * diff[i].0[c];
+                    var[c] += w * w * diff[i].1[c];
+                }
+            }
+        });
+        if wsum <= 0.0 {
+            return ([0.0; 3], [0.0; 3]);
+        }
+        (acc.map(|a| a / wsum), var.map(|x| x / (wsum * wsum)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize, bump: f32) -> Mesh {
+        let mut p = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let (x, y) = (i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32);
+                let r2 = (x - 0.5).powi(2) + (y - 0.5).powi(2);
+                p.push(Vec3::new(x, y, bump * (-r2 / 0.02).exp()));
+            }
+        }
+        let mut t = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let v = (j * n + i) as u32;
+                t.push([v, v + 1, v + n as u32 + 1]);
+                t.push([v, v + n as u32 + 1, v + n as u32]);
+            }
+        }
+        Mesh::new(p, t, None).unwrap()
+    }
+
+    #[test]
+    fn the_spread_is_a_poisson_disc_covering_the_mesh() {
+        let mesh = grid(60, 0.0);
+        let s = 0.05;
+        let chosen = spread(&mesh, s);
+        for (k, &a) in chosen.iter().enumerate() {
+            for &b in &chosen[k + 1..] {
+                let d = mesh.positions()[a as usize].distance(mesh.positions()[b as usize]);
+                assert!(d >= s, "{d}");
+            }
+        }
+        // Every vertex lies within one spacing of a chosen one (else it would have been chosen).
+        for p in mesh.positions() {
+            let near = chosen
+                .iter()
+                .map(|&c| mesh.positions()[c as usize].distance(*p))
+                .fold(f32::INFINITY, f32::min);
+            assert!(near < s, "{near}");
+        }
+        assert_eq!(chosen, spread(&mesh, s), "deterministic");
+    }
+
+    #[test]
+    fn only_neighbourhoods_that_leave_the_tangent_plane_are_walked() {
+        // A bump of height 0.1 at the centre of a unit plane: candidates near it are not flat
+        // within a reach of 0.15, those far from it are.
+        let mesh = grid(41, 0.1);
+        let candidates = spread(&mesh, 0.05);
+        let flat = flat_vertices(&mesh, &candidates, 0.15, 0.002);
+        for (&v, f) in candidates.iter().zip(&flat) {
+            let p = mesh.positions()[v as usize];
+            let from_centre = Vec3::new(p.x - 0.5, p.y - 0.5, 0.0).length();
+            if from_centre < 0.1 {
+                assert!(!f, "{p:?} lies on the bump");
+            }
+            if from_centre > 0.5 {
+                assert!(*f, "{p:?} lies far from the bump");
+            }
+        }
+        assert!(flat.iter().any(|f| *f) && flat.iter().any(|f| !*f));
+    }
+}

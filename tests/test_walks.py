@@ -1,0 +1,116 @@
+"""Issue 12 through the Python API: Cycles' random walk traced inside the mesh, as a reference
+(`reference_radiance`) and as the geometry term of PRT (`Prt(..., walks=...)`), against
+what it must agree with: Cycles' slab render, the half-space model where the surface is flat,
+the walks at every vertex where it is not; the skip test; determinism; bad input."""
+
+import math
+
+import numpy as np
+import pytest
+
+import translucent
+from test_api import centre_index, plane
+from test_profiles import CYCLES_SLAB, slab_material, sun_plane
+from test_stability import sphere
+
+
+def test_walks_through_an_open_plane_give_the_cycles_slab_render():
+    """An open plane is a half-space for the walks (nothing below to leave through): at the
+    centre of a sun-lit 1 m plane (irradiance 1) the radiance along the normal times pi is the
+    slab albedo Cycles renders (Blender 5.0.1: 0.604, 0.433, 0.244)."""
+    p, s = sun_plane(n=41, size=1.0)
+    c = centre_index(p)
+    m = slab_material()
+    radiance, d = translucent.reference_radiance(s, m, walks=20_000, receivers=[c], details=True)
+    got = radiance[0] * math.pi / translucent.layer_weight(m.roughness, 1.0, m.eta)
+    se = d["std_error"][0] * math.pi
+    assert np.all(se < 0.01 * got)
+    assert np.all(np.abs(got - CYCLES_SLAB) <= 0.02 * np.array(CYCLES_SLAB) + 3 * se), got
+    assert d["walks"] == 3 * 20_000 and d["rays"] > d["walks"]
+
+
+def test_the_same_seed_gives_the_same_walks():
+    p, t = sphere(10, 0.01)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), 1.0)
+    m = translucent.Material.preset("skin1")
+    a = translucent.reference_radiance(s, m, walks=16)
+    b = translucent.reference_radiance(s, m, walks=16)
+    c = translucent.reference_radiance(s, m, walks=16, seed=3)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_flat_neighbourhoods_are_not_walked():
+    """The skip test of point 4: a large plane is flat within the walks' reach everywhere, so no
+    vertex is walked and the preview is the half-space profile's to the bit; a small sphere is
+    curved everywhere, so every candidate vertex is walked."""
+    p, s = sun_plane(n=41, size=1.0)
+    m = translucent.Material.preset("skin1")
+    flat = translucent.Prt(s, m, backend="cpu")
+    walks = flat.report["walks"]
+    assert walks["walked_vertices"] == 0 and walks["skipped_flat"] > 0 and walks["rays"] == 0
+    np.testing.assert_array_equal(flat.radiosity(m), translucent.Prt(s, m, backend="cpu", walks=0).radiosity(m))
+
+    ps, ts = sphere(12, 0.005)
+    sp = translucent.Scene(ps, ts)
+    sp.add_sun((0.0, 0.0, -1.0), 1.0)
+    curved = translucent.Prt(sp, m, backend="cpu").report["walks"]
+    assert curved["skipped_flat"] == 0 and curved["walked_vertices"] > 0
+
+
+def test_prt_with_walks_follows_the_walks_where_light_goes_through():
+    """A 6 mm marble sphere lit from one side: light crosses it, which the half-space profile
+    cannot see (its far side is dark). PRT with walks against the walks at every vertex
+    (20x more walks per vertex, no kernel): within 5 %, and far closer than the half-space
+    preview, which the error estimate states."""
+    p, t = sphere(12, 3.0)  # millimetres
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), 1.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1.0)
+    w = s.vertex_areas[:, 0]
+    truth = translucent.reference_radiance(s, m, walks=1000)
+    k = translucent.layer_weight(m.roughness, 1.0, m.eta) / math.pi
+    walked = translucent.Prt(s, m, backend="cpu", interreflection=False, walk_rays=5_000_000)
+    halfspace = translucent.Prt(s, m, backend="cpu", interreflection=False, walks=0)
+    err_walked = max(translucent.relative_error(walked.radiosity(m) * k, truth, w)["rms"])
+    err_half = max(translucent.relative_error(halfspace.radiosity(m) * k, truth, w)["rms"])
+    assert err_walked < 0.05, err_walked
+    assert err_half > 3 * err_walked, (err_half, err_walked)
+    assert walked.report["walks"]["walks_per_vertex"] >= 16
+    # The estimate states the term's own noise, and covers what was measured.
+    assert max(walked.last_eval["error_estimate"]) >= max(walked.report["walks"]["noise"])
+    assert max(walked.last_eval["error_estimate"]) >= 0.7 * err_walked
+
+
+def test_an_edit_beyond_the_walked_lengths_asks_for_a_refresh():
+    """The geometry term is carried to edits by diffusion length between the three walked
+    channels; an edit that takes a channel's length 3x beyond them says so."""
+    p, t = sphere(12, 0.01)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), 1.0)
+    m = translucent.Material.from_principled(base_color=(0.8, 0.6, 0.5), radius=(1.0, 0.6, 0.4), scale=0.004)
+    prt = translucent.Prt(s, m, backend="cpu", walks=16)
+    prt.radiosity(m)
+    assert not prt.refresh_advised
+    far = translucent.Material.from_principled(base_color=(0.8, 0.6, 0.5), radius=(1.0, 0.6, 0.4), scale=0.02)
+    prt.radiosity(far)
+    assert prt.refresh_advised
+    assert max(prt.last_eval["error_estimate"]) >= 1.0
+
+
+def test_bad_walk_input_is_a_clear_error():
+    p, s = sun_plane(n=11, size=0.1)
+    m = translucent.Material.preset("skin1")
+    with pytest.raises(ValueError, match="dipole"):
+        translucent.reference_radiance(s, m, profile="dipole")
+    with pytest.raises(ValueError):
+        translucent.reference_radiance(s, m, walks=-1)
+    with pytest.raises(ValueError):
+        translucent.reference_radiance(s, m, walks=0)
+    with pytest.raises(ValueError, match="out of range"):
+        translucent.reference_radiance(s, m, receivers=[len(p)])
+    with pytest.raises(ValueError, match="Cycles"):
+        translucent.Prt(s, m, profile="dipole", walks=16)
+    with pytest.raises(ValueError):
+        translucent.Prt(s, m, walks=-3)
