@@ -155,12 +155,20 @@ class Prt:
         profile: Profile = "cycles",
         interreflection: bool | None = None,
         interreflection_rays: int = 144,
+        walks: int | None = None,
+        walk_vertices: int = 1000,
+        walk_rays: int | None = None,
     ) -> None:
         """`profile`: "cycles" (Cycles' random walk with the Principled layers: what a Cycles
         render shows) or "dipole" (Jensen's dipole, the papers' model).
-        `interreflection`: add the object's own light falling back on it (one bounce, ray cast
-        with `interreflection_rays` per vertex); None: on for "cycles" (Cycles shows it), off for
-        "dipole".
+        `interreflection`: add the object's own light falling back on it (three bounces, ray
+        cast with `interreflection_rays` per vertex); None: on for "cycles" (Cycles shows it),
+        off for "dipole".
+        `walks`: Cycles' walk traced through the mesh itself for the geometry a half-space
+        profile cannot see (thin and curved parts); None: on for "cycles" with as many walks as
+        `walk_rays` rays allow (default min(20 M, 2500 per vertex), about 8 s on 2 cores), off
+        for "dipole"; N: exactly N walks per walked vertex and channel; 0: off. Flat
+        neighbourhoods are not walked (`report["walks"]["skipped_flat"]`).
         `backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
         "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none.
         `fit_tolerance`: choose the basis size as the smallest (up to `coefficients`) whose
