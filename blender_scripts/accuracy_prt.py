@@ -34,7 +34,8 @@ def evaluate(model: str, receivers: int, coefficients: int, rel_tol: float, seed
     for name, m in mats.items():
         t0 = time.perf_counter()
         # The ground truth integrates the direct-light model: PRT without the object's own light.
-        prt = translucent.Prt(scene, m, coefficients=coefficients, profile=profile, interreflection=False)
+        prt = translucent.Prt(scene, m, coefficients=coefficients, profile=profile, interreflection=False,
+                              walks=0 if profile == "cycles" else None)
         pre = time.perf_counter() - t0
         b = prt.radiosity(m)[idx]
         edit = prt.last_eval["seconds"]

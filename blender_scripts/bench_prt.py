@@ -70,12 +70,16 @@ def main() -> int:
             times.append(time.perf_counter() - t0)
             reports.append(prt.report)
         r = reports[-1]
+        w = r["walks"]
+        walks = (f", walks through the mesh {w['seconds']:.2f} s: {w['walks_per_vertex']} walks per vertex x "
+                 f"{w['walked_vertices']} vertices ({w['skipped_flat']} flat, skipped), {w['rays'] / 1e6:.1f} M rays, "
+                 f"their noise {100 * max(w['noise']):.1f} % of B" if w else "")
         print(
             f"\nprecompute, bunny 10 cm ({scene.vertex_count} vertices, {r['samples']} samples), marble, "
             f"{profile} profile, 32 coefficients: median {statistics.median(times):.2f} s over {args.runs} runs "
             f"(irradiance {r['seconds_irradiance']:.2f} s, tree {r['seconds_tree']:.2f} s, "
             f"transport {r['seconds_transport']:.2f} s, the object's own light {r['seconds_interreflection']:.2f} s "
-            f"for {r['interreflection_rays']} rays) [budget 20 s]"
+            f"for {r['interreflection_rays']} rays{walks}) [budget 20 s]"
         )
 
     # Growth: the same surface with 4x the vertices and 4x the samples. Brute force (Xu 2007
@@ -87,8 +91,9 @@ def main() -> int:
         ts = []
         for _ in range(args.runs):
             t0 = time.perf_counter()
-            # The transport alone: the object's own light is ray casting, linear in vertices.
-            translucent.Prt(scene_k, marble, coefficients=32, samples=samples, interreflection=False)
+            # The transport alone: the object's own light and the walks are ray casting, linear in
+            # vertices (the walks have a fixed ray budget).
+            translucent.Prt(scene_k, marble, coefficients=32, samples=samples, interreflection=False, walks=0)
             ts.append(time.perf_counter() - t0)
         grow.append(statistics.median(ts))
     print(

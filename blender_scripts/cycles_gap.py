@@ -7,12 +7,16 @@ that distance taken apart:
 - interreflection: the bake with and without indirect light (the object's own light);
 - the half-space assumption (curvature, thin parts): the profile's ground truth, which is the
   half-space model integrated exactly over the mesh, against Cycles' direct light;
-- PRT's own error: PRT against that ground truth.
+- PRT's own error: PRT against that ground truth;
+- the walks through the mesh (issue 12): the preview as shipped (Cycles' profile with the
+  walks) beside the half-space table alone, and the in-house walk reference
+  (`reference_radiance`, 4096 walks per receiver) against Cycles' direct light, with what is
+  left beyond the noise of both.
 Errors are area-weighted relative RMS (worst channel); the preview-vs-Cycles figures over all
 vertices, those involving the ground truth over `--receivers` random vertices. Everything
 rendered is cached (out/cache), so a second run only recomputes PRT.
 
-Run: .venv/bin/python blender_scripts/cycles_gap.py [--models suzanne stanford-bunny.obj]
+Run: .venv/bin/python blender_scripts/cycles_gap.py [--models suzanne suzanne-backlit stanford-bunny.obj]
      [--materials marble skin1 ketchup aniso08] [--spp 1024] [--receivers 60] [--out out/gap]
 """
 
@@ -65,7 +69,8 @@ def ratio(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
     return [float((w * a[:, c]).sum() / max((w * b[:, c]).sum(), 1e-30)) for c in range(3)]
 
 
-def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float) -> list[dict]:
+def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float,
+            walk_reference_walks: int = 4096) -> list[dict]:
     import cycles_reference as cr
     import demo
     import report
@@ -91,27 +96,42 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
                    noise=rel(cyc, cyc2, w_all) / np.sqrt(2.0),
                    interreflection_rms=rel(direct, cyc, w_all),
                    interreflection_share=[1 - r for r in ratio(direct, cyc, w_all)])
-        for profile in ("cycles", "dipole"):
+        # The preview as shipped (Cycles' profile with the walks through the mesh), the
+        # half-space table alone, and the dipole.
+        for key, profile, walks in (("cycles", "cycles", None), ("halfspace", "cycles", 0), ("dipole", "dipole", None)):
             t0 = time.perf_counter()
-            prt = translucent.Prt(scene, m, profile=profile, backend="cpu")
+            prt = translucent.Prt(scene, m, profile=profile, backend="cpu", walks=walks)
             pre = time.perf_counter() - t0
             preview = prt.radiance(m)
             edit = prt.last_eval["seconds"]
-            row[profile] = dict(vs_cycles=rel(preview, cyc, w_all), ratio=ratio(preview, cyc, w_all),
-                                vs_cycles_channels=rel_channels(preview, cyc, w_all),
-                                interreflection_share=prt.report["interreflection_share"],
-                                vs_direct=rel(preview, direct, w_all), precompute_s=pre, edit_ms=1e3 * edit,
-                                estimate=max(prt.last_eval["error_estimate"]))
-            if profile == "cycles" or m.g == 0.0:
+            row[key] = dict(vs_cycles=rel(preview, cyc, w_all), ratio=ratio(preview, cyc, w_all),
+                            vs_cycles_channels=rel_channels(preview, cyc, w_all),
+                            interreflection_share=prt.report["interreflection_share"],
+                            vs_direct=rel(preview, direct, w_all), precompute_s=pre, edit_ms=1e3 * edit,
+                            estimate=max(prt.last_eval["error_estimate"]), walks=prt.report["walks"])
+            if key == "halfspace" or (key == "dipole" and m.g == 0.0):
                 gt = report.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
                 # The ground truth is the direct-light model: PRT without the bounce against it.
                 # Along the normal, as the bake looks: L = W(1) B / pi.
                 exit_weight = (translucent.layer_weight(m.roughness, 1.0, m.eta) if profile == "cycles"
                                else report.fresnel_t(m.eta))
                 gt_radiance = gt * exit_weight / np.pi
-                row[profile]["prt_vs_truth"] = rel(prt.radiosity(m, interreflection=False)[idx], gt, w)
-                row[profile]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
-                row[profile]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
+                row[key]["prt_vs_truth"] = rel(prt.radiosity(m, interreflection=False)[idx], gt, w)
+                row[key]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
+                row[key]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
+        # The in-house walk reference (Cycles' walk through the mesh, no Blender) against Cycles'
+        # direct light at the receivers, with the noise of both taken out.
+        t0 = time.perf_counter()
+        ref, d = translucent.reference_radiance(scene, m, walks=walk_reference_walks, receivers=idx.tolist(),
+                                                details=True)
+        # The direct bake's noise taken as the full bake's (two seeds of it exist).
+        direct_noise = row["noise"]
+        measured = rel(ref, direct[idx], w)
+        row["walk_reference"] = dict(vs_direct=measured, ratio=ratio(ref, direct[idx], w), noise=max(d["noise"]),
+                                     direct_noise=direct_noise, walks=walk_reference_walks,
+                                     seconds=time.perf_counter() - t0,
+                                     beyond_noise=float(np.sqrt(max(measured ** 2 - max(d["noise"]) ** 2
+                                                                    - direct_noise ** 2, 0.0))))
         rows.append(row)
         print(json.dumps(row), flush=True)
     return rows
@@ -120,23 +140,26 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
 def table(rows: list[dict]) -> str:
     pct = lambda x: f"{100 * x:.1f}"  # noqa: E731
     lines = [
-        "| scene | material | preview (Cycles profile) vs Cycles % | mean ratio | dipole vs Cycles % | "
-        "Cycles noise % | interreflection % (share) | half-space model vs Cycles direct % | PRT vs its ground truth % |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| scene | material | preview vs Cycles % | mean ratio | half-space table vs Cycles % | dipole vs Cycles % | "
+        "Cycles noise % | walk reference vs Cycles direct %: measured (beyond both noises) | "
+        "interreflection % | walks per vertex x walked vertices | precompute s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        c, d = r["cycles"], r["dipole"]
+        c, h, d, wr = r["cycles"], r["halfspace"], r["dipole"], r["walk_reference"]
+        w = c.get("walks") or {}
         lines.append(
             f"| {r['model']} | {r['material']} | **{pct(c['vs_cycles'])}** | "
-            f"{', '.join(f'{x:.3f}' for x in c['ratio'])} | {pct(d['vs_cycles'])} | {pct(r['noise'])} | "
-            f"{pct(r['interreflection_rms'])} ({', '.join(pct(x) for x in r['interreflection_share'])}) | "
-            f"{pct(c.get('truth_vs_direct', float('nan')))} | {pct(c.get('prt_vs_truth', float('nan')))} |")
+            f"{', '.join(f'{x:.3f}' for x in c['ratio'])} | {pct(h['vs_cycles'])} | {pct(d['vs_cycles'])} | "
+            f"{pct(r['noise'])} | {pct(wr['vs_direct'])} ({pct(wr['beyond_noise'])}) | "
+            f"{pct(r['interreflection_rms'])} | {w.get('walks_per_vertex', 0)} x {w.get('walked_vertices', 0)} | "
+            f"{c['precompute_s']:.1f} |")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--models", nargs="+", default=["suzanne", "stanford-bunny.obj"])
+    ap.add_argument("--models", nargs="+", default=["suzanne", "suzanne-backlit", "stanford-bunny.obj"])
     ap.add_argument("--materials", nargs="+", default=["marble", "skin1", "ketchup", "aniso08"])
     ap.add_argument("--spp", type=int, default=1024)
     ap.add_argument("--receivers", type=int, default=60)

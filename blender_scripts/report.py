@@ -107,6 +107,11 @@ def worst(err: dict) -> tuple[float, float]:
     return float(max(err["rms"])), float(max(err["max"]))
 
 
+# Ray budgets of the walks through the mesh in the report (0: the half-space table alone; 20 M is
+# the default).
+WALK_RAYS = (0, 5_000_000, 20_000_000, 60_000_000)
+
+
 def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, profile="cycles") -> list[Row]:
     """Each PRT setting: one precompute for the material, one (timed) edit, the errors against
     the ground truth (direct light, as the reference integrates it) and, with the object's own
@@ -115,8 +120,10 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, prof
     method = f"PRT (Xu 2007), {profile} profile"
     for coefficients, degree, fit_tol in PRT_SETTINGS:
         t0 = time.perf_counter()
+        # Against the ground truth of the half-space profile: no walks through the mesh here.
         prt = translucent.Prt(scene, material, coefficients=coefficients, degree=degree,
-                              fit_tolerance=fit_tol, backend="cpu", profile=profile, interreflection=False)
+                              fit_tolerance=fit_tol, backend="cpu", profile=profile, interreflection=False,
+                              walks=0 if profile == "cycles" else None)
         pre = time.perf_counter() - t0
         edits = []
         for _ in range(5):
@@ -129,16 +136,24 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, prof
         rows.append(Row(method, setting, name, "ground truth", rms, mx, pre, float(np.median(edits)), est,
                         extra=dict(samples=rep["samples"], coefficients=rep["coefficients"])))
         if cycles is not None and (coefficients, degree, fit_tol) == (32, 1, None):
-            t0 = time.perf_counter()
-            full = translucent.Prt(scene, material, coefficients=coefficients, degree=degree, backend="cpu",
-                                   profile=profile, interreflection=profile == "cycles")
-            pre_full = time.perf_counter() - t0
-            radiance = full.radiance(material)
-            edit = full.last_eval["seconds"]
-            rms, mx = worst(translucent.relative_error(radiance, cycles["all"], cycles["weights"]))
-            bounce = ", with the object's own light" if full.report["interreflection_rays"] else ""
-            rows.append(Row(method, setting + bounce, name, cycles["label"] + ", all vertices", rms, mx, pre_full,
-                            edit, est, notes="what the artist sees against what Cycles renders"))
+            # The walks' knob (issue 12): rays they may cast, 0 for the half-space table alone.
+            for walk_rays in (WALK_RAYS if profile == "cycles" else (None,)):
+                t0 = time.perf_counter()
+                full = translucent.Prt(scene, material, coefficients=coefficients, degree=degree, backend="cpu",
+                                       profile=profile, interreflection=profile == "cycles",
+                                       walks=0 if walk_rays == 0 else None, walk_rays=walk_rays or None)
+                pre_full = time.perf_counter() - t0
+                radiance = full.radiance(material)
+                edit = full.last_eval["seconds"]
+                rms, mx = worst(translucent.relative_error(radiance, cycles["all"], cycles["weights"]))
+                bounce = ", with the object's own light" if full.report["interreflection_rays"] else ""
+                w = full.report["walks"]
+                walks = (f", walks {w['walks_per_vertex']} x {w['walked_vertices']} vertices "
+                         f"({w['rays'] / 1e6:.0f} M rays, {w['skipped_flat']} flat skipped)") if w else (
+                    ", half-space table alone" if profile == "cycles" else "")
+                rows.append(Row(method, setting + bounce + walks, name, cycles["label"] + ", all vertices", rms, mx,
+                                pre_full, edit, max(full.last_eval["error_estimate"]),
+                                notes="what the artist sees against what Cycles renders"))
     return rows
 
 
@@ -196,12 +211,20 @@ def eevee_rows(obj, material, name, samples_list, reference_spp):
         return []
 
 
+# Behind Suzanne's head (she faces -Y), a little above her ears.
+BACKLIGHT = (0.0, 0.14, 0.06)
+
+
 def build_scene(model: str):
-    """The demo's scene (Suzanne with Subdivision, point light, dim world) or a shared model
-    at 10 cm under the same light."""
+    """The demo's scene (Suzanne with Subdivision, point light, dim world), the same lit from
+    behind ("suzanne-backlit": the light behind the head, its ears between it and the camera),
+    or a shared model at 10 cm under the demo's light."""
     import demo
 
     suzanne, cam = demo.build_scene()
+    if model == "suzanne-backlit":
+        bpy.data.objects["Key"].location = BACKLIGHT
+        return suzanne, cam
     if model != "suzanne":
         import models
 

@@ -34,7 +34,8 @@ def measure(model: str, material: str, receivers: int, factors=FACTORS, rel_tol:
     p, t = models.load(model, diagonal=0.1)
     scene = models.standard_scene(p, t)
     base = translucent.Material.preset(material, mm_per_unit=1000.0)
-    prt = translucent.Prt(scene, base)
+    # The half-space transport against its own ground truth: no walks through the mesh.
+    prt = translucent.Prt(scene, base, walks=0)
     rng = np.random.default_rng(3)
     idx = np.sort(rng.choice(scene.vertex_count, size=min(receivers, scene.vertex_count), replace=False))
     weights = scene.vertex_areas[idx, 0]
@@ -53,7 +54,7 @@ def measure(model: str, material: str, receivers: int, factors=FACTORS, rel_tol:
         # The limit sigma_t -> infinity is exact: B = c I(x) R_d,total (Jensen 2001's diffuse
         # limit; c the vertex's coverage, 1 inside the surface).
         limit = translucent.relative_error(b, irr * np.array(m.total_diffuse_reflectance), weights)
-        fresh = translucent.Prt(scene, m).radiosity(m)[idx] if refresh_check else None
+        fresh = translucent.Prt(scene, m, walks=0).radiosity(m)[idx] if refresh_check else None
         fresh_err = max(translucent.relative_error(fresh, ref, weights)["rms"]) if refresh_check else float("nan")
         rows.append(dict(factor=k, rms=max(err["rms"]), max=max(err["max"]), estimate=max(est),
                          refresh=advised, reference_s=ref_s, reference_error=info["estimated_rel_error"],

@@ -175,7 +175,13 @@ impl GeometryTerm {
         // Rays per walk (all channels) from this first pass; the budget then buys either more
         // walked vertices (short-reaching materials: finer detail for the same rays) or more
         // walks at the same ones.
-        let per_walk = first.rays as f64 / (walked.len() * settings.walks).max(1) as f64;
+        // (No walked vertex in the first pass: the surface is flat at its spacing, and no
+        // more walks are bought.)
+        let per_walk = if walked.is_empty() {
+            f64::INFINITY
+        } else {
+            first.rays as f64 / (walked.len() * settings.walks) as f64
+        };
         let budget_walks = |vertices: usize| {
             ((settings.rays as f64 / (per_walk * vertices as f64).max(1.0)) as usize)
                 .min(settings.max_walks)
@@ -390,17 +396,22 @@ fn spread(mesh: &Mesh, spacing: f32) -> Vec<u32> {
     out
 }
 
-/// Per candidate: whether every other candidate within `reach` lies within `tolerance` of its
-/// tangent plane and faces within 10 degrees of its normal.
+/// Per candidate: whether every vertex of the mesh within `reach` lies within `tolerance` of
+/// its tangent plane and faces within 10 degrees of its normal (all vertices, not only the
+/// candidates, so the answer does not depend on how many candidates there are).
 fn flat_vertices(mesh: &Mesh, candidates: &[u32], reach: f32, tolerance: f32) -> Vec<bool> {
-    let grid = Grid::new(mesh, candidates, reach);
+    let all: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
+    let grid = Grid::new(mesh, &all, reach);
     candidates
         .par_iter()
         .map(|&v| {
             let (p, n) = (mesh.positions()[v as usize], mesh.normals()[v as usize]);
             let mut flat = true;
             grid.visit(p, |i| {
-                let u = candidates[i] as usize;
+                let u = all[i] as usize;
+                if !flat || mesh.normals()[u] == Vec3::ZERO {
+                    return;
+                }
                 let (q, m) = (mesh.positions()[u], mesh.normals()[u]);
                 if q.distance(p) < reach && ((q - p).dot(n).abs() > tolerance || m.dot(n) < 0.985) {
                     flat = false;

@@ -359,6 +359,12 @@ impl Prt {
         let far = FarField::new(settings.far_field);
         report.far_field_distance_bound = far.distance_bound();
         let vcount = mesh.vertex_count();
+        // With walks through the mesh, the transport is the first 60 % of the progress bar.
+        let transport_end = if settings.geometry.is_some() {
+            0.6
+        } else {
+            1.0
+        };
         let mut rows = vec![0f32; vcount * channels * stride];
         let mut counters = Counters::default();
         let chunk = 2048;
@@ -398,7 +404,10 @@ impl Prt {
                 })
                 .reduce(Counters::default, Counters::sum);
             counters = counters.sum(chunk_counters);
-            tick(0.15 + 0.85 * ((first + chunk).min(vcount) as f32 / vcount as f32))?;
+            tick(
+                0.15 + (transport_end - 0.15)
+                    * ((first + chunk).min(vcount) as f32 / vcount as f32),
+            )?;
         }
         report.exact_samples = counters.exact;
         report.far_clusters = counters.far;
@@ -435,7 +444,10 @@ impl Prt {
                 &prt.vertex_irradiance,
                 &halfspace,
                 g,
-                None,
+                progress
+                    .map(|p| move |f: f32| p(0.6 + 0.35 * f))
+                    .as_ref()
+                    .map(|f| f as _),
             )?;
             prt.report.geometry = Some(term.report.clone());
             prt.geometry = Some(term);
