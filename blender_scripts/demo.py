@@ -177,8 +177,9 @@ def main() -> int:
     preview = preview_object(suzanne)
     eye = tuple(cam.location)
     for name, m in materials.items():
-        # The ground truth integrates direct light: compare PRT without the object's own light.
-        b = prt.radiosity(m, interreflection=False)
+        # The ground truth integrates the half-space profile's direct light: compare PRT without
+        # the object's own light and without the walks' geometry term.
+        b = prt.radiosity(m, interreflection=False, walks=False)
         edit = prt.last_eval
         t0 = time.perf_counter()
         truth = translucent.reference_radiosity(scene, m, rel_tol=1e-3, receivers=receivers.tolist())

@@ -253,17 +253,20 @@ impl PyPrt {
     /// eq. 9 without the exit weight / pi); for Cycles' profile, the subsurface lobe and the
     /// diffuse lobe beside it, before the specular layer.
     /// `interreflection=False` leaves out the object's own light even where it was precomputed.
-    #[pyo3(signature = (material, interreflection = true))]
+    /// `walks=False` leaves out the walks' geometry term: the half-space profile alone, what
+    /// `reference_radiosity` integrates.
+    #[pyo3(signature = (material, interreflection = true, walks = true))]
     fn radiosity<'py>(
         &mut self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         interreflection: bool,
+        walks: bool,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let inner = &self.inner;
         let e = py
-            .detach(|| inner.radiosity_with(&m, interreflection))
+            .detach(|| inner.radiosity_parts(&m, interreflection, walks))
             .map_err(crate::convert::to_py)?;
         let out = rgb_array(py, &e.radiosity);
         self.last = Some(e);

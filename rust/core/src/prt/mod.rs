@@ -435,7 +435,7 @@ impl Prt {
         };
         if let Some(g) = &settings.geometry {
             let rep = &representatives[0];
-            let halfspace = prt.radiosity_with(rep, false)?.radiosity;
+            let halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
             let tracer = crate::raytrace::Tracer::new(mesh);
             let term = GeometryTerm::compute(
                 mesh,
@@ -633,6 +633,17 @@ impl Prt {
     /// As `radiosity`; `bounce` false leaves out the object's own light even where it was
     /// precomputed (direct light only: what the ground truth integrates).
     pub fn radiosity_with(&self, material: &Material, bounce: bool) -> Result<Evaluation> {
+        self.radiosity_parts(material, bounce, true)
+    }
+
+    /// As `radiosity_with`; `walks` false also leaves out the walks' geometry term: the
+    /// half-space profile alone, what `reference` integrates.
+    pub fn radiosity_parts(
+        &self,
+        material: &Material,
+        bounce: bool,
+        walks: bool,
+    ) -> Result<Evaluation> {
         let t0 = Instant::now();
         let c = self.coefficients(material)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
@@ -652,7 +663,7 @@ impl Prt {
                 .for_each(|(b, i)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * i[ch]));
         }
         let mut error_estimate = c.error_estimate;
-        if let Some(g) = &self.geometry {
+        if let Some(g) = self.geometry.as_ref().filter(|_| walks) {
             let added = g.add_to(&mut radiosity, material)?;
             for (e, a) in error_estimate.iter_mut().zip(added) {
                 *e += a;

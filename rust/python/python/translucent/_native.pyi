@@ -182,9 +182,13 @@ class Prt:
     def backend(self) -> Literal["gpu", "cpu"]: ...
     @property
     def backend_message(self) -> str: ...
-    def radiosity(self, material: Material, interreflection: bool = True) -> npt.NDArray[np.float32]:
+    def radiosity(
+        self, material: Material, interreflection: bool = True, walks: bool = True
+    ) -> npt.NDArray[np.float32]:
         """(N, 3) radiosity B per vertex: the profile summed over the lit surface (with the
-        object's own light where it was precomputed, unless `interreflection` is False)."""
+        object's own light where it was precomputed, unless `interreflection` is False, and
+        the walks' geometry term where they ran, unless `walks` is False: then the half-space
+        profile alone, what `reference_radiosity` integrates)."""
     def radiance(self, material: Material, eye: Vec3 | None = None) -> npt.NDArray[np.float32]:
         """(N, 3) radiance toward the point `eye`, W(w_o) B / pi (W: F_t for the dipole, what the
         specular layer leaves for Cycles); without an eye, along each vertex normal (a bake)."""
