@@ -179,12 +179,15 @@ def summary(sess: Session) -> str:
     """What the precompute did and left out, in one line for the status bar and the panel."""
     r, info = sess.prt.report, sess.info
     world = "world: no rays (black)" if r["world_skipped"] else f"world: {info.world}"
+    w = r.get("walks")
+    walks = (f"; walks through the mesh: {w['walks_per_vertex']} x {w['walked_vertices']} vertices "
+             f"({w['skipped_flat']} flat skipped)" if w else "")
     return (
         f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped), "
         f"{r['lights_used']} light(s) used, {r['lights_skipped_black'] + len(info.skipped_lights)} dark "
         f"and {r['lights_unreached']} out of reach skipped, {world}; {r['samples']} samples, "
         f"{r['coefficients']} coefficients, support radius {r['support_radius']:.4g} units, "
-        f"{r['rays']} rays, {r['seconds']:.2f} s"
+        f"{r['rays']} rays{walks}, {r['seconds']:.2f} s"
     )
 
 
