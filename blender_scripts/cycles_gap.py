@@ -70,7 +70,7 @@ def ratio(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
 
 
 def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float,
-            walk_reference_walks: int = 4096) -> list[dict]:
+            walk_reference_walks: int = 4096, one_bake: bool = False) -> list[dict]:
     import cycles_reference as cr
     import demo
     import report
@@ -89,13 +89,15 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
     for name in names:
         m = material(name)
         cyc, cyc_s = cr.bake_vertices(bake_obj, m, spp)
-        cyc2, _ = cr.bake_vertices(bake_obj, m, spp, seed=1)
-        direct, _ = cr.bake_vertices(bake_obj, m, spp, direct_only=True)
-        # The noise of one bake: two seeds differ by sqrt(2) of it.
         row = dict(model=model, material=name, vertices=scene.vertex_count, spp=spp, bake_s=cyc_s,
-                   noise=rel(cyc, cyc2, w_all) / np.sqrt(2.0),
-                   interreflection_rms=rel(direct, cyc, w_all),
-                   interreflection_share=[1 - r for r in ratio(direct, cyc, w_all)])
+                   noise=float("nan"), interreflection_rms=float("nan"), interreflection_share=[float("nan")] * 3)
+        direct = None
+        if not one_bake:
+            cyc2, _ = cr.bake_vertices(bake_obj, m, spp, seed=1)
+            direct, _ = cr.bake_vertices(bake_obj, m, spp, direct_only=True)
+            # The noise of one bake: two seeds differ by sqrt(2) of it.
+            row.update(noise=rel(cyc, cyc2, w_all) / np.sqrt(2.0), interreflection_rms=rel(direct, cyc, w_all),
+                       interreflection_share=[1 - r for r in ratio(direct, cyc, w_all)])
         # The preview as shipped (Cycles' profile with the walks through the mesh), the
         # half-space table alone, and the dipole.
         for key, profile, walks in (("cycles", "cycles", None), ("halfspace", "cycles", 0), ("dipole", "dipole", None)):
@@ -107,9 +109,10 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
             row[key] = dict(vs_cycles=rel(preview, cyc, w_all), ratio=ratio(preview, cyc, w_all),
                             vs_cycles_channels=rel_channels(preview, cyc, w_all),
                             interreflection_share=prt.report["interreflection_share"],
-                            vs_direct=rel(preview, direct, w_all), precompute_s=pre, edit_ms=1e3 * edit,
+                            vs_direct=rel(preview, direct, w_all) if direct is not None else float("nan"),
+                            precompute_s=pre, edit_ms=1e3 * edit,
                             estimate=max(prt.last_eval["error_estimate"]), walks=prt.report["walks"])
-            if key == "halfspace" or (key == "dipole" and m.g == 0.0):
+            if direct is not None and (key == "halfspace" or (key == "dipole" and m.g == 0.0)):
                 gt = report.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
                 # The ground truth is the direct-light model: PRT without the bounce against it.
                 # Along the normal, as the bake looks: L = W(1) B / pi.
@@ -119,26 +122,27 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
                 row[key]["prt_vs_truth"] = rel(prt.radiosity(m, interreflection=False)[idx], gt, w)
                 row[key]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
                 row[key]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
-        # The in-house walk reference (Cycles' walk through the mesh, no Blender) against Cycles'
-        # direct light at the receivers, with the noise of both taken out.
-        t0 = time.perf_counter()
-        ref, d = translucent.reference_radiance(scene, m, walks=walk_reference_walks, receivers=idx.tolist(),
-                                                details=True)
-        # The direct bake's noise taken as the full bake's (two seeds of it exist).
-        direct_noise = row["noise"]
-        measured = rel(ref, direct[idx], w)
-        row["walk_reference"] = dict(vs_direct=measured, ratio=ratio(ref, direct[idx], w), noise=max(d["noise"]),
-                                     direct_noise=direct_noise, walks=walk_reference_walks,
-                                     seconds=time.perf_counter() - t0,
-                                     beyond_noise=float(np.sqrt(max(measured ** 2 - max(d["noise"]) ** 2
-                                                                    - direct_noise ** 2, 0.0))))
+        if direct is not None:
+            # The in-house walk reference (Cycles' walk through the mesh, no Blender) against Cycles'
+            # direct light at the receivers, with the noise of both taken out.
+            t0 = time.perf_counter()
+            ref, d = translucent.reference_radiance(scene, m, walks=walk_reference_walks, receivers=idx.tolist(),
+                                                    details=True)
+            # The direct bake's noise taken as the full bake's (two seeds of it exist).
+            direct_noise = row["noise"]
+            measured = rel(ref, direct[idx], w)
+            row["walk_reference"] = dict(vs_direct=measured, ratio=ratio(ref, direct[idx], w), noise=max(d["noise"]),
+                                         direct_noise=direct_noise, walks=walk_reference_walks,
+                                         seconds=time.perf_counter() - t0,
+                                         beyond_noise=float(np.sqrt(max(measured ** 2 - max(d["noise"]) ** 2
+                                                                        - direct_noise ** 2, 0.0))))
         rows.append(row)
         print(json.dumps(row), flush=True)
     return rows
 
 
 def table(rows: list[dict]) -> str:
-    pct = lambda x: f"{100 * x:.1f}"  # noqa: E731
+    pct = lambda x: "—" if x != x else f"{100 * x:.1f}"  # noqa: E731
     lines = [
         "| scene | material | preview vs Cycles % | mean ratio | half-space table vs Cycles % | dipole vs Cycles % | "
         "Cycles noise % | walk reference vs Cycles direct %: measured (beyond both noises) | "
@@ -146,7 +150,8 @@ def table(rows: list[dict]) -> str:
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        c, h, d, wr = r["cycles"], r["halfspace"], r["dipole"], r["walk_reference"]
+        c, h, d = r["cycles"], r["halfspace"], r["dipole"]
+        wr = r.get("walk_reference", dict(vs_direct=float("nan"), beyond_noise=float("nan")))
         w = c.get("walks") or {}
         lines.append(
             f"| {r['model']} | {r['material']} | **{pct(c['vs_cycles'])}** | "
@@ -165,10 +170,12 @@ def main(argv=None) -> int:
     ap.add_argument("--receivers", type=int, default=60)
     ap.add_argument("--rel-tol", type=float, default=2e-3)
     ap.add_argument("--out", default=str(REPO / "out" / "gap"))
+    ap.add_argument("--one-bake", action="store_true",
+                    help="only the seed-0 bake: the preview's distances, no noise, direct-light or walk-reference columns")
     args = ap.parse_args(argv)
     rows = []
     for model in args.models:
-        rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol)
+        rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol, one_bake=args.one_bake)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "gap.json").write_text(json.dumps(rows, indent=1))
