@@ -61,6 +61,9 @@ impl Default for MeshWalkSettings {
 /// weight RR_WEIGHT (Russian roulette, unbiased).
 const RR_WEIGHT: f64 = 0.05;
 
+/// How far (in mean free paths) a flight's ray looks for the surface: e^-12 = 6e-6.
+const REACH_OPTICAL: f64 = 12.0;
+
 /// Vertices per progress tick.
 const TICK: usize = 512;
 
@@ -323,10 +326,12 @@ impl Walker<'_> {
             };
             let u = if flight == 0 { first[2] } else { uniform(rng) };
             rays += 1;
-            let length = match self
-                .tracer
-                .intersect(pos.as_vec3(), dir.as_vec3(), f32::INFINITY)
-            {
+            // Surfaces farther than REACH_OPTICAL mean free paths take less than e^-REACH_OPTICAL
+            // of the weight: the ray looks no farther (the BVH visits far fewer nodes). A flight
+            // that goes beyond anyway (that rare) looks again without a limit and leaves where it
+            // crosses the surface, scored as it is.
+            let reach = (REACH_OPTICAL / sigma) as f32;
+            let length = match self.tracer.intersect(pos.as_vec3(), dir.as_vec3(), reach) {
                 Some(hit) => {
                     let s = f64::from(hit.t);
                     let leave = (-sigma * s).exp();
@@ -335,8 +340,26 @@ impl Walker<'_> {
                     // A flight shorter than s: -ln(1 - u (1 - e^(-sigma s))) / sigma.
                     -(-u * (1.0 - leave)).ln_1p() / sigma
                 }
-                // No surface that way (an open mesh): the medium goes on.
-                None => -(1.0 - u).ln() / sigma,
+                None => {
+                    let t = -(1.0 - u).ln() / sigma;
+                    if t > f64::from(reach) {
+                        rays += 1;
+                        if let Some(hit) =
+                            self.tracer
+                                .intersect(pos.as_vec3(), dir.as_vec3(), f32::INFINITY)
+                        {
+                            let s = f64::from(hit.t);
+                            if s < t {
+                                score +=
+                                    weight * self.exit_irradiance(hit.triangle, pos + dir * s, c);
+                                break;
+                            }
+                        }
+                    }
+                    // No surface within the flight (or none at all: an open mesh): the medium
+                    // goes on.
+                    t
+                }
             };
             pos += dir * length;
             // Collision flight + 1.
