@@ -13,7 +13,7 @@ use translucent_core::irradiance::{irradiance, Density, IrradianceReport, Irradi
 use translucent_core::optics::Material;
 use translucent_core::prt::geometry::GeometrySettings;
 
-/// The walks' default ray budget: 20 M rays (about 8 s on 2 cores), and at most 2500 per
+/// The walks' default ray budget: 20 M rays (about 5 s on 2 cores), and at most 2500 per
 /// vertex (a small mesh needs fewer for the same noise per area).
 const DEFAULT_WALK_RAYS: u64 = 20_000_000;
 const WALK_RAYS_PER_VERTEX: u64 = 2500;

@@ -166,7 +166,7 @@ class Prt:
         off for "dipole".
         `walks`: Cycles' walk traced through the mesh itself for the geometry a half-space
         profile cannot see (thin and curved parts); None: on for "cycles" with as many walks as
-        `walk_rays` rays allow (default min(20 M, 2500 per vertex), about 8 s on 2 cores), off
+        `walk_rays` rays allow (default min(20 M, 2500 per vertex), about 5 s on 2 cores), off
         for "dipole"; N: exactly N walks per walked vertex and channel; 0: off. Flat
         neighbourhoods are not walked (`report["walks"]["skipped_flat"]`).
         `backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
