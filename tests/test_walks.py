@@ -128,3 +128,22 @@ def test_the_walks_keep_to_their_ray_budget():
         m = translucent.Material.preset(name)
         w = translucent.Prt(s, m, backend="cpu", interreflection=False, walk_rays=2_000_000).report["walks"]
         assert 0 < w["rays"] <= 1.1 * 2_000_000, (name, w)
+
+
+@pytest.mark.parametrize("sigma_a, sigma_s", [(1e-6, 1e4), (1e3, 1e3), (1e-6, 1e-3), (0.0, 50.0)])
+def test_walks_stay_finite_on_stiff_and_extreme_media(sigma_a, sigma_s):
+    """Stiff (10^4 per unit: walks leave at once), dark (albedo 0.5 at 10^3), nearly transparent
+    (mean free path 1000x the object: walks cross it and leave) and without absorption: B finite
+    and non-negative, the reference as well, the ray budget kept, no error."""
+    p, t = sphere(10, 0.01)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), 1.0)
+    m = translucent.Material(sigma_a, sigma_s, g=0.0, eta=1.4)
+    prt = translucent.Prt(s, m, backend="cpu", walk_rays=300_000)
+    b = prt.radiosity(m)
+    assert np.all(np.isfinite(b)) and b.min() >= 0
+    w = prt.report["walks"]
+    assert w["rays"] <= 1.1 * 300_000 + 16 * 1000 * 256
+    ref = translucent.reference_radiance(s, m, walks=8)
+    assert np.all(np.isfinite(ref)) and ref.min() >= 0
+    assert all(math.isfinite(e) for e in prt.last_eval["error_estimate"])
