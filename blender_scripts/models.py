@@ -25,7 +25,17 @@ def load(name: str, diagonal: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     p = np.asarray(mesh.vertices, dtype=np.float64)
     lo, hi = p.min(axis=0), p.max(axis=0)
     p = (p - 0.5 * (lo + hi)) * (diagonal / np.linalg.norm(hi - lo))
-    return p.astype(np.float32), np.asarray(mesh.faces, dtype=np.int64)
+    t = np.asarray(mesh.faces, dtype=np.int64)
+    # A closed mesh wound inwards (the shared horse.ply: signed volume < 0) has its normals
+    # inside: the light would enter from within. Turn it outwards, as Blender's "Recalculate
+    # Outside" would; open meshes (the bunny) are left as they are.
+    if mesh.is_watertight and _signed_volume(p, t) < 0:
+        t = t[:, ::-1].copy()
+    return p.astype(np.float32), t
+
+
+def _signed_volume(p: np.ndarray, t: np.ndarray) -> float:
+    return float(np.einsum("ij,ij->i", p[t[:, 0]], np.cross(p[t[:, 1]], p[t[:, 2]])).sum() / 6.0)
 
 
 def subdivide(positions: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
