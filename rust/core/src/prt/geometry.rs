@@ -20,7 +20,7 @@ use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::mesh_walk::{walk_radiosity, MeshWalkResult, MeshWalkSettings};
 use crate::optics::{Material, CHANNELS};
-use crate::profiles::{Model, RadialProfile};
+use crate::profiles::{Model, Profile, RadialProfile};
 use crate::raytrace::Tracer;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -104,14 +104,13 @@ pub struct GeometryTerm {
 }
 
 /// Diffusion length 1 / sigma_tr of each channel's profile (capped at a large multiple of the
-/// near length where nothing is absorbed), and the slab albedo A.
-fn lengths_and_albedos(model: Model, m: &Material) -> Result<([f64; 3], [f64; 3])> {
-    let p = model.profiles(m)?;
+/// near length where nothing is absorbed), and the slab albedo A (`totals`).
+fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
     let l = std::array::from_fn(|c| {
         let s = p[c].length_scales();
         s.decay.min(1e6 * s.near).max(1e-30)
     });
-    Ok((l, std::array::from_fn(|c| p[c].total() + p[c].point_mass())))
+    (l, super::totals(p))
 }
 
 impl GeometryTerm {
@@ -128,7 +127,7 @@ impl GeometryTerm {
         progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
     ) -> Result<GeometryTerm> {
         let start = Instant::now();
-        let (lengths, albedo) = lengths_and_albedos(Model::Cycles, material)?;
+        let (lengths, albedo) = lengths_and_albedos(&Model::Cycles.profiles(material)?);
         let shortest = lengths.iter().copied().fold(f64::INFINITY, f64::min);
         let longest = lengths.iter().copied().fold(0.0, f64::max);
         let n = mesh.vertex_count();
@@ -284,14 +283,15 @@ impl GeometryTerm {
         })
     }
 
-    /// Adds the term for `material` to `radiosity` (per vertex, direct light) and returns, per
-    /// channel, the error it may add: its noise, and 1 where the edit's diffusion length left
-    /// the walked range by more than LENGTH_MARGIN (a refresh is advised).
-    pub fn add_to(&self, radiosity: &mut [[f32; 3]], material: &Material) -> Result<[f64; 3]> {
+    /// Adds the term for the material of `profiles` (Cycles' model) to `radiosity` (per vertex,
+    /// direct light) and returns, per channel, the error it may add: its noise, and 1 where the
+    /// edit's diffusion length left the walked range by more than LENGTH_MARGIN (a refresh is
+    /// advised).
+    pub fn add_to(&self, radiosity: &mut [[f32; 3]], profiles: &[Profile; 3]) -> [f64; 3] {
         if self.lengths.is_empty() {
-            return Ok([0.0; 3]);
+            return [0.0; 3];
         }
-        let (lengths, albedo) = lengths_and_albedos(Model::Cycles, material)?;
+        let (lengths, albedo) = lengths_and_albedos(profiles);
         let mut error = self.noise;
         // Per channel: the two walked channels bracketing ln L and their weights.
         let picks: [([usize; 2], [f32; 2]); 3] = std::array::from_fn(|c| {
@@ -328,7 +328,7 @@ impl GeometryTerm {
                     b[c] = (b[c] + scale[c] * (wi * d[i] + wj * d[j])).max(0.0);
                 }
             });
-        Ok(error)
+        error
     }
 }
 

@@ -433,13 +433,16 @@ impl Prt {
             geometry: None,
             report,
         };
-        if let Some(g) = &settings.geometry {
+        // One BVH for the walks and the object's own light, built only if either runs.
+        let bounce_strata = settings.interreflection.filter(|&s| s > 0);
+        let tracer = (settings.geometry.is_some() || bounce_strata.is_some())
+            .then(|| crate::raytrace::Tracer::new(mesh));
+        if let (Some(g), Some(tracer)) = (&settings.geometry, &tracer) {
             let rep = &representatives[0];
             let halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
-            let tracer = crate::raytrace::Tracer::new(mesh);
             let term = GeometryTerm::compute(
                 mesh,
-                &tracer,
+                tracer,
                 rep,
                 &prt.vertex_irradiance,
                 &halfspace,
@@ -453,11 +456,10 @@ impl Prt {
             prt.geometry = Some(term);
             prt.report.seconds_total = start.elapsed().as_secs_f64();
         }
-        if let Some(strata) = settings.interreflection.filter(|&s| s > 0) {
+        if let (Some(strata), Some(tracer)) = (bounce_strata, &tracer) {
             let t_bounce = Instant::now();
             let rep = &representatives[0];
             let direct = prt.radiosity(rep)?.radiosity;
-            let tracer = crate::raytrace::Tracer::new(mesh);
             let model = settings.model;
             let source_albedo = slab_albedo(model, rep)?;
             let receiving = lobe_totals(model, rep)?;
@@ -472,7 +474,7 @@ impl Prt {
                     .collect();
                 irradiance = crate::interreflection::indirect_irradiance(
                     mesh,
-                    &tracer,
+                    tracer,
                     &sent,
                     &|cos| model.exit_weight(rep, cos),
                     strata,
@@ -579,6 +581,12 @@ impl Prt {
     /// channel, the coefficient vector of the dot product: [M(near_radius), c_0 .. c_{n-1}],
     /// M the profile's disc integral, and the profile's point mass.
     pub fn coefficients(&self, material: &Material) -> Result<Coefficients> {
+        self.check_eta(material)?;
+        self.coefficients_of(&self.model.profiles(material)?)
+    }
+
+    /// The material's index of refraction is the one the irradiance was computed for.
+    fn check_eta(&self, material: &Material) -> Result<()> {
         let eta = self.model.irradiance_eta(material);
         if (eta - self.eta).abs() > 1e-9 {
             return Err(Error::InvalidArgument(format!(
@@ -587,7 +595,11 @@ impl Prt {
                 self.eta, eta
             )));
         }
-        let profiles = self.model.profiles(material)?;
+        Ok(())
+    }
+
+    /// `coefficients` for the material's three profiles.
+    fn coefficients_of(&self, profiles: &[Profile; 3]) -> Result<Coefficients> {
         let (lo, hi) = self.basis().domain();
         let mut fit_error = [0.0; 3];
         let mut estimate = [0.0; 3];
@@ -645,7 +657,10 @@ impl Prt {
         walks: bool,
     ) -> Result<Evaluation> {
         let t0 = Instant::now();
-        let c = self.coefficients(material)?;
+        self.check_eta(material)?;
+        // The material's profiles, once: the fit, the walks' term and the bounce all read them.
+        let profiles = self.model.profiles(material)?;
+        let c = self.coefficients_of(&profiles)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         let (mut radiosity, gpu) = match &self.gpu {
@@ -664,14 +679,15 @@ impl Prt {
         }
         let mut error_estimate = c.error_estimate;
         if let Some(g) = self.geometry.as_ref().filter(|_| walks) {
-            let added = g.add_to(&mut radiosity, material)?;
+            let added = g.add_to(&mut radiosity, &profiles);
             for (e, a) in error_estimate.iter_mut().zip(added) {
                 *e += a;
             }
         }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
-            let albedo = slab_albedo(self.model, material)?;
-            let receiving = lobe_totals(self.model, material)?;
+            let receiving = totals(&profiles);
+            let w = self.model.exit_weight(material, 1.0);
+            let albedo = receiving.map(|t| w * t);
             let k: [f32; 3] = std::array::from_fn(|ch| {
                 if bounce.source_albedo[ch] > 0.0 {
                     (receiving[ch] * albedo[ch] / bounce.source_albedo[ch]) as f32
@@ -724,8 +740,12 @@ impl Prt {
 /// What a thick slab of `material` returns per unit irradiance, profile and lobes: the
 /// profile's total plus its point mass, per channel.
 fn lobe_totals(model: Model, material: &Material) -> Result<[f64; 3]> {
-    let p = model.profiles(material)?;
-    Ok(std::array::from_fn(|c| p[c].total() + p[c].point_mass()))
+    Ok(totals(&model.profiles(material)?))
+}
+
+/// `lobe_totals` of the three profiles at hand.
+pub(crate) fn totals(p: &[Profile; 3]) -> [f64; 3] {
+    std::array::from_fn(|c| p[c].total() + p[c].point_mass())
 }
 
 /// The slab's albedo seen along the normal: the exit weight times `lobe_totals`.
