@@ -3,6 +3,7 @@ benchmarks and accuracy checks use. Loading only: no maths beyond scaling to a s
 
 from __future__ import annotations
 
+import os
 import pathlib
 
 import numpy as np
@@ -10,7 +11,8 @@ import numpy as np
 import translucent
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-MODELS = REPO.parent / "shared" / "models"
+# TRANSLUCENT_MODELS points elsewhere (the device machine, where ../shared does not travel).
+MODELS = pathlib.Path(os.environ.get("TRANSLUCENT_MODELS", REPO.parent / "shared" / "models"))
 
 
 def load(name: str, diagonal: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
