@@ -147,3 +147,31 @@ def test_walks_stay_finite_on_stiff_and_extreme_media(sigma_a, sigma_s):
     ref = translucent.reference_radiance(s, m, walks=8)
     assert np.all(np.isfinite(ref)) and ref.min() >= 0
     assert all(math.isfinite(e) for e in prt.last_eval["error_estimate"])
+
+
+def test_a_part_sunk_into_another_is_walked_as_its_own_class():
+    """A 1.5 mm marble sphere sunk a third of its height into a 4 mm one (an eyeball in a head),
+    lit from above. The walks from the sunk part leave into the large sphere's inside, in the
+    dark, where the half-space profile sees the lit surface around it (measured: 5-6x too
+    bright there). PRT with walks against the walks at those vertices (no kernel), and on the
+    small sphere as a whole."""
+    pb, tb = sphere(16, 4.0)
+    ps, ts = sphere(8, 1.5)
+    ps = ps + np.array([0.0, 0.0, 3.8], np.float32)
+    p, t = np.vstack([pb, ps]), np.vstack([tb, ts + len(pb)])
+    s = translucent.Scene(p, t)
+    s.add_sun((0.3, 0.0, -1.0), 1.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1.0)
+    w = s.vertex_areas[:, 0]
+    small = np.arange(len(pb), len(p))
+    inside = np.linalg.norm(p[small], axis=1) < 4.0
+    truth = translucent.reference_radiance(s, m, walks=400, receivers=small.tolist())
+    k = translucent.layer_weight(m.roughness, 1.0, m.eta) / math.pi
+    walked = translucent.Prt(s, m, backend="cpu", interreflection=False, walk_rays=3_000_000)
+    half = translucent.Prt(s, m, backend="cpu", interreflection=False, walks=0)
+    assert walked.report["walks"]["refined_vertices"] > 0
+    for sel, bound in ((inside, 0.35), (np.ones(len(small), bool), 0.12)):
+        err = max(translucent.relative_error((walked.radiosity(m) * k)[small][sel], truth[sel], w[small][sel])["rms"])
+        err_half = max(translucent.relative_error((half.radiosity(m) * k)[small][sel], truth[sel], w[small][sel])["rms"])
+        assert err < bound, (err, err_half)
+        assert err_half > 3 * err, (err_half, err)

@@ -12,6 +12,13 @@
 //! and scaled by the edited A. An edit whose L leaves the walked range by more than
 //! `LENGTH_MARGIN` is flagged (the error estimate grows, a refresh is advised).
 //!
+//! Two places where D changes faster than the walked vertices' spacing get walked again,
+//! `REFINE_FACTOR` times closer, with a kernel of that finer spacing: around walked vertices
+//! whose D stands out from their neighbourhood's average (`REFINE_TOLERANCE`), and every
+//! vertex that lies inside another part of the mesh (the ray along its normal meets a surface
+//! from behind: an eyeball sunk into a head), which is averaged only among its own class.
+//! Their rays are `REFINE_SHARE` of the budget on top of it.
+//!
 //! Vertices whose neighbourhood within the reach of the walks is flat (every walked vertex
 //! within it lies within `FLAT_TOLERANCE` L of the tangent plane and faces the same way) get
 //! D = 0 without walks: there the half-space table is the walk.
@@ -42,6 +49,17 @@ const TARGET_WALKS: usize = 256;
 const SPREAD_DENSITY: f64 = 1.9;
 /// Reach of the walks in diffusion lengths, for the flatness test.
 const REACH_LENGTHS: f64 = 3.0;
+/// A walked vertex whose D differs from its neighbourhood's kernel average by more than this
+/// share of its B (and by more than three standard errors) marks a place where D changes
+/// faster than the spacing resolves (an eyeball sunk into a head, the rim of an ear): the
+/// vertices within one spacing of it are walked again, `REFINE_FACTOR` times closer.
+const REFINE_TOLERANCE: f32 = 0.1;
+const REFINE_FACTOR: f32 = 3.0;
+/// The refinement's rays, as a share of the main budget (on top of it).
+const REFINE_SHARE: f64 = 0.5;
+
+/// D per channel and its variance, at one walked vertex.
+type Diff = ([f32; 3], [f32; 3]);
 
 /// How the geometry term is computed.
 #[derive(Debug, Clone, PartialEq)]
@@ -78,6 +96,10 @@ pub struct GeometryReport {
     pub walked_vertices: usize,
     /// Candidate vertices found flat: no walks.
     pub skipped_flat: usize,
+    /// Vertices walked again, closer together, where D changed faster than the spacing
+    /// resolved (`REFINE_TOLERANCE`), and their walks per vertex.
+    pub refined_vertices: usize,
+    pub refined_walks_per_vertex: usize,
     pub walks_per_vertex: usize,
     pub walks: u64,
     pub rays: u64,
@@ -131,6 +153,9 @@ impl GeometryTerm {
         let shortest = lengths.iter().copied().fold(f64::INFINITY, f64::min);
         let longest = lengths.iter().copied().fold(0.0, f64::max);
         let n = mesh.vertex_count();
+        // Vertices inside another part of the mesh (an eyeball sunk into a head) are their own
+        // class: walked closer together, averaged only among themselves.
+        let embedded = embedded_vertices(mesh, tracer);
         // Flat neighbourhoods get D = 0 and no walks.
         let reach = (REACH_LENGTHS * longest) as f32;
         let tolerance = (FLAT_TOLERANCE * shortest) as f32;
@@ -138,10 +163,10 @@ impl GeometryTerm {
             let spacing = (mesh.area() / (SPREAD_DENSITY * count as f64)).sqrt() as f32;
             let candidates = if count >= n {
                 (0..n as u32)
-                    .filter(|&v| mesh.normals()[v as usize] != Vec3::ZERO)
+                    .filter(|&v| mesh.normals()[v as usize] != Vec3::ZERO && !embedded[v as usize])
                     .collect()
             } else {
-                spread(mesh, spacing)
+                spread_where(mesh, spacing, |v| !embedded[v as usize])
             };
             let flat = flat_vertices(mesh, &candidates, reach, tolerance);
             let walked = candidates
@@ -171,6 +196,7 @@ impl GeometryTerm {
         let (mut spacing, mut candidates, mut walked) =
             select(settings.vertices.clamp(1, n.max(1)));
         let first = walk(&walked, settings.walks, settings.seed, 0.0, 0.2)?;
+        let (main_from, main_to) = (0.2, 0.8);
         // Rays per walk (all channels) from this first pass; the budget then buys either more
         // walked vertices (short-reaching materials: finer detail for the same rays) or more
         // walks at the same ones.
@@ -192,11 +218,14 @@ impl GeometryTerm {
         {
             (spacing, candidates, walked) = select(wanted.min(n));
             let w = budget_walks(walked.len()).max(settings.walks);
-            (walk(&walked, w, settings.seed ^ 0x5eed, 0.2, 1.0)?, w)
+            (
+                walk(&walked, w, settings.seed ^ 0x5eed, main_from, main_to)?,
+                w,
+            )
         } else {
             let more = budget_walks(walked.len()).saturating_sub(settings.walks);
             if more > 0 && !walked.is_empty() {
-                let second = walk(&walked, more, settings.seed ^ 0x5eed, 0.2, 1.0)?;
+                let second = walk(&walked, more, settings.seed ^ 0x5eed, main_from, main_to)?;
                 (
                     combine(&first, &second, settings.walks, more),
                     settings.walks + more,
@@ -205,6 +234,7 @@ impl GeometryTerm {
                 (first, settings.walks)
             }
         };
+        let mut walks_total = (walks.walks, walks.rays);
         // Per candidate: D and its variance (flat ones: exactly 0).
         let mut diff = vec![([0f32; 3], [0f32; 3]); candidates.len()];
         let mut k = 0;
@@ -223,9 +253,102 @@ impl GeometryTerm {
         }
         let radius = KERNEL_SPACINGS * spacing;
         let grid = Grid::new(mesh, &candidates, radius);
+        // Where D changes faster than the spacing resolves: walked vertices whose D stands out
+        // from their neighbourhood's average.
+        let flagged: Vec<u32> = candidates
+            .par_iter()
+            .enumerate()
+            .filter(|(i, &v)| {
+                let (d, var) = diff[*i];
+                if var == [0.0; 3] {
+                    return false; // flat (no walks)
+                }
+                let (mean, _) = grid.average(mesh, v, &candidates, &diff, &embedded);
+                let h = halfspace[v as usize];
+                (0..3).any(|c| {
+                    let r = (d[c] - mean[c]).abs();
+                    r > REFINE_TOLERANCE * h[c].max(h[c] + d[c]) && r * r > 9.0 * var[c]
+                })
+            })
+            .map(|(_, &v)| v)
+            .collect();
+        let mut refined = (Vec::new(), 0usize);
+        let mut near_flagged = vec![false; n];
+        let mut fine_spacing = spacing;
+        let any_embedded = embedded.iter().any(|e| *e);
+        if (!flagged.is_empty() || any_embedded) && per_walk.is_finite() && settings.rays > 0 {
+            let flag_grid = Grid::new(mesh, &flagged, spacing);
+            near_flagged = (0..n)
+                .into_par_iter()
+                .map(|v| {
+                    let (p, nv) = (mesh.positions()[v], mesh.normals()[v]);
+                    let mut near = false;
+                    flag_grid.visit(p, |i| {
+                        let u = flagged[i] as usize;
+                        near |= mesh.positions()[u].distance(p) < spacing
+                            && mesh.normals()[u].dot(nv) > 0.0;
+                    });
+                    near || embedded[v]
+                })
+                .collect();
+            fine_spacing = spacing / REFINE_FACTOR;
+            let taken: std::collections::HashSet<u32> = walked.iter().copied().collect();
+            let fine: Vec<u32> = spread_where(mesh, fine_spacing, |v| {
+                near_flagged[v as usize] && !taken.contains(&v)
+            });
+            let fine_flat = flat_vertices(mesh, &fine, reach, tolerance);
+            let fine: Vec<u32> = fine
+                .into_iter()
+                .zip(fine_flat)
+                .filter(|(_, f)| !f)
+                .map(|(v, _)| v)
+                .collect();
+            if !fine.is_empty() {
+                let budget = REFINE_SHARE * settings.rays as f64;
+                let w = ((budget / (per_walk * fine.len() as f64)) as usize)
+                    .clamp(settings.walks, walks_per_vertex.max(settings.walks));
+                let more = walk(&fine, w, settings.seed ^ 0xf1e, main_to, 1.0)?;
+                refined = (
+                    fine.iter()
+                        .enumerate()
+                        .map(|(k, &v)| {
+                            let (b, se) = (more.radiosity[k], more.std_error[k]);
+                            let h = halfspace[v as usize];
+                            (
+                                v,
+                                (
+                                    std::array::from_fn(|c| b[c] - h[c]),
+                                    std::array::from_fn(|c| se[c] * se[c]),
+                                ),
+                            )
+                        })
+                        .collect::<Vec<_>>(),
+                    w,
+                );
+                walks_total.0 += more.walks;
+                walks_total.1 += more.rays;
+            }
+        }
+        // Near a flagged vertex, the kernel is the fine spacing's over every walked vertex.
+        let (fine_points, fine_diff): (Vec<u32>, Vec<Diff>) = candidates
+            .iter()
+            .copied()
+            .zip(diff.iter().copied())
+            .chain(refined.0.iter().copied())
+            .unzip();
+        let fine_grid = Grid::new(mesh, &fine_points, KERNEL_SPACINGS * fine_spacing);
         let smoothed: Vec<([f32; 3], [f32; 3])> = (0..n)
             .into_par_iter()
-            .map(|v| grid.average(mesh, v as u32, &candidates, &diff))
+            .map(|v| {
+                if near_flagged[v] {
+                    let (d, var) =
+                        fine_grid.average(mesh, v as u32, &fine_points, &fine_diff, &embedded);
+                    if var != [0.0; 3] || d != [0.0; 3] {
+                        return (d, var);
+                    }
+                }
+                grid.average(mesh, v as u32, &candidates, &diff, &embedded)
+            })
             .collect();
         let areas = mesh.vertex_areas();
         let mut sums = [[0f64; 3]; 3]; // noise^2, D^2, B^2 (area-weighted)
@@ -272,8 +395,10 @@ impl GeometryTerm {
                 walked_vertices: walked.len(),
                 skipped_flat: candidates.len() - walked.len(),
                 walks_per_vertex,
-                walks: walks.walks,
-                rays: walks.rays,
+                refined_vertices: refined.0.len(),
+                refined_walks_per_vertex: refined.1,
+                walks: walks_total.0,
+                rays: walks_total.1,
                 spacing: f64::from(spacing),
                 kernel_radius: f64::from(radius),
                 noise,
@@ -359,9 +484,32 @@ fn combine(a: &MeshWalkResult, b: &MeshWalkResult, na: usize, nb: usize) -> Mesh
     }
 }
 
+/// Per vertex: whether the ray along its normal first meets a surface from behind, i.e. the
+/// vertex lies inside a closed part of the mesh (an eyeball sunk into a head). Cycles' walk
+/// from there leaves into the enclosing part's inside, in the dark, where a half-space profile
+/// sees the lit surface around it.
+fn embedded_vertices(mesh: &Mesh, tracer: &Tracer) -> Vec<bool> {
+    let (p, nrm) = (mesh.positions(), mesh.normals());
+    (0..mesh.vertex_count())
+        .into_par_iter()
+        .map(|v| {
+            let n = nrm[v];
+            if n == Vec3::ZERO {
+                return false;
+            }
+            tracer
+                .intersect(tracer.offset_origin(p[v], n), n, f32::INFINITY)
+                .is_some_and(|h| {
+                    let [a, b, c] = mesh.triangles()[h.triangle as usize].map(|i| p[i as usize]);
+                    (b - a).cross(c - a).dot(n) > 0.0
+                })
+        })
+        .collect()
+}
+
 /// A deterministic, well-spread subset of the vertices about `spacing` apart (greedy
-/// Poisson-disc over the vertices in a fixed scrambled order).
-fn spread(mesh: &Mesh, spacing: f32) -> Vec<u32> {
+/// Poisson-disc over the vertices in a fixed scrambled order), among those `allowed` keeps.
+fn spread_where(mesh: &Mesh, spacing: f32, allowed: impl Fn(u32) -> bool) -> Vec<u32> {
     let n = mesh.vertex_count() as u32;
     let mut order: Vec<u32> = (0..n).collect();
     order.sort_by_key(|&v| v.wrapping_mul(2_654_435_761).rotate_left(7));
@@ -370,7 +518,7 @@ fn spread(mesh: &Mesh, spacing: f32) -> Vec<u32> {
     let key = |p: Vec3| (p / cell).floor().as_ivec3().to_array();
     let mut out = Vec::new();
     for v in order {
-        if mesh.normals()[v as usize] == Vec3::ZERO {
+        if mesh.normals()[v as usize] == Vec3::ZERO || !allowed(v) {
             continue;
         }
         let p = mesh.positions()[v as usize];
@@ -456,16 +604,19 @@ impl Grid {
     }
 
     /// Kernel average of the candidates' D at vertex v, (1 - d^2/R^2)^2 times the cosine
-    /// between the normals (candidates facing away are left out: the two sides of an ear),
-    /// and the variance of that average.
+    /// between the normals (candidates facing away are left out: the two sides of an ear;
+    /// so are those of the other `class`: embedded or exposed), and the variance of that
+    /// average.
     fn average(
         &self,
         mesh: &Mesh,
         v: u32,
         candidates: &[u32],
         diff: &[([f32; 3], [f32; 3])],
+        class: &[bool],
     ) -> ([f32; 3], [f32; 3]) {
         let (p, n) = (mesh.positions()[v as usize], mesh.normals()[v as usize]);
+        let own = class[v as usize];
         let r2 = self.cell * self.cell;
         let mut wsum = 0f32;
         let (mut acc, mut var) = ([0f32; 3], [0f32; 3]);
@@ -473,7 +624,7 @@ impl Grid {
             let u = candidates[i] as usize;
             let d2 = mesh.positions()[u].distance_squared(p);
             let cos = mesh.normals()[u].dot(n);
-            if d2 < r2 && cos > 0.0 {
+            if d2 < r2 && cos > 0.0 && class[u] == own {
                 let w = (1.0 - d2 / r2).powi(2) * cos;
                 wsum += w;
                 for c in 0..3 {
@@ -517,7 +668,7 @@ mod tests {
     fn the_spread_is_a_poisson_disc_covering_the_mesh() {
         let mesh = grid(60, 0.0);
         let s = 0.05;
-        let chosen = spread(&mesh, s);
+        let chosen = spread_where(&mesh, s, |_| true);
         for (k, &a) in chosen.iter().enumerate() {
             for &b in &chosen[k + 1..] {
                 let d = mesh.positions()[a as usize].distance(mesh.positions()[b as usize]);
@@ -532,7 +683,45 @@ mod tests {
                 .fold(f32::INFINITY, f32::min);
             assert!(near < s, "{near}");
         }
-        assert_eq!(chosen, spread(&mesh, s), "deterministic");
+        assert_eq!(chosen, spread_where(&mesh, s, |_| true), "deterministic");
+    }
+
+    /// An axis-aligned cube, wound outwards, appended to (p, t).
+    fn cube(p: &mut Vec<Vec3>, t: &mut Vec<[u32; 3]>, centre: Vec3, half: f32) {
+        let base = p.len() as u32;
+        for k in 0..8 {
+            let s = |b: usize| if k & b != 0 { 1.0 } else { -1.0 };
+            p.push(centre + half * Vec3::new(s(1), s(2), s(4)));
+        }
+        // Faces as corner quads (bit masks), counter-clockwise seen from outside.
+        for q in [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ] {
+            t.push([base + q[0], base + q[1], base + q[2]]);
+            t.push([base + q[0], base + q[2], base + q[3]]);
+        }
+    }
+
+    #[test]
+    fn vertices_inside_another_part_are_embedded_and_no_others() {
+        // A small cube sunk halfway into the +x face of a large one: its four corners at
+        // x = 0.7 lie inside the large cube, its four at x = 1.3 outside; the large cube's
+        // corners are all outside.
+        let (mut p, mut t) = (Vec::new(), Vec::new());
+        cube(&mut p, &mut t, Vec3::ZERO, 1.0);
+        cube(&mut p, &mut t, Vec3::new(1.0, 0.0, 0.0), 0.3);
+        let mesh = Mesh::new(p, t, None).unwrap();
+        let tracer = Tracer::new(&mesh);
+        let embedded = embedded_vertices(&mesh, &tracer);
+        for (v, e) in embedded.iter().enumerate() {
+            let inside = v >= 8 && mesh.positions()[v].x < 1.0;
+            assert_eq!(*e, inside, "vertex {v} at {:?}", mesh.positions()[v]);
+        }
     }
 
     #[test]
@@ -540,7 +729,7 @@ mod tests {
         // A bump of height 0.1 at the centre of a unit plane: candidates near it are not flat
         // within a reach of 0.15, those far from it are.
         let mesh = grid(41, 0.1);
-        let candidates = spread(&mesh, 0.05);
+        let candidates = spread_where(&mesh, 0.05, |_| true);
         let flat = flat_vertices(&mesh, &candidates, 0.15, 0.002);
         for (&v, f) in candidates.iter().zip(&flat) {
             let p = mesh.positions()[v as usize];

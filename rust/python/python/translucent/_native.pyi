@@ -168,7 +168,10 @@ class Prt:
         profile cannot see (thin and curved parts); None: on for "cycles" with as many walks as
         `walk_rays` rays allow (default min(20 M, 2500 per vertex), about 5 s on 2 cores), off
         for "dipole"; N: exactly N walks per walked vertex and channel; 0: off. Flat
-        neighbourhoods are not walked (`report["walks"]["skipped_flat"]`).
+        neighbourhoods are not walked (`report["walks"]["skipped_flat"]`); where the term
+        changes faster than the walked vertices' spacing, and at vertices sunk inside another
+        part of the mesh, a second pass walks 3x closer with up to half the rays again
+        (`report["walks"]["refined_vertices"]`).
         `backend`: where edits run; "auto" takes a hardware GPU if there is one, else the CPU;
         "gpu" takes any wgpu adapter (Mesa's lavapipe too) and raises RuntimeError if none.
         `fit_tolerance`: choose the basis size as the smallest (up to `coefficients`) whose
