@@ -343,3 +343,47 @@ def test_auto_picks_the_method_by_what_changed(addon, monkeypatch):
     monkeypatch.delattr(translucent, "Hierarchy")
     assert session.resolve_method("HIERARCHY", "precompute") == ("prt", session.HIERARCHY_MISSING)
     assert session.resolve_method("AUTO", "deformation") == ("prt", session.HIERARCHY_MISSING)
+
+
+def test_a_shape_key_and_edit_mode_edits_are_followed(addon):
+    import bmesh
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    obj.shape_key_add(name="Basis")
+    grow = obj.shape_key_add(name="Grow")
+    for point in grow.data:
+        point.co *= 1.25
+    grow.value = 0.0
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.state(mat) == "ready"
+    first = read_preview(obj)
+    grow.value = 1.0
+    bpy.context.view_layer.update()
+    session.follow_now()
+    shaped = read_preview(obj)
+    assert not np.allclose(shaped, first), "the shape key did not change the preview"
+    np.testing.assert_allclose(shaped, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+    # Edit Mode: noticed, but shown when leaving it (a write now would be lost on the way out).
+    obj.active_shape_key_index = 0
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    bm = bmesh.from_edit_mesh(obj.data)
+    for v in bm.verts:
+        if v.co.z > 0.02:
+            v.co.y += 0.02
+    bmesh.update_edit_mesh(obj.data)
+    bpy.context.view_layer.update()
+    sess = session.SESSIONS[mat.name]
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is sess and "Edit Mode" in sess.follow_message
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
+    edited = read_preview(obj)
+    assert not np.allclose(edited, shaped)
+    np.testing.assert_allclose(edited, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
