@@ -69,7 +69,9 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         state = session.state(mat)
         if state == "running":
             job = session.JOBS[mat.name]
-            layout.label(text=f"Precomputing {100 * job.progress:.0f} % (Esc cancels)", icon="TIME")
+            what = "Refreshing in the background" if getattr(job, "background", False) else "Precomputing"
+            esc = "" if getattr(job, "background", False) else " (Esc cancels)"
+            layout.label(text=f"{what} {100 * job.progress:.0f} %{esc}", icon="TIME")
         else:
             layout.operator("translucent.precompute", icon="RENDER_STILL")
         if state == "none":

@@ -50,6 +50,8 @@ class Session:
     deformed: dict = field(default_factory=dict)
     # What differs from the transport ("" when nothing): the panel's "stale" and its reason.
     changed: str = ""
+    # Mesh objects that took or lost the material since ("" when none), in words.
+    members_changed: str = ""
     # What following the scene is doing ("refreshing: light Key changed", ...).
     follow_message: str = ""
 
@@ -448,6 +450,7 @@ def _in_background(name: str, job: Job, objects, info, lighting, failed, method_
     """Runs `job` off the UI thread (headless: here, at once) and swaps its transport in when it
     is done; until then the old preview stays up. `failed(error)` reports an error."""
     JOBS[name] = job
+    job.background = True  # the panel: no Esc to cancel it (no modal operator runs it)
 
     def complete() -> None:
         JOBS.pop(name, None)
@@ -510,6 +513,8 @@ def _lighting_difference(old: dict, new: dict) -> str:
 
 def _describe(s: Session, lighting: str) -> str:
     parts = [f"{name} {'changed topology' if what == 'topology' else what}" for name, what in sorted(s.deformed.items())]
+    if s.members_changed:
+        parts.append(s.members_changed)
     if lighting:
         parts.append(lighting)
     return ", ".join(parts)
@@ -535,14 +540,16 @@ def follow_scene(scene, depsgraph) -> None:
     world changed, and schedules the debounced check. Evaluates no mesh."""
     if not SESSIONS:
         return
-    tagged, lighting = set(), False
+    tagged, lighting, linked = set(), False, False
     for u in depsgraph.updates:
         id_ = u.id.original
         if isinstance(id_, bpy.types.Object) and id_.type == "MESH" and (u.is_updated_geometry or u.is_updated_transform):
             tagged.add(id_.name)
         elif _is_lighting(id_):
             lighting = True
-    _follow(scene, tagged, lighting)
+        # Objects linked, unlinked or given a material: which objects carry it may differ.
+        linked = linked or isinstance(id_, (bpy.types.Scene, bpy.types.Collection))
+    _follow(scene, tagged, lighting, linked)
 
 
 @bpy.app.handlers.persistent
@@ -553,17 +560,18 @@ def follow_frame(scene, depsgraph=None) -> None:
         _follow(scene, None, True)
 
 
-def _follow(scene, tagged: set | None, lighting: bool) -> None:
+def _follow(scene, tagged: set | None, lighting: bool, linked: bool = True) -> None:
     keys = export.lighting_keys(scene) if lighting else None
     for name, s in list(SESSIONS.items()):
         if bpy.data.materials.get(name) is None:
             continue
         moved = set(s.objects) if tagged is None else tagged & set(s.objects)
+        others = linked or (tagged is not None and bool(tagged - moved))
         lit = ""
         if keys is not None:
             lit = _lighting_difference(s.lighting, keys)
             s.changed = _describe(s, lit)  # the panel says "stale" at once; geometry after the check
-        if moved or lit:
+        if moved or lit or others:
             _note(name, moved)
 
 
@@ -603,15 +611,19 @@ def follow_now(names=None) -> None:
             # back: leaving Edit Mode tags the geometry again, and the preview follows then.
             s.follow_message = "in Edit Mode: the preview follows when you leave it"
             continue
-        _check(s, suspects, bpy.context.scene)
+        _check(s, mat, suspects, bpy.context.scene)
         settings = mat.translucent
         if s.changed and settings.enabled and settings.follow_scene:
             _follow_refresh(mat, s)
 
 
-def _check(s: Session, suspects: set, bl_scene) -> None:
-    """Compares the tagged objects' evaluated geometry and the lights and world with what the
-    transport was built from, and keeps the result on the session (`deformed`, `changed`)."""
+def _check(s: Session, mat: bpy.types.Material, suspects: set, bl_scene) -> None:
+    """Compares the tagged objects' evaluated geometry, which objects carry the material, and
+    the lights and world with what the transport was built from, and keeps the result on the
+    session (`deformed`, `members_changed`, `changed`)."""
+    members = {o.name for o in objects_with(mat, bl_scene)}
+    gained, lost = sorted(members - set(s.objects)), sorted(set(s.objects) - members)
+    s.members_changed = ", ".join([f"{n} took the material" for n in gained] + [f"{n} lost it" for n in lost])
     depsgraph = bpy.context.evaluated_depsgraph_get()
     for r in s.info.objects:
         if r.name not in suspects:
@@ -636,7 +648,7 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
     scratch; the hierarchy updates itself in place otherwise."""
     change = "deformation" if s.deformed else "light"
     method, message = resolve_method(mat.translucent.method, change, s.method)
-    topology = any(v != "deformed" for v in s.deformed.values())
+    topology = any(v != "deformed" for v in s.deformed.values()) or bool(s.members_changed)
     name = mat.name
     try:
         job, objects, info, lighting = start(mat, method=method, previous=None if topology else s)

@@ -387,3 +387,22 @@ def test_a_shape_key_and_edit_mode_edits_are_followed(addon):
     edited = read_preview(obj)
     assert not np.allclose(edited, shaped)
     np.testing.assert_allclose(edited, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+
+
+def test_an_object_taking_the_material_is_followed(addon):
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.03, location=(0.1, 0.0, 0.0), segments=12, ring_count=6)
+    other = bpy.context.active_object
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.state(mat) == "ready" and session.SESSIONS[mat.name].objects == [obj.name]
+    other.data.materials.append(mat)
+    bpy.context.view_layer.update()
+    session.follow_now()
+    sess = session.SESSIONS[mat.name]
+    assert sorted(sess.objects) == sorted([obj.name, other.name]) and session.state(mat) == "ready"
+    assert read_preview(other).max() > 0
