@@ -462,7 +462,7 @@ def _in_background(name: str, job: Job, objects, info, lighting, failed, method_
             return
         finish(mat, job, objects, info, lighting, method_message)
 
-    if bpy.app.background:
+    if _headless():
         job.run_here()
         complete()
         return
@@ -476,6 +476,11 @@ def _in_background(name: str, job: Job, objects, info, lighting, failed, method_
 
     job.start()
     bpy.app.timers.register(poll, first_interval=0.2)
+
+
+def _headless() -> bool:
+    """No UI to keep responsive (tests may pretend there is one)."""
+    return bpy.app.background
 
 
 def _redraw() -> None:

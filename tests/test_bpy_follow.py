@@ -406,3 +406,35 @@ def test_an_object_taking_the_material_is_followed(addon):
     sess = session.SESSIONS[mat.name]
     assert sorted(sess.objects) == sorted([obj.name, other.name]) and session.state(mat) == "ready"
     assert read_preview(other).max() > 0
+
+
+def test_with_a_ui_the_refresh_runs_on_a_worker_and_the_old_preview_stays_until_it_is_done(addon, monkeypatch):
+    """The path Blender with a window takes: the precompute on a worker thread, polled by a
+    timer (captured here, as headless Blender runs none); the preview swaps only when the
+    poll finds the job done."""
+    import bpy
+
+    from addon import session
+
+    mat, obj, light = lit_sphere(bpy)
+    first, sess = read_preview(obj), session.SESSIONS[mat.name]
+    timers = []
+    monkeypatch.setattr(session, "_headless", lambda: False)
+    monkeypatch.setattr(bpy.app.timers, "register", lambda fn, first_interval=0.0, persistent=False: timers.append(fn))
+    monkeypatch.setattr(bpy.app.timers, "is_registered", lambda fn: fn in timers)
+    light.location.x += 0.1
+    bpy.context.view_layer.update()
+    session.follow_now()
+    job = session.JOBS[mat.name]
+    assert session.state(mat) == "running" and job._thread.ident is not None, "started on a worker thread"
+    assert job.background and "Refreshing in the background" in " ".join(draw_panel(addon, mat))
+    # Whatever the worker does meanwhile, the artist sees the old preview.
+    np.testing.assert_array_equal(read_preview(obj), first)
+    assert session.SESSIONS[mat.name] is sess
+    job._thread.join(timeout=120)
+    poll = next(fn for fn in timers if fn.__name__ == "poll")
+    assert poll() is None, "the job is done"
+    assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
+    now = read_preview(obj)
+    assert not np.allclose(now, first)
+    np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
