@@ -1,9 +1,11 @@
 """The add-on follows the scene (issue 10, point 5), in headless Blender: a deformed mesh (a
-Displace modifier, an armature pose, an animated modifier on the timeline) and a moved light
-refresh the preview without pressing anything; the add-on's own colour writes are not taken
-for a deformation; a topology change rebuilds; the panel's draw evaluates no mesh; the
-Method selector falls back to PRT, saying why, while translucent has no hierarchy; the
-user's meshes and materials are never written.
+Displace modifier, an armature pose, a shape key, an Edit Mode edit, an animated modifier on
+the timeline), a moved light and an object taking the material refresh the preview without
+pressing anything; the add-on's own colour writes are not taken for a deformation; a
+topology change rebuilds; with a UI the refresh runs on a worker thread and the old preview
+stays until it is done; the panel's draw evaluates no mesh; the Method selector falls back to
+PRT, saying why, while translucent has no hierarchy; the user's meshes and materials are
+never written.
 
 Headless Blender runs no timers: the tests let the real depsgraph handlers fire
 (`view_layer.update()`, `frame_set`) and then do what the debounced timer does once the scene
