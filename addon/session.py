@@ -270,6 +270,12 @@ def finish(material: bpy.types.Material, job: Job, objects, info, lighting, meth
 def summary(sess: Session) -> str:
     """What the precompute did and left out, in one line for the status bar and the panel."""
     r, info = sess.prt.report, sess.info
+    if sess.method == "hierarchy":
+        # Its report's keys are the hierarchy's own: shown as it gives them, not as PRT's.
+        own = ", ".join(f"{k} {v}" for k, v in dict(getattr(sess.prt.hierarchy, "report", None) or {}).items())
+        return (f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped), "
+                f"{len(info.lights)} light(s), {len(info.skipped_lights)} dark skipped, world: {info.world}; "
+                f"hierarchy (Mertens 2003){': ' + own if own else ''}")
     world = "world: no rays (black)" if r["world_skipped"] else f"world: {info.world}"
     w = r.get("walks")
     walks = (f"; walks through the mesh: {w['walks_per_vertex']} x {w['walked_vertices']} vertices "
