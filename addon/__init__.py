@@ -5,7 +5,8 @@ Blender-side code only: settings (`properties`), operators, the material panel, 
 (`export`) and colour write-back (`writeback`). All maths lives in the native `translucent`
 module. Enable the preview on a material, press Precompute, then drag the sliders: the
 objects' "translucent_preview" colour attribute follows, and Solid viewports show it
-(`viewport`) until the preview is turned off.
+(`viewport`) until the preview is turned off. Posing, deforming, scrubbing the timeline or
+moving a light refreshes the preview on its own (`session.follow_scene`), in the background.
 """
 
 import bpy
@@ -58,18 +59,36 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         row = layout.row()
         row.prop(s, "backend")
         row.prop(s, "auto_refresh")
+        row = layout.row()
+        row.prop(s, "method")
+        row.prop(s, "follow_scene")
+        if s.method != "PRT" and not session.hierarchy_available():
+            layout.label(text=session.HIERARCHY_MISSING, icon="INFO")
+        # Everything below reads what the handlers and jobs left on the session: a redraw
+        # evaluates no mesh (the follow check does, once the scene is still).
         state = session.state(mat)
         if state == "running":
             job = session.JOBS[mat.name]
-            layout.label(text=f"Precomputing {100 * job.progress:.0f} % (Esc cancels)", icon="TIME")
+            what = "Refreshing in the background" if getattr(job, "background", False) else "Precomputing"
+            esc = "" if getattr(job, "background", False) else " (Esc cancels)"
+            layout.label(text=f"{what} {100 * job.progress:.0f} %{esc}", icon="TIME")
         else:
             layout.operator("translucent.precompute", icon="RENDER_STILL")
         if state == "none":
             layout.label(text="No transport: press Precompute", icon="INFO")
-        elif state == "stale":
-            layout.label(text="Scene, profile or (dipole) IOR changed: transport is stale, precompute again",
-                         icon="ERROR")
         sess = session.SESSIONS.get(mat.name)
+        if state == "stale":
+            if sess is not None and sess.changed:
+                follows = s.follow_scene and s.enabled
+                layout.label(text=f"Changed: {sess.changed}" + (" (refreshing)" if follows else ""),
+                             icon="TIME" if follows else "ERROR")
+            if not (sess is not None and sess.changed and s.follow_scene):
+                layout.label(text="Scene, profile or (dipole) IOR changed: transport is stale, precompute again",
+                             icon="ERROR")
+        if sess is not None and sess.follow_message:
+            layout.label(text=sess.follow_message, icon="INFO")
+        if sess is not None and sess.method_message:
+            layout.label(text=sess.method_message, icon="INFO")
         if sess is not None and sess.edit_message:
             layout.label(text=sess.edit_message, icon="TIME" if mat.name in session.PREPARING else "ERROR")
         if sess is not None:
@@ -93,6 +112,7 @@ def _drop_sessions(*_args):
     """A loaded file starts without transport (it is not saved); the panel asks for a precompute."""
     session.SESSIONS.clear()
     session.JOBS.clear()
+    session.PENDING.clear()
     viewport.forget()
 
 
@@ -105,13 +125,20 @@ def register():
         bpy.utils.register_class(cls)
     bpy.app.handlers.load_post.append(_drop_sessions)
     bpy.app.handlers.depsgraph_update_post.append(session.follow_principled)
+    bpy.app.handlers.depsgraph_update_post.append(session.follow_scene)
+    bpy.app.handlers.frame_change_post.append(session.follow_frame)
 
 
 def unregister():
-    if _drop_sessions in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(_drop_sessions)
-    if session.follow_principled in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(session.follow_principled)
+    for handlers, fn in ((bpy.app.handlers.load_post, _drop_sessions),
+                         (bpy.app.handlers.depsgraph_update_post, session.follow_principled),
+                         (bpy.app.handlers.depsgraph_update_post, session.follow_scene),
+                         (bpy.app.handlers.frame_change_post, session.follow_frame)):
+        if fn in handlers:
+            handlers.remove(fn)
+    if bpy.app.timers.is_registered(session.follow_tick):
+        bpy.app.timers.unregister(session.follow_tick)
+    session.PENDING.clear()
     for cls in reversed(operators.classes + classes):
         bpy.utils.unregister_class(cls)
     viewport.restore()

@@ -42,11 +42,12 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             self.report({"WARNING"}, f"a precompute for {mat.name} is already running")
             return None
         try:
-            job, objects, info, fp = session.start(mat, context.scene)
+            method, self._method_message = session.resolve_method(mat.translucent.method, "precompute")
+            job, objects, info, lighting = session.start(mat, context.scene, method=method)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return None
-        self._mat, self._job, self._objects, self._info, self._fp = mat.name, job, objects, info, fp
+        self._mat, self._job, self._objects, self._info, self._lighting = mat.name, job, objects, info, lighting
         return job
 
     def _finish(self, context):
@@ -61,7 +62,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
                 return {"CANCELLED"}
             self.report({"ERROR"}, f"precompute failed: {job.error}")
             return {"CANCELLED"}
-        s = session.finish(mat, job, self._objects, self._info, self._fp)
+        s = session.finish(mat, job, self._objects, self._info, self._lighting, self._method_message)
         r = s.prt.report
         self.report({"INFO"}, f"precomputed {r['vertices']} vertices: {session.summary(s)}; {s.prt.backend_message}")
         return {"FINISHED"}

@@ -113,8 +113,15 @@ def _toggle(self, context):
     if self.enabled and sess is not None:
         session.edit(mat)
         viewport.show(objects)
+        if self.follow_scene:
+            session.follow_again(mat)  # what changed while the preview was off
     elif not self.enabled:
         viewport.restore(objects or session.objects_with(mat))
+
+
+def _follow_toggle(self, context):
+    if self.follow_scene and self.enabled:
+        session.follow_again(self.id_data)
 
 
 class TranslucentMaterialSettings(bpy.types.PropertyGroup):
@@ -160,6 +167,22 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
         description="When an edit leaves the range the basis was chosen for (the error estimate says so), "
         "precompute again in the background",
         default=True,
+    )
+    method: EnumProperty(
+        name="Method",
+        items=[("AUTO", "Auto", "Choose by what changed: PRT for material edits and lights, the hierarchy for "
+                "deforming or animated meshes (PRT while translucent has no hierarchy)"),
+               ("PRT", "PRT", "Precomputed radiance transfer (Xu 2007): live material edits; a moved light or a "
+                "deformation precomputes again in the background"),
+               ("HIERARCHY", "Hierarchy", "Hierarchical boundary elements (Mertens 2003): deforming scenes, "
+                "nothing precomputed that a deformation invalidates (needs translucent.Hierarchy; PRT until then)")],
+        default="AUTO",
+    )
+    follow_scene: BoolProperty(
+        name="Follow scene",
+        description="When a previewed object deforms (armature, shape keys, modifiers, edit mode, timeline) or "
+        "a light or the world changes, refresh the preview in the background; the old preview stays until then",
+        default=True, update=_follow_toggle,
     )
     backend: EnumProperty(
         name="Device",

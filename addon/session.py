@@ -1,9 +1,15 @@
 """The transport of each previewed material, held in memory (never saved: a reloaded file asks
-for a new precompute), and the edit path: refit + dot product + write-back."""
+for a new precompute), the edit path (refit + dot product + write-back), and the scene
+following: a depsgraph handler notices a previewed object deforming or a light or the world
+changing, and a debounced timer checks and refreshes the transport in the background.
+
+How a transport is built is the method's: PRT (Xu 2007) today; the hierarchy (Mertens 2003)
+plugs in through `resolve_method` and `HierarchyJob` once `translucent.Hierarchy` exists."""
 
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass, field
 
 import bpy
@@ -14,10 +20,11 @@ from . import export, viewport, writeback
 
 @dataclass
 class Session:
-    prt: object  # translucent.Prt
+    prt: object  # translucent.Prt, or the hierarchy's transport (`HierarchyTransport`)
     info: export.ExportInfo
     objects: list[str]
-    fingerprint: str
+    # export.lighting_keys at the precompute: what each light and the world were.
+    lighting: dict
     eta: float
     # "cycles" or "dipole": the profile the transport was precomputed for.
     profile: str = "cycles"
@@ -35,6 +42,18 @@ class Session:
     chosen_for: tuple = ()
     refresh_advised: bool = False
     refresh_message: str = ""
+    # "prt" or "hierarchy": what built the transport, and why it is not the method asked for.
+    method: str = "prt"
+    method_message: str = ""
+    # Objects whose evaluated geometry differs from the transport's: name -> "deformed",
+    # "topology" (vertex count) or "removed". Kept by the follow check, read by the panel.
+    deformed: dict = field(default_factory=dict)
+    # What differs from the transport ("" when nothing): the panel's "stale" and its reason.
+    changed: str = ""
+    # Mesh objects that took or lost the material since ("" when none), in words.
+    members_changed: str = ""
+    # What following the scene is doing ("refreshing: light Key changed", ...).
+    follow_message: str = ""
 
 
 # material name -> Session
@@ -49,35 +68,6 @@ def objects_with(material: bpy.types.Material, scene: bpy.types.Scene | None = N
     """Mesh objects of the scene whose material slots hold `material`: the only ones exported."""
     scene = scene or bpy.context.scene
     return [o for o in scene.objects if o.type == "MESH" and any(s.material == material for s in o.material_slots)]
-
-
-def fingerprint(objects, bl_scene) -> str:
-    """What the transport depends on: evaluated geometry, lights, world. Cheap to compare."""
-    import hashlib
-
-    h = hashlib.sha256()
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    for o in objects:
-        p, t, _ = export.evaluated_mesh_arrays(o, depsgraph)
-        h.update(p.tobytes())
-        h.update(t.tobytes())
-    for o in bl_scene.objects:
-        if o.type == "LIGHT":
-            h.update(np.array(o.matrix_world, np.float32).tobytes())
-            d = o.data
-            h.update(repr((d.type, d.energy, tuple(d.color), getattr(d, "spot_size", 0), getattr(d, "size", 0), o.hide_render)).encode())
-    w = bl_scene.world
-    if w is not None:
-        h.update(repr(tuple(w.color)).encode())
-        if w.node_tree is not None:
-            for n in w.node_tree.nodes:
-                for i in n.inputs:
-                    if hasattr(i, "default_value"):
-                        try:
-                            h.update(repr(tuple(i.default_value)).encode())
-                        except TypeError:
-                            h.update(repr(i.default_value).encode())
-    return h.hexdigest()
 
 
 class Job:
@@ -111,6 +101,60 @@ class Job:
     @property
     def done(self) -> bool:
         return not self._thread.is_alive() and (self.result is not None or self.error is not None)
+
+
+class HierarchyTransport:
+    """A `translucent.Hierarchy` seen through the calls the edit path makes on a `Prt`
+    (`radiance(m)`, `last_eval`, `report`, `profile`). Written against the hierarchy's announced
+    API (`Hierarchy(scene, material, profile=, eps=, mode=)`, `.radiance(material, eye)`,
+    `.update(positions=, lights=)`); untested until translucent has it."""
+
+    def __init__(self, hierarchy, profile: str):
+        self.hierarchy = hierarchy
+        self.profile = profile
+        self.backend_message = "hierarchy (Mertens 2003)"
+        self.last_eval = {"error_estimate": [0.0, 0.0, 0.0], "seconds": 0.0, "refresh_advised": False}
+
+    @property
+    def report(self) -> dict:
+        r = dict(getattr(self.hierarchy, "report", None) or {})
+        for key, value in (("world_skipped", False), ("walks", None), ("lights_used", 0), ("lights_skipped_black", 0),
+                           ("lights_unreached", 0), ("samples", 0), ("coefficients", 0), ("support_radius", 0.0),
+                           ("rays", 0), ("seconds", 0.0), ("vertices", 0)):
+            r.setdefault(key, value)
+        return r
+
+    def radiance(self, m):
+        # Along the normals, as the PRT preview shows it: no eye point.
+        colors = self.hierarchy.radiance(m, None)
+        last = getattr(self.hierarchy, "last_eval", None)
+        if last:
+            self.last_eval.update(last)
+        return colors
+
+
+class HierarchyJob(Job):
+    """The hierarchy built (or updated, same topology) on a worker thread; the same polling."""
+
+    def __init__(self, scene, material, previous: HierarchyTransport | None = None, positions=None, **kwargs):
+        super().__init__(scene, [material], **kwargs)
+        self._material, self._previous, self._positions = material, previous, positions
+
+    def _run(self, scene, materials, kwargs):
+        import translucent
+
+        try:
+            profile = kwargs.get("profile", "cycles")
+            if self._previous is not None:
+                # Same topology: the hierarchy's own update (links promoted or demoted).
+                self._previous.hierarchy.update(positions=self._positions, lights=scene)
+                self.result = self._previous
+            else:
+                h = translucent.Hierarchy(scene, self._material, profile=profile, eps=HIERARCHY_EPS,
+                                          mode="on_the_fly")
+                self.result = HierarchyTransport(h, profile)
+        except BaseException as e:  # reported by the follow refresh, which falls back to PRT
+            self.error = e
 
 
 def nearest_original_vertices(objects: list[str], info: export.ExportInfo) -> dict[str, np.ndarray]:
@@ -149,8 +193,41 @@ def _params(settings) -> tuple:
             settings.profile)
 
 
-def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], export.ExportInfo, str]:
-    """Exports what the material needs and creates (but does not start) its precompute job."""
+# ------------------------------------------------------------------------------- methods
+
+HIERARCHY_EPS = (0.1, 0.1)  # Mertens 2003's receiver and emitter thresholds (eps1, eps2)
+
+
+def hierarchy_available() -> bool:
+    import translucent
+
+    return hasattr(translucent, "Hierarchy")
+
+
+HIERARCHY_MISSING = "Hierarchy: not in this build of translucent (no translucent.Hierarchy), PRT used"
+
+
+def resolve_method(setting: str, change: str, current: str = "prt") -> tuple[str, str]:
+    """The method ("prt" or "hierarchy") that builds the transport for a `change` ("precompute",
+    "deformation", "light") under the panel's `setting` ("PRT", "HIERARCHY", "AUTO"), and why it
+    is not the one asked for ("" when it is). Auto: the hierarchy for a deformation, and for a
+    light when the hierarchy already holds the transport (its render mode); PRT otherwise (the
+    button, material editing: PRT's edits are dot products)."""
+    if setting == "PRT":
+        return "prt", ""
+    wants = setting == "HIERARCHY" or change == "deformation" or (change == "light" and current == "hierarchy")
+    if not wants:
+        return "prt", ""
+    if not hierarchy_available():
+        return "prt", HIERARCHY_MISSING
+    return "hierarchy", ""
+
+
+def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
+          previous: Session | None = None) -> tuple[Job, list[str], export.ExportInfo, dict]:
+    """Exports what the material needs and creates (but does not start) the job that builds its
+    transport: PRT's precompute, or the hierarchy (updated in place from `previous` when the
+    topology is the same). Returns the job, the objects, the export info and the lighting keys."""
     bl_scene = bl_scene or bpy.context.scene
     objects = objects_with(material, bl_scene)
     if not objects:
@@ -158,16 +235,31 @@ def start(material: bpy.types.Material, bl_scene=None) -> tuple[Job, list[str], 
     scene, info = export.export_scene(objects, bl_scene=bl_scene)
     info.skipped_objects = [o.name for o in bl_scene.objects if o.type == "MESH" and o not in objects]
     s = material.translucent
-    job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend,
-              profile=s.profile_name())
+    if method == "hierarchy":
+        same = (previous is not None and previous.method == "hierarchy"
+                and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
+        positions = None
+        if same:
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            positions = np.concatenate([export.evaluated_mesh_arrays(o, depsgraph)[0] for o in objects])
+        job = HierarchyJob(scene, s.material(), previous=previous.prt if same else None, positions=positions,
+                           profile=s.profile_name())
+    else:
+        job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend,
+                  profile=s.profile_name())
+    job.method = method
     job.chosen_for = _params(s)
     job.profile = s.profile_name()
-    return job, [o.name for o in objects], info, fingerprint(objects, bl_scene)
+    return job, [o.name for o in objects], info, export.lighting_keys(bl_scene)
 
 
-def finish(material: bpy.types.Material, job: Job, objects, info, fp) -> Session:
-    session = Session(job.result, info, objects, fp, material.translucent.eta, profile=job.profile)
+def finish(material: bpy.types.Material, job: Job, objects, info, lighting, method_message: str = "") -> Session:
+    """The finished job's transport becomes the material's session (the old one, still shown
+    until now, is dropped) and the preview is written from it."""
+    session = Session(job.result, info, objects, lighting, material.translucent.eta, profile=job.profile)
     session.chosen_for = job.chosen_for
+    session.method = getattr(job, "method", "prt")
+    session.method_message = method_message
     session.remap = nearest_original_vertices(objects, info)
     SESSIONS[material.name] = session
     edit(material)
@@ -178,6 +270,12 @@ def finish(material: bpy.types.Material, job: Job, objects, info, fp) -> Session
 def summary(sess: Session) -> str:
     """What the precompute did and left out, in one line for the status bar and the panel."""
     r, info = sess.prt.report, sess.info
+    if sess.method == "hierarchy":
+        # Its report's keys are the hierarchy's own: shown as it gives them, not as PRT's.
+        own = ", ".join(f"{k} {v}" for k, v in dict(getattr(sess.prt.hierarchy, "report", None) or {}).items())
+        return (f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped), "
+                f"{len(info.lights)} light(s), {len(info.skipped_lights)} dark skipped, world: {info.world}; "
+                f"hierarchy (Mertens 2003){': ' + own if own else ''}")
     world = "world: no rays (black)" if r["world_skipped"] else f"world: {info.world}"
     w = r.get("walks")
     walks = (f"; walks through the mesh: {w['walks_per_vertex']} x {w['walked_vertices']} vertices "
@@ -192,7 +290,7 @@ def summary(sess: Session) -> str:
 
 
 def state(material: bpy.types.Material) -> str:
-    """'none', 'running', 'stale' or 'ready' for the panel."""
+    """'none', 'running', 'stale' or 'ready' for the panel; cheap (it runs on every redraw)."""
     if material.name in JOBS:
         return "running"
     s = SESSIONS.get(material.name)
@@ -202,8 +300,8 @@ def state(material: bpy.types.Material) -> str:
         return "stale"
     if s.profile == "dipole" and abs(s.eta - material.translucent.eta) > 1e-9:
         return "stale"
-    objects = [bpy.data.objects.get(n) for n in s.objects]
-    if any(o is None for o in objects) or fingerprint(objects, bpy.context.scene) != s.fingerprint:
+    # What the follow handler and check found (no mesh is evaluated here: the panel calls this).
+    if s.changed or any(bpy.data.objects.get(n) is None for n in s.objects):
         return "stale"
     return "ready"
 
@@ -224,6 +322,8 @@ def edit(material: bpy.types.Material) -> None:
     s = SESSIONS.get(material.name)
     if s is None or not material.translucent.enabled:
         return
+    if s.method == "hierarchy" and material.name in JOBS:
+        return  # the hierarchy is being updated in place on a worker thread: shown when done
     settings = material.translucent
     if settings.source == "PRINCIPLED":
         s.principled_key = principled_key(material)
@@ -338,13 +438,25 @@ def refresh(material: bpy.types.Material) -> None:
     if s.chosen_for == _params(material.translucent):
         return
     try:
-        job, objects, info, fp = start(material)
+        job, objects, info, lighting = start(material)
     except ValueError as e:
         s.refresh_message = f"refresh failed: {e}"
         return
-    JOBS[material.name] = job
     s.refresh_message = "refreshing the basis for the new material"
-    name = material.name
+
+    def failed(error):
+        cur = SESSIONS.get(material.name)
+        if cur is not None:
+            cur.refresh_message = f"refresh failed: {error}"
+
+    _in_background(material.name, job, objects, info, lighting, failed)
+
+
+def _in_background(name: str, job: Job, objects, info, lighting, failed, method_message: str = "") -> None:
+    """Runs `job` off the UI thread (headless: here, at once) and swaps its transport in when it
+    is done; until then the old preview stays up. `failed(error)` reports an error."""
+    JOBS[name] = job
+    job.background = True  # the panel: no Esc to cancel it (no modal operator runs it)
 
     def complete() -> None:
         JOBS.pop(name, None)
@@ -352,13 +464,11 @@ def refresh(material: bpy.types.Material) -> None:
         if mat is None:
             return
         if job.error is not None:
-            cur = SESSIONS.get(name)
-            if cur is not None:
-                cur.refresh_message = f"refresh failed: {job.error}"
+            failed(job.error)
             return
-        finish(mat, job, objects, info, fp)
+        finish(mat, job, objects, info, lighting, method_message)
 
-    if bpy.app.background:
+    if _headless():
         job.run_here()
         complete()
         return
@@ -367,10 +477,213 @@ def refresh(material: bpy.types.Material) -> None:
         if not job.done:
             return 0.2
         complete()
-        for window in bpy.context.window_manager.windows:
-            for area in window.screen.areas:
-                area.tag_redraw()
+        _redraw()
         return None
 
     job.start()
     bpy.app.timers.register(poll, first_interval=0.2)
+
+
+def _headless() -> bool:
+    """No UI to keep responsive (tests may pretend there is one)."""
+    return bpy.app.background
+
+
+def _redraw() -> None:
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in wm.windows if wm is not None else ():
+        for area in window.screen.areas:
+            area.tag_redraw()
+
+
+# ----------------------------------------------------------------------- following the scene
+#
+# The depsgraph handler only takes notes (which previewed objects' geometry or transform was
+# tagged; a changed light or world is compared at once, it is cheap); a timer runs once the
+# scene has been still for DEBOUNCE_S, evaluates the tagged objects to tell a deformation from
+# the add-on's own colour writes (those tag the mesh too), and refreshes in the background.
+
+DEBOUNCE_S = 0.3
+# material name -> (clock at the last change noticed, objects whose geometry may have changed)
+PENDING: dict[str, tuple[float, set]] = {}
+_clock = time.monotonic  # tests may replace it
+
+
+def _lighting_difference(old: dict, new: dict) -> str:
+    """What differs between two `export.lighting_keys`, in words ("" when nothing)."""
+    parts = []
+    for key in sorted(set(old) | set(new)):
+        if key not in new:
+            parts.append(f"{key} removed")
+        elif key not in old:
+            parts.append(f"{key} added")
+        elif old[key] != new[key]:
+            parts.append(f"{key} changed")
+    return ", ".join(parts)
+
+
+def _describe(s: Session, lighting: str) -> str:
+    parts = [f"{name} {'changed topology' if what == 'topology' else what}" for name, what in sorted(s.deformed.items())]
+    if s.members_changed:
+        parts.append(s.members_changed)
+    if lighting:
+        parts.append(lighting)
+    return ", ".join(parts)
+
+
+def _note(name: str, objects=()) -> None:
+    _, suspects = PENDING.get(name, (0.0, set()))
+    PENDING[name] = (_clock(), suspects | set(objects))
+    if not bpy.app.timers.is_registered(follow_tick):
+        bpy.app.timers.register(follow_tick, first_interval=DEBOUNCE_S)
+
+
+def _is_lighting(id_) -> bool:
+    return (isinstance(id_, (bpy.types.Light, bpy.types.World, bpy.types.Scene))
+            or (isinstance(id_, bpy.types.Object) and id_.type == "LIGHT")
+            or (isinstance(id_, bpy.types.NodeTree) and id_.bl_idname == "ShaderNodeTree"))
+
+
+@bpy.app.handlers.persistent
+def follow_scene(scene, depsgraph) -> None:
+    """depsgraph_update_post: notes which previewed objects deformed or moved (geometry or
+    transform tagged: armature, shape keys, modifiers, edit mode) and whether a light or the
+    world changed, and schedules the debounced check. Evaluates no mesh."""
+    if not SESSIONS:
+        return
+    tagged, lighting, linked = set(), False, False
+    for u in depsgraph.updates:
+        id_ = u.id.original
+        if isinstance(id_, bpy.types.Object) and id_.type == "MESH" and (u.is_updated_geometry or u.is_updated_transform):
+            tagged.add(id_.name)
+        elif _is_lighting(id_):
+            lighting = True
+        # Objects linked, unlinked or given a material: which objects carry it may differ.
+        linked = linked or isinstance(id_, (bpy.types.Scene, bpy.types.Collection))
+    _follow(scene, tagged, lighting, linked)
+
+
+@bpy.app.handlers.persistent
+def follow_frame(scene, depsgraph=None) -> None:
+    """frame_change_post (timeline scrub, playback): anything may be animated, so every
+    previewed object is checked once the timeline is still."""
+    if SESSIONS:
+        _follow(scene, None, True)
+
+
+def _follow(scene, tagged: set | None, lighting: bool, linked: bool = True) -> None:
+    keys = export.lighting_keys(scene) if lighting else None
+    for name, s in list(SESSIONS.items()):
+        if bpy.data.materials.get(name) is None:
+            continue
+        moved = set(s.objects) if tagged is None else tagged & set(s.objects)
+        others = linked or (tagged is not None and bool(tagged - moved))
+        lit = ""
+        if keys is not None:
+            lit = _lighting_difference(s.lighting, keys)
+            s.changed = _describe(s, lit)  # the panel says "stale" at once; geometry after the check
+        if moved or lit or others:
+            _note(name, moved)
+
+
+def follow_again(material: bpy.types.Material) -> None:
+    """Following was switched on (or the preview on again): check every previewed object and
+    the lights once the timer runs, and refresh what changed meanwhile."""
+    s = SESSIONS.get(material.name)
+    if s is not None:
+        _note(material.name, s.objects)
+
+
+def follow_tick() -> float | None:
+    """The timer: once a material's scene has been still for DEBOUNCE_S, `follow_now` for it.
+    Returns when to run again (None: nothing pending)."""
+    now = _clock()
+    due = [n for n, (t, _) in PENDING.items() if now - t >= DEBOUNCE_S]
+    follow_now(due)
+    if not PENDING:
+        return None
+    return max(0.05, min(DEBOUNCE_S - (now - t) for t, _ in PENDING.values()))
+
+
+def follow_now(names=None) -> None:
+    """Checks what the handler noted (all pending materials, or `names`) and refreshes the
+    transport of those that changed, in the background: PRT again, or the hierarchy (see
+    `resolve_method`). A material whose job still runs stays pending: checked when it is done."""
+    for name in list(PENDING if names is None else names):
+        if name not in PENDING or name in JOBS or name in PREPARING:
+            continue
+        _, suspects = PENDING.pop(name)
+        s, mat = SESSIONS.get(name), bpy.data.materials.get(name)
+        if s is None or mat is None:
+            continue
+        objects = [bpy.data.objects.get(n) for n in s.objects]
+        if any(o is not None and o.mode == "EDIT" for o in objects):
+            # The preview attribute written now would be lost when Edit Mode writes its mesh
+            # back: leaving Edit Mode tags the geometry again, and the preview follows then.
+            s.follow_message = "in Edit Mode: the preview follows when you leave it"
+            continue
+        _check(s, mat, suspects, bpy.context.scene)
+        settings = mat.translucent
+        if s.changed and settings.enabled and settings.follow_scene:
+            _follow_refresh(mat, s)
+
+
+def _check(s: Session, mat: bpy.types.Material, suspects: set, bl_scene) -> None:
+    """Compares the tagged objects' evaluated geometry, which objects carry the material, and
+    the lights and world with what the transport was built from, and keeps the result on the
+    session (`deformed`, `members_changed`, `changed`)."""
+    members = {o.name for o in objects_with(mat, bl_scene)}
+    gained, lost = sorted(members - set(s.objects)), sorted(set(s.objects) - members)
+    s.members_changed = ", ".join([f"{n} took the material" for n in gained] + [f"{n} lost it" for n in lost])
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for r in s.info.objects:
+        if r.name not in suspects:
+            continue
+        obj = bpy.data.objects.get(r.name)
+        if obj is None:
+            s.deformed[r.name] = "removed"
+            continue
+        key = export.object_geometry_key(obj, depsgraph)
+        if key == r.geometry_key:
+            s.deformed.pop(r.name, None)  # the add-on's own colour write, or moved back
+        elif key.split(":")[0] != str(r.count):
+            s.deformed[r.name] = "topology"
+        else:
+            s.deformed[r.name] = "deformed"
+    s.changed = _describe(s, _lighting_difference(s.lighting, export.lighting_keys(bl_scene)))
+
+
+def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
+    """Builds the transport again for the scene as it is now, in the background; the old
+    preview stays up until the new one is written. A topology change always starts from
+    scratch; the hierarchy updates itself in place otherwise."""
+    change = "deformation" if s.deformed else "light"
+    method, message = resolve_method(mat.translucent.method, change, s.method)
+    topology = any(v != "deformed" for v in s.deformed.values()) or bool(s.members_changed)
+    name = mat.name
+    try:
+        job, objects, info, lighting = start(mat, method=method, previous=None if topology else s)
+    except ValueError as e:
+        s.follow_message = f"following the scene failed: {e}"
+        return
+    s.follow_message = f"refreshing ({'PRT' if method == 'prt' else 'hierarchy'}): {s.changed}"
+
+    def failed(error):
+        cur = SESSIONS.get(name)
+        if cur is not None:
+            cur.follow_message = f"following the scene failed: {error}"
+
+    def hierarchy_failed(error):
+        # The hierarchy is new: when it fails, PRT keeps the preview following, saying why.
+        material = bpy.data.materials.get(name)
+        if material is None:
+            return
+        why = f"hierarchy failed ({error}), PRT used"
+        try:
+            job2, objects2, info2, lighting2 = start(material, method="prt")
+        except ValueError as e:
+            failed(e)
+            return
+        _in_background(name, job2, objects2, info2, lighting2, failed, why)
+
+    _in_background(name, job, objects, info, lighting, hierarchy_failed if method == "hierarchy" else failed, message)

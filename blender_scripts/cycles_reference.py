@@ -78,7 +78,8 @@ def principled_material(material: translucent.Material, name: str = "Cycles refe
     """A Principled BSDF random walk simulating `material` (medium per scene unit, layers)."""
     p = cycles.principled_for(material)
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        mat.use_nodes = True
     cycles.apply_to_principled(mat.node_tree.nodes["Principled BSDF"], p)
     return mat
 

@@ -53,7 +53,8 @@ def build_scene() -> tuple[bpy.types.Object, bpy.types.Object]:
     scene.collection.objects.link(light)
 
     world = bpy.data.worlds.new("World")
-    world.use_nodes = True
+    if world.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        world.use_nodes = True
     bg = world.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (0.03, 0.03, 0.035, 1.0)
     bg.inputs["Strength"].default_value = 1.0
@@ -79,7 +80,8 @@ def preview_object(source: bpy.types.Object) -> bpy.types.Object:
     bpy.context.scene.collection.objects.link(obj)
     source.hide_render = True
     mat = bpy.data.materials.new("Translucent preview")
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     attr = nodes.new("ShaderNodeAttribute")
@@ -113,7 +115,8 @@ def render_cycles(source: bpy.types.Object, preview: bpy.types.Object, material,
     from translucent import cycles
 
     mat = bpy.data.materials.new("Cycles " + path.stem)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        mat.use_nodes = True
     cycles.apply_to_principled(
         mat.node_tree.nodes["Principled BSDF"],
         cycles.to_principled(material.sigma_a, material.sigma_s, material.g, material.eta),

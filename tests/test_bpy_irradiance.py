@@ -15,7 +15,8 @@ def build(bpy):
     bpy.ops.mesh.primitive_cube_add(size=0.8, location=(0.3, 0.2, 0.9))
     blocker = bpy.context.active_object
     mat = bpy.data.materials.new("White")
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        mat.use_nodes = True
     nodes = mat.node_tree.nodes
     nodes.clear()
     diffuse = nodes.new("ShaderNodeBsdfDiffuse")

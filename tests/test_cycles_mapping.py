@@ -80,13 +80,15 @@ def test_a_thick_slab_in_cycles_is_what_the_walk_table_predicts(empty_blend):
     slab = bpy.context.active_object
     slab.scale = (1.0, 1.0, 0.5)
     mat = bpy.data.materials.new("Slab")
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        mat.use_nodes = True
     node = mat.node_tree.nodes["Principled BSDF"]
     cycles.apply_to_principled(node, p)
     node.inputs["Specular IOR Level"].default_value = 0.0
     slab.data.materials.append(mat)
     world = bpy.data.worlds.new("W")
-    world.use_nodes = True
+    if world.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
     bpy.context.scene.world = world
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))

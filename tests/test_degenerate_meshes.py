@@ -2,7 +2,9 @@
 duplicate vertices, holes (the Utah teapot from ../shared/models, which has 1036 open edges),
 isolated vertices and a single triangle precompute and evaluate to finite, non-negative
 radiosity that agrees with `reference_radiosity` where the samples resolve the material;
-out-of-range indices, NaN coordinates and empty meshes are ValueErrors saying what is wrong.
+out-of-range indices, NaN coordinates, coordinates that overflow single precision, meshes
+without area and empty meshes are ValueErrors saying what is wrong; triangles that are not
+integers are a TypeError.
 
 "Resolved" below means the profile spreads over many sample spacings (sigma_t' times the
 object's size of a few units against tens of thousands of samples). Where it does not, PRT
@@ -88,22 +90,15 @@ def test_zero_area_triangles_change_nothing(scale):
     assert_close_to_reference(scene, m, b, [0, 5, 60, n - 1, n * n // 2])
 
 
-def test_a_mesh_without_area_is_dark_or_refused():
-    """Only zero-area triangles: no surface, no samples. The reference gives exactly 0; PRT
-    gives its inner disc over a vanishing radius (measured 5.9e-12 here), below 1e-9. All three
-    vertices in one point (a zero bounding box): PRT refuses with a ValueError (sample spacing
-    0), never a panic."""
-    p = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], np.float32)
-    scene = lit(p, [[0, 1, 2]])
-    assert scene.mesh_report["degenerate_triangles"] == 1 and scene.mesh_report["area"] == 0.0
-    m = translucent.Material(0.5, 5.0)
-    b = translucent.Prt(scene, m, backend="cpu").radiosity(m)
-    assert_valid(b)
-    assert np.all(b <= 1e-9)
-    assert np.all(translucent.reference_radiosity(scene, m) == 0.0)
-    point = lit(np.zeros((3, 3), np.float32), [[0, 1, 2]])
-    with pytest.raises(ValueError, match="spacing"):
-        translucent.Prt(point, m, backend="cpu")
+@pytest.mark.parametrize("p", [
+    [[0, 0, 0], [1, 0, 0], [2, 0, 0]],  # on one line
+    [[0.5, 0.5, 0.5]] * 3,  # in one point (PRT used to say "sample spacing 0")
+], ids=["collinear", "one point"])
+def test_a_mesh_without_area_is_refused_saying_so(p):
+    """Only zero-area triangles: no surface to scatter light. Refused when the scene is built,
+    with the reason, instead of a dark preview or an error about the sample spacing later."""
+    with pytest.raises(ValueError, match="zero total area"):
+        translucent.Scene(np.asarray(p, np.float32), [[0, 1, 2], [2, 1, 0]])
 
 
 # ------------------------------------------------------------------------- duplicate vertices
@@ -306,7 +301,10 @@ def test_a_single_triangle(scale, k):
         (lambda p, t: (p, np.where(t == 3, 2**40, t)), "out of range"),
         (lambda p, t: (np.where(np.arange(len(p))[:, None] == 2, np.nan, p), t), "vertex 2 has a non-finite"),
         (lambda p, t: (np.where(np.arange(len(p))[:, None] == 4, np.inf, p), t), "vertex 4 has a non-finite"),
-        (lambda p, t: (np.where(np.arange(len(p))[:, None] == 4, 1e39, p), t), "non-finite"),  # f32 overflow
+        # A finite float64 beyond f32's range, and f32 coordinates whose squares overflow.
+        (lambda p, t: (np.where(np.arange(len(p))[:, None] == 4, 1e39, p), t),
+         "positions row 4 holds 1e39, which overflows single precision"),
+        (lambda p, t: (p * 1e20, t), "extent overflows single precision"),
         (lambda p, t: (p[:0], t), "no vertices"),
         (lambda p, t: (p, t[:0]), "no triangles"),
         (lambda p, t: (p[:0], t[:0]), "no vertices"),
@@ -318,6 +316,19 @@ def test_invalid_meshes_raise_value_error(mutate, words):
     p2, t2 = mutate(p.astype(np.float64), t.copy())
     with pytest.raises(ValueError, match=words), np.errstate(over="ignore"):
         translucent.Scene(p2, t2)
+
+
+@pytest.mark.parametrize("triangles", [
+    np.array([[0, 1, 2.7]]),  # used to be truncated to vertex 2
+    np.array([[0.0, 1.0, 2.0]]),  # whole numbers, but a float array all the same
+    [[0, 1, 2.5]],
+    np.array([[True, False, True]]),
+], ids=["fraction", "whole floats", "list", "bool"])
+def test_a_triangle_array_of_non_integers_is_a_type_error(triangles):
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    with pytest.raises(TypeError, match="integer array of vertex indices, got dtype"):
+        translucent.Scene(p, triangles)
+    translucent.Scene(p, np.array([[0, 1, 2]], np.uint16))  # any integer dtype is fine
 
 
 def test_invalid_teapot_raises_value_error_naming_the_vertex():

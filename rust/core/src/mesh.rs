@@ -43,7 +43,9 @@ pub struct SurfaceSample {
 impl Mesh {
     /// Validates and builds a mesh. `normals`, if given, must have one entry per vertex; when
     /// absent, area-weighted vertex normals are computed. Errors: empty input, NaN/Inf
-    /// coordinates, indices out of range. Degenerate triangles are reported, not fatal.
+    /// coordinates, indices out of range, coordinates whose squared lengths or cross products
+    /// overflow f32, a mesh of zero total area. Degenerate triangles among others are reported,
+    /// not fatal.
     pub fn new(
         positions: Vec<Vec3>,
         triangles: Vec<[u32; 3]>,
@@ -89,11 +91,33 @@ impl Mesh {
         let mut vertex_areas = vec![0.0f32; positions.len()];
         let mut accumulated = vec![Vec3::ZERO; positions.len()];
         let mut used = vec![false; positions.len()];
-        let scale = bounding_diagonal(&positions).max(f32::MIN_POSITIVE);
-        for tri in &triangles {
+        // Coordinates that are finite in f32 can still overflow its squared lengths and cross
+        // products (|x| above ~1.8e19): every later distance would be infinite, so say so here.
+        let diagonal = bounding_diagonal(&positions);
+        if !diagonal.is_finite() {
+            let largest = positions
+                .iter()
+                .map(|p| p.abs().max_element())
+                .fold(0.0f32, f32::max);
+            return Err(Error::InvalidMesh(format!(
+                "the mesh's extent overflows single precision: coordinates up to {largest:e} give a \
+                 bounding-box diagonal whose square exceeds {:e}; scale the scene down",
+                f32::MAX
+            )));
+        }
+        let scale = diagonal.max(f32::MIN_POSITIVE);
+        for (t, tri) in triangles.iter().enumerate() {
             let [a, b, c] = tri.map(|v| positions[v as usize]);
             let cross = (b - a).cross(c - a);
             let area = 0.5 * cross.length();
+            if !area.is_finite() {
+                return Err(Error::InvalidMesh(format!(
+                    "triangle {t}'s area overflows single precision (edges up to {:e} units, \
+                     cross product above {:e}); scale the scene down",
+                    (b - a).length().max((c - a).length()),
+                    f32::MAX
+                )));
+            }
             // Zero area relative to the mesh's size, not in absolute units (scale 1e-4..1e4).
             if area <= 1e-12 * scale * scale {
                 report.degenerate_triangles += 1;
@@ -105,6 +129,15 @@ impl Mesh {
                 accumulated[v as usize] += cross; // area-weighted
                 used[v as usize] = true;
             }
+        }
+        // No surface at all (every vertex in one point, or on one line): nothing can scatter
+        // light, and every method would divide by the area or sample it. Refused, saying so.
+        if report.degenerate_triangles == triangles.len() {
+            return Err(Error::InvalidMesh(format!(
+                "the mesh has zero total area: all {} triangle(s) are degenerate (their vertices \
+                 coincide or lie on one line), so there is no surface to scatter light",
+                triangles.len()
+            )));
         }
         report.isolated_vertices = used.iter().filter(|u| !**u).count();
         let normals = normals.unwrap_or(accumulated);
@@ -437,6 +470,46 @@ mod tests {
         .unwrap_err();
         assert!(e.to_string().contains("non-finite"), "{e}");
         assert!(Mesh::new(p.clone(), vec![[0, 1, 2]], Some(vec![Vec3::Z])).is_err());
+    }
+
+    #[test]
+    fn a_mesh_without_area_is_refused_saying_so() {
+        // Three vertices on one line, and three in one point.
+        for p in [
+            vec![Vec3::ZERO, Vec3::X, Vec3::new(2.0, 0.0, 0.0)],
+            vec![Vec3::splat(0.5); 3],
+        ] {
+            let e = Mesh::new(p, vec![[0, 1, 2], [2, 1, 0]], None).unwrap_err();
+            assert!(e.to_string().contains("zero total area"), "{e}");
+        }
+    }
+
+    #[test]
+    fn coordinates_overflowing_f32_products_are_refused_saying_so() {
+        // Finite f32 coordinates, but 1e20^2 = 1e40 is not: the diagonal overflows.
+        let big = vec![
+            Vec3::ZERO,
+            Vec3::new(1e20, 0.0, 0.0),
+            Vec3::new(0.0, 1e20, 0.0),
+        ];
+        let e = Mesh::new(big, vec![[0, 1, 2]], None).unwrap_err();
+        assert!(e.to_string().contains("overflows single precision"), "{e}");
+        // A finite diagonal does not make the cross product finite: legs of 1.2e19 give a
+        // squared diagonal of 2.9e38 (< 3.4e38) but a cross product of 1.44e38, squared 2e76.
+        let edge = 1.2e19f32;
+        let p = vec![
+            Vec3::ZERO,
+            Vec3::new(edge, 0.0, 0.0),
+            Vec3::new(0.0, edge, 0.0),
+        ];
+        assert!(bounding_diagonal(&p).is_finite());
+        assert!(
+            !(Vec3::new(edge, 0.0, 0.0).cross(Vec3::new(0.0, edge, 0.0)))
+                .length()
+                .is_finite()
+        );
+        let e = Mesh::new(p, vec![[0, 1, 2]], None).unwrap_err();
+        assert!(e.to_string().contains("triangle 0's area overflows"), "{e}");
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Conversions between Python/numpy values and core types, and core errors to exceptions.
 
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use translucent_core::Error;
 
@@ -81,11 +81,13 @@ fn as_contiguous<'py>(value: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<
     np.call_method1("ascontiguousarray", (value, dtype))
 }
 
-/// An (N, 3) float array as rows (values are validated by the core, not here).
+/// An (N, 3) float array as f32 rows. Read in double precision first so that a finite value
+/// beyond f32's range (1e39 in a float64 array) is refused here, saying so, instead of reaching
+/// the core as an infinity; NaN and infinities given as such are the core's to report.
 pub fn float_rows(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]>> {
-    let arr = as_contiguous(value, "float32")
+    let arr = as_contiguous(value, "float64")
         .map_err(|e| PyValueError::new_err(format!("{name} must be an (N, 3) float array: {e}")))?;
-    let arr: PyReadonlyArray2<f32> = arr
+    let arr: PyReadonlyArray2<f64> = arr
         .extract()
         .map_err(|_| PyValueError::new_err(format!("{name} must be a 2-D (N, 3) float array")))?;
     if arr.shape()[1] != 3 {
@@ -94,10 +96,21 @@ pub fn float_rows(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]
             arr.shape()
         )));
     }
-    Ok(arr
-        .as_slice()?
-        .chunks_exact(3)
-        .map(|p| [p[0], p[1], p[2]])
+    let s = arr.as_slice()?;
+    if let Some(i) = s
+        .iter()
+        .position(|v| v.is_finite() && v.abs() > f64::from(f32::MAX))
+    {
+        return Err(PyValueError::new_err(format!(
+            "{name} row {} holds {:e}, which overflows single precision (|x| <= {:e}); \
+             scale the scene down",
+            i / 3,
+            s[i],
+            f32::MAX
+        )));
+    }
+    Ok(s.chunks_exact(3)
+        .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
         .collect())
 }
 
@@ -120,9 +133,25 @@ pub fn non_negative<T: TryFrom<i64>>(name: &str, value: i64) -> PyResult<T> {
     T::try_from(value).map_err(|_| PyValueError::new_err(format!("{name} = {value} is too large")))
 }
 
-/// An (M, 3) integer array of vertex indices, checked non-negative and below 2^32.
+/// An (M, 3) integer array of vertex indices, checked non-negative and below 2^32. Anything
+/// but an integer dtype is a TypeError: numpy's cast would truncate 1.7 to vertex 1 silently.
 pub fn triangle_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
-    let arr = as_contiguous(value, "int64").map_err(|e| {
+    let np = value.py().import("numpy")?;
+    let given = np.call_method1("asarray", (value,)).map_err(|e| {
+        PyValueError::new_err(format!("{name} must be an (M, 3) integer array: {e}"))
+    })?;
+    let dtype = given.getattr("dtype")?;
+    let kind: String = dtype.getattr("kind")?.extract()?;
+    let size: usize = given.getattr("size")?.extract()?;
+    // An empty array has nothing to truncate (`[]` is float64 to numpy): the core reports it.
+    if size > 0 && kind != "i" && kind != "u" {
+        return Err(PyTypeError::new_err(format!(
+            "{name} must be an integer array of vertex indices, got dtype {}; \
+             convert whole-number floats with .astype(np.int64) after checking them",
+            dtype.str()?
+        )));
+    }
+    let arr = as_contiguous(&given, "int64").map_err(|e| {
         PyValueError::new_err(format!("{name} must be an (M, 3) integer array: {e}"))
     })?;
     let arr: PyReadonlyArray2<i64> = arr

@@ -83,7 +83,11 @@ class Scene:
 
     def __init__(
         self, positions: ArrayN3, triangles: npt.ArrayLike, normals: ArrayN3 | None = None
-    ) -> None: ...
+    ) -> None:
+        """`positions` (N, 3) in scene units, held in single precision; `triangles` (M, 3) vertex
+        indices of an integer dtype. ValueError for NaN/Inf or out-of-range values (beyond f32, or
+        whose squared lengths or cross products overflow it), bad indices, empty meshes or zero
+        total area; TypeError for triangles that are not integers."""
     def add_sun(self, direction: Vec3, irradiance: float, color: RGB | None = None) -> None:
         """`direction`: the way the light travels; `irradiance`: Blender's Strength [W/m^2]."""
     def add_point_light(self, position: Vec3, power: float, color: RGB | None = None) -> None:

@@ -179,7 +179,8 @@ def make_volume_material(name: str, sigma_a, sigma_s, g: float, eta: float):
 
     sigma_a, sigma_s = _check_rgb("sigma_a", sigma_a), _check_rgb("sigma_s", sigma_s)
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")

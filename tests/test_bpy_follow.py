@@ -1,0 +1,442 @@
+"""The add-on follows the scene (issue 10, point 5), in headless Blender: a deformed mesh (a
+Displace modifier, an armature pose, a shape key, an Edit Mode edit, an animated modifier on
+the timeline), a moved light and an object taking the material refresh the preview without
+pressing anything; the add-on's own colour writes are not taken for a deformation; a
+topology change rebuilds; with a UI the refresh runs on a worker thread and the old preview
+stays until it is done; the panel's draw evaluates no mesh; the Method selector falls back to
+PRT, saying why, while translucent has no hierarchy; the user's meshes and materials are
+never written.
+
+Headless Blender runs no timers: the tests let the real depsgraph handlers fire
+(`view_layer.update()`, `frame_set`) and then do what the debounced timer does once the scene
+is still (`session.follow_now`). The expected preview after following is the one pressing
+Precompute gives for the changed scene."""
+
+import ast
+import pathlib
+
+import numpy as np
+import pytest
+
+from test_bpy_addon import read_preview
+from test_bpy_export import mesh_hash
+
+pytestmark = pytest.mark.bpy
+
+ADDON = pathlib.Path(__file__).resolve().parents[1] / "addon"
+
+
+@pytest.fixture
+def addon(empty_blend):
+    import addon as package
+
+    package.register()
+    yield package
+    package.unregister()
+
+
+def node_inputs(mat):
+    return [(n.name, i.identifier, tuple(i.default_value) if hasattr(i.default_value, "__len__") else i.default_value)
+            for n in mat.node_tree.nodes for i in n.inputs if hasattr(i, "default_value")]
+
+
+def lit_sphere(bpy, method="PRT"):
+    """A small sphere (114 vertices) with a Displace modifier of strength 0 and a point light."""
+    mat = bpy.data.materials.new("Wax")
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=16, ring_count=8)
+    obj = bpy.context.active_object
+    obj.data.materials.append(mat)
+    displace = obj.modifiers.new("Displace", "DISPLACE")  # no texture: along the normals
+    displace.strength = 0.0
+    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    light.data.energy = 5.0
+    light.location = (0.0, -0.15, 0.15)
+    bpy.context.scene.collection.objects.link(light)
+    s = mat.translucent
+    s.enabled = True
+    s.preset = "MARBLE"
+    s.coefficients = 8
+    s.method = method
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    return mat, obj, light
+
+
+def precomputed_preview(bpy, mat, obj):
+    """What pressing Precompute shows for the scene as it is now."""
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    return read_preview(obj)
+
+
+def test_a_deformed_mesh_refreshes_the_preview_after_the_scene_is_still(addon, monkeypatch):
+    import bpy
+
+    from addon import session
+
+    mat, obj, light = lit_sphere(bpy)
+    user_mesh, user_nodes = mesh_hash(obj.data), node_inputs(mat)
+    first, sess = read_preview(obj), session.SESSIONS[mat.name]
+    clock = [100.0]
+    monkeypatch.setattr(session, "_clock", lambda: clock[0])
+    obj.modifiers["Displace"].strength = 0.02  # the sphere grows by 1 cm: nearer the light
+    bpy.context.view_layer.update()  # the depsgraph handler notes it, evaluates nothing
+    assert mat.name in session.PENDING and bpy.app.timers.is_registered(session.follow_tick)
+    # Debounced: while the scene keeps changing, the timer waits and the old preview stays.
+    assert session.follow_tick() == pytest.approx(session.DEBOUNCE_S)
+    assert session.SESSIONS[mat.name] is sess
+    np.testing.assert_array_equal(read_preview(obj), first)
+    clock[0] += 1.0  # still for longer than DEBOUNCE_S
+    session.follow_tick()
+    followed = session.SESSIONS[mat.name]
+    assert followed is not sess and session.state(mat) == "ready" and not followed.changed
+    # What may be left pending is the add-on's own colour write: checked, no second refresh.
+    clock[0] += 1.0
+    assert session.follow_tick() is None
+    assert session.SESSIONS[mat.name] is followed and not session.PENDING
+    now = read_preview(obj)
+    assert not np.allclose(now, first), "the deformation did not change the preview"
+    np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+    assert mesh_hash(obj.data) == user_mesh and node_inputs(mat) == user_nodes
+    assert [m.name for m in obj.modifiers] == ["Displace"] and obj.modifiers["Displace"].strength == pytest.approx(0.02)
+
+
+def test_an_armature_pose_refreshes_the_preview(addon):
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    arm_data = bpy.data.armatures.new("Rig")
+    rig = bpy.data.objects.new("Rig", arm_data)
+    bpy.context.scene.collection.objects.link(rig)
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.mode_set(mode="EDIT")
+    bone = arm_data.edit_bones.new("Bone")
+    bone.head, bone.tail = (0.0, 0.0, 0.0), (0.0, 0.0, 0.05)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    group = obj.vertex_groups.new(name="Bone")
+    upper = [v.index for v in obj.data.vertices if v.co.z > 0.0]
+    group.add(upper, 1.0, "REPLACE")
+    obj.modifiers.new("Armature", "ARMATURE").object = rig
+    bpy.context.view_layer.objects.active = obj
+    user_mesh, user_nodes = mesh_hash(obj.data), node_inputs(mat)
+    # Rig and weights in place, rest pose: the evaluated mesh has not moved.
+    bpy.context.view_layer.update()
+    session.follow_now()
+    rest = session.SESSIONS[mat.name]
+    assert session.state(mat) == "ready" and not rest.deformed
+    first = read_preview(obj)
+    rig.pose.bones["Bone"].location = (0.0, 0.03, 0.0)  # the upper half slides toward +Y
+    bpy.context.view_layer.update()
+    assert mat.name in session.PENDING
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is not rest and session.state(mat) == "ready"
+    now = read_preview(obj)
+    assert not np.allclose(now, first), "the pose did not change the preview"
+    np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+    assert mesh_hash(obj.data) == user_mesh and node_inputs(mat) == user_nodes
+
+
+def test_a_moved_light_refreshes_the_preview_and_the_panel_says_why_meanwhile(addon):
+    import bpy
+
+    from addon import session
+
+    mat, obj, light = lit_sphere(bpy)
+    first, user_mesh = read_preview(obj), mesh_hash(obj.data)
+    light.location.x += 0.1
+    bpy.context.view_layer.update()
+    assert session.state(mat) == "stale" and session.SESSIONS[mat.name].changed == "light Key changed"
+    np.testing.assert_array_equal(read_preview(obj), first)  # kept until the new one is ready
+    session.follow_now()
+    assert session.state(mat) == "ready"
+    now = read_preview(obj)
+    assert not np.allclose(now, first)
+    np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+    # The light's power is followed as well (light data, not only the object).
+    light.data.energy = 10.0
+    bpy.context.view_layer.update()
+    assert session.SESSIONS[mat.name].changed == "light Key changed"
+    session.follow_now()
+    np.testing.assert_allclose(read_preview(obj), 2.0 * now, rtol=1e-4, atol=1e-7)
+    assert mesh_hash(obj.data) == user_mesh
+
+
+def test_scrubbing_the_timeline_follows_an_animated_modifier(addon):
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    displace = obj.modifiers["Displace"]
+    displace.keyframe_insert("strength", frame=1)
+    displace.strength = 0.02
+    displace.keyframe_insert("strength", frame=10)
+    bpy.context.scene.frame_set(1)
+    session.follow_now()
+    assert session.state(mat) == "ready"
+    first = read_preview(obj)
+    bpy.context.scene.frame_set(10)  # frame_change_post
+    assert mat.name in session.PENDING
+    session.follow_now()
+    now = read_preview(obj)
+    assert not np.allclose(now, first)
+    np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+
+
+def test_the_addons_own_colour_writes_are_not_a_deformation(addon):
+    """Writing the preview attribute tags the mesh's geometry like a deformation does: the
+    check tells them apart by the evaluated positions, so an edit never starts a refresh."""
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    sess = session.SESSIONS[mat.name]
+    mat.translucent.auto_refresh = False  # only following the scene may refresh here
+    first = read_preview(obj)
+    mat.translucent.sigma_a = tuple(2.0 * x for x in mat.translucent.sigma_a)  # a slider edit: a colour write
+    assert not np.allclose(read_preview(obj), first)
+    bpy.context.view_layer.update()
+    assert mat.name in session.PENDING, "the write tagged the mesh"
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is sess and session.state(mat) == "ready" and not sess.deformed
+
+
+def test_a_topology_change_rebuilds_and_shows_through_the_original_vertices(addon):
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    n = len(obj.data.vertices)
+    obj.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    bpy.context.view_layer.update()
+    session.follow_now()
+    sess = session.SESSIONS[mat.name]
+    assert sess.info.objects[0].count > n, "rebuilt for the subdivided mesh"
+    assert sess.not_shown == [] and len(read_preview(obj)) == n
+    assert session.state(mat) == "ready"
+
+
+def test_without_following_the_panel_says_stale_and_nothing_refreshes(addon):
+    import bpy
+
+    from addon import session
+
+    mat, obj, light = lit_sphere(bpy)
+    mat.translucent.follow_scene = False
+    sess = session.SESSIONS[mat.name]
+    obj.modifiers["Displace"].strength = 0.02
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is sess
+    assert session.state(mat) == "stale" and sess.changed == f"{obj.name} deformed"
+    obj.modifiers["Displace"].strength = 0.0  # back as it was: current again
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.state(mat) == "ready"
+    # Switched back on, it catches up with what changed while it was off.
+    light.location.z += 0.05
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is sess and session.state(mat) == "stale"
+    mat.translucent.follow_scene = True
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
+
+
+class Layout:
+    """Stands in for a panel's UILayout: records the labels, accepts everything else."""
+
+    def __init__(self, labels):
+        self.labels = labels
+
+    def label(self, text="", **_):
+        self.labels.append(text)
+
+    def __getattr__(self, name):
+        return lambda *a, **k: self
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+
+
+def draw_panel(addon, mat):
+    from types import SimpleNamespace
+
+    labels = []
+    addon.TRANSLUCENT_PT_material.draw(SimpleNamespace(layout=Layout(labels)), SimpleNamespace(material=mat))
+    return labels
+
+
+def test_the_panel_draw_evaluates_no_mesh(addon, monkeypatch):
+    import bpy
+
+    from addon import export
+
+    # The add-on evaluates meshes in one function only (checked here from its source), so
+    # counting that function's calls counts every evaluation.
+    callers = set()
+    for path in ADDON.glob("*.py"):
+        for fn in ast.walk(ast.parse(path.read_text())):
+            if isinstance(fn, ast.FunctionDef):
+                for node in ast.walk(fn):
+                    if isinstance(node, ast.Attribute) and node.attr in {"evaluated_get", "to_mesh"}:
+                        callers.add(f"{path.stem}.{fn.name}")
+    assert callers == {"export._evaluate"}
+    calls = []
+    original = export._evaluate
+    monkeypatch.setattr(export, "_evaluate", lambda *a, **k: (calls.append(a[0].name), original(*a, **k))[1])
+
+    mat = bpy.data.materials.new("Wax")
+    mat.translucent.enabled = True
+    assert any("press Precompute" in t for t in draw_panel(addon, mat))
+    mat, obj, light = lit_sphere(bpy)
+    calls.clear()
+    assert "Changed" not in " ".join(draw_panel(addon, mat))
+    obj.modifiers["Displace"].strength = 0.02
+    light.location.x += 0.1
+    bpy.context.view_layer.update()
+    labels = draw_panel(addon, mat)
+    assert calls == [], "a redraw evaluated a mesh"
+    assert "Changed: light Key changed (refreshing)" in labels
+    # The counting is live: the follow check evaluates, and the panel then shows what it found.
+    mat.translucent.follow_scene = False
+    from addon import session
+
+    session.follow_now()
+    assert calls == [obj.name]
+    calls.clear()
+    assert f"Changed: {obj.name} deformed, light Key changed" in draw_panel(addon, mat)
+    assert calls == []
+
+
+def test_the_hierarchy_method_falls_back_to_prt_saying_why(addon, monkeypatch):
+    import bpy
+
+    import translucent
+    from addon import session
+
+    monkeypatch.delattr(translucent, "Hierarchy", raising=False)
+    mat, obj, light = lit_sphere(bpy, method="HIERARCHY")
+    sess = session.SESSIONS[mat.name]
+    assert sess.method == "prt" and sess.method_message == session.HIERARCHY_MISSING
+    assert session.HIERARCHY_MISSING in draw_panel(addon, mat)
+    mat.translucent.method = "AUTO"
+    obj.modifiers["Displace"].strength = 0.02
+    bpy.context.view_layer.update()
+    session.follow_now()
+    sess = session.SESSIONS[mat.name]
+    assert sess.method == "prt" and sess.method_message == session.HIERARCHY_MISSING
+    assert session.state(mat) == "ready"
+
+
+def test_auto_picks_the_method_by_what_changed(addon, monkeypatch):
+    import translucent
+    from addon import session
+
+    monkeypatch.setattr(translucent, "Hierarchy", object, raising=False)
+    assert session.resolve_method("AUTO", "precompute") == ("prt", "")
+    assert session.resolve_method("AUTO", "light", "prt") == ("prt", "")
+    assert session.resolve_method("AUTO", "deformation") == ("hierarchy", "")
+    assert session.resolve_method("AUTO", "light", "hierarchy") == ("hierarchy", "")
+    assert session.resolve_method("PRT", "deformation") == ("prt", "")
+    assert session.resolve_method("HIERARCHY", "precompute") == ("hierarchy", "")
+    monkeypatch.delattr(translucent, "Hierarchy")
+    assert session.resolve_method("HIERARCHY", "precompute") == ("prt", session.HIERARCHY_MISSING)
+    assert session.resolve_method("AUTO", "deformation") == ("prt", session.HIERARCHY_MISSING)
+
+
+def test_a_shape_key_and_edit_mode_edits_are_followed(addon):
+    import bmesh
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    obj.shape_key_add(name="Basis")
+    grow = obj.shape_key_add(name="Grow")
+    for point in grow.data:
+        point.co *= 1.25
+    grow.value = 0.0
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.state(mat) == "ready"
+    first = read_preview(obj)
+    grow.value = 1.0
+    bpy.context.view_layer.update()
+    session.follow_now()
+    shaped = read_preview(obj)
+    assert not np.allclose(shaped, first), "the shape key did not change the preview"
+    np.testing.assert_allclose(shaped, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+    # Edit Mode: noticed, but shown when leaving it (a write now would be lost on the way out).
+    obj.active_shape_key_index = 0
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    bm = bmesh.from_edit_mesh(obj.data)
+    for v in bm.verts:
+        if v.co.z > 0.02:
+            v.co.y += 0.02
+    bmesh.update_edit_mesh(obj.data)
+    bpy.context.view_layer.update()
+    sess = session.SESSIONS[mat.name]
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is sess and "Edit Mode" in sess.follow_message
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
+    edited = read_preview(obj)
+    assert not np.allclose(edited, shaped)
+    np.testing.assert_allclose(edited, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+
+
+def test_an_object_taking_the_material_is_followed(addon):
+    import bpy
+
+    from addon import session
+
+    mat, obj, _ = lit_sphere(bpy)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.03, location=(0.1, 0.0, 0.0), segments=12, ring_count=6)
+    other = bpy.context.active_object
+    bpy.context.view_layer.update()
+    session.follow_now()
+    assert session.state(mat) == "ready" and session.SESSIONS[mat.name].objects == [obj.name]
+    other.data.materials.append(mat)
+    bpy.context.view_layer.update()
+    session.follow_now()
+    sess = session.SESSIONS[mat.name]
+    assert sorted(sess.objects) == sorted([obj.name, other.name]) and session.state(mat) == "ready"
+    assert read_preview(other).max() > 0
+
+
+def test_with_a_ui_the_refresh_runs_on_a_worker_and_the_old_preview_stays_until_it_is_done(addon, monkeypatch):
+    """The path Blender with a window takes: the precompute on a worker thread, polled by a
+    timer (captured here, as headless Blender runs none); the preview swaps only when the
+    poll finds the job done."""
+    import bpy
+
+    from addon import session
+
+    mat, obj, light = lit_sphere(bpy)
+    first, sess = read_preview(obj), session.SESSIONS[mat.name]
+    timers = []
+    monkeypatch.setattr(session, "_headless", lambda: False)
+    monkeypatch.setattr(bpy.app.timers, "register", lambda fn, first_interval=0.0, persistent=False: timers.append(fn))
+    monkeypatch.setattr(bpy.app.timers, "is_registered", lambda fn: fn in timers)
+    light.location.x += 0.1
+    bpy.context.view_layer.update()
+    session.follow_now()
+    job = session.JOBS[mat.name]
+    assert session.state(mat) == "running" and job._thread.ident is not None, "started on a worker thread"
+    assert job.background and "Refreshing in the background" in " ".join(draw_panel(addon, mat))
+    # Whatever the worker does meanwhile, the artist sees the old preview.
+    np.testing.assert_array_equal(read_preview(obj), first)
+    assert session.SESSIONS[mat.name] is sess
+    job._thread.join(timeout=120)
+    poll = next(fn for fn in timers if fn.__name__ == "poll")
+    assert poll() is None, "the job is done"
+    assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
+    now = read_preview(obj)
+    assert not np.allclose(now, first)
+    np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
