@@ -439,12 +439,35 @@ impl Prt {
             .then(|| crate::raytrace::Tracer::new(mesh));
         if let (Some(g), Some(tracer)) = (&settings.geometry, &tracer) {
             let rep = &representatives[0];
-            let halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
+            let mut halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
+            // The object's own light goes through thin parts too (it lights the front of an
+            // ear, Cycles' walk carries it to the back), which the bounce's local term,
+            // (R_total + point mass) E_ind, cannot: the walks gather the direct irradiance
+            // plus an estimate of E_ind (one bounce of the half-space B), and the term is taken
+            // against the half-space B plus that local term, so it holds what the walks carry
+            // of both.
+            let mut lit = prt.vertex_irradiance.clone();
+            if let Some(strata) = bounce_strata {
+                let estimate = crate::interreflection::indirect_irradiance(
+                    mesh,
+                    tracer,
+                    &halfspace,
+                    &|cos| settings.model.exit_weight(rep, cos),
+                    strata,
+                );
+                let receiving = lobe_totals(settings.model, rep)?;
+                for ((l, h), e) in lit.iter_mut().zip(halfspace.iter_mut()).zip(&estimate) {
+                    for c in 0..3 {
+                        l[c] += e[c];
+                        h[c] += receiving[c] as f32 * e[c];
+                    }
+                }
+            }
             let term = GeometryTerm::compute(
                 mesh,
                 tracer,
                 rep,
-                &prt.vertex_irradiance,
+                &lit,
                 &halfspace,
                 g,
                 progress
