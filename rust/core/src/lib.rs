@@ -22,6 +22,7 @@ pub mod surface_integral; // a profile over a triangle or polygon from a point (
 pub mod basis; // Xu 2007 §5 piecewise polynomial basis and its constrained fit
 
 // Methods.
+pub mod hierarchy; // Mertens et al. 2003: face clusters and links, deformation and moving lights
 pub mod prt; // Xu et al. 2007: precomputed transport, live material edits
 
 // Reference.
