@@ -79,8 +79,8 @@ impl EdgeRule {
     };
     /// For a method evaluating millions of links: relative error below 1e-3 (measured).
     pub const FAST: EdgeRule = EdgeRule {
-        max_angle: 0.8,
-        max_length_ratio: 1.0,
+        max_angle: 1.2,
+        max_length_ratio: 1.5,
         eight_points: false,
     };
 }

@@ -16,7 +16,7 @@
 //!
 //! Departures from the paper, each where the profile must have a say or where one sample is
 //! biased: emitters beyond the profile's support are dropped; a cluster wider than
-//! `DECAY_SHARE` of the shortest decay length is opened; a far link samples the profile at two
+//! `DECAY_SHARE` of the shortest decay length among the channels reaching it is opened; a far link samples the profile at two
 //! sigma points of the emitter's irradiance-weighted spread instead of once at its centre
 //! (R is convex: one sample underestimates by about ½ R″ σ², 5–10 % per link at ε₂ = 0.05).
 //!
@@ -26,7 +26,7 @@
 //! records the links per receiver (render and incremental modes).
 
 use super::clusters::{quadratic_form, ClusterTree};
-use crate::profiles::{LookupProfile, RadialProfile};
+use crate::profiles::{LookupProfile, LookupRgb};
 use crate::surface_integral::{triangle_integral_rgb, EdgeRule, Triangle};
 use glam::DVec3;
 
@@ -36,19 +36,23 @@ pub const DECAY_SHARE: f64 = 1.0;
 
 /// A face within this many of its radii of the receiver is integrated (polygon form factor);
 /// beyond, its spread is sampled (measured: the sample rule is then within 1 % per face).
-pub const NEAR_FACTOR: f64 = 1.5;
+pub const NEAR_FACTOR: f64 = 1.2;
 
 /// Everything the oracle and the gather read.
 pub struct Context<'a> {
     pub tree: &'a ClusterTree,
     pub faces: &'a [Triangle],
     pub profiles: &'a [LookupProfile; 3],
+    /// The same three profiles' R on one table, for the far links.
+    pub rgb: &'a LookupRgb,
     pub eps_receiver: f64,
     pub eps_emitter: f64,
     /// Largest support radius over the channels: emitters farther away are dropped.
     pub support: f64,
-    /// Smallest decay length over the channels.
-    pub decay: f64,
+    /// Each channel's support radius and decay length: a cluster must be narrow against the
+    /// decay of the channels that reach it.
+    pub supports: [f64; 3],
+    pub decays: [f64; 3],
     pub rule: EdgeRule,
     /// Skip emitters with no power (on-the-fly only: stored links must outlive the lighting).
     pub skip_dark: bool,
@@ -114,9 +118,14 @@ impl Context<'_> {
         let t = self.tree;
         let (ri, ei) = (r as usize, e as usize);
         let d = (t.centroid[ri] - t.centroid[ei]).length();
-        if d - t.radius[ri] - t.radius[ei] > self.support {
+        let gap = d - t.radius[ri] - t.radius[ei];
+        if gap > self.support {
             return Verdict::Drop;
         }
+        let decay = (0..3)
+            .filter(|&c| gap <= self.supports[c])
+            .map(|c| self.decays[c])
+            .fold(f64::INFINITY, f64::min);
         let emitter_leaf = t.is_leaf(e);
         let w = self.omega(t.centroid[ri], ei);
         let receiver_fails = match t.children[ri] {
@@ -129,13 +138,14 @@ impl Context<'_> {
                     })
             }
         };
-        let emitter_fails = w > self.eps_emitter
-            || d < NEAR_FACTOR * t.radius[ei]
-            || (!emitter_leaf && t.radius[ei] > DECAY_SHARE * self.decay);
+        // Too wide for one sample against the decay of the channels that reach it.
+        let too_wide = t.radius[ei] > DECAY_SHARE * decay;
+        let close = d < NEAR_FACTOR * t.radius[ei];
+        let emitter_fails = w > self.eps_emitter || close || too_wide;
         match (receiver_fails, emitter_fails) {
             (false, false) => Verdict::Far,
-            // A face cannot be opened: integrated if close, else its spread sampled.
-            (false, true) if emitter_leaf && d < NEAR_FACTOR * t.radius[ei] => Verdict::Near,
+            // A face cannot be opened: integrated if close or wide, else its spread sampled.
+            (false, true) if emitter_leaf && (close || too_wide) => Verdict::Near,
             (false, true) if emitter_leaf => Verdict::Far,
             (false, true) => Verdict::OpenEmitter,
             (true, false) => Verdict::MoveDown,
@@ -169,14 +179,8 @@ impl Context<'_> {
         let d = (d2 + (trace - radial).max(0.0)).sqrt();
         let sr = radial.max(0.0).sqrt().min(0.9 * d);
         let p = &t.power[e as usize];
-        std::array::from_fn(|c| {
-            if p[c] == 0.0 {
-                0.0
-            } else {
-                let prof = &self.profiles[c];
-                0.5 * p[c] * (prof.value(d - sr) + prof.value(d + sr))
-            }
-        })
+        let (lo, hi) = (self.rgb.value(d - sr), self.rgb.value(d + sr));
+        std::array::from_fn(|c| 0.5 * p[c] * (lo[c] + hi[c]))
     }
 
     /// The form factor F(A_E, c_R) per channel (Mertens eq. 7, §4).

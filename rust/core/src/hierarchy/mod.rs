@@ -27,7 +27,7 @@ use crate::irradiance::{irradiance, Density, IrradianceSettings};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
 use crate::optics::Material;
-use crate::profiles::{LookupProfile, Model, RadialProfile};
+use crate::profiles::{LookupProfile, LookupRgb, Model, RadialProfile};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use crate::surface_integral::{EdgeRule, Triangle};
@@ -140,7 +140,7 @@ pub struct Hierarchy {
     /// Face irradiance and the eta it was taken with; None when stale.
     face_irradiance: Option<(Vec<[f32; 3]>, f64)>,
     vertex_irradiance: Option<(Vec<[f32; 3]>, f64)>,
-    profiles: Option<(Material, [LookupProfile; 3])>,
+    profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
     geometry_changed: bool,
     report: HierarchyReport,
 }
@@ -304,19 +304,21 @@ impl Hierarchy {
 
     /// The lookup profiles of `material`; whether they changed.
     fn prepare_profiles(&mut self, material: &Material) -> Result<bool> {
-        if matches!(&self.profiles, Some((m, _)) if m == material) {
+        if matches!(&self.profiles, Some((m, _, _)) if m == material) {
             return Ok(false);
         }
         let exact = self.settings.model.profiles(material)?;
         let tol = self.settings.support_tolerance;
         let lookup = std::array::from_fn(|c| LookupProfile::new(&exact[c], tol));
-        self.profiles = Some((*material, lookup));
+        let rgb = LookupRgb::new(&lookup);
+        self.profiles = Some((*material, lookup, rgb));
         Ok(true)
     }
 
     fn context<'a>(
         &'a self,
         lookup: &'a [LookupProfile; 3],
+        rgb: &'a LookupRgb,
         skip_dark: bool,
         scale: f64,
     ) -> Context<'a> {
@@ -324,14 +326,18 @@ impl Hierarchy {
             tree: &self.tree,
             faces: &self.faces,
             profiles: lookup,
+            rgb,
             eps_receiver: self.settings.eps_receiver * scale,
             eps_emitter: self.settings.eps_emitter * scale,
             support: lookup.iter().map(|p| p.support()).fold(0.0, f64::max),
-            decay: lookup
-                .iter()
-                .filter(|p| !p.is_zero())
-                .map(|p| p.length_scales().decay)
-                .fold(f64::INFINITY, f64::min),
+            supports: std::array::from_fn(|c| lookup[c].support()),
+            decays: std::array::from_fn(|c| {
+                if lookup[c].is_zero() {
+                    f64::INFINITY
+                } else {
+                    lookup[c].length_scales().decay
+                }
+            }),
             rule: EdgeRule::FAST,
             skip_dark,
         }
@@ -362,7 +368,7 @@ impl Hierarchy {
         let point_mass = self
             .profiles
             .as_ref()
-            .map(|(_, p)| p.iter().any(|p| p.point_mass() > 0.0))
+            .map(|(_, p, _)| p.iter().any(|p| p.point_mass() > 0.0))
             .unwrap_or(false);
         if point_mass {
             report.rays += self.sample_vertices(eta)?;
@@ -374,12 +380,18 @@ impl Hierarchy {
         }
         report.seconds_pull = t.elapsed().as_secs_f64();
 
-        let (_, lookup) = self
+        let (_, lookup, rgb) = self
             .profiles
             .take()
             .ok_or_else(|| Error::InvalidArgument("no profiles prepared".into()))?;
-        let result = self.evaluate(&lookup, material_changed, geometry_changed, &mut report);
-        self.profiles = Some((*material, lookup));
+        let result = self.evaluate(
+            &lookup,
+            &rgb,
+            material_changed,
+            geometry_changed,
+            &mut report,
+        );
+        self.profiles = Some((*material, lookup, rgb));
         let face_b = result?;
 
         // Average to the vertices (area-weighted over the faces around each, §3.2).
@@ -395,7 +407,7 @@ impl Hierarchy {
             }
         }
         let masses: [f64; 3] = match &self.profiles {
-            Some((_, p)) => std::array::from_fn(|c| p[c].point_mass()),
+            Some((_, p, _)) => std::array::from_fn(|c| p[c].point_mass()),
             None => [0.0; 3],
         };
         let out: Vec<[f32; 3]> = sum
@@ -422,6 +434,7 @@ impl Hierarchy {
     fn evaluate(
         &mut self,
         lookup: &[LookupProfile; 3],
+        rgb: &LookupRgb,
         material_changed: bool,
         geometry_changed: bool,
         report: &mut HierarchyReport,
@@ -437,7 +450,7 @@ impl Hierarchy {
             let mut slots = std::mem::take(&mut self.slots);
             slots.clear();
             slots.resize_with(n, Slot::default);
-            let ctx = self.context(lookup, !keep, 1.0);
+            let ctx = self.context(lookup, rgb, !keep, 1.0);
             counts = ctx.visit(root, vec![root], [0.0; 3], &mut slots, None, keep);
             self.slots = slots;
             self.has_links = keep;
@@ -447,7 +460,7 @@ impl Hierarchy {
             let previous = std::mem::take(&mut self.slots);
             let mut slots: Vec<Slot> = Vec::new();
             slots.resize_with(n, Slot::default);
-            let ctx = self.context(lookup, false, 1.0);
+            let ctx = self.context(lookup, rgb, false, 1.0);
             counts = ctx.visit(
                 root,
                 Vec::new(),
@@ -463,7 +476,7 @@ impl Hierarchy {
             // Same links: the near form factors again if the profile or the shape changed,
             // then gather (par over receivers) and push (top-down).
             let mut slots = std::mem::take(&mut self.slots);
-            let ctx = self.context(lookup, false, 1.0);
+            let ctx = self.context(lookup, rgb, false, 1.0);
             if material_changed || geometry_changed {
                 slots.par_iter_mut().enumerate().for_each(|(r, s)| {
                     for (e, f) in s.links.near.iter_mut() {
@@ -506,12 +519,17 @@ impl Hierarchy {
         }
         // The error estimate: a few faces again with ε/4, from the root.
         let t = Instant::now();
-        report.error_estimate = self.estimate(lookup, &face_b);
+        report.error_estimate = self.estimate(lookup, rgb, &face_b);
         report.seconds_estimate = t.elapsed().as_secs_f64();
         Ok(face_b)
     }
 
-    fn estimate(&self, lookup: &[LookupProfile; 3], face_b: &[[f64; 3]]) -> [f64; 3] {
+    fn estimate(
+        &self,
+        lookup: &[LookupProfile; 3],
+        rgb: &LookupRgb,
+        face_b: &[[f64; 3]],
+    ) -> [f64; 3] {
         let k = self.settings.estimate_receivers.min(self.faces.len());
         if k == 0 {
             return [0.0; 3];
@@ -521,7 +539,7 @@ impl Hierarchy {
             .collect();
         let step = leaves.len() as f64 / k as f64;
         let picks: Vec<u32> = (0..k).map(|i| leaves[(i as f64 * step) as usize]).collect();
-        let ctx = self.context(lookup, true, 0.25);
+        let ctx = self.context(lookup, rgb, true, 0.25);
         let root = self.tree.root();
         let fine: Vec<[f64; 3]> = picks
             .par_iter()

@@ -131,6 +131,56 @@ impl RadialProfile for LookupProfile {
     }
 }
 
+/// R of three channels on one table (one node search for all three): what a method sampling
+/// the profile millions of times reads. Nodes uniform in √ρ up to the largest support, R
+/// linear between them; each channel is 0 beyond its own support.
+#[derive(Debug, Clone)]
+pub struct LookupRgb {
+    support: f64,
+    scale: f64,
+    value: Vec<[f64; 3]>,
+}
+
+impl LookupRgb {
+    pub fn new(channels: &[LookupProfile; 3]) -> LookupRgb {
+        let support = channels.iter().map(|c| c.support()).fold(0.0, f64::max);
+        let mut value = vec![[0.0; 3]; NODES + 1];
+        if support > 0.0 {
+            for (i, v) in value.iter_mut().enumerate() {
+                let u = i as f64 / NODES as f64;
+                let rho = support * u * u;
+                *v = std::array::from_fn(|c| channels[c].value(rho));
+            }
+        }
+        LookupRgb {
+            support,
+            scale: if support > 0.0 {
+                NODES as f64 / support.sqrt()
+            } else {
+                0.0
+            },
+            value,
+        }
+    }
+
+    /// R(r) of the three channels.
+    #[inline]
+    pub fn value(&self, r: f64) -> [f64; 3] {
+        if r >= self.support || r.is_nan() {
+            return [0.0; 3];
+        }
+        let u = r.max(0.0).sqrt() * self.scale;
+        let i = (u as usize).min(NODES - 1);
+        let f = u - i as f64;
+        let (a, b) = (&self.value[i], &self.value[i + 1]);
+        [
+            a[0] + f * (b[0] - a[0]),
+            a[1] + f * (b[1] - a[1]),
+            a[2] + f * (b[2] - a[2]),
+        ]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -161,6 +211,17 @@ mod tests {
                     r *= 1.07;
                 }
                 assert_eq!(t.value(2.0 * t.support()), 0.0);
+                let channels = [t.clone(), t.clone(), t.clone()];
+                let rgb = LookupRgb::new(&channels);
+                let mut r = 0.1 * s.near;
+                while r < t.support() {
+                    let (a, b) = (rgb.value(r)[1], p.value(r));
+                    assert!(
+                        (a - b).abs() <= 5e-4 * b + 1e-9 * total / (s.near * s.near),
+                        "{model:?} RGB R({r}): {a} vs {b}"
+                    );
+                    r *= 1.07;
+                }
                 assert!((t.disc_integral(1e9) - total).abs() <= 2e-5 * total);
             }
         }

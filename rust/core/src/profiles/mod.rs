@@ -13,7 +13,7 @@ pub mod table;
 pub mod walk;
 
 pub use dipole::Dipole;
-pub use lookup::LookupProfile;
+pub use lookup::{LookupProfile, LookupRgb};
 pub use table::{WalkProfile, WalkTable};
 
 use crate::error::{Error, Result};
