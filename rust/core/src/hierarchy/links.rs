@@ -138,8 +138,14 @@ impl Context<'_> {
                     })
             }
         };
-        // Too wide for one sample against the decay of the channels that reach it.
-        let too_wide = t.radius[ei] > DECAY_SHARE * decay;
+        // Too wide for one sample against the decay of the channels that reach it (a face,
+        // which can only be integrated, at twice the share: its two sigma points still hold).
+        let share = if emitter_leaf {
+            2.0 * DECAY_SHARE
+        } else {
+            DECAY_SHARE
+        };
+        let too_wide = t.radius[ei] > share * decay;
         let close = d < NEAR_FACTOR * t.radius[ei];
         let emitter_fails = w > self.eps_emitter || close || too_wide;
         match (receiver_fails, emitter_fails) {
