@@ -21,7 +21,7 @@ impl PyHierarchy {
     /// Builds the hierarchy and evaluates `material` once (links, in render and incremental
     /// modes). Releases the GIL.
     #[new]
-    #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.1),
+    #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.3),
         mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32))]
     #[allow(clippy::too_many_arguments)]
     fn new(

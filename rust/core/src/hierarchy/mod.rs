@@ -87,7 +87,7 @@ impl Default for HierarchySettings {
     fn default() -> Self {
         Self {
             eps_receiver: 0.005,
-            eps_emitter: 0.1,
+            eps_emitter: 0.3,
             model: Model::Cycles,
             mode: Mode::OnTheFly,
             support_tolerance: 1e-4,
