@@ -52,6 +52,7 @@ test: lint test-rust test-python
 
 bench: build
 	$(PY) blender_scripts/bench_prt.py
+	$(PY) blender_scripts/bench_hierarchy.py
 
 # The installable Blender extension (zip with the native wheel) in dist/.
 addon: setup

@@ -11,6 +11,14 @@ use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
+/// Irradiance at points with normals, supplied by the caller (usually `irradiance` below with
+/// the scene's lights); I = ∫ F_t L (n · w) dw, Xu 2007 eq. (3). The density says whether the
+/// points are summed many at a time (samples, patches) or used alone (vertices). Shared by the
+/// methods and the ground truth, so that none depends on another's types.
+pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync + 'a;
+/// Progress in [0, 1]; returning false cancels.
+pub type ProgressFn<'a> = dyn Fn(f32) -> bool + Sync + 'a;
+
 /// How irradiance is estimated.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IrradianceSettings {

@@ -16,11 +16,13 @@ pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabul
 pub mod quadrature; // Gauss–Legendre and Simpson rules
 pub mod raytrace; // BVH and shadow rays (obvhs)
 pub mod scene; // a mesh with its lights
+pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)
 
 // Shared by the PRT method, kept apart so other methods may use it.
 pub mod basis; // Xu 2007 §5 piecewise polynomial basis and its constrained fit
 
 // Methods.
+pub mod hierarchy; // Mertens et al. 2003: face clusters and links, deformation and moving lights
 pub mod prt; // Xu et al. 2007: precomputed transport, live material edits
 
 // Reference.

@@ -13,16 +13,15 @@ use crate::error::{Error, Result};
 use crate::mesh::{interpolated_normal, Mesh};
 use crate::optics::Material;
 use crate::profiles::{Model, Profile, RadialProfile};
-use crate::quadrature::GAUSS8;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use std::f64::consts::PI;
 use std::time::Instant;
 
 use crate::irradiance::Density;
 /// Irradiance at points with normals (Xu 2007 eq. 3), supplied by the caller; the patches are
 /// dense points summed many at a time.
-pub use crate::prt::IrradianceFn;
+pub use crate::irradiance::IrradianceFn;
+use crate::surface_integral::{corner_integral, triangle_integral, EdgeRule, Triangle as Patch};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReferenceSettings {
@@ -70,155 +69,6 @@ pub struct ReferenceResult {
 const SMOOTH: f64 = 0.1;
 /// Tail of R_d,total left out beyond the support radius, relative to `rel_tol`.
 const TAIL_SHARE: f64 = 0.1;
-
-struct Patch {
-    corners: [DVec3; 3],
-    centroid: DVec3,
-    normal: DVec3,
-    area: f64,
-    diam: f64,
-}
-
-impl Patch {
-    fn new(a: DVec3, b: DVec3, c: DVec3) -> Patch {
-        let cross = (b - a).cross(c - a);
-        let len = cross.length();
-        Patch {
-            corners: [a, b, c],
-            centroid: (a + b + c) / 3.0,
-            normal: if len > 0.0 { cross / len } else { DVec3::Z },
-            area: 0.5 * len,
-            diam: (b - a).length().max((c - b).length()).max((a - c).length()),
-        }
-    }
-}
-
-/// ∫_T R(|x − y|) dA(y) over a planar triangle, exactly up to the angular quadrature.
-/// Drop x onto T's plane (height h, foot q). In polar coordinates about q,
-/// ∫_0^ρ R(sqrt(s^2 + h^2)) s ds = (M(sqrt(ρ^2 + h^2)) − M(h)) / 2π with M the profile's
-/// disc integral,
-/// so only the angle remains: a signed sum over the triangles (q, edge). This is the
-/// semi-analytic point-to-triangle form factor of Mertens et al. 2003 (§4, eqs. 8–19) with the
-/// radial integral in closed form.
-fn triangle_integral(x: DVec3, p: &Patch, dip: &Profile) -> f64 {
-    if p.area <= 0.0 {
-        return 0.0;
-    }
-    let h = (x - p.corners[0]).dot(p.normal);
-    let q = x - h * p.normal;
-    let h = h.abs();
-    let base = dip.disc_integral(h);
-    let mut total = 0.0;
-    for i in 0..3 {
-        let (a, b) = (p.corners[i], p.corners[(i + 1) % 3]);
-        let edge = b - a;
-        let len = edge.length();
-        if len <= 0.0 {
-            continue;
-        }
-        let e = edge / len;
-        let foot = a + (q - a).dot(e) * e;
-        let d = (foot - q).length();
-        if d <= 1e-12 * p.diam {
-            continue; // q on the edge's line: the sub-triangle (q, a, b) has no area
-        }
-        let sign = (a - q).cross(b - q).dot(p.normal).signum();
-        let (psi_a, psi_b) = ((a - foot).dot(e).atan2(d), (b - foot).dot(e).atan2(d));
-        let (lo, hi) = (psi_a.min(psi_b), psi_a.max(psi_b));
-        // rho(psi) = d / cos(psi); composite 8-point Gauss–Legendre in psi.
-        let pieces = ((hi - lo) / 0.2).ceil().max(1.0) as usize;
-        let step = (hi - lo) / pieces as f64;
-        let mut sum = 0.0;
-        for k in 0..pieces {
-            let mid = lo + (k as f64 + 0.5) * step;
-            for (t, w) in GAUSS8 {
-                let psi = mid + 0.5 * step * t;
-                let rho = d / psi.cos();
-                sum += w * 0.5 * step * (dip.disc_integral((rho * rho + h * h).sqrt()) - base);
-            }
-        }
-        total += sign * sum;
-    }
-    total / (2.0 * PI)
-}
-
-/// ∫_P R(|x − y|) (y − x) dA(y) over a triangle P with x at its corner `c`: the first moment
-/// that, with `triangle_integral`, integrates a linear irradiance exactly. Polar about x: only
-/// the opposite edge bounds the region, at rho(psi) = d / cos(psi), and the radial integral
-/// R2(rho) = ∫_0^rho s^2 R_d(s) ds is by parts rho m(rho) − ∫_0^rho m(s) ds with
-/// m(s) = ∫_0^s R_d(t) t dt = M(s)/2π − M(0)/2π in closed form, the remaining integral by
-/// Gauss–Legendre on intervals doubling from half the profile's near length (m bends on that
-/// scale near 0).
-fn corner_moment(p: &Patch, c: usize, dip: &Profile) -> DVec3 {
-    let x = p.corners[c];
-    let (a, b) = (p.corners[(c + 1) % 3], p.corners[(c + 2) % 3]);
-    let edge = b - a;
-    let len = edge.length();
-    if p.area <= 0.0 || len <= 0.0 {
-        return DVec3::ZERO;
-    }
-    let e = edge / len;
-    let foot = a + (x - a).dot(e) * e;
-    let d = (foot - x).length();
-    if d <= 1e-12 * p.diam {
-        return DVec3::ZERO;
-    }
-    let n_e = (foot - x) / d;
-    let m0 = dip.disc_integral(0.0);
-    let m = |s: f64| (dip.disc_integral(s) - m0) / (2.0 * PI);
-    let r2 = |rho: f64| {
-        let mut integral = 0.0;
-        let (mut lo, mut hi) = (0.0, (0.5 * dip.length_scales().near).min(rho));
-        while lo < rho {
-            let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
-            integral += GAUSS8
-                .iter()
-                .map(|(t, w)| w * half * m(mid + half * t))
-                .sum::<f64>();
-            lo = hi;
-            hi = (2.0 * hi).min(rho);
-        }
-        rho * m(rho) - integral
-    };
-    let (psi_a, psi_b) = ((a - foot).dot(e).atan2(d), (b - foot).dot(e).atan2(d));
-    let (lo, hi) = (psi_a.min(psi_b), psi_a.max(psi_b));
-    let pieces = ((hi - lo) / 0.2).ceil().max(1.0) as usize;
-    let step = (hi - lo) / pieces as f64;
-    let mut sum = DVec3::ZERO;
-    for k in 0..pieces {
-        let mid = lo + (k as f64 + 0.5) * step;
-        for (t, w) in GAUSS8 {
-            let psi = mid + 0.5 * step * t;
-            let dir = psi.cos() * n_e + psi.sin() * e;
-            sum += w * 0.5 * step * r2(d / psi.cos()) * dir;
-        }
-    }
-    sum
-}
-
-/// ∫_P R(|x − y|) I(y) dA over the sub-triangle P that has the receiver x at its corner `c`,
-/// I linear between the corner values `corner_irr`: I_c K0 + Σ (I_j − I_c) K1 · w_j, with
-/// w_j the dual vectors of P's edges from x (y − x = α u_1 + β u_2, α = (y − x) · w_1).
-fn corner_integral(p: &Patch, c: usize, dip: &Profile, corner_irr: [f64; 3]) -> f64 {
-    let x = p.corners[c];
-    let (u1, u2) = (p.corners[(c + 1) % 3] - x, p.corners[(c + 2) % 3] - x);
-    let k0 = triangle_integral(x, p, dip);
-    let k1 = corner_moment(p, c, dip);
-    // Dual basis in the plane: w1 . u1 = 1, w1 . u2 = 0 and so on.
-    let (g11, g12, g22) = (u1.dot(u1), u1.dot(u2), u2.dot(u2));
-    let det = g11 * g22 - g12 * g12;
-    if det <= 0.0 {
-        return corner_irr[c] * k0;
-    }
-    let w1 = (g22 * u1 - g12 * u2) / det;
-    let w2 = (g11 * u2 - g12 * u1) / det;
-    let (i0, i1, i2) = (
-        corner_irr[c],
-        corner_irr[(c + 1) % 3],
-        corner_irr[(c + 2) % 3],
-    );
-    i0 * k0 + (i1 - i0) * k1.dot(w1) + (i2 - i0) * k1.dot(w2)
-}
 
 /// The mesh at one level: sub-triangles grouped by triangle, with their irradiance.
 struct Level {
@@ -366,7 +216,8 @@ fn radiosity_at(x: DVec3, lv: &Level, dips: &[Profile; 3], support: &[f64; 3]) -
                 if let Some((corner, (index, irr))) = own {
                     if s == lv.first[t] + index {
                         let corner_irr = irr.map(|i| i[c]);
-                        b[c] += corner_integral(sub, corner, &dips[c], corner_irr);
+                        b[c] +=
+                            corner_integral(sub, corner, &dips[c], corner_irr, &EdgeRule::PRECISE);
                         continue;
                     }
                 }
@@ -378,7 +229,7 @@ fn radiosity_at(x: DVec3, lv: &Level, dips: &[Profile; 3], support: &[f64; 3]) -
                 if ds > 2.0 * sub.diam && sub.diam * curvature_scale(&dips[c], ds) < SMOOTH {
                     b[c] += i * sub.area * dips[c].value(ds);
                 } else {
-                    b[c] += i * triangle_integral(x, sub, &dips[c]);
+                    b[c] += i * triangle_integral(x, sub, &dips[c], &EdgeRule::PRECISE);
                 }
             }
         }
@@ -535,6 +386,7 @@ fn worst_rel_rms(a: &[[f64; 3]], b: &[[f64; 3]], w: &[f64]) -> f64 {
 mod tests {
     use super::*;
     use crate::profiles::Dipole;
+    use crate::quadrature::GAUSS8;
 
     /// Brute-force 2-D Gauss product rule over the triangle (Duffy-free: the receiver is kept
     /// off the triangle or the kernel is smooth at this resolution), subdividing k x k.
@@ -580,7 +432,7 @@ mod tests {
             p.corners[1],                                         // at a vertex
             0.5 * (p.corners[0] + p.corners[1]) - p.normal * 0.1, // near an edge, below
         ] {
-            let exact = triangle_integral(x, &p, &dip);
+            let exact = triangle_integral(x, &p, &dip, &EdgeRule::PRECISE);
             let bf = brute(x, &p, &dip, 64);
             assert!(
                 (exact - bf).abs() < 2e-4 * bf.abs().max(1e-12),
@@ -766,7 +618,7 @@ mod tests {
                 // The field rotated so that `irr[corner]` sits at that corner of the patch.
                 let rotated: [f64; 3] = std::array::from_fn(|j| irr[(j + 3 - corner) % 3]);
                 let x = p.corners[corner];
-                let exact = corner_integral(&p, corner, &dip, rotated);
+                let exact = corner_integral(&p, corner, &dip, rotated, &EdgeRule::PRECISE);
                 let bf = brute_linear(x, &p, &dip, rotated, 96);
                 assert!(
                     (exact - bf).abs() < 1e-3 * bf,

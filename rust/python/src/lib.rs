@@ -5,6 +5,7 @@
 use pyo3::prelude::*;
 
 mod convert;
+mod hierarchy;
 mod material;
 mod prt;
 mod reference;
@@ -18,6 +19,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<material::PyMaterial>()?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<prt::PyPrt>()?;
+    m.add_class::<hierarchy::PyHierarchy>()?;
     m.add_function(wrap_pyfunction!(reference::reference_radiosity_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::reference_radiance_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::relative_error, m)?)?;

@@ -8,10 +8,12 @@
 //!   the Principled layers it is what Cycles renders.
 
 pub mod dipole;
+pub mod lookup;
 pub mod table;
 pub mod walk;
 
 pub use dipole::Dipole;
+pub use lookup::{LookupProfile, LookupRgb};
 pub use table::{WalkProfile, WalkTable};
 
 use crate::error::{Error, Result};

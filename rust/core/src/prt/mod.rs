@@ -29,12 +29,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 use tree::{SampleTree, WeightedSample};
 
-/// Irradiance at points with normals, supplied by the caller (usually `irradiance::irradiance`
-/// with the scene's lights); I = int F_t L (n . w) dw, Xu 2007 eq. (3). The density says
-/// whether the points are summed many at a time (samples) or used alone (vertices).
-pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync + 'a;
-/// Progress in [0, 1]; returning false cancels.
-pub type ProgressFn<'a> = dyn Fn(f32) -> bool + Sync + 'a;
+pub use crate::irradiance::{IrradianceFn, ProgressFn};
 
 /// Basis sizes tried, smallest first, when the size is chosen by `fit_tolerance`.
 pub const BASIS_SIZES: [usize; 10] = [4, 6, 8, 12, 16, 24, 32, 48, 64, 96];

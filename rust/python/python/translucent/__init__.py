@@ -2,7 +2,8 @@
 
 Any radial profile on triangle meshes: Cycles' random walk (the default: what a Cycles render
 of the Principled BSDF shows) or Jensen's dipole (the papers' model); PRT material editing after
-Xu et al. 2007. Lengths are in scene units, coefficients in 1/scene unit, light units follow
+Xu et al. 2007; hierarchical boundary elements after Mertens et al. 2003 for deforming
+meshes and moving lights. Lengths are in scene units, coefficients in 1/scene unit, light units follow
 Blender/Cycles (sun Strength = W/m^2, point/spot/area Power = W, world colour = radiance).
 
 The random-walk tables are kept in $TRANSLUCENT_CACHE, else $XDG_CACHE_HOME/translucent, else
@@ -14,6 +15,7 @@ import pathlib
 
 from ._native import (
     Cancelled,
+    Hierarchy,
     Material,
     Prt,
     Scene,
@@ -40,6 +42,7 @@ set_table_cache(str(_default_cache() / "tables"))
 
 __all__ = [
     "Cancelled",
+    "Hierarchy",
     "Material",
     "Prt",
     "Scene",

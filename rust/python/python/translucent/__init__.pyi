@@ -1,5 +1,6 @@
 from ._native import (
     Cancelled as Cancelled,
+    Hierarchy as Hierarchy,
     Material as Material,
     Prt as Prt,
     Scene as Scene,

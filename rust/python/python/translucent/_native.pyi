@@ -221,6 +221,52 @@ class Prt:
     @property
     def vertex_count(self) -> int: ...
 
+class Hierarchy:
+    """Hierarchical boundary elements (Mertens 2003): a face-cluster hierarchy over a copy of
+    the scene, links refined by the solid-angle oracle, for deforming meshes and moving lights.
+    Nothing is precomputed that a deformation invalidates."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        material: Material,
+        profile: Profile = "cycles",
+        eps: tuple[float, float] = (0.005, 0.3),
+        mode: Literal["on_the_fly", "incremental", "render"] = "on_the_fly",
+        world_samples: int = 64,
+        area_samples: int = 16,
+        estimate_receivers: int = 32,
+    ) -> None:
+        """Builds the hierarchy and evaluates `material` once. `eps` = (ε₁, ε₂) [sr]: the
+        receiver's and the emitter's solid-angle thresholds of the refinement oracle.
+        `mode`: "on_the_fly" (everything from scratch each evaluation, no links kept),
+        "render" (links kept; a light change gathers again over them), "incremental" (links
+        kept and re-checked after a material or geometry change). Releases the GIL."""
+    def radiosity(self, material: Material) -> npt.NDArray[np.float32]:
+        """B per vertex, (N, 3): what `reference_radiosity` integrates."""
+    def radiance(self, material: Material, eye: Vec3 | None = None) -> npt.NDArray[np.float32]:
+        """L = W(w_o) B / pi toward `eye`, or along each normal without one."""
+    def update(
+        self,
+        positions: npt.ArrayLike | None = None,
+        lights: Scene | None = None,
+        normals: npt.ArrayLike | None = None,
+    ) -> None:
+        """The mesh deformed (same vertex count and triangles) and/or the lights and world are
+        now those of the Scene `lights`. Evaluated at the next `radiosity`/`radiance`."""
+    mode: Literal["on_the_fly", "incremental", "render"]
+    @property
+    def profile(self) -> Profile: ...
+    @property
+    def eps(self) -> tuple[float, float]: ...
+    @property
+    def vertex_count(self) -> int: ...
+    @property
+    def report(self) -> dict[str, object]:
+        """The last evaluation: links, far_links, near_links, links_per_face, clusters, faces,
+        depth, oracle_tests, relinked, rays, seconds per phase (build, refit, irradiance, pull,
+        links, push, estimate) and in all, error_estimate per channel."""
+
 @overload
 def reference_radiosity(
     scene: Scene,

@@ -1,0 +1,596 @@
+//! Hierarchical boundary elements for translucency (Mertens, Kautz, Bekaert, Seidel, Van Reeth
+//! 2003): geometry, lighting and material may all change, and nothing is precomputed that a
+//! deformation invalidates. A face-cluster hierarchy (`clusters`, §5.1.1) is built once per
+//! topology; links between clusters are refined from the root by the solid-angle oracle
+//! (`links`, §3.2, §5.2); irradiance is sampled at the faces and pulled up, gathered over the
+//! links (polygon integral near, point sample far, §3.1, §4), pushed down and averaged to the
+//! vertices (§3.2). Any profile (`profiles::Model`), read through a lookup table.
+//!
+//! Modes (§5.5): on-the-fly refines and gathers from scratch each time, storing no links;
+//! render keeps the links and only gathers the new irradiance over them (after a material or
+//! geometry change it re-integrates the near links' form factors but keeps the links);
+//! incremental keeps the links and, after a material or geometry change, re-checks each one
+//! against the oracle: kept, demoted (opened or moved down) or promoted (two sibling emitters
+//! replaced by their parent), one level per update.
+//!
+//! B is the quantity `reference::reference_radiosity` integrates: the profile over the
+//! irradiance I (with the profile's Fresnel factor), plus the profile's point mass times the
+//! vertex's own irradiance; the irradiance from `irradiance::irradiance` (lights with ray-cast
+//! shadows, the world) at the face centroids with interpolated normals, as the ground truth
+//! samples it.
+
+pub mod clusters;
+pub mod links;
+
+use crate::error::{Error, Result};
+use crate::irradiance::{irradiance, Density, IrradianceSettings};
+use crate::lights::{Light, World};
+use crate::mesh::{interpolated_normal, Mesh};
+use crate::optics::Material;
+use crate::profiles::{LookupProfile, LookupRgb, Model, RadialProfile};
+use crate::raytrace::Tracer;
+use crate::scene::Scene;
+use crate::surface_integral::{EdgeRule, Triangle};
+use clusters::ClusterTree;
+use glam::Vec3;
+use links::{Context, LinkCounts, NodeLinks, Slot};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Which of Mertens' three modes (§5.5) an evaluation runs in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    OnTheFly,
+    Incremental,
+    Render,
+}
+
+impl Mode {
+    pub fn parse(name: &str) -> Result<Mode> {
+        match name {
+            "on_the_fly" => Ok(Mode::OnTheFly),
+            "incremental" => Ok(Mode::Incremental),
+            "render" => Ok(Mode::Render),
+            other => Err(Error::InvalidArgument(format!(
+                "mode {other:?}: choose 'on_the_fly', 'incremental' or 'render'"
+            ))),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::OnTheFly => "on_the_fly",
+            Mode::Incremental => "incremental",
+            Mode::Render => "render",
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct HierarchySettings {
+    /// ε₁: largest change of an emitter's solid angle [sr] across a receiver's children.
+    pub eps_receiver: f64,
+    /// ε₂: largest solid angle [sr] an emitter may subtend at a far link.
+    pub eps_emitter: f64,
+    pub model: Model,
+    pub mode: Mode,
+    /// Share of the profile's total left out beyond its support radius.
+    pub support_tolerance: f64,
+    pub world_samples: u32,
+    pub area_samples: u32,
+    pub seed: u64,
+    /// Faces whose radiosity the error estimate recomputes with ε/4.
+    pub estimate_receivers: usize,
+}
+
+impl Default for HierarchySettings {
+    fn default() -> Self {
+        Self {
+            eps_receiver: 0.005,
+            eps_emitter: 0.3,
+            model: Model::Cycles,
+            mode: Mode::OnTheFly,
+            support_tolerance: 1e-4,
+            world_samples: 64,
+            area_samples: 16,
+            seed: 1,
+            estimate_receivers: 32,
+        }
+    }
+}
+
+/// What the last evaluation did and how long each phase took [s].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct HierarchyReport {
+    pub mode: &'static str,
+    pub faces: usize,
+    pub clusters: usize,
+    pub depth: usize,
+    /// Links of the last evaluation (on-the-fly: used, not stored; dark emitters skipped).
+    pub far_links: u64,
+    pub near_links: u64,
+    pub oracle_tests: u64,
+    pub dropped_beyond_support: u64,
+    /// Whether links were refined (on-the-fly, first build, incremental re-check).
+    pub relinked: bool,
+    pub rays: u64,
+    pub seconds_build: f64,
+    pub seconds_refit: f64,
+    pub seconds_irradiance: f64,
+    pub seconds_pull: f64,
+    /// Refinement and gather (they run together in one traversal).
+    pub seconds_links: f64,
+    pub seconds_push: f64,
+    pub seconds_estimate: f64,
+    pub seconds: f64,
+    /// Area-weighted relative RMS per channel between the faces' radiosity and the same
+    /// recomputed with ε/4 on `estimate_receivers` faces.
+    pub error_estimate: [f64; 3],
+}
+
+/// The hierarchy of one scene, with the links and irradiance of its last evaluation.
+pub struct Hierarchy {
+    scene: Scene,
+    tracer: Tracer,
+    settings: HierarchySettings,
+    tree: ClusterTree,
+    faces: Vec<Triangle>,
+    slots: Vec<Slot>,
+    has_links: bool,
+    /// Face irradiance and the eta it was taken with; None when stale.
+    face_irradiance: Option<(Vec<[f32; 3]>, f64)>,
+    vertex_irradiance: Option<(Vec<[f32; 3]>, f64)>,
+    profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
+    geometry_changed: bool,
+    report: HierarchyReport,
+}
+
+fn faces_of(mesh: &Mesh) -> Vec<Triangle> {
+    let p = mesh.positions();
+    mesh.triangles()
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| p[v as usize].as_dvec3());
+            Triangle::new(a, b, c)
+        })
+        .collect()
+}
+
+impl Hierarchy {
+    /// Builds the cluster hierarchy of `scene.mesh` (no evaluation yet).
+    pub fn new(scene: Scene, settings: HierarchySettings) -> Result<Hierarchy> {
+        for (name, v) in [
+            ("eps receiver", settings.eps_receiver),
+            ("eps emitter", settings.eps_emitter),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::InvalidArgument(format!(
+                    "{name} = {v}: must be a positive solid angle [sr]"
+                )));
+            }
+        }
+        if !(settings.support_tolerance > 0.0 && settings.support_tolerance < 1.0) {
+            return Err(Error::InvalidArgument(format!(
+                "support tolerance {} must lie in (0, 1)",
+                settings.support_tolerance
+            )));
+        }
+        let start = Instant::now();
+        let tree = ClusterTree::build(scene.mesh.positions(), scene.mesh.triangles());
+        let faces = faces_of(&scene.mesh);
+        let tracer = Tracer::new(&scene.mesh);
+        let mut tree = tree;
+        tree.refit(&faces);
+        let report = HierarchyReport {
+            mode: settings.mode.name(),
+            faces: faces.len(),
+            clusters: tree.len(),
+            depth: tree.depth,
+            seconds_build: start.elapsed().as_secs_f64(),
+            ..Default::default()
+        };
+        Ok(Hierarchy {
+            slots: Vec::new(),
+            scene,
+            tracer,
+            settings,
+            tree,
+            faces,
+            has_links: false,
+            face_irradiance: None,
+            vertex_irradiance: None,
+            profiles: None,
+            geometry_changed: false,
+            report,
+        })
+    }
+
+    pub fn settings(&self) -> &HierarchySettings {
+        &self.settings
+    }
+
+    pub fn report(&self) -> &HierarchyReport {
+        &self.report
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// Changes the mode; links kept from before stay valid.
+    pub fn set_mode(&mut self, mode: Mode) {
+        self.settings.mode = mode;
+    }
+
+    /// The mesh deformed: same triangles, new positions (and normals, or computed ones).
+    pub fn set_positions(
+        &mut self,
+        positions: Vec<Vec3>,
+        normals: Option<Vec<Vec3>>,
+    ) -> Result<()> {
+        let n = self.scene.mesh.vertex_count();
+        if positions.len() != n {
+            return Err(Error::InvalidArgument(format!(
+                "{} positions for a mesh of {n} vertices (a topology change needs a new Hierarchy)",
+                positions.len()
+            )));
+        }
+        let mesh = Mesh::new(positions, self.scene.mesh.triangles().to_vec(), normals)?;
+        self.tracer = Tracer::new(&mesh);
+        self.faces = faces_of(&mesh);
+        self.scene.mesh = mesh;
+        self.geometry_changed = true;
+        self.face_irradiance = None;
+        self.vertex_irradiance = None;
+        Ok(())
+    }
+
+    /// New lights and world: the next evaluation samples the irradiance again.
+    pub fn set_lights(&mut self, lights: Vec<Light>, world: World) {
+        self.scene.lights = lights;
+        self.scene.world = world;
+        self.face_irradiance = None;
+        self.vertex_irradiance = None;
+    }
+
+    fn irradiance_settings(&self, eta: f64, density: Density) -> IrradianceSettings {
+        IrradianceSettings {
+            eta,
+            world_samples: self.settings.world_samples,
+            area_samples: self.settings.area_samples,
+            seed: self.settings.seed,
+        }
+        .for_density(density)
+    }
+
+    /// Irradiance at the face centroids with the interpolated normals; returns rays cast.
+    fn sample_faces(&mut self, eta: f64) -> Result<u64> {
+        if matches!(&self.face_irradiance, Some((_, e)) if *e == eta) {
+            return Ok(0);
+        }
+        let mesh = &self.scene.mesh;
+        let (points, normals): (Vec<Vec3>, Vec<Vec3>) = mesh
+            .triangles()
+            .par_iter()
+            .zip(self.faces.par_iter())
+            .map(|(t, f)| {
+                let corners = t.map(|v| mesh.normals()[v as usize]);
+                let n = interpolated_normal(&corners, 1.0 / 3.0, 1.0 / 3.0, f.normal.as_vec3());
+                (f.centroid.as_vec3(), n)
+            })
+            .unzip();
+        let s = self.irradiance_settings(eta, Density::Dense);
+        let (values, r) = irradiance(&self.scene, &self.tracer, &points, &normals, &s)?;
+        self.face_irradiance = Some((values, eta));
+        Ok(r.rays)
+    }
+
+    fn sample_vertices(&mut self, eta: f64) -> Result<u64> {
+        if matches!(&self.vertex_irradiance, Some((_, e)) if *e == eta) {
+            return Ok(0);
+        }
+        let mesh = &self.scene.mesh;
+        let s = self.irradiance_settings(eta, Density::Receivers);
+        let (values, r) = irradiance(
+            &self.scene,
+            &self.tracer,
+            mesh.positions(),
+            mesh.normals(),
+            &s,
+        )?;
+        self.vertex_irradiance = Some((values, eta));
+        Ok(r.rays)
+    }
+
+    /// The lookup profiles of `material`; whether they changed.
+    fn prepare_profiles(&mut self, material: &Material) -> Result<bool> {
+        if matches!(&self.profiles, Some((m, _, _)) if m == material) {
+            return Ok(false);
+        }
+        let exact = self.settings.model.profiles(material)?;
+        let tol = self.settings.support_tolerance;
+        let lookup = std::array::from_fn(|c| LookupProfile::new(&exact[c], tol));
+        let rgb = LookupRgb::new(&lookup);
+        self.profiles = Some((*material, lookup, rgb));
+        Ok(true)
+    }
+
+    fn context<'a>(
+        &'a self,
+        lookup: &'a [LookupProfile; 3],
+        rgb: &'a LookupRgb,
+        skip_dark: bool,
+        scale: f64,
+    ) -> Context<'a> {
+        Context {
+            tree: &self.tree,
+            faces: &self.faces,
+            profiles: lookup,
+            rgb,
+            eps_receiver: self.settings.eps_receiver * scale,
+            eps_emitter: self.settings.eps_emitter * scale,
+            support: lookup.iter().map(|p| p.support()).fold(0.0, f64::max),
+            supports: std::array::from_fn(|c| lookup[c].support()),
+            decays: std::array::from_fn(|c| {
+                if lookup[c].is_zero() {
+                    f64::INFINITY
+                } else {
+                    lookup[c].length_scales().decay
+                }
+            }),
+            rule: EdgeRule::FAST,
+            skip_dark,
+        }
+    }
+
+    /// Radiosity B per vertex (the quantity `reference_radiosity` integrates).
+    pub fn radiosity(&mut self, material: &Material) -> Result<Vec<[f32; 3]>> {
+        let start = Instant::now();
+        let mut report = HierarchyReport {
+            mode: self.settings.mode.name(),
+            faces: self.faces.len(),
+            clusters: self.tree.len(),
+            depth: self.tree.depth,
+            seconds_build: self.report.seconds_build,
+            ..Default::default()
+        };
+        let material_changed = self.prepare_profiles(material)?;
+        let t = Instant::now();
+        let geometry_changed = self.geometry_changed;
+        if geometry_changed {
+            self.tree.refit(&self.faces);
+            self.geometry_changed = false;
+        }
+        report.seconds_refit = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let eta = self.settings.model.irradiance_eta(material);
+        report.rays = self.sample_faces(eta)?;
+        let point_mass = self
+            .profiles
+            .as_ref()
+            .map(|(_, p, _)| p.iter().any(|p| p.point_mass() > 0.0))
+            .unwrap_or(false);
+        if point_mass {
+            report.rays += self.sample_vertices(eta)?;
+        }
+        report.seconds_irradiance = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        if let Some((irr, _)) = &self.face_irradiance {
+            self.tree.pull(irr);
+        }
+        report.seconds_pull = t.elapsed().as_secs_f64();
+
+        let (_, lookup, rgb) = self
+            .profiles
+            .take()
+            .ok_or_else(|| Error::InvalidArgument("no profiles prepared".into()))?;
+        let result = self.evaluate(
+            &lookup,
+            &rgb,
+            material_changed,
+            geometry_changed,
+            &mut report,
+        );
+        self.profiles = Some((*material, lookup, rgb));
+        let face_b = result?;
+
+        // Average to the vertices (area-weighted over the faces around each, §3.2).
+        let t = Instant::now();
+        let mesh = &self.scene.mesh;
+        let mut sum = vec![[0.0f64; 4]; mesh.vertex_count()];
+        for (f, tri) in mesh.triangles().iter().enumerate() {
+            let a = self.faces[f].area;
+            for &v in tri {
+                let s = &mut sum[v as usize];
+                (0..3).for_each(|c| s[c] += a * face_b[f][c]);
+                s[3] += a;
+            }
+        }
+        let masses: [f64; 3] = match &self.profiles {
+            Some((_, p, _)) => std::array::from_fn(|c| p[c].point_mass()),
+            None => [0.0; 3],
+        };
+        let out: Vec<[f32; 3]> = sum
+            .iter()
+            .enumerate()
+            .map(|(v, s)| {
+                let own = match &self.vertex_irradiance {
+                    Some((i, _)) if point_mass => i[v],
+                    _ => [0.0; 3],
+                };
+                std::array::from_fn(|c| {
+                    let b = if s[3] > 0.0 { s[c] / s[3] } else { 0.0 };
+                    (b + masses[c] * f64::from(own[c])) as f32
+                })
+            })
+            .collect();
+        report.seconds_push += t.elapsed().as_secs_f64();
+        report.seconds = start.elapsed().as_secs_f64();
+        self.report = report;
+        Ok(out)
+    }
+
+    /// Links and gather by mode; returns B per face.
+    fn evaluate(
+        &mut self,
+        lookup: &[LookupProfile; 3],
+        rgb: &LookupRgb,
+        material_changed: bool,
+        geometry_changed: bool,
+        report: &mut HierarchyReport,
+    ) -> Result<Vec<[f64; 3]>> {
+        let mode = self.settings.mode;
+        let root = self.tree.root();
+        let n = self.tree.len();
+        let t = Instant::now();
+        let counts: LinkCounts;
+        if mode == Mode::OnTheFly || !self.has_links {
+            // From the root: refine and gather in one traversal.
+            let keep = mode != Mode::OnTheFly;
+            let mut slots = std::mem::take(&mut self.slots);
+            slots.clear();
+            slots.resize_with(n, Slot::default);
+            let ctx = self.context(lookup, rgb, !keep, 1.0);
+            counts = ctx.visit(root, vec![root], [0.0; 3], &mut slots, None, keep);
+            self.slots = slots;
+            self.has_links = keep;
+            report.relinked = true;
+            report.seconds_links = t.elapsed().as_secs_f64();
+        } else if mode == Mode::Incremental && (material_changed || geometry_changed) {
+            let previous = std::mem::take(&mut self.slots);
+            let mut slots: Vec<Slot> = Vec::new();
+            slots.resize_with(n, Slot::default);
+            let ctx = self.context(lookup, rgb, false, 1.0);
+            counts = ctx.visit(
+                root,
+                Vec::new(),
+                [0.0; 3],
+                &mut slots,
+                Some(&previous),
+                true,
+            );
+            self.slots = slots;
+            report.relinked = true;
+            report.seconds_links = t.elapsed().as_secs_f64();
+        } else {
+            // Same links: the near form factors again if the profile or the shape changed,
+            // then gather (par over receivers) and push (top-down).
+            let mut slots = std::mem::take(&mut self.slots);
+            let ctx = self.context(lookup, rgb, false, 1.0);
+            if material_changed || geometry_changed {
+                slots.par_iter_mut().enumerate().for_each(|(r, s)| {
+                    for (e, f) in s.links.near.iter_mut() {
+                        *f = ctx.form_factor(r as u32, *e);
+                    }
+                });
+            }
+            slots.par_iter_mut().enumerate().for_each(|(r, s)| {
+                s.radiosity = ctx.gather(r as u32, &s.links);
+            });
+            report.seconds_links = t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            for node in (0..n).rev() {
+                let p = self.tree.parent[node];
+                if p != u32::MAX {
+                    let up = slots[p as usize].radiosity;
+                    (0..3).for_each(|c| slots[node].radiosity[c] += up[c]);
+                }
+            }
+            report.seconds_push = t.elapsed().as_secs_f64();
+            let mut c = LinkCounts::default();
+            for s in &slots {
+                c.far += s.links.far.len() as u64;
+                c.near += s.links.near.len() as u64;
+            }
+            counts = c;
+            self.slots = slots;
+        }
+        report.far_links = counts.far;
+        report.near_links = counts.near;
+        report.oracle_tests = counts.oracle_tests;
+        report.dropped_beyond_support = counts.dropped_beyond_support;
+
+        let mut face_b = vec![[0.0f64; 3]; self.faces.len()];
+        for node in 0..n {
+            let f = self.tree.face[node];
+            if f != u32::MAX {
+                face_b[f as usize] = self.slots[node].radiosity;
+            }
+        }
+        // The error estimate: a few faces again with ε/4, from the root.
+        let t = Instant::now();
+        report.error_estimate = self.estimate(lookup, rgb, &face_b);
+        report.seconds_estimate = t.elapsed().as_secs_f64();
+        Ok(face_b)
+    }
+
+    fn estimate(
+        &self,
+        lookup: &[LookupProfile; 3],
+        rgb: &LookupRgb,
+        face_b: &[[f64; 3]],
+    ) -> [f64; 3] {
+        let k = self.settings.estimate_receivers.min(self.faces.len());
+        if k == 0 {
+            return [0.0; 3];
+        }
+        let leaves: Vec<u32> = (0..self.tree.len() as u32)
+            .filter(|&r| self.tree.is_leaf(r))
+            .collect();
+        let step = leaves.len() as f64 / k as f64;
+        let picks: Vec<u32> = (0..k).map(|i| leaves[(i as f64 * step) as usize]).collect();
+        let ctx = self.context(lookup, rgb, true, 0.25);
+        let root = self.tree.root();
+        let fine: Vec<[f64; 3]> = picks
+            .par_iter()
+            .map(|&r| {
+                let mut slot = [Slot::default()];
+                ctx.visit(r, vec![root], [0.0; 3], &mut slot, None, false);
+                slot[0].radiosity
+            })
+            .collect();
+        std::array::from_fn(|c| {
+            let (mut num, mut den) = (0.0, 0.0);
+            for (i, &r) in picks.iter().enumerate() {
+                let f = self.tree.face[r as usize] as usize;
+                let a = self.faces[f].area;
+                num += a * (face_b[f][c] - fine[i][c]).powi(2);
+                den += a * fine[i][c].powi(2);
+            }
+            if den > 0.0 {
+                (num / den).sqrt()
+            } else {
+                0.0
+            }
+        })
+    }
+
+    /// Radiance toward `eye` (along each vertex normal without one): L = W(cos_o) B / π with
+    /// W the profile's exit weight (dipole: F_t, Xu 2007 eq. 2; Cycles: the Principled layers).
+    pub fn radiance(&mut self, material: &Material, eye: Option<Vec3>) -> Result<Vec<[f32; 3]>> {
+        if let Some(eye) = eye.filter(|e| !e.is_finite()) {
+            return Err(Error::InvalidArgument(format!("eye {eye:?} is not finite")));
+        }
+        let mut b = self.radiosity(material)?;
+        let model = self.settings.model;
+        let mesh = &self.scene.mesh;
+        b.par_iter_mut()
+            .zip(mesh.positions().par_iter().zip(mesh.normals().par_iter()))
+            .for_each(|(b, (p, n))| {
+                let cos_o = match eye {
+                    Some(eye) => n.dot((eye - *p).normalize_or_zero()),
+                    None => 1.0,
+                };
+                let k =
+                    (model.exit_weight(material, f64::from(cos_o)) / std::f64::consts::PI) as f32;
+                *b = b.map(|x| x * k);
+            });
+        Ok(b)
+    }
+
+    /// The links stored per cluster (render and incremental modes), for tests and tools.
+    pub fn links(&self) -> Option<Vec<&NodeLinks>> {
+        self.has_links
+            .then(|| self.slots.iter().map(|s| &s.links).collect())
+    }
+}
