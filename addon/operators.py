@@ -63,8 +63,8 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             self.report({"ERROR"}, f"precompute failed: {job.error}")
             return {"CANCELLED"}
         s = session.finish(mat, job, self._objects, self._info, self._lighting, self._method_message)
-        r = s.prt.report
-        self.report({"INFO"}, f"precomputed {r['vertices']} vertices: {session.summary(s)}; {s.prt.backend_message}")
+        vertices = sum(o.count for o in self._info.objects)
+        self.report({"INFO"}, f"precomputed {vertices} vertices: {session.summary(s)}; {s.prt.backend_message}")
         return {"FINISHED"}
 
     def execute(self, context):

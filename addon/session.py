@@ -195,7 +195,7 @@ def _params(settings) -> tuple:
 
 # ------------------------------------------------------------------------------- methods
 
-HIERARCHY_EPS = (0.1, 0.1)  # Mertens 2003's receiver and emitter thresholds (eps1, eps2)
+HIERARCHY_EPS = (0.005, 0.3)  # receiver and emitter thresholds (eps1, eps2): translucent.Hierarchy's defaults
 
 
 def hierarchy_available() -> bool:
