@@ -157,6 +157,38 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, prof
     return rows
 
 
+# The hierarchy's receiver threshold eps1 swept (eps2 at its default 0.3): Mertens 2003 §3.2.
+HIERARCHY_EPS = ((0.02, 0.3), (0.01, 0.3), (0.005, 0.3), (0.0025, 0.3))
+
+
+def hierarchy_rows(scene, material, name, truth, receivers, weights, cycles=None, profile="cycles") -> list[Row]:
+    """The hierarchy (Mertens 2003) at each eps: built on the fly (timed), then one timed
+    re-evaluation for the material; against the ground truth (direct light, the same model) and,
+    at the default, against Cycles along the normal (no walks, no object's own light)."""
+    rows = []
+    method = f"Hierarchy (Mertens 2003), {profile} profile"
+    for eps in HIERARCHY_EPS:
+        t0 = time.perf_counter()
+        h = translucent.Hierarchy(scene, material, profile=profile, eps=eps, mode="on_the_fly")
+        pre = time.perf_counter() - t0
+        evals = []
+        for _ in range(3):
+            t1 = time.perf_counter()
+            b = h.radiosity(material)
+            evals.append(time.perf_counter() - t1)
+        rep = h.report
+        rms, mx = worst(translucent.relative_error(b[receivers], truth, weights))
+        setting = f"eps {eps[0]:g}, {eps[1]:g}: {rep['links']} links ({rep['links_per_face']:.0f} per face)"
+        rows.append(Row(method, setting, name, "ground truth", rms, mx, pre, float(np.median(evals)),
+                        float(max(rep["error_estimate"])), extra=dict(links=rep["links"])))
+        if cycles is not None and eps == (0.005, 0.3):
+            radiance = h.radiance(material, None)
+            rms, mx = worst(translucent.relative_error(radiance, cycles["all"], cycles["weights"]))
+            rows.append(Row(method, setting, name, cycles["label"] + ", all vertices", rms, mx, pre,
+                            float(np.median(evals)), notes="direct light through a half-space profile, no walks"))
+    return rows
+
+
 def machine() -> str:
     """The CPU model and core count, for the report's title."""
     import os
@@ -355,6 +387,8 @@ def main(argv=None) -> int:
                                 notes="the model's distance from Cycles' random walk (no interreflection)"))
             progress(i, steps, f"{name}: PRT settings, {profile}")
             rows += prt_rows(scene, m, name, truth, receivers, weights, cyc, profile)
+            progress(i, steps, f"{name}: hierarchy thresholds, {profile}")
+            rows += hierarchy_rows(scene, m, name, truth, receivers, weights, cyc, profile)
             rows.append(Row(f"Reference (brute force), {profile}", f"rel. tol. {args.rel_tol:g}, level "
                             f"{ref_info.get('level')}", name, "ground truth",
                             float(ref_info.get("estimated_rel_error", 0.0)), float("nan"), ref_s, 0.0,
