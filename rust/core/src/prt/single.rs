@@ -7,11 +7,14 @@
 //!
 //! What departs from the paper: S_j is kept per light group (each light, the world), so the
 //! phase function may be the exact Henyey–Greenstein one as well as Xu's Eddington split
-//! (eq. 11, exact for the linear phase). The 4-vector S = int (1, w'_i) E L says how much light
-//! arrives (S_0) and its mean travel direction (S_vec / S_0); HG evaluated with g |m| along
-//! m = S_vec / S_0 is exact when the light of a group arrives from one direction (a sun or a
-//! point light on a flat neighbourhood) and treats a spread of directions as HG-shaped (HG's
-//! convolution of g1 and g2 is HG of g1 g2) otherwise. The world's light, spread over the
+//! (eq. 11, exact for the linear phase). Each 4-vector S_j = int (1, w'_i) B_j E L says how
+//! much light arrives in basis function j's band of path lengths (S_j,0) and its mean travel
+//! direction (S_j,vec / S_j,0); HG evaluated per j with g |m_j| along m_j = S_j,vec / S_j,0 is
+//! exact when the light of a group in that band arrives from one direction (a sun or a point
+//! light on a flat neighbourhood) and treats a spread of directions as HG-shaped (HG's
+//! convolution of g1 and g2 is HG of g1 g2) otherwise. One mean direction per group instead of
+//! per j left 2.2 % on the bunny's skin1 at g = 0.9; per j resolves how the entry normal turns
+//! with depth. The world's light, spread over the
 //! whole sphere, is where that is coarsest; a Legendre expansion for it is not built here.
 
 use crate::basis::{Basis, Degree, Fitter};
@@ -19,9 +22,7 @@ use crate::error::{Error, Result};
 use crate::optics::Material;
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
-use crate::single_scattering::{
-    exponential_steps, henyey_greenstein, outgoing, PathSettings, Phase, SinglePaths,
-};
+use crate::single_scattering::{exponential_steps, outgoing, PathSettings, Phase, SinglePaths};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -267,7 +268,7 @@ impl SingleScattering {
         let n = self.basis().len();
         let groups = self.colours.len();
         let row = groups * n * 4;
-        let g = material.g;
+        let g32 = material.g as f32;
         let sigma_s = material.sigma_s;
         let mut radiance = vec![[0f32; 3]; self.positions.len()];
         if row > 0 {
@@ -280,39 +281,43 @@ impl SingleScattering {
                         return;
                     };
                     let out = out.as_vec3();
+                    let mut acc = [0f64; 3];
+                    let mut weighted = vec![0f32; n];
                     for (grp, colour) in self.colours.iter().enumerate() {
                         let block = &s[grp * n * 4..(grp + 1) * n * 4];
+                        // H(w'_o) . S_j per basis function (eq. 14 before the sum over j): the
+                        // phase function does not depend on the channel, the coefficients do.
+                        for (jj, w) in weighted.iter_mut().enumerate() {
+                            let sj = &block[jj * 4..jj * 4 + 4];
+                            let m = Vec3::new(sj[1], sj[2], sj[3]);
+                            *w = match phase {
+                                // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi, exact for Eddington.
+                                Phase::Eddington => (sj[0] + 3.0 * g32 * m.dot(out)) * INV_4PI,
+                                // HG along the mean travel direction of the light in this
+                                // basis function's band of path lengths, with g scaled by the
+                                // directions' mean cosine (module head).
+                                Phase::HenyeyGreenstein => {
+                                    let len = m.length();
+                                    if sj[0] <= 0.0 || len <= 0.0 {
+                                        sj[0] * INV_4PI
+                                    } else {
+                                        let gs = g32 * (len / sj[0]).min(1.0);
+                                        sj[0] * hg32(gs, m.dot(out) / len)
+                                    }
+                                }
+                            };
+                        }
                         for ch in 0..3 {
                             if colour[ch] == 0.0 {
                                 continue;
                             }
-                            // sum_j c_j S_j: the 4-vector (light, light x direction).
-                            let mut v = [0f32; 4];
-                            for (j, c) in coeffs[ch].iter().enumerate() {
-                                for q in 0..4 {
-                                    v[q] += c * block[j * 4 + q];
-                                }
-                            }
-                            if v[0] <= 0.0 {
-                                continue;
-                            }
-                            let m = Vec3::new(v[1], v[2], v[3]);
-                            let p = match phase {
-                                // Xu 2007 eq. 11: H(w'_o) . G with H = (1, 3 g w'_o) / 4 pi.
-                                Phase::Eddington => {
-                                    (f64::from(v[0]) + 3.0 * g * f64::from(m.dot(out)))
-                                        / (4.0 * std::f64::consts::PI)
-                                }
-                                Phase::HenyeyGreenstein => {
-                                    let len = m.length();
-                                    let spread = f64::from((len / v[0]).min(1.0));
-                                    let cos = if len > 0.0 { m.dot(out) / len } else { 0.0 };
-                                    f64::from(v[0]) * henyey_greenstein(g * spread, f64::from(cos))
-                                }
-                            };
-                            let x = sigma_s[ch] * ft_o * p * f64::from(colour[ch]);
-                            l[ch] += x.max(0.0) as f32;
+                            let dot: f32 =
+                                coeffs[ch].iter().zip(&weighted).map(|(c, w)| c * w).sum();
+                            acc[ch] += f64::from(dot) * f64::from(colour[ch]);
                         }
+                    }
+                    for ch in 0..3 {
+                        l[ch] = (sigma_s[ch] * ft_o * acc[ch]).max(0.0) as f32;
                     }
                 });
         }
@@ -323,6 +328,15 @@ impl SingleScattering {
             dot_seconds: t1.elapsed().as_secs_f64(),
         })
     }
+}
+
+const INV_4PI: f32 = 1.0 / (4.0 * std::f32::consts::PI);
+
+/// Henyey–Greenstein in f32 for the per-edit loop (`single_scattering::henyey_greenstein`).
+#[inline]
+fn hg32(g: f32, cos: f32) -> f32 {
+    let d = (1.0 + g * g - 2.0 * g * cos.clamp(-1.0, 1.0)).max(1e-30);
+    (1.0 - g * g) * INV_4PI / (d * d.sqrt())
 }
 
 /// The single-scattering share of what a thick slab of `material` returns under a sun along
