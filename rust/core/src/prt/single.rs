@@ -73,7 +73,9 @@ pub struct SingleReport {
 #[derive(Debug)]
 pub struct SingleScattering {
     fitter: Fitter,
-    /// [vertex][group][j][4]: S_j = int int (1, w'_i) B_j(s'_i + s) L_i F_t(w_i) ds dw_i.
+    /// [vertex][group][q][j], q over the 4 components of S_j = int int (1, w'_i) B_j(s'_i + s)
+    /// L_i F_t(w_i) ds dw_i: for one vertex and group each component is n contiguous floats,
+    /// so the per-edit loop over j vectorises.
     transport: Vec<f32>,
     colours: Vec<[f32; 3]>,
     positions: Vec<Vec3>,
@@ -181,9 +183,8 @@ impl SingleScattering {
                             if j >= n || *b == 0.0 {
                                 continue;
                             }
-                            let base = (a.group * n + j) * 4;
                             for (q, gq) in g.iter().enumerate() {
-                                acc[base + q] += w * a.weight * b * gq;
+                                acc[(a.group * 4 + q) * n + j] += w * a.weight * b * gq;
                             }
                         }
                     });
@@ -285,27 +286,35 @@ impl SingleScattering {
                     let mut weighted = vec![0f32; n];
                     for (grp, colour) in self.colours.iter().enumerate() {
                         let block = &s[grp * n * 4..(grp + 1) * n * 4];
+                        let (s0, rest) = block.split_at(n);
+                        let (sx, rest) = rest.split_at(n);
+                        let (sy, sz) = rest.split_at(n);
                         // H(w'_o) . S_j per basis function (eq. 14 before the sum over j): the
                         // phase function does not depend on the channel, the coefficients do.
-                        for (jj, w) in weighted.iter_mut().enumerate() {
-                            let sj = &block[jj * 4..jj * 4 + 4];
-                            let m = Vec3::new(sj[1], sj[2], sj[3]);
-                            *w = match phase {
-                                // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi, exact for Eddington.
-                                Phase::Eddington => (sj[0] + 3.0 * g32 * m.dot(out)) * INV_4PI,
-                                // HG along the mean travel direction of the light in this
-                                // basis function's band of path lengths, with g scaled by the
-                                // directions' mean cosine (module head).
-                                Phase::HenyeyGreenstein => {
-                                    let len = m.length();
-                                    if sj[0] <= 0.0 || len <= 0.0 {
-                                        sj[0] * INV_4PI
-                                    } else {
-                                        let gs = g32 * (len / sj[0]).min(1.0);
-                                        sj[0] * hg32(gs, m.dot(out) / len)
-                                    }
+                        match phase {
+                            // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi, exact for Eddington.
+                            Phase::Eddington => {
+                                for jj in 0..n {
+                                    let along = sx[jj] * out.x + sy[jj] * out.y + sz[jj] * out.z;
+                                    weighted[jj] = (s0[jj] + 3.0 * g32 * along) * INV_4PI;
                                 }
-                            };
+                            }
+                            // HG along the mean travel direction of the light in this basis
+                            // function's band of path lengths, with g scaled by the
+                            // directions' mean cosine (module head).
+                            Phase::HenyeyGreenstein => {
+                                for jj in 0..n {
+                                    let along = sx[jj] * out.x + sy[jj] * out.y + sz[jj] * out.z;
+                                    let len2 = sx[jj] * sx[jj] + sy[jj] * sy[jj] + sz[jj] * sz[jj];
+                                    let len = len2.sqrt().max(1e-30);
+                                    let s = s0[jj].max(1e-30);
+                                    let gs = g32 * (len / s).min(1.0);
+                                    let cos = (along / len).clamp(-1.0, 1.0);
+                                    let d = (1.0 + gs * gs - 2.0 * gs * cos).max(1e-30);
+                                    weighted[jj] = s0[jj].max(0.0) * (1.0 - gs * gs) * INV_4PI
+                                        / (d * d.sqrt());
+                                }
+                            }
                         }
                         for ch in 0..3 {
                             if colour[ch] == 0.0 {
@@ -331,13 +340,6 @@ impl SingleScattering {
 }
 
 const INV_4PI: f32 = 1.0 / (4.0 * std::f32::consts::PI);
-
-/// Henyey–Greenstein in f32 for the per-edit loop (`single_scattering::henyey_greenstein`).
-#[inline]
-fn hg32(g: f32, cos: f32) -> f32 {
-    let d = (1.0 + g * g - 2.0 * g * cos.clamp(-1.0, 1.0)).max(1e-30);
-    (1.0 - g * g) * INV_4PI / (d * d.sqrt())
-}
 
 /// The single-scattering share of what a thick slab of `material` returns under a sun along
 /// the normal, per channel: L1 / (L1 + L_d) with L1 of DESIGN.md's plane limit seen along the
