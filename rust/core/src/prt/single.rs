@@ -283,7 +283,8 @@ impl SingleScattering {
                     };
                     let out = out.as_vec3();
                     let mut acc = [0f64; 3];
-                    let mut weighted = vec![0f32; n];
+                    let mut buffer = [0f32; crate::basis::MAX_COEFFICIENTS];
+                    let weighted = &mut buffer[..n];
                     for (grp, colour) in self.colours.iter().enumerate() {
                         let block = &s[grp * n * 4..(grp + 1) * n * 4];
                         let (s0, rest) = block.split_at(n);
@@ -320,8 +321,11 @@ impl SingleScattering {
                             if colour[ch] == 0.0 {
                                 continue;
                             }
-                            let dot: f32 =
-                                coeffs[ch].iter().zip(&weighted).map(|(c, w)| c * w).sum();
+                            let dot: f32 = coeffs[ch]
+                                .iter()
+                                .zip(weighted.iter())
+                                .map(|(c, w)| c * w)
+                                .sum();
                             acc[ch] += f64::from(dot) * f64::from(colour[ch]);
                         }
                     }
