@@ -55,7 +55,7 @@ def main(argv=None) -> int:
     tmp = REPO / "out" / "backlit"
     tmp.mkdir(parents=True, exist_ok=True)
     panels = []
-    for label, kwargs in (("dipole", dict(profile="dipole")), ("half-space table", dict(walks=0)),
+    for label, kwargs in (("dipole", dict(profile="dipole", single_scattering=False)), ("half-space table", dict(walks=0)),
                           ("walks through the mesh", dict())):
         prt = translucent.Prt(scene, m, backend="cpu", **kwargs)
         dist = cycles_gap.rel(prt.radiance(m), cyc, w)

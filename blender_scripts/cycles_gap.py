@@ -102,7 +102,8 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
         # half-space table alone, and the dipole.
         for key, profile, walks in (("cycles", "cycles", None), ("halfspace", "cycles", 0), ("dipole", "dipole", None)):
             t0 = time.perf_counter()
-            prt = translucent.Prt(scene, m, profile=profile, backend="cpu", walks=walks)
+            # The dipole as the papers' multiple scattering alone (its single scattering: issue 11).
+            prt = translucent.Prt(scene, m, profile=profile, backend="cpu", walks=walks, single_scattering=False)
             pre = time.perf_counter() - t0
             preview = prt.radiance(m)
             edit = prt.last_eval["seconds"]

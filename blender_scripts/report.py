@@ -141,7 +141,8 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, prof
                 t0 = time.perf_counter()
                 full = translucent.Prt(scene, material, coefficients=coefficients, degree=degree, backend="cpu",
                                        profile=profile, interreflection=profile == "cycles",
-                                       walks=0 if walk_rays == 0 else None, walk_rays=walk_rays or None)
+                                       walks=0 if walk_rays == 0 else None, walk_rays=walk_rays or None,
+                                       single_scattering=False)  # MS alone, as the rows above
                 pre_full = time.perf_counter() - t0
                 radiance = full.radiance(material)
                 edit = full.last_eval["seconds"]

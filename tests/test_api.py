@@ -138,7 +138,7 @@ def test_radiance_is_fresnel_over_pi_times_radiosity():
     s = translucent.Scene(p, t)
     s.add_sun((0, 0, -1), 1.0)
     m = translucent.Material.preset("skin1")
-    prt = translucent.Prt(s, m, profile="dipole")
+    prt = translucent.Prt(s, m, profile="dipole", single_scattering=False)  # L_d alone
     b = prt.radiosity(m)
     eye = np.array([0.0, 0.3, 0.3])
     l = prt.radiance(m, eye)

@@ -348,6 +348,13 @@ impl Basis {
     pub fn fitter_weighted(&self, weight: &dyn Fn(f64) -> f64) -> Fitter {
         Fitter::new(self.clone(), weight)
     }
+
+    /// A fitter on the line measure: minimises int (F - P)^2 dr and keeps int P dr exactly, and
+    /// its errors are relative to int |F| dr. For functions integrated along a path (single
+    /// scattering's attenuation E, Xu 2007 eq. 13), not over the surface.
+    pub fn fitter_line(&self) -> Fitter {
+        Fitter::with_measure(self.clone(), &|_| 1.0, false)
+    }
 }
 
 fn uniform(lo: f64, hi: f64, m: usize) -> Vec<f64> {
@@ -446,6 +453,12 @@ pub struct Fit {
 
 impl Fitter {
     fn new(basis: Basis, weight: &dyn Fn(f64) -> f64) -> Fitter {
+        Self::with_measure(basis, weight, true)
+    }
+
+    /// `radial`: the area weight r dr (profiles over a surface); else the line measure dr.
+    fn with_measure(basis: Basis, weight: &dyn Fn(f64) -> f64, radial: bool) -> Fitter {
+        let measure = |r: f64| if radial { r } else { 1.0 };
         let n = basis.len();
         let p = basis.degree.as_int();
         let mut nodes = Vec::new();
@@ -457,7 +470,13 @@ impl Fitter {
                 let (first, v) = basis.eval(r);
                 let w = weight(r);
                 let w = if w.is_finite() && w > 0.0 { w } else { 1.0 };
-                nodes.push((r, wt * half * r * w, wt * half * r, first, v));
+                nodes.push((
+                    r,
+                    wt * half * measure(r) * w,
+                    wt * half * measure(r),
+                    first,
+                    v,
+                ));
             }
             // Check rule: the same Gauss rule on each half of the interval. Its nodes are not
             // the fitting nodes, so the reported error is not the LS residual at its own nodes,
@@ -467,7 +486,7 @@ impl Fitter {
                 for (x, wt) in GAUSS8 {
                     let r = c + hh * x;
                     let (first, v) = basis.eval(r);
-                    checks.push((r, wt * hh * r, first, v));
+                    checks.push((r, wt * hh * measure(r), first, v));
                 }
             }
         }

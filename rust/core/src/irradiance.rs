@@ -310,32 +310,11 @@ impl Estimator<'_> {
                 if !self.visible(dir, f32::INFINITY) {
                     continue;
                 }
-                let l = world_radiance(world, dir);
+                let l = world.radiance(dir);
                 add(&mut sum, scaled(&l, self.fresnel(cos)));
             }
         }
         scaled(&sum, PI / count as f32)
-    }
-}
-
-/// Radiance of the world along `dir`. Equirectangular lookup as Cycles' default
-/// Environment Texture: u = -atan2(y, x) / (2 pi) + 1/2, v = atan2(z, hypot(x, y)) / pi + 1/2,
-/// v = 1 at the zenith (image row 0).
-fn world_radiance(world: &World, dir: Vec3) -> [f32; 3] {
-    match world {
-        World::Black => [0.0; 3],
-        World::Uniform(c) => *c,
-        World::Environment {
-            width,
-            height,
-            radiance,
-        } => {
-            let u = -dir.y.atan2(dir.x) / (2.0 * PI) + 0.5;
-            let v = dir.z.atan2(dir.x.hypot(dir.y)) / PI + 0.5;
-            let x = ((u * *width as f32) as usize).min(width - 1);
-            let y = (((1.0 - v) * *height as f32) as usize).min(height - 1);
-            radiance[y * width + x]
-        }
     }
 }
 

@@ -203,6 +203,105 @@ impl Light {
     }
 }
 
+/// Light arriving at a point from one sample of a light (pbrt-v4's `SampleLi`): the unit
+/// direction toward the light, how far it is (infinite for a sun), and the radiance integrated
+/// over the sample's solid angle [W/unit^2 at normal incidence]. A surface facing it receives
+/// `value` x cos; an area light's sample is one of `count` points (divide by the count).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Incident {
+    pub direction: Vec3,
+    pub distance: f32,
+    pub value: [f32; 3],
+}
+
+impl Light {
+    /// The light arriving at `x` from the sample `u` in [0, 1)^2 (only area lights read it:
+    /// the point of the rectangle at (u - 1/2) x size). None where nothing arrives (outside a
+    /// spot's cone, behind an area light, at the light itself). The same `u` at every point
+    /// of one line toward the light gives the same direction: single scattering finds where a
+    /// ray enters the medium and asks again there.
+    pub fn incident(&self, x: Vec3, u: [f32; 2]) -> Option<Incident> {
+        use std::f32::consts::PI;
+        let toward = |pos: Vec3| {
+            let v = pos - x;
+            let d2 = v.length_squared();
+            (d2 > 0.0 && d2.is_finite()).then(|| (v / d2.sqrt(), d2.sqrt(), d2))
+        };
+        match self {
+            // Sun Strength is the irradiance on a surface facing it.
+            Light::Sun {
+                direction,
+                irradiance,
+            } => Some(Incident {
+                direction: -*direction,
+                distance: f32::INFINITY,
+                value: *irradiance,
+            }),
+            // Power P [W] is radiant intensity P / (4 pi) [W/sr]: P / (4 pi d^2) at distance d.
+            Light::Point { position, power } => {
+                let (l, d, d2) = toward(*position)?;
+                Some(Incident {
+                    direction: l,
+                    distance: d,
+                    value: power.map(|p| p / (4.0 * PI * d2)),
+                })
+            }
+            // Cycles' spot_light_attenuation: smoothstep over the blend fraction of the cone.
+            Light::Spot {
+                position,
+                direction,
+                power,
+                spot_size,
+                blend,
+            } => {
+                let (l, d, d2) = toward(*position)?;
+                let cos_axis = (-l).dot(*direction);
+                let cos_half = (0.5 * spot_size).cos();
+                if cos_axis <= cos_half {
+                    return None;
+                }
+                let mask = if *blend > 0.0 {
+                    let t = ((cos_axis - cos_half) / ((1.0 - cos_half) * blend)).clamp(0.0, 1.0);
+                    t * t * (3.0 - 2.0 * t)
+                } else {
+                    1.0
+                };
+                Some(Incident {
+                    direction: l,
+                    distance: d,
+                    value: power.map(|p| mask * p / (4.0 * PI * d2)),
+                })
+            }
+            // A Lambertian rectangle of radiance P / (pi A): one point of it stands for
+            // L cos_l A / d^2 of solid-angle-integrated radiance.
+            Light::Area {
+                position,
+                direction,
+                axis_u,
+                size_u,
+                size_v,
+                power,
+            } => {
+                let axis_v = direction.cross(*axis_u);
+                let q = *position
+                    + *axis_u * ((u[0] - 0.5) * size_u)
+                    + axis_v * ((u[1] - 0.5) * size_v);
+                let (l, d, d2) = toward(q)?;
+                let cos_l = direction.dot(-l);
+                if cos_l <= 0.0 {
+                    return None;
+                }
+                let area = size_u * size_v;
+                Some(Incident {
+                    direction: l,
+                    distance: d,
+                    value: power.map(|p| p / (PI * area) * cos_l * area / d2),
+                })
+            }
+        }
+    }
+}
+
 impl World {
     pub fn uniform(radiance: [f32; 3]) -> Result<Self> {
         let c = check_rgb("world colour", radiance)?;
@@ -236,5 +335,28 @@ impl World {
 
     pub fn is_black(&self) -> bool {
         matches!(self, World::Black)
+    }
+
+    /// Radiance arriving from direction `dir` (unit, pointing away from the scene).
+    /// Equirectangular lookup as Cycles' default Environment Texture:
+    /// u = -atan2(y, x) / (2 pi) + 1/2, v = atan2(z, hypot(x, y)) / pi + 1/2, v = 1 at the
+    /// zenith (image row 0).
+    pub fn radiance(&self, dir: Vec3) -> [f32; 3] {
+        use std::f32::consts::PI;
+        match self {
+            World::Black => [0.0; 3],
+            World::Uniform(c) => *c,
+            World::Environment {
+                width,
+                height,
+                radiance,
+            } => {
+                let u = -dir.y.atan2(dir.x) / (2.0 * PI) + 0.5;
+                let v = dir.z.atan2(dir.x.hypot(dir.y)) / PI + 0.5;
+                let x = ((u * *width as f32) as usize).min(width - 1);
+                let y = (((1.0 - v) * *height as f32) as usize).min(height - 1);
+                radiance[y * width + x]
+            }
+        }
     }
 }

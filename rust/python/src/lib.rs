@@ -23,6 +23,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reference::reference_radiosity_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::reference_radiance_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::relative_error, m)?)?;
+    m.add_function(wrap_pyfunction!(
+        reference::reference_single_scattering_py,
+        m
+    )?)?;
     m.add_function(wrap_pyfunction!(material::prepare_profile, m)?)?;
     m.add_function(wrap_pyfunction!(material::profile_ready, m)?)?;
     m.add_function(wrap_pyfunction!(material::set_table_cache, m)?)?;

@@ -17,7 +17,8 @@ use translucent_core::prt::geometry::GeometrySettings;
 /// vertex (a small mesh needs fewer for the same noise per area).
 const DEFAULT_WALK_RAYS: u64 = 20_000_000;
 const WALK_RAYS_PER_VERTEX: u64 = 2500;
-use translucent_core::prt::{Backend, Evaluation, Prt, PrtSettings};
+use translucent_core::prt::{single, Backend, Evaluation, Prt, PrtSettings};
+use translucent_core::single_scattering::{PathSettings, Phase};
 
 use translucent_core::Vec3;
 
@@ -29,6 +30,10 @@ pub struct PyPrt {
     backend_message: String,
     /// The rays and lights of the precompute's irradiance estimates (samples and vertices).
     lighting: IrradianceReport,
+    /// Whether single scattering was computed, and why.
+    single: single::Decision,
+    /// The last evaluation's single scattering, when it had any.
+    last_single: Option<single::SingleEvaluation>,
 }
 
 impl PyPrt {
@@ -87,7 +92,8 @@ impl PyPrt {
     #[pyo3(signature = (scene, materials, coefficients = 32, degree = 1, samples = None,
         tolerance = 1e-5, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
         backend = "auto", fit_tolerance = None, profile = "cycles", interreflection = None,
-        interreflection_rays = 144, walks = None, walk_vertices = 1000, walk_rays = None))]
+        interreflection_rays = 144, walks = None, walk_vertices = 1000, walk_rays = None,
+        single_scattering = None, single_coefficients = 16, single_steps = 32))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -109,8 +115,13 @@ impl PyPrt {
         walks: Option<i64>,
         walk_vertices: i64,
         walk_rays: Option<i64>,
+        single_scattering: Option<bool>,
+        single_coefficients: i64,
+        single_steps: i64,
     ) -> PyResult<Self> {
         let model = crate::material::model(profile)?;
+        let single_coefficients: usize = non_negative("single_coefficients", single_coefficients)?;
+        let single_steps: usize = non_negative("single_steps", single_steps)?;
         let rays: usize = non_negative("interreflection_rays", interreflection_rays)?;
         if !(1..=1_000_000).contains(&rays) {
             return Err(PyValueError::new_err(format!(
@@ -159,6 +170,17 @@ impl PyPrt {
         let world_samples: u32 = non_negative("world_samples", world_samples)?;
         let area_samples: u32 = non_negative("area_samples", area_samples)?;
         let materials = materials_of(materials)?;
+        let single = single::decide(model, &materials, single_scattering).map_err(to_py)?;
+        let single_settings = single::SingleSettings {
+            coefficients: single_coefficients,
+            steps: single_steps,
+            paths: PathSettings {
+                eta: materials.first().map_or(1.3, |m| m.eta),
+                area_samples: area_samples.clamp(1, 16),
+                world_directions: (world_samples / 4).max(4),
+            },
+            ..Default::default()
+        };
         // The irradiance's Fresnel factor: the dipole's smooth boundary, or none for Cycles'
         // walk (it leaves into a plain Lambertian BSDF).
         let eta = materials
@@ -198,13 +220,25 @@ impl PyPrt {
                     })
                 };
                 let tick = |f: f32| progress.call(f);
-                Prt::precompute(
+                let mut prt = Prt::precompute(
                     &core_scene.mesh,
                     &materials,
                     &settings,
                     &irradiance_fn,
                     if progress.is_set() { Some(&tick) } else { None },
-                )
+                )?;
+                // Single scattering (Xu 2007 eq. 15) only when decided on: no rays, memory or
+                // evaluation otherwise.
+                if single.on {
+                    let s = single::SingleScattering::precompute(
+                        core_scene,
+                        &tracer,
+                        &materials,
+                        &single_settings,
+                    )?;
+                    prt.set_single_scattering(Some(s))?;
+                }
+                Ok(prt)
             })
         });
         let inner = result.map_err(|e| e.into_py(Some(&progress)))?;
@@ -213,6 +247,8 @@ impl PyPrt {
             last: None,
             backend_message: String::new(),
             lighting: lighting.into_inner().unwrap_or_else(|e| e.into_inner()),
+            single,
+            last_single: None,
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -276,21 +312,53 @@ impl PyPrt {
     /// Radiance toward the point `eye`, L = W(w_o) B / pi, (N, 3) float32, W the profile's exit
     /// weight (dipole: F_t; Cycles: what the Principled specular layer leaves); without `eye`,
     /// the radiance leaving along each vertex normal (what a Cycles bake records).
-    #[pyo3(signature = (material, eye = None))]
+    /// With single scattering (report["single_scattering"]), L_d + L^(1) (Xu 2007 eq. 1):
+    /// `phase` "hg" (exact Henyey–Greenstein per light group) or "eddington" (Xu eq. 11).
+    #[pyo3(signature = (material, eye = None, phase = "hg"))]
     fn radiance<'py>(
         &mut self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         eye: Option<&Bound<'_, PyAny>>,
+        phase: &str,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = eye.map(|e| vec3("eye", e)).transpose()?;
+        let phase = Phase::parse(phase).map_err(to_py)?;
         let inner = &self.inner;
-        let e = py
-            .detach(|| inner.radiance(&m, eye))
-            .map_err(crate::convert::to_py)?;
+        let (e, l1) = py
+            .detach(|| guard(|| inner.radiance_with(&m, eye, phase)))
+            .map_err(|e| e.into_py(None))?;
         let out = rgb_array(py, &e.radiosity);
         self.last = Some(e);
+        self.last_single = l1;
+        Ok(out)
+    }
+
+    /// Single scattering alone toward `eye`, L^(1) (Xu 2007 eq. 14), (N, 3) float32; raises
+    /// ValueError when the precompute left it out (report["single_scattering_reason"] says why).
+    #[pyo3(signature = (material, eye = None, phase = "hg"))]
+    fn single_radiance<'py>(
+        &mut self,
+        py: Python<'py>,
+        material: PyRef<'_, PyMaterial>,
+        eye: Option<&Bound<'_, PyAny>>,
+        phase: &str,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let m = material.inner;
+        let eye = eye.map(|e| vec3("eye", e)).transpose()?;
+        let phase = Phase::parse(phase).map_err(to_py)?;
+        let Some(s) = self.inner.single_scattering() else {
+            return Err(PyValueError::new_err(format!(
+                "no single scattering in this precompute: {}",
+                self.single.reason
+            )));
+        };
+        let l1 = py
+            .detach(|| guard(|| s.radiance(&m, eye, phase)))
+            .map_err(|e| e.into_py(None))?;
+        let out = rgb_array(py, &l1.radiance);
+        self.last_single = Some(l1);
         Ok(out)
     }
 
@@ -314,6 +382,10 @@ impl PyPrt {
         }
         d.set_item("fit_error", e.fit_error.to_vec())?;
         d.set_item("error_estimate", e.error_estimate.to_vec())?;
+        if let Some(l1) = &self.last_single {
+            d.set_item("single_error_estimate", l1.error_estimate.to_vec())?;
+            d.set_item("single_seconds", l1.fit_seconds + l1.dot_seconds)?;
+        }
         d.set_item(
             "refresh_advised",
             self.inner.refresh_advised(&e.error_estimate),
@@ -351,8 +423,29 @@ impl PyPrt {
         d.set_item("lights_skipped_black", self.lighting.lights_skipped)?;
         d.set_item("lights_unreached", self.lighting.lights_unreached)?;
         d.set_item("world_skipped", self.lighting.world_skipped)?;
-        // Multiple scattering only (Xu 2007's diffuse term): no single-scattering work at all.
-        d.set_item("single_scattering", false)?;
+        // Single scattering (Xu 2007 eqs. 12-15): whether it was computed, on what share and
+        // why; none of its work when it is off.
+        d.set_item("single_scattering", self.single.on)?;
+        d.set_item("single_scattering_share", self.single.share)?;
+        d.set_item("single_scattering_tolerance", single::SHARE_TOLERANCE)?;
+        d.set_item("single_scattering_reason", self.single.reason.clone())?;
+        match self.inner.single_scattering() {
+            Some(s) => {
+                let r = s.report();
+                let w = PyDict::new(py);
+                w.set_item("coefficients", r.coefficients)?;
+                w.set_item("steps", r.steps)?;
+                w.set_item("knots", r.knots.clone())?;
+                w.set_item("step_length", r.step_length)?;
+                w.set_item("groups", r.groups)?;
+                w.set_item("transport_bytes", r.transport_bytes)?;
+                w.set_item("rays", r.rays)?;
+                w.set_item("bounded_paths", r.bounded_paths)?;
+                w.set_item("seconds", r.seconds)?;
+                d.set_item("single", w)?;
+            }
+            None => d.set_item("single", py.None())?,
+        }
         d.set_item("stored_channels", r.stored_channels)?;
         d.set_item("transport_bytes", r.transport_bytes)?;
         d.set_item("exact_samples", r.exact_samples)?;

@@ -12,6 +12,7 @@ use translucent_core::mesh_walk::{walk_radiosity, MeshWalkSettings};
 use translucent_core::metrics;
 use translucent_core::profiles::Model;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
+use translucent_core::single_scattering::{reference_single, PathSettings, Phase};
 use translucent_core::Vec3;
 
 /// Ground-truth radiosity by direct integration over the mesh (no basis, no clusters) of the
@@ -240,4 +241,72 @@ fn receiver_indices(receivers: Option<Bound<'_, PyAny>>, n: usize) -> PyResult<O
             Ok(out)
         })
         .transpose()
+}
+
+/// Ground-truth single scattering L^(1) toward `eye` (None: along each normal) by brute force:
+/// Xu 2007 eq. 5 with the exact attenuation and phase function ("hg" or "eddington"),
+/// `steps` cells per channel along the path below each receiver (the same path model, light
+/// sampling and Fresnel as `Prt(single_scattering=True)`; `world_samples` / 4 world
+/// directions and `area_samples` points per area light at each step, as there). (K, 3)
+/// float32 for the `receivers` (all vertices by default); with `details=True` also a dict
+/// with the rays and seconds.
+#[pyfunction]
+#[pyo3(signature = (scene, material, eye = None, receivers = None, phase = "hg", steps = 512,
+    world_samples = 64, area_samples = 16, details = false))]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(name = "reference_single_scattering")]
+pub fn reference_single_scattering_py<'py>(
+    py: Python<'py>,
+    scene: PyRef<'_, PyScene>,
+    material: PyRef<'_, PyMaterial>,
+    eye: Option<&Bound<'py, PyAny>>,
+    receivers: Option<Bound<'py, PyAny>>,
+    phase: &str,
+    steps: i64,
+    world_samples: i64,
+    area_samples: i64,
+    details: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let eye = eye.map(|e| crate::convert::vec3("eye", e)).transpose()?;
+    let phase = Phase::parse(phase).map_err(to_py)?;
+    let steps: usize = non_negative("steps", steps)?;
+    let world_samples: u32 = non_negative("world_samples", world_samples)?;
+    let area_samples: u32 = non_negative("area_samples", area_samples)?;
+    let receivers: Option<Vec<usize>> =
+        receiver_indices(receivers, scene.scene.mesh.vertex_count())?
+            .map(|v| v.into_iter().map(|x| x as usize).collect());
+    let m = material.inner;
+    let settings = PathSettings {
+        eta: m.eta,
+        area_samples: area_samples.clamp(1, 16),
+        world_directions: (world_samples / 4).max(4),
+    };
+    let tracer = scene.tracer();
+    let core_scene = &scene.scene;
+    let start = std::time::Instant::now();
+    let (values, rays) = py
+        .detach(|| {
+            guard(|| {
+                reference_single(
+                    core_scene,
+                    &tracer,
+                    &m,
+                    phase,
+                    eye,
+                    receivers.as_deref(),
+                    steps,
+                    &settings,
+                )
+            })
+        })
+        .map_err(|e| e.into_py(None))?;
+    let out = rgb_array(py, &values).into_any();
+    if !details {
+        return Ok(out);
+    }
+    let d = PyDict::new(py);
+    d.set_item("rays", rays)?;
+    d.set_item("steps", steps)?;
+    d.set_item("seconds", start.elapsed().as_secs_f64())?;
+    Ok((out, d).into_pyobject(py)?.into_any())
 }

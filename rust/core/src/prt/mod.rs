@@ -14,6 +14,7 @@
 
 pub mod geometry;
 mod layout;
+pub mod single;
 mod tree;
 
 use crate::basis::{Basis, Degree, Fit, Fitter};
@@ -176,6 +177,8 @@ pub struct Prt {
     bounce: Option<Bounce>,
     /// What the walks through the mesh add to the half-space profile (`geometry`).
     geometry: Option<GeometryTerm>,
+    /// Single scattering (Xu 2007 eqs. 12-15), when attached (`set_single_scattering`).
+    single: Option<single::SingleScattering>,
     report: PrtReport,
 }
 
@@ -426,6 +429,7 @@ impl Prt {
             model: settings.model,
             bounce: None,
             geometry: None,
+            single: None,
             report,
         };
         // One BVH for the walks and the object's own light, built only if either runs.
@@ -726,6 +730,55 @@ impl Prt {
             dot_seconds: t1.elapsed().as_secs_f64(),
             gpu,
         })
+    }
+
+    /// Attaches single scattering precomputed for the same mesh (the dipole only: Cycles'
+    /// walk already holds every order of scattering, and adding L^(1) would count it twice).
+    pub fn set_single_scattering(
+        &mut self,
+        single: Option<single::SingleScattering>,
+    ) -> Result<()> {
+        if let Some(s) = &single {
+            if self.model != Model::Dipole {
+                return Err(Error::InvalidArgument(format!(
+                    "single scattering joins the dipole only: the {} profile already contains it",
+                    self.model.name()
+                )));
+            }
+            if s.report().coefficients == 0 || s.vertex_count() != self.vertex_count() {
+                return Err(Error::InvalidArgument(
+                    "single scattering was precomputed for another mesh".into(),
+                ));
+            }
+        }
+        self.single = single;
+        Ok(())
+    }
+
+    pub fn single_scattering(&self) -> Option<&single::SingleScattering> {
+        self.single.as_ref()
+    }
+
+    /// L_d + L^(1) toward `eye` (Xu 2007 eq. 1): `radiance` plus single scattering with the
+    /// phase function `phase`, when it was attached; also returns L^(1)'s own evaluation.
+    pub fn radiance_with(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        phase: crate::single_scattering::Phase,
+    ) -> Result<(Evaluation, Option<single::SingleEvaluation>)> {
+        let mut e = self.radiance(material, eye)?;
+        let Some(s) = &self.single else {
+            return Ok((e, None));
+        };
+        let l1 = s.radiance(material, eye, phase)?;
+        e.radiosity
+            .par_iter_mut()
+            .zip(l1.radiance.par_iter())
+            .for_each(|(l, a)| *l = std::array::from_fn(|c| l[c] + a[c]));
+        e.fit_seconds += l1.fit_seconds;
+        e.dot_seconds += l1.dot_seconds;
+        Ok((e, Some(l1)))
     }
 
     /// Multiple-scattering radiance toward `eye`: L_d = W(w_o) B / pi, W the model's exit

@@ -1,0 +1,291 @@
+//! PRT single scattering (Xu 2007 eqs. 12–15) against things other than itself: DESIGN.md's
+//! plane limit in closed form, and the brute-force integral of eq. 5 (exact E and phase
+//! function, 512 steps per channel) on a closed curved mesh lit by a point light and a sun.
+
+use std::f64::consts::PI;
+use translucent_core::lights::Light;
+use translucent_core::mesh::Mesh;
+use translucent_core::optics::Material;
+use translucent_core::prt::single::{SingleScattering, SingleSettings};
+use translucent_core::raytrace::Tracer;
+use translucent_core::scene::Scene;
+use translucent_core::single_scattering::{brute_force, PathSettings, Phase, SinglePaths};
+use translucent_core::Vec3;
+
+/// A square of side `size` in z = 0, `n` x `n` cells.
+fn plane(n: usize, size: f32) -> Mesh {
+    let mut p = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            p.push(Vec3::new(
+                size * (i as f32 / n as f32 - 0.5),
+                size * (j as f32 / n as f32 - 0.5),
+                0.0,
+            ));
+        }
+    }
+    let w = (n + 1) as u32;
+    let mut t = Vec::new();
+    for j in 0..n as u32 {
+        for i in 0..n as u32 {
+            let a = j * w + i;
+            t.push([a, a + 1, a + w + 1]);
+            t.push([a, a + w + 1, a + w]);
+        }
+    }
+    Mesh::new(p, t, None).unwrap()
+}
+
+/// A closed UV sphere of `radius`: n - 1 rings of 2n vertices and two poles.
+fn sphere(n: usize, radius: f32) -> Mesh {
+    let mut p = vec![Vec3::new(0.0, 0.0, radius)];
+    for i in 1..n {
+        let th = std::f32::consts::PI * i as f32 / n as f32;
+        for j in 0..2 * n {
+            let ph = std::f32::consts::PI * j as f32 / n as f32;
+            p.push(radius * Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()));
+        }
+    }
+    p.push(Vec3::new(0.0, 0.0, -radius));
+    let seg = 2 * n;
+    let last = (p.len() - 1) as u32;
+    let ring = |i: usize, j: usize| (1 + (i - 1) * seg + (j % seg)) as u32;
+    let mut t: Vec<[u32; 3]> = (0..seg).map(|j| [0, ring(1, j), ring(1, j + 1)]).collect();
+    for i in 1..n - 1 {
+        for j in 0..seg {
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i, j + 1),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+            );
+            t.push([a, c, d]);
+            t.push([a, d, b]);
+        }
+    }
+    t.extend((0..seg).map(|j| [last, ring(n - 1, j + 1), ring(n - 1, j)]));
+    Mesh::new(p, t, None).unwrap()
+}
+
+/// Unpolarised dielectric transmittance, written out apart from `optics`.
+fn ft(eta: f64, c: f64) -> f64 {
+    let ct = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();
+    let rs = (c - eta * ct) / (c + eta * ct);
+    let rp = (eta * c - ct) / (eta * c + ct);
+    1.0 - 0.5 * (rs * rs + rp * rp)
+}
+
+/// DESIGN.md: sun at theta on a large plane, viewed along the normal, path along -n:
+/// L = sigma_s F_t(theta) F_t(0) p E / (sigma_t (1 + 1 / cos theta')).
+fn plane_limit(m: &Material, c: usize, theta: f64, e: f64, phase: Phase) -> f64 {
+    let sin_t = theta.sin() / m.eta;
+    let cos_t = (1.0 - sin_t * sin_t).sqrt();
+    let cos = -cos_t; // in along (sin_t, 0, -cos_t), out along +z
+    let g = m.g;
+    let p = match phase {
+        Phase::Eddington => (1.0 + 3.0 * g * cos) / (4.0 * PI),
+        Phase::HenyeyGreenstein => {
+            (1.0 - g * g) / (4.0 * PI * (1.0 + g * g - 2.0 * g * cos).powf(1.5))
+        }
+    };
+    let st = m.sigma_a[c] + m.sigma_s[c];
+    m.sigma_s[c] * ft(m.eta, theta.cos()) * ft(m.eta, 1.0) * p * e / (st * (1.0 + 1.0 / cos_t))
+}
+
+#[test]
+fn prt_single_scattering_meets_the_plane_limit_within_one_percent() {
+    let mut scene = Scene::new(plane(10, 40.0));
+    // Jensen's marble in mm (sigma_t 2.2-3.0 /mm) and skin1 (0.8-1.5 /mm).
+    let marble = Material::preset("marble", 1.0).unwrap();
+    let skin = Material::preset("skin1", 1.0).unwrap();
+    for (theta, g) in [(0.0f64, 0.0), (0.7, 0.3), (1.2, -0.3), (0.3, 0.9)] {
+        scene.lights = vec![Light::sun(
+            Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32),
+            [2.0, 1.0, 0.5],
+        )
+        .unwrap()];
+        let tracer = Tracer::new(&scene.mesh);
+        let reps = [marble, skin];
+        let ss = SingleScattering::precompute(
+            &scene,
+            &tracer,
+            &reps,
+            &SingleSettings {
+                paths: PathSettings {
+                    eta: marble.eta,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let centre = scene
+            .mesh
+            .positions()
+            .iter()
+            .position(|p| p.length() < 1e-4)
+            .unwrap();
+        for base in reps {
+            let m = Material { g, ..base };
+            for phase in [Phase::HenyeyGreenstein, Phase::Eddington] {
+                if phase == Phase::Eddington && g.abs() > 1.0 / 3.0 {
+                    continue;
+                }
+                let eye = Some(scene.mesh.positions()[centre] + Vec3::Z * 1e3);
+                let l = ss.radiance(&m, eye, phase).unwrap().radiance[centre];
+                for c in 0..3 {
+                    let expect = plane_limit(&m, c, theta, [2.0, 1.0, 0.5][c], phase);
+                    let got = f64::from(l[c]);
+                    assert!(
+                        (got / expect - 1.0).abs() < 0.01,
+                        "theta {theta} g {g} {phase:?} channel {c}: {got} vs {expect}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+fn rel_rms(got: &[[f64; 3]], want: &[[f64; 3]]) -> [f64; 3] {
+    std::array::from_fn(|c| {
+        let (mut e, mut w) = (0.0, 0.0);
+        for (a, b) in got.iter().zip(want) {
+            e += (a[c] - b[c]).powi(2);
+            w += b[c] * b[c];
+        }
+        (e / w).sqrt()
+    })
+}
+
+#[test]
+fn prt_single_scattering_matches_brute_force_on_a_lit_sphere() {
+    // A 10 mm sphere, marble and skin1 in mm, a point light and a sun from another side.
+    let mut scene = Scene::new(sphere(20, 10.0));
+    scene.lights = vec![
+        Light::point(Vec3::new(15.0, -25.0, 30.0), [4000.0; 3]).unwrap(),
+        Light::sun(Vec3::new(0.5, 0.6, -0.62), [2.0, 1.8, 1.5]).unwrap(),
+    ];
+    let tracer = Tracer::new(&scene.mesh);
+    let marble = Material::preset("marble", 1.0).unwrap();
+    let skin = Material::preset("skin1", 1.0).unwrap();
+    let settings = SingleSettings {
+        paths: PathSettings {
+            eta: marble.eta,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let ss = SingleScattering::precompute(&scene, &tracer, &[marble, skin], &settings).unwrap();
+    let paths = SinglePaths::new(&scene, &tracer, &settings.paths).unwrap();
+    let eye = Vec3::new(20.0, -40.0, 15.0);
+    let receivers: Vec<usize> = (0..scene.mesh.vertex_count()).step_by(7).collect();
+    for base in [marble, skin] {
+        for g in [-0.3, 0.0, 0.3, 0.9] {
+            let m = Material { g, ..base };
+            for phase in [Phase::HenyeyGreenstein, Phase::Eddington] {
+                if phase == Phase::Eddington && g > 0.5 {
+                    continue;
+                }
+                let prt = ss.radiance(&m, Some(eye), phase).unwrap().radiance;
+                let mut rays = 0;
+                let (mut got, mut want) = (Vec::new(), Vec::new());
+                for &v in &receivers {
+                    let p = scene.mesh.positions()[v];
+                    let n = scene.mesh.normals()[v];
+                    want.push(brute_force(
+                        &paths,
+                        &m,
+                        phase,
+                        p,
+                        n,
+                        Some(eye),
+                        512,
+                        &mut rays,
+                    ));
+                    got.push(prt[v].map(f64::from));
+                }
+                let lit = want.iter().filter(|w| w[0] > 0.0).count();
+                assert!(lit > receivers.len() / 4, "too few lit receivers: {lit}");
+                let e = rel_rms(&got, &want);
+                eprintln!(
+                    "g {g} {phase:?} lit {lit}/{} rel RMS {e:?} mean {:?}",
+                    receivers.len(),
+                    want.iter().map(|w| w[0]).sum::<f64>() / want.len() as f64
+                );
+                assert!(
+                    e.iter().all(|x| *x < 0.02),
+                    "g {g} {phase:?}: relative RMS {e:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn eddington_and_hg_agree_at_g_zero_and_part_with_g() {
+    let mut scene = Scene::new(sphere(12, 10.0));
+    scene.lights = vec![Light::sun(Vec3::new(0.3, 0.2, -1.0), [1.0; 3]).unwrap()];
+    let tracer = Tracer::new(&scene.mesh);
+    let marble = Material::preset("marble", 1.0).unwrap();
+    let settings = SingleSettings {
+        paths: PathSettings {
+            eta: marble.eta,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let ss = SingleScattering::precompute(&scene, &tracer, &[marble], &settings).unwrap();
+    let eye = Some(Vec3::new(0.0, -50.0, 20.0));
+    let hg = ss
+        .radiance(&marble, eye, Phase::HenyeyGreenstein)
+        .unwrap()
+        .radiance;
+    let ed = ss
+        .radiance(&marble, eye, Phase::Eddington)
+        .unwrap()
+        .radiance;
+    for (a, b) in hg.iter().zip(&ed) {
+        for c in 0..3 {
+            assert!((a[c] - b[c]).abs() <= 1e-5 * a[c].abs().max(1e-12));
+        }
+    }
+    // At g = 0.3 the two differ where the light comes back toward the eye: not the same
+    // function, as 1 + 3 g cos is HG's first two Legendre terms only.
+    let m = Material { g: 0.3, ..marble };
+    let hg = ss
+        .radiance(&m, eye, Phase::HenyeyGreenstein)
+        .unwrap()
+        .radiance;
+    let ed = ss.radiance(&m, eye, Phase::Eddington).unwrap().radiance;
+    let differ = hg
+        .iter()
+        .zip(&ed)
+        .filter(|(a, b)| a[0] > 0.0 && (a[0] / b[0] - 1.0).abs() > 0.05)
+        .count();
+    assert!(differ > 0);
+}
+
+#[test]
+fn a_non_finite_eye_and_another_eta_are_errors() {
+    let mut scene = Scene::new(plane(2, 4.0));
+    scene.lights = vec![Light::sun(-Vec3::Z, [1.0; 3]).unwrap()];
+    let tracer = Tracer::new(&scene.mesh);
+    let marble = Material::preset("marble", 1.0).unwrap();
+    let settings = SingleSettings {
+        paths: PathSettings {
+            eta: marble.eta,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let ss = SingleScattering::precompute(&scene, &tracer, &[marble], &settings).unwrap();
+    let eye = Some(Vec3::new(f32::NAN, 0.0, 1.0));
+    assert!(ss.radiance(&marble, eye, Phase::Eddington).is_err());
+    let other = Material { eta: 1.5, ..marble };
+    assert!(ss.radiance(&other, None, Phase::Eddington).is_err());
+    let bad = SingleSettings {
+        steps: 0,
+        ..settings
+    };
+    assert!(SingleScattering::precompute(&scene, &tracer, &[marble], &bad).is_err());
+}

@@ -1,0 +1,153 @@
+"""Issue 11: single scattering (Xu 2007 eqs. 5-7, 11-15) beside the dipole's multiple
+scattering. Expected values come from the brute-force integral of eq. 5
+(`reference_single_scattering`: exact attenuation and phase function, 512 steps per channel,
+no basis) or from the multiple-scattering-only precompute, never from PRT's own single
+scattering. The plane limit in closed form is `cargo test --test single_scattering`."""
+
+import sys
+
+import numpy as np
+import pytest
+
+import translucent
+from conftest import REPO
+from test_api import plane
+
+sys.path.insert(0, str(REPO / "blender_scripts"))
+import models  # noqa: E402
+
+MARBLE = translucent.Material.preset("marble", mm_per_unit=1000.0)
+SKIN = translucent.Material.preset("skin1", mm_per_unit=1000.0)
+
+
+def with_g(m, g):
+    return translucent.Material(sigma_a=m.sigma_a, sigma_s=m.sigma_s, g=g, eta=m.eta)
+
+
+def sun_plane(n=21, size=0.05):
+    p, t = plane(n, size)
+    s = translucent.Scene(p, t)
+    s.add_sun(direction=(0.3, 0.0, -1.0), irradiance=2.0)
+    return s
+
+
+def rel_rms(got, want):
+    return np.sqrt(((got - want) ** 2).sum(axis=0) / (want**2).sum(axis=0))
+
+
+BUNNY = models.MODELS / "stanford-bunny.obj"
+
+
+@pytest.fixture(scope="module")
+def bunny():
+    p, t = models.load("stanford-bunny.obj")
+    scene = models.standard_scene(p, t)
+    prt = translucent.Prt(scene, [MARBLE, SKIN], profile="dipole", single_scattering=True,
+                          coefficients=16, backend="cpu")
+    return scene, p, prt
+
+
+@pytest.mark.skipif(not BUNNY.exists(), reason="../shared/models is not beside the repo")
+@pytest.mark.parametrize("base", [MARBLE, SKIN], ids=["marble", "skin1"])
+@pytest.mark.parametrize("g", [-0.3, 0.0, 0.3, 0.9])
+def test_prt_single_scattering_within_two_percent_of_brute_force_on_the_bunny(bunny, base, g):
+    scene, p, prt = bunny
+    eye = p.mean(axis=0) + np.array([0.05, -0.25, 0.1])
+    receivers = np.arange(0, len(p), len(p) // 40)
+    m = with_g(base, g)
+    want = translucent.reference_single_scattering(scene, m, eye=eye, receivers=receivers)
+    got = prt.single_radiance(m, eye=eye)[receivers]
+    lit = (want[:, 0] > 0).sum()
+    assert lit >= 10, lit
+    assert rel_rms(got, want).max() < 0.02, rel_rms(got, want)
+    # L_d + L^(1): the sum of the two terms.
+    total = prt.radiance(m, eye=eye)[receivers]
+    assert np.all(total >= got - 1e-7)
+
+
+def test_radiance_is_multiple_plus_single_scattering():
+    s = sun_plane()
+    on = translucent.Prt(s, MARBLE, profile="dipole", single_scattering=True, backend="cpu",
+                         samples=5000)
+    off = translucent.Prt(s, MARBLE, profile="dipole", single_scattering=False, backend="cpu",
+                          samples=5000)
+    eye = (0.01, -0.02, 0.3)
+    ld = off.radiance(MARBLE, eye=eye)
+    l1 = on.single_radiance(MARBLE, eye=eye)
+    assert np.allclose(on.radiance(MARBLE, eye=eye), ld + l1, rtol=1e-5, atol=1e-9)
+    assert l1.max() > 0.01 * ld.max()
+    # radiosity stays multiple scattering.
+    assert np.array_equal(on.radiosity(MARBLE), off.radiosity(MARBLE))
+    on.radiance(MARBLE, eye=eye)
+    assert len(on.last_eval["single_error_estimate"]) == 3
+
+
+def test_switched_off_costs_nothing_and_says_why():
+    s = sun_plane()
+    off = translucent.Prt(s, MARBLE, profile="dipole", single_scattering=False, backend="cpu",
+                          samples=5000)
+    r = off.report
+    assert r["single_scattering"] is False and r["single"] is None
+    assert "switched off" in r["single_scattering_reason"]
+    with pytest.raises(ValueError, match="no single scattering"):
+        off.single_radiance(MARBLE)
+    on = translucent.Prt(s, MARBLE, profile="dipole", backend="cpu", samples=5000)
+    r = on.report
+    # None: decided by the share, stated in the report.
+    assert r["single_scattering"] is True
+    assert r["single_scattering_share"] >= r["single_scattering_tolerance"] == 0.01
+    assert r["single"]["transport_bytes"] > 0 and r["single"]["coefficients"] == 16
+    # A purely absorbing medium: nothing scatters, the share is 0.
+    dark = translucent.Material(sigma_a=50000.0, sigma_s=0.0, g=0.0, eta=1.3)
+    r = translucent.Prt(s, dark, profile="dipole", backend="cpu", samples=5000).report
+    assert r["single_scattering"] is False and "negligible" in r["single_scattering_reason"]
+
+
+def test_cycles_profile_never_adds_single_scattering():
+    s = sun_plane()
+    with pytest.raises(ValueError, match="already contains every order"):
+        translucent.Prt(s, MARBLE, profile="cycles", single_scattering=True, backend="cpu",
+                        samples=5000, walks=0)
+    r = translucent.Prt(s, MARBLE, profile="cycles", backend="cpu", samples=5000,
+                        walks=0).report
+    assert r["single_scattering"] is False and "cycles" in r["single_scattering_reason"]
+    assert r["single"] is None
+
+
+def test_bad_eye_phase_and_receivers_are_clear_errors():
+    s = sun_plane()
+    on = translucent.Prt(s, MARBLE, profile="dipole", single_scattering=True, backend="cpu",
+                         samples=5000)
+    with pytest.raises(ValueError, match="eye"):
+        on.radiance(MARBLE, eye=(np.nan, 0.0, 1.0))
+    with pytest.raises(ValueError, match="eye"):
+        on.single_radiance(MARBLE, eye=(0.0, np.inf, 1.0))
+    with pytest.raises(ValueError, match="phase"):
+        on.radiance(MARBLE, eye=(0.0, 0.0, 1.0), phase="rayleigh")
+    with pytest.raises(ValueError, match="eye"):
+        translucent.reference_single_scattering(s, MARBLE, eye=(np.nan, 0, 1), receivers=[0])
+    with pytest.raises(ValueError):
+        translucent.reference_single_scattering(s, MARBLE, receivers=[10**6])
+    with pytest.raises(ValueError, match="steps"):
+        translucent.reference_single_scattering(s, MARBLE, receivers=[0], steps=2)
+    other = translucent.Material(sigma_a=MARBLE.sigma_a, sigma_s=MARBLE.sigma_s, g=0.0, eta=1.5)
+    with pytest.raises(ValueError, match="eta"):
+        on.radiance(other, eye=(0.0, 0.0, 1.0))
+
+
+def test_eddington_and_hg_agree_at_g_zero_only():
+    s = sun_plane()
+    on = translucent.Prt(s, MARBLE, profile="dipole", single_scattering=True, backend="cpu",
+                         samples=5000)
+    eye = (0.0, -0.05, 0.2)
+    assert np.allclose(on.single_radiance(MARBLE, eye=eye, phase="hg"),
+                       on.single_radiance(MARBLE, eye=eye, phase="eddington"), rtol=1e-5)
+    m = with_g(MARBLE, 0.3)
+    hg = on.single_radiance(m, eye=eye, phase="hg")
+    ed = on.single_radiance(m, eye=eye, phase="eddington")
+    # Each against its own brute force: the phase functions differ, the transport is shared.
+    c = [len(hg) // 2]
+    for phase, got in [("hg", hg), ("eddington", ed)]:
+        want = translucent.reference_single_scattering(s, m, eye=eye, receivers=c, phase=phase)
+        assert np.allclose(got[c], want, rtol=0.01), (phase, got[c], want)
+    assert not np.allclose(hg[c], ed[c], rtol=0.05)
