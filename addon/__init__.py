@@ -127,6 +127,8 @@ def register():
     bpy.app.handlers.depsgraph_update_post.append(session.follow_principled)
     bpy.app.handlers.depsgraph_update_post.append(session.follow_scene)
     bpy.app.handlers.frame_change_post.append(session.follow_frame)
+    if not bpy.app.timers.is_registered(session.follow_view_tick):
+        bpy.app.timers.register(session.follow_view_tick, first_interval=session.VIEW_POLL_S, persistent=True)
 
 
 def unregister():
@@ -138,6 +140,8 @@ def unregister():
             handlers.remove(fn)
     if bpy.app.timers.is_registered(session.follow_tick):
         bpy.app.timers.unregister(session.follow_tick)
+    if bpy.app.timers.is_registered(session.follow_view_tick):
+        bpy.app.timers.unregister(session.follow_view_tick)
     session.PENDING.clear()
     for cls in reversed(operators.classes + classes):
         bpy.utils.unregister_class(cls)

@@ -54,6 +54,9 @@ class Session:
     members_changed: str = ""
     # What following the scene is doing ("refreshing: light Key changed", ...).
     follow_message: str = ""
+    # The viewport's eye point the preview is drawn toward (world space), when the transport
+    # holds single scattering (view dependent, Xu 2007 eq. 5); None: along each normal.
+    eye: tuple | None = None
 
 
 # material name -> Session
@@ -342,9 +345,10 @@ def edit(material: bpy.types.Material) -> None:
         return  # the walk tables for a new g, Roughness or IOR are being built; old preview kept
     s.edit_message = ""
     prt = s.prt
-    # Radiance leaving along each normal: a view-independent viewport colour.
+    # Radiance leaving along each normal (a view-independent viewport colour), or toward the
+    # viewport's eye where single scattering makes it depend on the view.
     try:
-        colors = prt.radiance(m)
+        colors = prt.radiance(m, s.eye) if s.eye is not None and view_dependent(s) else prt.radiance(m)
     except ValueError as e:
         s.edit_message = f"not shown: {e}"
         return
@@ -687,3 +691,58 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
         _in_background(name, job2, objects2, info2, lighting2, failed, why)
 
     _in_background(name, job, objects, info, lighting, hierarchy_failed if method == "hierarchy" else failed, message)
+
+
+# How far the eye must move, relative to its distance from the origin plus 1 unit, before the
+# view-dependent preview is drawn again; and how often the viewport's view is looked at [s].
+EYE_TOLERANCE = 1e-3
+VIEW_POLL_S = 0.2
+
+
+def view_dependent(s: Session) -> bool:
+    """Whether the session's transport holds single scattering (the dipole's L^(1)): only then
+    does the preview depend on where the viewer is."""
+    return s.method == "prt" and bool(dict(getattr(s.prt, "report", {}) or {}).get("single_scattering"))
+
+
+def viewport_eye() -> tuple | None:
+    """The eye point of the first 3D viewport (world space), or None without one (headless)."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in getattr(wm, "windows", []):
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                r3d = area.spaces.active.region_3d
+                if r3d is not None:
+                    return tuple(r3d.view_matrix.inverted().translation)
+    return None
+
+
+def set_eye(material: bpy.types.Material, eye) -> bool:
+    """Draws the material's preview toward `eye` (world space; None: along the normals) when
+    it depends on the view; returns whether it was drawn again."""
+    s = SESSIONS.get(material.name)
+    if s is None or not view_dependent(s):
+        return False
+    if eye is not None:
+        eye = tuple(float(x) for x in eye)
+        if s.eye is not None:
+            moved = sum((a - b) ** 2 for a, b in zip(eye, s.eye)) ** 0.5
+            if moved <= EYE_TOLERANCE * (1.0 + sum(a * a for a in eye) ** 0.5):
+                return False
+    elif s.eye is None:
+        return False
+    s.eye = eye
+    edit(material)
+    return True
+
+
+def follow_view_tick() -> float:
+    """Timer: the viewport's view moved, so the view-dependent previews are drawn toward it
+    (sliders stay live: an edit draws toward the last eye)."""
+    eye = viewport_eye()
+    if eye is not None:
+        for name in list(SESSIONS):
+            mat = bpy.data.materials.get(name)
+            if mat is not None and name not in JOBS:
+                set_eye(mat, eye)
+    return VIEW_POLL_S

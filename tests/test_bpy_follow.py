@@ -484,3 +484,41 @@ def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):
     rebuilt = max(translucent.relative_error(h_new.radiosity(s.material()), truth, w)["rms"])
     assert updated < rebuilt + 0.01 and rebuilt < 0.1, (updated, rebuilt)
     assert mesh_hash(obj.data) == user_mesh
+
+
+def test_the_preview_follows_the_view_where_single_scattering_makes_it_depend_on_it(addon):
+    """Issue 11: with the dipole (single scattering on) the preview is drawn toward the
+    viewport's eye; moving the eye draws it again, an unchanged eye does not, a slider edit draws
+    toward the same eye; with Cycles' profile (view independent) the eye changes nothing. The
+    timer draws toward the 3D viewport's eye."""
+    import bpy
+
+    from addon import session
+
+    mat, obj, light = lit_sphere(bpy)
+    assert not session.set_eye(mat, (0.0, -1.0, 0.3)), "Cycles' profile holds no view dependence"
+    mat.translucent.profile = "DIPOLE"
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    sess = session.SESSIONS[mat.name]
+    assert sess.prt.report["single_scattering"]
+    along = read_preview(obj)
+    eye = (0.0, -1.0, 0.3)
+    assert session.set_eye(mat, eye)
+    toward = read_preview(obj)
+    np.testing.assert_allclose(toward, sess.prt.radiance(mat.translucent.material(), eye), rtol=1e-6)
+    assert not np.allclose(toward, along)
+    assert not session.set_eye(mat, eye), "the same eye is not drawn again"
+    assert session.set_eye(mat, (1.0, 0.0, 0.2))
+    moved = read_preview(obj)
+    assert not np.allclose(moved, toward)
+    mat.translucent.preset = "SKIN1"
+    session.edit(mat)
+    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material(), (1.0, 0.0, 0.2)),
+                               rtol=1e-6)
+    # The timer reads the 3D viewport's view (the factory startup has one, headless too).
+    eye_view = session.viewport_eye()
+    assert eye_view is not None and session.follow_view_tick() == session.VIEW_POLL_S
+    assert sess.eye == pytest.approx(eye_view)
+    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material(), eye_view), rtol=1e-6)
+    assert session.set_eye(mat, None)
+    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material()), rtol=1e-6)
