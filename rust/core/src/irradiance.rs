@@ -235,17 +235,10 @@ impl Estimator<'_> {
                 blend,
             } => {
                 let to_point = (self.p - *position).normalize_or_zero();
-                let cos_axis = to_point.dot(*direction);
-                let cos_half = (0.5 * spot_size).cos();
-                if cos_axis <= cos_half {
+                let mask = crate::lights::spot_mask(to_point.dot(*direction), *spot_size, *blend);
+                if mask <= 0.0 {
                     return [0.0; 3];
                 }
-                let mask = if *blend > 0.0 {
-                    let t = ((cos_axis - cos_half) / ((1.0 - cos_half) * blend)).clamp(0.0, 1.0);
-                    t * t * (3.0 - 2.0 * t)
-                } else {
-                    1.0
-                };
                 self.point_source(*position, scaled(power, mask / (4.0 * PI)))
             }
             // A Lambertian rectangle of power P and area A has radiance P / (pi A) (Cycles);

@@ -255,17 +255,10 @@ impl Light {
                 blend,
             } => {
                 let (l, d, d2) = toward(*position)?;
-                let cos_axis = (-l).dot(*direction);
-                let cos_half = (0.5 * spot_size).cos();
-                if cos_axis <= cos_half {
+                let mask = spot_mask((-l).dot(*direction), *spot_size, *blend);
+                if mask <= 0.0 {
                     return None;
                 }
-                let mask = if *blend > 0.0 {
-                    let t = ((cos_axis - cos_half) / ((1.0 - cos_half) * blend)).clamp(0.0, 1.0);
-                    t * t * (3.0 - 2.0 * t)
-                } else {
-                    1.0
-                };
                 Some(Incident {
                     direction: l,
                     distance: d,
@@ -358,5 +351,21 @@ impl World {
                 radiance[y * width + x]
             }
         }
+    }
+}
+
+/// Cycles' spot cone (`spot_light_attenuation`): 0 outside the cone of full angle `spot_size`,
+/// a smoothstep over the `blend` fraction of the cone's cosine range, 1 inside it; no extra
+/// cosine. `cos_axis` is the cosine between the spot's axis and the direction to the point.
+pub fn spot_mask(cos_axis: f32, spot_size: f32, blend: f32) -> f32 {
+    let cos_half = (0.5 * spot_size).cos();
+    if cos_axis <= cos_half {
+        return 0.0;
+    }
+    if blend > 0.0 {
+        let t = ((cos_axis - cos_half) / ((1.0 - cos_half) * blend)).clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
+    } else {
+        1.0
     }
 }
