@@ -241,46 +241,28 @@ impl Estimator<'_> {
                 }
                 self.point_source(*position, scaled(power, mask / (4.0 * PI)))
             }
-            // A Lambertian rectangle of power P and area A has radiance P / (pi A) (Cycles);
-            // E = sum over stratified points of L F_t cos cos_l A / (N d^2).
-            Light::Area {
-                position,
-                direction,
-                axis_u,
-                size_u,
-                size_v,
-                power,
-            } => {
-                let axis_v = direction.cross(*axis_u);
-                let area = size_u * size_v;
-                let radiance = scaled(power, 1.0 / (PI * area));
+            // A Lambertian rectangle of power P and area A has radiance P / (pi A) (Cycles):
+            // E = mean over stratified points of F_t cos times what `Light::incident` gives
+            // for the point, L cos_l A / d^2.
+            Light::Area { .. } => {
                 let k = (area_samples as f32).sqrt().ceil() as u32;
                 let count = k * k;
                 let mut sum = [0.0f32; 3];
                 for a in 0..k {
                     for b in 0..k {
-                        let su = (a as f32 + self.rng.next()) / k as f32 - 0.5;
-                        let sv = (b as f32 + self.rng.next()) / k as f32 - 0.5;
-                        let q = *position + *axis_u * (su * size_u) + axis_v * (sv * size_v);
-                        let v = q - self.p;
-                        let d2 = v.length_squared();
-                        if d2 <= 0.0 {
+                        let su = (a as f32 + self.rng.next()) / k as f32;
+                        let sv = (b as f32 + self.rng.next()) / k as f32;
+                        let Some(inc) = light.incident(self.p, [su, sv]) else {
+                            continue;
+                        };
+                        let cos = self.n.dot(inc.direction);
+                        if cos <= 0.0 || !self.visible(inc.direction, inc.distance * (1.0 - 1e-5)) {
                             continue;
                         }
-                        let d = d2.sqrt();
-                        let l = v / d;
-                        let cos = self.n.dot(l);
-                        let cos_l = direction.dot(-l);
-                        if cos <= 0.0 || cos_l <= 0.0 || !self.visible(l, d * (1.0 - 1e-5)) {
-                            continue;
-                        }
-                        add(
-                            &mut sum,
-                            scaled(&radiance, self.fresnel(cos) * cos * cos_l / d2),
-                        );
+                        add(&mut sum, scaled(&inc.value, self.fresnel(cos) * cos));
                     }
                 }
-                scaled(&sum, area / count as f32)
+                scaled(&sum, 1.0 / count as f32)
             }
         }
     }
