@@ -610,8 +610,39 @@ impl Fitter {
     }
 }
 
+/// Coefficients as the per-edit dot products take them: f32, with every entry below
+/// `FLUSH_BELOW` of the largest magnitude set to zero. Such an entry changes a dot product by
+/// less than 1e-12 of its largest term, but as an f32 it can be subnormal (a fast-decaying
+/// profile's far basis functions: skin1's reach 1e-40), and x86 multiplies subnormals about
+/// ten times slower: the 139k-vertex edit took 12 ms for skin1 against 0.9 ms for marble.
+pub fn edit_coefficients(coefficients: &[f64]) -> Vec<f32> {
+    let peak = coefficients.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+    coefficients
+        .iter()
+        .map(|&c| {
+            if c.abs() < FLUSH_BELOW * peak || (c as f32).abs() < f32::MIN_POSITIVE {
+                0.0
+            } else {
+                c as f32
+            }
+        })
+        .collect()
+}
+
+/// See `edit_coefficients`.
+pub const FLUSH_BELOW: f64 = 1e-12;
+
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn edit_coefficients_flush_what_would_be_subnormal() {
+        let c = edit_coefficients(&[2.0, -1e-3, 1e-13, -1e-41, 0.0]);
+        assert_eq!(c, vec![2.0, -1e-3, 0.0, 0.0, 0.0]);
+        assert!(c.iter().all(|x| *x == 0.0 || x.is_normal()));
+        // Relative, not absolute: a profile in tiny units keeps its shape.
+        assert_eq!(edit_coefficients(&[1e-30, 1e-35]), vec![1e-30f32, 1e-35f32]);
+    }
     use super::*;
     use crate::profiles::Dipole;
 

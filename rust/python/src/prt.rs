@@ -383,6 +383,7 @@ impl PyPrt {
         d.set_item("fit_error", e.fit_error.to_vec())?;
         d.set_item("error_estimate", e.error_estimate.to_vec())?;
         if let Some(l1) = &self.last_single {
+            // On the GPU, L^(1)'s dot products run inside the MS dispatch (dispatch_seconds).
             d.set_item("single_error_estimate", l1.error_estimate.to_vec())?;
             d.set_item("single_seconds", l1.fit_seconds + l1.dot_seconds)?;
         }
@@ -439,6 +440,8 @@ impl PyPrt {
                 w.set_item("step_length", r.step_length)?;
                 w.set_item("groups", r.groups)?;
                 w.set_item("transport_bytes", r.transport_bytes)?;
+                w.set_item("quantization_error", r.quantization_error)?;
+                w.set_item("on_gpu", self.inner.single_on_gpu())?;
                 w.set_item("rays", r.rays)?;
                 w.set_item("bounded_paths", r.bounded_paths)?;
                 w.set_item("seconds", r.seconds)?;

@@ -1,6 +1,9 @@
 //! The GPU path of the per-edit dot product (Xu 2007 eq. 9) through wgpu compute: the transport
 //! is uploaded once, each edit uploads only the coefficients (3 x stride floats), dispatches,
 //! and reads the radiosity back. Runs on any Vulkan adapter, Mesa's software lavapipe included.
+//! Single scattering (Xu 2007 eq. 14, `single.wgsl`) joins it on the same device: its S_j are
+//! uploaded once (`attach_single`), and an edit dispatches both kernels in one submission and
+//! reads both results back with one wait.
 
 use crate::error::{Error, Result};
 use std::time::Instant;
@@ -25,6 +28,51 @@ pub struct GpuTimings {
     pub readback: f64,
 }
 
+/// Single scattering's transport as the GPU takes it (see prt/single.rs `Quantized`).
+#[derive(Debug, Clone, Copy)]
+pub struct SingleTransport<'a> {
+    /// [vertex][group][q][run] u16 values, two per word (the first in the low half).
+    pub words: &'a [u32],
+    /// [vertex][group]
+    pub scales: &'a [f32],
+    /// [vertex][position, normal] (w unused).
+    pub geometry: &'a [[f32; 4]],
+    /// [group] light colour (w unused).
+    pub colours: &'a [[f32; 4]],
+    /// Basis functions of E.
+    pub n: usize,
+    /// u16 values per (vertex, group, q) run: n rounded up to even.
+    pub run: usize,
+}
+
+/// One edit's single scattering parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SingleEdit {
+    /// [3][n]: E's coefficients per channel.
+    pub coefficients: Vec<f32>,
+    pub g: f32,
+    pub eta: f32,
+    /// false: Eddington (Xu eq. 11), true: Henyey–Greenstein.
+    pub henyey_greenstein: bool,
+    /// None: along each normal.
+    pub eye: Option<[f32; 3]>,
+    pub sigma_s: [f32; 3],
+}
+
+/// Single scattering resident on the GPU.
+struct SingleResident {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    params: wgpu::Buffer,
+    coefficients: wgpu::Buffer,
+    output: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    groups: usize,
+    n: usize,
+    run: usize,
+    bytes: u64,
+}
+
 /// The transport resident on a GPU, ready for edits.
 pub struct GpuEvaluator {
     device: wgpu::Device,
@@ -38,6 +86,7 @@ pub struct GpuEvaluator {
     stride: usize,
     adapter: AdapterDescription,
     half_error: Option<f64>,
+    single: Option<SingleResident>,
 }
 
 impl std::fmt::Debug for GpuEvaluator {
@@ -231,6 +280,7 @@ impl GpuEvaluator {
             stride,
             adapter: description,
             half_error,
+            single: None,
         })
     }
 
@@ -246,8 +296,148 @@ impl GpuEvaluator {
         &self.adapter
     }
 
+    /// Uploads single scattering's transport beside the multiple-scattering one (once per
+    /// precompute); every `evaluate` with a `SingleEdit` then runs both kernels.
+    pub fn attach_single(&mut self, t: &SingleTransport) -> Result<()> {
+        let groups = t.colours.len();
+        let vertices = self.vertices;
+        if t.run < t.n
+            || t.run % 2 != 0
+            || t.geometry.len() != 2 * vertices
+            || t.scales.len() != vertices * groups
+            || t.words.len() * 2 != vertices * groups * 4 * t.run
+        {
+            return Err(Error::InvalidArgument(
+                "single-scattering transport does not match the mesh on the GPU".into(),
+            ));
+        }
+        let device = &self.device;
+        let limit = device.limits().max_storage_buffer_binding_size;
+        let bytes = std::mem::size_of_val(t.words) as u64;
+        if bytes > limit {
+            return Err(Error::GpuUnavailable(format!(
+                "single-scattering transport of {bytes} bytes exceeds the adapter's storage \
+                 binding limit of {limit}"
+            )));
+        }
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("single scattering"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("single.wgsl").into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("single scattering"),
+            layout: None,
+            module: &shader,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let init = |label: &str, contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                // An empty binding is invalid: at least one word.
+                contents: if contents.is_empty() {
+                    &[0; 16]
+                } else {
+                    contents
+                },
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let words = init("single words", bytemuck::cast_slice(t.words));
+        let scales = init("single scales", bytemuck::cast_slice(t.scales));
+        let geometry = init("single geometry", bytemuck::cast_slice(t.geometry));
+        let colours = init("single colours", bytemuck::cast_slice(t.colours));
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("single params"),
+            size: 64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let coefficients = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("single coefficients"),
+            size: (3 * t.n.max(1) * 4) as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let out_size = (vertices.max(1) * 3 * 4) as u64;
+        let output = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("single radiance"),
+            size: out_size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("single readback"),
+            size: out_size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let layout = pipeline.get_bind_group_layout(0);
+        let entries: Vec<wgpu::BindGroupEntry> = [
+            &params,
+            &words,
+            &scales,
+            &geometry,
+            &colours,
+            &coefficients,
+            &output,
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("single scattering"),
+            layout: &layout,
+            entries: &entries,
+        });
+        self.single = Some(SingleResident {
+            pipeline,
+            bind_group,
+            params,
+            coefficients,
+            output,
+            staging,
+            groups,
+            n: t.n,
+            run: t.run,
+            bytes: bytes + std::mem::size_of_val(t.scales) as u64,
+        });
+        Ok(())
+    }
+
+    /// Frees single scattering's buffers.
+    pub fn detach_single(&mut self) {
+        self.single = None;
+    }
+
+    /// Whether single scattering is resident (`attach_single`).
+    pub fn has_single(&self) -> bool {
+        self.single.is_some()
+    }
+
+    /// Bytes of single scattering's transport on the GPU.
+    pub fn single_bytes(&self) -> Option<u64> {
+        self.single.as_ref().map(|s| s.bytes)
+    }
+
     /// B per vertex for coefficients `[3][stride]` (colour already folded in).
     pub fn dot(&self, coefficients: &[f32]) -> Result<(Vec<[f32; 3]>, GpuTimings)> {
+        self.evaluate(coefficients, None).map(|(b, _, t)| (b, t))
+    }
+
+    /// B per vertex for coefficients `[3][stride]` and, with `single`, L^(1) per vertex too:
+    /// both kernels in one submission, both results read back after one wait.
+    #[allow(clippy::type_complexity)]
+    pub fn evaluate(
+        &self,
+        coefficients: &[f32],
+        single: Option<&SingleEdit>,
+    ) -> Result<(Vec<[f32; 3]>, Option<Vec<[f32; 3]>>, GpuTimings)> {
         if coefficients.len() != 3 * self.stride {
             return Err(Error::InvalidArgument(format!(
                 "{} coefficients for a stride of {}",
@@ -255,46 +445,117 @@ impl GpuEvaluator {
                 self.stride
             )));
         }
+        let resident = match single {
+            Some(edit) => {
+                let r = self.single.as_ref().ok_or_else(|| {
+                    Error::InvalidArgument("no single scattering on the GPU".into())
+                })?;
+                if edit.coefficients.len() != 3 * r.n {
+                    return Err(Error::InvalidArgument(format!(
+                        "{} single-scattering coefficients for {} basis functions",
+                        edit.coefficients.len(),
+                        r.n
+                    )));
+                }
+                Some((r, edit))
+            }
+            None => None,
+        };
         let mut t = GpuTimings::default();
         let t0 = Instant::now();
         self.queue
             .write_buffer(&self.coefficients, 0, bytemuck::cast_slice(coefficients));
+        if let Some((r, edit)) = resident {
+            let eye = edit.eye.unwrap_or([0.0; 3]);
+            let params: [u32; 16] = [
+                self.vertices as u32,
+                r.groups as u32,
+                r.n as u32,
+                r.run as u32,
+                u32::from(edit.henyey_greenstein),
+                u32::from(edit.eye.is_some()),
+                edit.g.to_bits(),
+                edit.eta.to_bits(),
+                eye[0].to_bits(),
+                eye[1].to_bits(),
+                eye[2].to_bits(),
+                0,
+                edit.sigma_s[0].to_bits(),
+                edit.sigma_s[1].to_bits(),
+                edit.sigma_s[2].to_bits(),
+                0,
+            ];
+            self.queue
+                .write_buffer(&r.params, 0, bytemuck::cast_slice(&params));
+            self.queue
+                .write_buffer(&r.coefficients, 0, bytemuck::cast_slice(&edit.coefficients));
+        }
         t.upload = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         let mut encoder = self.device.create_command_encoder(&Default::default());
+        let groups = self.vertices.div_ceil(64).max(1) as u32;
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.dispatch_workgroups(self.vertices.div_ceil(64).max(1) as u32, 1, 1);
+            pass.dispatch_workgroups(groups, 1, 1);
+            if let Some((r, _)) = resident {
+                pass.set_pipeline(&r.pipeline);
+                pass.set_bind_group(0, &r.bind_group, &[]);
+                pass.dispatch_workgroups(groups, 1, 1);
+            }
         }
         encoder.copy_buffer_to_buffer(&self.output, 0, &self.staging, 0, self.staging.size());
+        if let Some((r, _)) = resident {
+            encoder.copy_buffer_to_buffer(&r.output, 0, &r.staging, 0, r.staging.size());
+        }
         self.queue.submit(Some(encoder.finish()));
-        let slice = self.staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
+        let mut stagings = vec![&self.staging];
+        if let Some((r, _)) = resident {
+            stagings.push(&r.staging);
+        }
+        for (k, staging) in stagings.iter().enumerate() {
+            let tx = tx.clone();
+            staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send((k, r));
+            });
+        }
+        drop(tx);
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::GpuUnavailable(format!("device poll failed: {e}")))?;
-        rx.recv()
-            .map_err(|e| Error::GpuUnavailable(format!("readback lost: {e}")))?
-            .map_err(|e| Error::GpuUnavailable(format!("readback failed: {e}")))?;
+        for _ in 0..stagings.len() {
+            rx.recv()
+                .map_err(|e| Error::GpuUnavailable(format!("readback lost: {e}")))?
+                .1
+                .map_err(|e| Error::GpuUnavailable(format!("readback failed: {e}")))?;
+        }
         t.dispatch = t1.elapsed().as_secs_f64();
         let t2 = Instant::now();
-        let out = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| Error::GpuUnavailable(format!("mapping failed: {e}")))?;
-            let floats: &[f32] = bytemuck::cast_slice(&view);
-            floats[..self.vertices * 3]
-                .chunks_exact(3)
-                .map(|c| [c[0], c[1], c[2]])
-                .collect()
-        };
-        self.staging.unmap();
+        let mut results = Vec::with_capacity(stagings.len());
+        for staging in &stagings {
+            let out = {
+                let view = staging
+                    .slice(..)
+                    .get_mapped_range()
+                    .map_err(|e| Error::GpuUnavailable(format!("mapping failed: {e}")))?;
+                let floats: &[f32] = bytemuck::cast_slice(&view);
+                floats[..self.vertices * 3]
+                    .chunks_exact(3)
+                    .map(|c| [c[0], c[1], c[2]])
+                    .collect::<Vec<[f32; 3]>>()
+            };
+            staging.unmap();
+            results.push(out);
+        }
         t.readback = t2.elapsed().as_secs_f64();
-        Ok((out, t))
+        let single_out = if results.len() > 1 {
+            results.pop()
+        } else {
+            None
+        };
+        let b = results.pop().unwrap_or_default();
+        Ok((b, single_out, t))
     }
 }

@@ -547,14 +547,18 @@ impl Prt {
             }
             Backend::Gpu => {
                 let t = &self.transport;
-                self.gpu = Some(crate::gpu::GpuEvaluator::new(
+                let mut gpu = crate::gpu::GpuEvaluator::new(
                     t.values(),
                     t.vertices(),
                     t.channels(),
                     t.stride(),
                     allow_software,
                     half,
-                )?);
+                )?;
+                if let Some(s) = &self.single {
+                    s.attach_to(&mut gpu)?;
+                }
+                self.gpu = Some(gpu);
                 Ok(())
             }
         }
@@ -632,7 +636,7 @@ impl Prt {
             estimate[c] = error_estimate(&fit, p, lo, hi, self.whole_mesh);
             let near = p.disc_integral(self.near_radius);
             std::iter::once(near as f32)
-                .chain(fit.coefficients.iter().map(|x| *x as f32))
+                .chain(crate::basis::edit_coefficients(&fit.coefficients))
                 .collect()
         });
         Ok(Coefficients {
@@ -678,6 +682,19 @@ impl Prt {
         bounce: bool,
         walks: bool,
     ) -> Result<Evaluation> {
+        self.radiosity_inner(material, bounce, walks, None)
+            .map(|(e, _)| e)
+    }
+
+    /// As `radiosity_parts`; with `single` (on the GPU only) single scattering's kernel runs
+    /// in the same submission and its L^(1) comes back beside B.
+    fn radiosity_inner(
+        &self,
+        material: &Material,
+        bounce: bool,
+        walks: bool,
+        single: Option<&crate::gpu::SingleEdit>,
+    ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         let t0 = Instant::now();
         self.check_eta(material)?;
         // The material's profiles, once: the fit, the walks' term and the bounce all read them.
@@ -685,12 +702,13 @@ impl Prt {
         let c = self.coefficients_of(&profiles)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let (mut radiosity, gpu) = match &self.gpu {
+        let (mut radiosity, l1, gpu) = match &self.gpu {
             Some(gpu) => {
-                let (b, t) = gpu.dot(&self.transport.scaled(&c.vectors).concat())?;
-                (b, Some(t))
+                let (b, l1, t) =
+                    gpu.evaluate(&self.transport.scaled(&c.vectors).concat(), single)?;
+                (b, l1, Some(t))
             }
-            None => (self.transport.dot(&c.vectors), None),
+            None => (self.transport.dot(&c.vectors), None, None),
         };
         if c.point_mass.iter().any(|&m| m > 0.0) {
             let k = c.point_mass.map(|m| m as f32);
@@ -722,14 +740,17 @@ impl Prt {
                 .zip(bounce.irradiance.par_iter())
                 .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
         }
-        Ok(Evaluation {
-            radiosity,
-            fit_error: c.fit_error,
-            error_estimate,
-            fit_seconds,
-            dot_seconds: t1.elapsed().as_secs_f64(),
-            gpu,
-        })
+        Ok((
+            Evaluation {
+                radiosity,
+                fit_error: c.fit_error,
+                error_estimate,
+                fit_seconds,
+                dot_seconds: t1.elapsed().as_secs_f64(),
+                gpu,
+            },
+            l1,
+        ))
     }
 
     /// Attaches single scattering precomputed for the same mesh (the dipole only: Cycles'
@@ -751,12 +772,23 @@ impl Prt {
                 ));
             }
         }
+        if let Some(gpu) = self.gpu.as_mut() {
+            match &single {
+                Some(s) => s.attach_to(gpu)?,
+                None => gpu.detach_single(),
+            }
+        }
         self.single = single;
         Ok(())
     }
 
     pub fn single_scattering(&self) -> Option<&single::SingleScattering> {
         self.single.as_ref()
+    }
+
+    /// Whether an edit's single scattering runs on the GPU (beside the MS dot products).
+    pub fn single_on_gpu(&self) -> bool {
+        self.single.is_some() && self.gpu.as_ref().is_some_and(|g| g.has_single())
     }
 
     /// L_d + L^(1) toward `eye` (Xu 2007 eq. 1): `radiance` plus single scattering with the
@@ -767,15 +799,37 @@ impl Prt {
         eye: Option<Vec3>,
         phase: crate::single_scattering::Phase,
     ) -> Result<(Evaluation, Option<single::SingleEvaluation>)> {
-        let mut e = self.radiance(material, eye)?;
         let Some(s) = &self.single else {
-            return Ok((e, None));
+            return Ok((self.radiance(material, eye)?, None));
         };
-        let l1 = s.radiance(material, eye, phase)?;
-        e.radiosity
-            .par_iter_mut()
-            .zip(l1.radiance.par_iter())
-            .for_each(|(l, a)| *l = std::array::from_fn(|c| l[c] + a[c]));
+        if self.gpu.as_ref().is_some_and(|g| g.has_single()) {
+            // Both kernels in one GPU submission; L^(1)'s dot time is inside `dot_seconds`.
+            let (edit, error_estimate, fit_seconds) = s.gpu_edit(material, eye, phase)?;
+            let (mut e, l1) = self.radiance_inner(material, eye, Some(&edit))?;
+            let l1 = l1.ok_or_else(|| {
+                Error::GpuUnavailable("the GPU returned no single scattering".into())
+            })?;
+            let t = Instant::now();
+            e.radiosity
+                .par_iter_mut()
+                .zip(l1.par_iter())
+                .for_each(|(l, a)| *l = std::array::from_fn(|c| l[c] + a[c]));
+            e.dot_seconds += t.elapsed().as_secs_f64();
+            e.fit_seconds += fit_seconds;
+            return Ok((
+                e,
+                Some(single::SingleEvaluation {
+                    radiance: l1,
+                    error_estimate,
+                    fit_seconds,
+                    dot_seconds: 0.0,
+                }),
+            ));
+        }
+        // CPU: B, then one pass that turns it into F_t B / pi (the dipole's exit weight, as
+        // `radiance`) and adds L^(1).
+        let (mut e, _) = self.radiosity_inner(material, true, true, None)?;
+        let l1 = s.radiance_joined(material, eye, phase, &mut e.radiosity)?;
         e.fit_seconds += l1.fit_seconds;
         e.dot_seconds += l1.dot_seconds;
         Ok((e, Some(l1)))
@@ -786,10 +840,21 @@ impl Prt {
     /// Cycles' specular layer lets through for its walk). Vertices facing away from the eye get
     /// 0. Without an eye, the radiance leaving along each vertex normal (what a bake sees).
     pub fn radiance(&self, material: &Material, eye: Option<Vec3>) -> Result<Evaluation> {
+        self.radiance_inner(material, eye, None).map(|(e, _)| e)
+    }
+
+    /// As `radiance`, with `single` as `radiosity_inner`.
+    fn radiance_inner(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        single: Option<&crate::gpu::SingleEdit>,
+    ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         if let Some(eye) = eye.filter(|e| !e.is_finite()) {
             return Err(Error::InvalidArgument(format!("eye {eye:?} is not finite")));
         }
-        let mut e = self.radiosity(material)?;
+        let (mut e, l1) = self.radiosity_inner(material, true, true, single)?;
+        let t = Instant::now();
         match eye {
             Some(eye) => radiance_from_radiosity(
                 &mut e.radiosity,
@@ -804,7 +869,8 @@ impl Prt {
                 e.radiosity.iter_mut().for_each(|b| *b = b.map(|x| x * k));
             }
         }
-        Ok(e)
+        e.dot_seconds += t.elapsed().as_secs_f64();
+        Ok((e, l1))
     }
 }
 

@@ -22,10 +22,11 @@ use crate::error::{Error, Result};
 use crate::optics::Material;
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
-use crate::single_scattering::{exponential_steps, outgoing, PathSettings, Phase, SinglePaths};
+use crate::single_scattering::{exponential_steps, PathSettings, Phase, SinglePaths};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
+use wide::f32x8;
 
 /// How the single-scattering transport is precomputed.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,7 +63,11 @@ pub struct SingleReport {
     /// Light groups with their own transport (a light each; the world one, or three for an
     /// environment image).
     pub groups: usize,
+    /// Memory of S_j: 16-bit fixed point and one f32 scale per vertex and light group.
     pub transport_bytes: usize,
+    /// The largest rounding of a stored S_j component relative to the largest S_j,0 of its
+    /// vertex and light group (at most 2^-16 for S_j,0 and 2^-15 for the direction part).
+    pub quantization_error: f64,
     pub rays: u64,
     /// Vertices whose path ends at the far side of the object (the rest run to the basis end).
     pub bounded_paths: usize,
@@ -73,10 +78,8 @@ pub struct SingleReport {
 #[derive(Debug)]
 pub struct SingleScattering {
     fitter: Fitter,
-    /// [vertex][group][q][j], q over the 4 components of S_j = int int (1, w'_i) B_j(s'_i + s)
-    /// L_i F_t(w_i) ds dw_i: for one vertex and group each component is n contiguous floats,
-    /// so the per-edit loop over j vectorises.
-    transport: Vec<f32>,
+    /// S_j in 16-bit fixed point (`Quantized`).
+    transport: Quantized,
     colours: Vec<[f32; 3]>,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
@@ -195,13 +198,15 @@ impl SingleScattering {
                 (rays, s_max.is_finite())
             })
             .collect();
+        let transport = Quantized::new(&transport, groups, n);
         let report = SingleReport {
             coefficients: n,
             steps: settings.steps,
             knots: basis.knots().to_vec(),
             step_length: length,
             groups,
-            transport_bytes: transport.len() * std::mem::size_of::<f32>(),
+            transport_bytes: transport.bytes(),
+            quantization_error: transport.error,
             rays: counts.iter().map(|c| c.0).sum(),
             bounded_paths: counts.iter().filter(|c| c.1).count(),
             seconds: start.elapsed().as_secs_f64(),
@@ -244,14 +249,7 @@ impl SingleScattering {
         (c, err)
     }
 
-    /// L^(1) toward `eye` (None: along each normal) per vertex, Xu 2007 eq. 14:
-    /// F_t(w_o) sigma_s H(w'_o) . sum_j c_j S_j, per light group.
-    pub fn radiance(
-        &self,
-        material: &Material,
-        eye: Option<Vec3>,
-        phase: Phase,
-    ) -> Result<SingleEvaluation> {
+    fn check(&self, material: &Material, eye: Option<Vec3>) -> Result<()> {
         if let Some(e) = eye.filter(|e| !e.is_finite()) {
             return Err(Error::InvalidArgument(format!("eye {e:?} is not finite")));
         }
@@ -261,78 +259,150 @@ impl SingleScattering {
                 self.eta, material.eta
             )));
         }
+        Ok(())
+    }
+
+    /// S_j, the vertices and the light colours as the GPU takes them
+    /// (`GpuEvaluator::attach_single`): (words, geometry, colours).
+    #[allow(clippy::type_complexity)]
+    pub fn gpu_arrays(&self) -> (Vec<u32>, Vec<[f32; 4]>, Vec<[f32; 4]>) {
+        let q = &self.transport;
+        let words = q
+            .words
+            .chunks(2)
+            .map(|p| u32::from(p[0]) | (u32::from(p.get(1).copied().unwrap_or(0)) << 16))
+            .collect();
+        let geometry = self
+            .positions
+            .iter()
+            .zip(&self.normals)
+            .flat_map(|(p, n)| [p.extend(1.0).to_array(), n.extend(0.0).to_array()])
+            .collect();
+        let colours = self
+            .colours
+            .iter()
+            .map(|c| [c[0], c[1], c[2], 0.0])
+            .collect();
+        (words, geometry, colours)
+    }
+
+    /// Uploads S_j to `gpu` (same mesh), so its edits run single scattering there too.
+    pub fn attach_to(&self, gpu: &mut crate::gpu::GpuEvaluator) -> Result<()> {
+        let (words, geometry, colours) = self.gpu_arrays();
+        let q = &self.transport;
+        gpu.attach_single(&crate::gpu::SingleTransport {
+            words: &words,
+            scales: &q.scales,
+            geometry: &geometry,
+            colours: &colours,
+            n: q.n,
+            run: q.n + q.n % 2,
+        })
+    }
+
+    /// One edit's parameters for the GPU kernel, with E's fit error estimate and time
+    /// (what `radiance` computes before its dot products).
+    pub fn gpu_edit(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        phase: Phase,
+    ) -> Result<(crate::gpu::SingleEdit, [f64; 3], f64)> {
         let t0 = Instant::now();
+        self.check(material, eye)?;
         let (coeffs, error_estimate) = self.coefficients(material);
-        let coeffs: [Vec<f32>; 3] = coeffs.map(|c| c.iter().map(|x| *x as f32).collect());
+        let edit = crate::gpu::SingleEdit {
+            coefficients: coeffs
+                .iter()
+                .flat_map(|c| crate::basis::edit_coefficients(c))
+                .collect(),
+            g: material.g as f32,
+            eta: self.eta as f32,
+            henyey_greenstein: phase == Phase::HenyeyGreenstein,
+            eye: eye.map(|e| e.to_array()),
+            sigma_s: material.sigma_s.map(|x| x as f32),
+        };
+        Ok((edit, error_estimate, t0.elapsed().as_secs_f64()))
+    }
+
+    /// L^(1) toward `eye` (None: along each normal) per vertex, Xu 2007 eq. 14:
+    /// F_t(w_o) sigma_s H(w'_o) . sum_j c_j S_j, per light group.
+    pub fn radiance(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        phase: Phase,
+    ) -> Result<SingleEvaluation> {
+        self.evaluate(material, eye, phase, None)
+    }
+
+    /// As `radiance`, and in the same pass over the vertices turns the dipole's multiple-
+    /// scattering radiosity `radiosity` into radiance toward the eye plus L^(1):
+    /// L = F_t(w_o) B / pi + L^(1) (Xu 2007 eqs. 1-2; F_t is the dipole's exit weight, computed
+    /// once per vertex for both terms). What an MS + SS edit on the CPU runs.
+    pub fn radiance_joined(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        phase: Phase,
+        radiosity: &mut [[f32; 3]],
+    ) -> Result<SingleEvaluation> {
+        if radiosity.len() != self.positions.len() {
+            return Err(Error::InvalidArgument(format!(
+                "{} radiosities for {} vertices",
+                radiosity.len(),
+                self.positions.len()
+            )));
+        }
+        self.evaluate(material, eye, phase, Some(radiosity))
+    }
+
+    fn evaluate(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        phase: Phase,
+        ms: Option<&mut [[f32; 3]]>,
+    ) -> Result<SingleEvaluation> {
+        let t0 = Instant::now();
+        self.check(material, eye)?;
+        let (coeffs, error_estimate) = self.coefficients(material);
+        let padded = n_padded(self.basis().len());
+        let coeffs: [Vec<f32>; 3] = coeffs.map(|c| {
+            let mut v = crate::basis::edit_coefficients(&c);
+            v.resize(padded, 0.0);
+            v
+        });
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let n = self.basis().len();
-        let groups = self.colours.len();
-        let row = groups * n * 4;
-        let g32 = material.g as f32;
-        let sigma_s = material.sigma_s;
+        let kernel = EditKernel {
+            q: &self.transport,
+            colours: &self.colours,
+            coeffs: &coeffs,
+            padded,
+            g: material.g as f32,
+            phase,
+            eta: self.eta as f32,
+            eye,
+            sigma_s: material.sigma_s.map(|x| x as f32),
+        };
         let mut radiance = vec![[0f32; 3]; self.positions.len()];
-        if row > 0 {
-            radiance
-                .par_iter_mut()
-                .zip(self.transport.par_chunks(row))
-                .zip(self.positions.par_iter().zip(self.normals.par_iter()))
-                .for_each(|((l, s), (p, nrm))| {
-                    let Some((out, ft_o)) = outgoing(self.eta, *p, *nrm, eye) else {
-                        return;
-                    };
-                    let out = out.as_vec3();
-                    let mut acc = [0f64; 3];
-                    let mut buffer = [0f32; crate::basis::MAX_COEFFICIENTS];
-                    let weighted = &mut buffer[..n];
-                    for (grp, colour) in self.colours.iter().enumerate() {
-                        let block = &s[grp * n * 4..(grp + 1) * n * 4];
-                        let (s0, rest) = block.split_at(n);
-                        let (sx, rest) = rest.split_at(n);
-                        let (sy, sz) = rest.split_at(n);
-                        // H(w'_o) . S_j per basis function (eq. 14 before the sum over j): the
-                        // phase function does not depend on the channel, the coefficients do.
-                        match phase {
-                            // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi, exact for Eddington.
-                            Phase::Eddington => {
-                                for jj in 0..n {
-                                    let along = sx[jj] * out.x + sy[jj] * out.y + sz[jj] * out.z;
-                                    weighted[jj] = (s0[jj] + 3.0 * g32 * along) * INV_4PI;
-                                }
-                            }
-                            // HG along the mean travel direction of the light in this basis
-                            // function's band of path lengths, with g scaled by the
-                            // directions' mean cosine (module head).
-                            Phase::HenyeyGreenstein => {
-                                for jj in 0..n {
-                                    let along = sx[jj] * out.x + sy[jj] * out.y + sz[jj] * out.z;
-                                    let len2 = sx[jj] * sx[jj] + sy[jj] * sy[jj] + sz[jj] * sz[jj];
-                                    let len = len2.sqrt().max(1e-30);
-                                    let s = s0[jj].max(1e-30);
-                                    let gs = g32 * (len / s).min(1.0);
-                                    let cos = (along / len).clamp(-1.0, 1.0);
-                                    let d = (1.0 + gs * gs - 2.0 * gs * cos).max(1e-30);
-                                    weighted[jj] = s0[jj].max(0.0) * (1.0 - gs * gs) * INV_4PI
-                                        / (d * d.sqrt());
-                                }
-                            }
-                        }
-                        for ch in 0..3 {
-                            if colour[ch] == 0.0 {
-                                continue;
-                            }
-                            let dot: f32 = coeffs[ch]
-                                .iter()
-                                .zip(weighted.iter())
-                                .map(|(c, w)| c * w)
-                                .sum();
-                            acc[ch] += f64::from(dot) * f64::from(colour[ch]);
-                        }
-                    }
-                    for ch in 0..3 {
-                        l[ch] = (sigma_s[ch] * ft_o * acc[ch]).max(0.0) as f32;
-                    }
-                });
+        let jobs = radiance
+            .par_chunks_mut(CHUNK)
+            .zip(self.positions.par_chunks(CHUNK))
+            .zip(self.normals.par_chunks(CHUNK))
+            .enumerate();
+        let init = || vec![0f32; 5 * padded];
+        match ms {
+            Some(ms) => jobs.zip(ms.par_chunks_mut(CHUNK)).for_each_init(
+                init,
+                |buffer, ((c, ((out, p), nrm)), b)| {
+                    kernel.run(c * CHUNK, p, nrm, buffer, out, Some(b));
+                },
+            ),
+            None => jobs.for_each_init(init, |buffer, (c, ((out, p), nrm))| {
+                kernel.run(c * CHUNK, p, nrm, buffer, out, None);
+            }),
         }
         Ok(SingleEvaluation {
             radiance,
@@ -344,6 +414,295 @@ impl SingleScattering {
 }
 
 const INV_4PI: f32 = 1.0 / (4.0 * std::f32::consts::PI);
+
+/// Vertices per rayon job of an edit: their view directions are computed together first.
+const CHUNK: usize = 64;
+
+/// One edit's single scattering (Xu 2007 eq. 14), compiled for the CPU it runs on
+/// (`multiversion`: AVX2 + FMA or AVX-512 where present, the portable build otherwise).
+struct EditKernel<'a> {
+    q: &'a Quantized,
+    colours: &'a [[f32; 3]],
+    coeffs: &'a [Vec<f32>; 3],
+    padded: usize,
+    g: f32,
+    phase: Phase,
+    eta: f32,
+    eye: Option<Vec3>,
+    sigma_s: [f32; 3],
+}
+
+impl EditKernel<'_> {
+    /// L^(1) of the vertices from `first` on (`positions.len()` of them, at most CHUNK); with
+    /// `ms`, their multiple-scattering radiosity, which becomes F_t B / pi + L^(1).
+    fn run(
+        &self,
+        first: usize,
+        positions: &[Vec3],
+        normals: &[Vec3],
+        buffer: &mut [f32],
+        out: &mut [[f32; 3]],
+        ms: Option<&mut [[f32; 3]]>,
+    ) {
+        edit_chunk(self, first, positions, normals, buffer, out, ms);
+    }
+}
+
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512vl+avx2+fma",
+    "x86_64+avx2+fma",
+    "aarch64+neon"
+))]
+fn edit_chunk(
+    k: &EditKernel,
+    first: usize,
+    positions: &[Vec3],
+    normals: &[Vec3],
+    buffer: &mut [f32],
+    out: &mut [[f32; 3]],
+    mut ms: Option<&mut [[f32; 3]]>,
+) {
+    let m = positions.len();
+    // Pass 1, all vertices of the chunk at once (independent, so they overlap in the
+    // pipeline): the refracted view direction w'_o and F_t(w_o) (`outgoing` in f32).
+    let mut view = [[0f32; 4]; CHUNK];
+    for ((v, p), nrm) in view.iter_mut().zip(positions).zip(normals) {
+        let w = match k.eye {
+            Some(e) => (e - *p).normalize_or_zero(),
+            None => *nrm,
+        };
+        let cos_o = w.dot(*nrm);
+        let t = (w - *nrm * cos_o) / k.eta;
+        let travel = t + *nrm * (1.0 - t.length_squared()).max(0.0).sqrt();
+        let ft = fresnel_transmittance_f32(k.eta, cos_o);
+        *v = [
+            travel.x,
+            travel.y,
+            travel.z,
+            if cos_o > 0.0 { ft } else { 0.0 },
+        ];
+    }
+    let padded = k.padded;
+    let (s0, rest) = buffer.split_at_mut(padded);
+    let (sx, rest) = rest.split_at_mut(padded);
+    let (sy, rest) = rest.split_at_mut(padded);
+    let (sz, weighted) = rest.split_at_mut(padded);
+    let groups = k.colours.len();
+    let row = k.q.row();
+    for (i, (l, v)) in out.iter_mut().zip(&view[..m]).enumerate() {
+        let ft_o = v[3];
+        if ft_o <= 0.0 {
+            if let Some(b) = ms.as_deref_mut() {
+                b[i] = [0.0; 3];
+            }
+            continue;
+        }
+        let vertex = first + i;
+        let words = &k.q.words[vertex * row..(vertex + 1) * row];
+        let scales = &k.q.scales[vertex * groups..(vertex + 1) * groups];
+        let dir = Vec3::new(v[0], v[1], v[2]);
+        // sum over groups and j of colour x scale x c_j H.S_j, eight j at a time per channel.
+        let mut acc = [f32x8::ZERO; 3];
+        for (grp, colour) in k.colours.iter().enumerate() {
+            if scales[grp] == 0.0 {
+                continue;
+            }
+            k.q.decode(words, grp, [s0, sx, sy, sz]);
+            phase_weights(k.phase, k.g, dir, [s0, sx, sy, sz], weighted);
+            for ch in 0..3 {
+                if colour[ch] != 0.0 {
+                    let f = f32x8::splat(colour[ch] * scales[grp]);
+                    for (c, w) in lanes(&k.coeffs[ch]).zip(lanes(weighted)) {
+                        acc[ch] += f32x8::from(*c) * f32x8::from(*w) * f;
+                    }
+                }
+            }
+        }
+        let acc = acc.map(|a| a.reduce_add());
+        for ch in 0..3 {
+            l[ch] = (k.sigma_s[ch] * ft_o * acc[ch]).max(0.0);
+        }
+        if let Some(b) = ms.as_deref_mut() {
+            let w = ft_o * std::f32::consts::FRAC_1_PI;
+            b[i] = std::array::from_fn(|ch| w * b[i][ch] + l[ch]);
+        }
+    }
+}
+
+/// `optics::fresnel_transmittance` in f32 for the per-edit loops.
+#[inline(always)]
+fn fresnel_transmittance_f32(eta: f32, cos_i: f32) -> f32 {
+    let cos_i = cos_i.clamp(1e-12, 1.0);
+    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    (1.0 - 0.5 * (rs * rs + rp * rp)).clamp(0.0, 1.0)
+}
+
+/// The width the per-vertex loops over j run in.
+const LANES: usize = 8;
+
+/// A slice of a multiple of LANES as arrays of LANES (`slice::as_chunks` is newer than our
+/// MSRV); the conversion cannot fail on exact chunks and compiles away.
+#[inline(always)]
+fn lanes(s: &[f32]) -> impl Iterator<Item = &[f32; LANES]> {
+    s.chunks_exact(LANES)
+        .map(|c| c.try_into().unwrap_or(&[0.0; LANES]))
+}
+
+#[inline(always)]
+fn lanes_mut(s: &mut [f32]) -> impl Iterator<Item = &mut [f32; LANES]> {
+    s.chunks_exact_mut(LANES)
+        .filter_map(|c| <&mut [f32; LANES]>::try_from(c).ok())
+}
+
+fn n_padded(n: usize) -> usize {
+    n.div_ceil(LANES) * LANES
+}
+
+/// H(w'_o) . S_j per basis function j (Xu 2007 eq. 14 before the sum over j): the phase
+/// function does not depend on the channel, the coefficients do. Slices of a multiple of
+/// LANES, in runs of LANES so the loop vectorises.
+#[inline(always)]
+fn phase_weights(phase: Phase, g: f32, out: Vec3, s: [&mut [f32]; 4], weighted: &mut [f32]) {
+    let [s0, sx, sy, sz] = s;
+    let runs = lanes(s0)
+        .zip(lanes(sx))
+        .zip(lanes(sy).zip(lanes(sz)))
+        .zip(lanes_mut(weighted));
+    match phase {
+        // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi, exact for Eddington.
+        Phase::Eddington => {
+            for (((s0, sx), (sy, sz)), w) in runs {
+                for k in 0..LANES {
+                    let along = sx[k] * out.x + sy[k] * out.y + sz[k] * out.z;
+                    w[k] = (s0[k] + 3.0 * g * along) * INV_4PI;
+                }
+            }
+        }
+        // HG along the mean travel direction of the light in this basis function's band of
+        // path lengths, with g scaled by the directions' mean cosine (module head).
+        Phase::HenyeyGreenstein => {
+            // Eight lanes at a time through `wide` (LLVM leaves this loop scalar otherwise).
+            let (g, one, tiny) = (f32x8::splat(g), f32x8::splat(1.0), f32x8::splat(1e-30));
+            let (ox, oy, oz) = (
+                f32x8::splat(out.x),
+                f32x8::splat(out.y),
+                f32x8::splat(out.z),
+            );
+            for (((s0, sx), (sy, sz)), w) in runs {
+                let (s0, sx, sy, sz) = (
+                    f32x8::from(*s0),
+                    f32x8::from(*sx),
+                    f32x8::from(*sy),
+                    f32x8::from(*sz),
+                );
+                let along = sx * ox + sy * oy + sz * oz;
+                let len = (sx * sx + sy * sy + sz * sz).sqrt().max(tiny);
+                let gs = g * (len / s0.max(tiny)).min(one);
+                let cos = (along / len).max(-one).min(one);
+                let d = (one + gs * gs - (gs + gs) * cos).max(tiny);
+                let r =
+                    s0.max(f32x8::ZERO) * (one - gs * gs) * f32x8::splat(INV_4PI) / (d * d.sqrt());
+                *w = r.to_array();
+            }
+        }
+    }
+}
+
+/// S_j stored in 16-bit fixed point: per vertex and light group one f32 scale, the largest
+/// S_j,0 (S_j,0 >= |S_j,vec| >= 0: B_j, E and L are non-negative and w'_i a unit vector), and
+/// the four components of each S_j divided by it, S_j,0 as unsigned (x 65535) and the
+/// direction part as signed (x 32767) integers. Half the memory of f32 — the single-scattering
+/// edit streams the whole of S_j, so half the time — and the rounding bounded relative to the
+/// brightest band of its vertex (`error`). Words are [vertex][group][q][j], each q's run padded
+/// to an even length so two values share a u32 word the GPU unpacks (WGSL unpack2x16unorm /
+/// unpack2x16snorm decode exactly these integers).
+#[derive(Debug, Clone)]
+pub(crate) struct Quantized {
+    /// [vertex][group][q][j padded]: q = 0 unsigned, q = 1..3 signed (as u16 bits).
+    pub(crate) words: Vec<u16>,
+    /// [vertex][group]
+    pub(crate) scales: Vec<f32>,
+    pub(crate) groups: usize,
+    pub(crate) n: usize,
+    /// The largest |decoded - stored f32| over every component, relative to its scale.
+    pub(crate) error: f64,
+}
+
+const UNORM: f32 = 65535.0;
+const SNORM: f32 = 32767.0;
+
+impl Quantized {
+    /// Quantizes `values` laid out [vertex][group][q][j] (n per run).
+    fn new(values: &[f32], groups: usize, n: usize) -> Quantized {
+        let padded = n + n % 2;
+        let runs = values.len() / (4 * n.max(1));
+        let mut words = vec![0u16; runs * 4 * padded];
+        let mut scales = vec![0f32; runs];
+        let mut error = 0f64;
+        for (r, (block, out)) in values
+            .chunks(4 * n.max(1))
+            .zip(words.chunks_mut(4 * padded))
+            .enumerate()
+        {
+            let scale = block[..n].iter().fold(0f32, |m, x| m.max(x.abs()));
+            scales[r] = scale;
+            if scale <= 0.0 {
+                continue;
+            }
+            for qq in 0..4 {
+                let k = if qq == 0 { UNORM } else { SNORM };
+                for j in 0..n {
+                    let x = (block[qq * n + j] / scale).clamp(-1.0, 1.0);
+                    let i = (x * k).round();
+                    out[qq * padded + j] = if qq == 0 {
+                        i.max(0.0) as u16
+                    } else {
+                        (i as i16) as u16
+                    };
+                    error = error.max(f64::from((i / k - x).abs()));
+                }
+            }
+        }
+        Quantized {
+            words,
+            scales,
+            groups,
+            n,
+            error,
+        }
+    }
+
+    /// u16 words per vertex.
+    pub(crate) fn row(&self) -> usize {
+        self.groups * 4 * (self.n + self.n % 2)
+    }
+
+    pub(crate) fn bytes(&self) -> usize {
+        self.words.len() * 2 + self.scales.len() * 4
+    }
+
+    /// One vertex's S_j of light group `group` in units of its scale, from that vertex's row.
+    #[inline(always)]
+    fn decode(&self, row: &[u16], group: usize, out: [&mut [f32]; 4]) {
+        let padded = self.n + self.n % 2;
+        let base = group * 4 * padded;
+        for (qq, o) in out.into_iter().enumerate() {
+            let src = &row[base + qq * padded..base + qq * padded + self.n];
+            if qq == 0 {
+                for (d, s) in o.iter_mut().zip(src) {
+                    *d = f32::from(*s) * (1.0 / UNORM);
+                }
+            } else {
+                for (d, s) in o.iter_mut().zip(src) {
+                    *d = f32::from(*s as i16) * (1.0 / SNORM);
+                }
+            }
+        }
+    }
+}
 
 /// The single-scattering share of what a thick slab of `material` returns under a sun along
 /// the normal, per channel: L1 / (L1 + L_d) with L1 of DESIGN.md's plane limit seen along the

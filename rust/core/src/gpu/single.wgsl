@@ -1,0 +1,118 @@
+// Single scattering toward an eye per vertex, Xu 2007 eq. 14:
+// L1[v][c] = sigma_s[c] F_t(w_o) sum_groups colour[g][c] scale[v][g] sum_j coef[c][j] H(w'_o) . S_j,
+// the same f32 arithmetic as the CPU kernel (prt/single.rs, `edit_chunk`), so the two agree to
+// rounding. S_j is stored in 16-bit fixed point relative to scale[v][g] (prt/single.rs,
+// `Quantized`): words [vertex][group][q][run] as u16 pairs, q = 0 unsigned (S_j,0), q = 1..3
+// signed (S_j,vec), each run padded to an even length.
+
+struct Params {
+    vertices: u32,
+    groups: u32,
+    // Basis functions of E.
+    n: u32,
+    // u16 values per (vertex, group, q) run: n rounded up to even.
+    run: u32,
+    // 0: Eddington (Xu 2007 eq. 11), 1: Henyey-Greenstein along each band's mean direction.
+    phase: u32,
+    // 1: toward `eye`; 0: along each normal.
+    has_eye: u32,
+    g: f32,
+    eta: f32,
+    eye: vec4<f32>,
+    sigma_s: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> words: array<u32>;
+@group(0) @binding(2) var<storage, read> scales: array<f32>; // [vertex][group]
+@group(0) @binding(3) var<storage, read> geometry: array<vec4<f32>>; // [vertex][position, normal]
+@group(0) @binding(4) var<storage, read> colours: array<vec4<f32>>; // [group]
+@group(0) @binding(5) var<storage, read> coefficients: array<f32>; // [3][n]
+@group(0) @binding(6) var<storage, read_write> radiance: array<f32>; // [vertices][3]
+
+const INV_4PI: f32 = 0.07957747154594767;
+
+// Unpolarised Fresnel transmittance entering a dielectric of index eta (optics/fresnel.rs).
+fn fresnel_transmittance(eta: f32, cos_in: f32) -> f32 {
+    let cos_i = clamp(cos_in, 1e-12, 1.0);
+    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    let cos_t = sqrt(max(1.0 - sin2_t, 0.0));
+    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    return clamp(1.0 - 0.5 * (rs * rs + rp * rp), 0.0, 1.0);
+}
+
+// The u16 at `index` of the word array: unsigned / 65535 or signed / 32767.
+fn load_unsigned(index: u32) -> f32 {
+    let pair = unpack2x16unorm(words[index >> 1u]);
+    return select(pair.x, pair.y, (index & 1u) == 1u);
+}
+
+fn load_signed(index: u32) -> f32 {
+    let pair = unpack2x16snorm(words[index >> 1u]);
+    return select(pair.x, pair.y, (index & 1u) == 1u);
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let v = gid.x;
+    if (v >= params.vertices) {
+        return;
+    }
+    let p = geometry[2u * v].xyz;
+    let nrm = geometry[2u * v + 1u].xyz;
+    var w = nrm;
+    if (params.has_eye == 1u) {
+        let d = params.eye.xyz - p;
+        let len2 = dot(d, d);
+        w = select(vec3<f32>(0.0), d * inverseSqrt(len2), len2 > 0.0);
+    }
+    let cos_o = dot(w, nrm);
+    var acc = vec3<f32>(0.0);
+    if (cos_o > 0.0) {
+        // Snell: the refracted view direction w'_o, travelling out of the surface.
+        let t = (w - nrm * cos_o) / params.eta;
+        let travel = t + nrm * sqrt(max(1.0 - dot(t, t), 0.0));
+        let ft_o = fresnel_transmittance(params.eta, cos_o);
+        let row = params.groups * 4u * params.run;
+        for (var grp = 0u; grp < params.groups; grp = grp + 1u) {
+            let scale = scales[v * params.groups + grp];
+            if (scale == 0.0) {
+                continue;
+            }
+            let colour = colours[grp].xyz * scale;
+            let base = v * row + grp * 4u * params.run;
+            for (var j = 0u; j < params.n; j = j + 1u) {
+                let s0 = load_unsigned(base + j);
+                let s = vec3<f32>(
+                    load_signed(base + params.run + j),
+                    load_signed(base + 2u * params.run + j),
+                    load_signed(base + 3u * params.run + j),
+                );
+                let along = dot(s, travel);
+                var weight: f32;
+                if (params.phase == 0u) {
+                    // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi.
+                    weight = (s0 + 3.0 * params.g * along) * INV_4PI;
+                } else {
+                    // HG along the band's mean direction, g scaled by its mean cosine.
+                    let len = max(sqrt(dot(s, s)), 1e-30);
+                    let gs = params.g * min(len / max(s0, 1e-30), 1.0);
+                    let cos = clamp(along / len, -1.0, 1.0);
+                    let d = max(1.0 + gs * gs - 2.0 * gs * cos, 1e-30);
+                    weight = max(s0, 0.0) * (1.0 - gs * gs) * INV_4PI / (d * sqrt(d));
+                }
+                let c = vec3<f32>(
+                    coefficients[j],
+                    coefficients[params.n + j],
+                    coefficients[2u * params.n + j],
+                );
+                acc = acc + c * weight * colour;
+            }
+        }
+        acc = max(params.sigma_s.xyz * ft_o * acc, vec3<f32>(0.0));
+    }
+    radiance[v * 3u] = acc.x;
+    radiance[v * 3u + 1u] = acc.y;
+    radiance[v * 3u + 2u] = acc.z;
+}
