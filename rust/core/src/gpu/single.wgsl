@@ -3,7 +3,7 @@
 // the same f32 arithmetic as the CPU kernel (prt/single.rs, `edit_chunk`), so the two agree to
 // rounding. S_j is stored in 16-bit fixed point relative to scale[v][g] (prt/single.rs,
 // `Quantized`): words [vertex][group][q][run] as u16 pairs, q = 0 unsigned (S_j,0), q = 1..3
-// signed (S_j,vec), each run padded to an even length.
+// signed (the mean direction m_j = S_j,vec / S_j,0), each run padded to an even length.
 
 struct Params {
     vertices: u32,
@@ -89,18 +89,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     load_signed(base + 2u * params.run + j),
                     load_signed(base + 3u * params.run + j),
                 );
+                // s: the band's mean travel direction m_j (prt/single.rs, `phase_weights`).
                 let along = dot(s, travel);
                 var weight: f32;
                 if (params.phase == 0u) {
-                    // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi.
-                    weight = (s0 + 3.0 * params.g * along) * INV_4PI;
+                    // Xu 2007 eq. 11: H . S_j = S_j,0 (1 + 3 g m_j . w'_o) / 4 pi.
+                    weight = s0 * (1.0 + 3.0 * params.g * along) * INV_4PI;
                 } else {
-                    // HG along the band's mean direction, g scaled by its mean cosine.
-                    let len = max(sqrt(dot(s, s)), 1e-30);
-                    let gs = params.g * min(len / max(s0, 1e-30), 1.0);
-                    let cos = clamp(along / len, -1.0, 1.0);
-                    let d = max(1.0 + gs * gs - 2.0 * gs * cos, 1e-30);
-                    weight = max(s0, 0.0) * (1.0 - gs * gs) * INV_4PI / (d * sqrt(d));
+                    // HG along m_j, g scaled by |m_j|.
+                    let g2m2 = params.g * params.g * dot(s, s);
+                    let gm = params.g * along;
+                    let d = max(1.0 + g2m2 - (gm + gm), 1e-30);
+                    weight = s0 * max(1.0 - g2m2, 0.0) * INV_4PI / (d * sqrt(d));
                 }
                 let c = vec3<f32>(
                     coefficients[j],

@@ -566,23 +566,24 @@ fn n_padded(n: usize) -> usize {
 /// LANES, in runs of LANES so the loop vectorises.
 #[inline(always)]
 fn phase_weights(phase: Phase, g: f32, out: Vec3, s: [&mut [f32]; 4], weighted: &mut [f32]) {
-    let [s0, sx, sy, sz] = s;
+    let [s0, mx, my, mz] = s;
     let runs = lanes(s0)
-        .zip(lanes(sx))
-        .zip(lanes(sy).zip(lanes(sz)))
+        .zip(lanes(mx))
+        .zip(lanes(my).zip(lanes(mz)))
         .zip(lanes_mut(weighted));
     match phase {
-        // Xu 2007 eq. 11: H = (1, 3 g w'_o) / 4 pi, exact for Eddington.
+        // Xu 2007 eq. 11: H . S_j = S_j,0 (1 + 3 g m_j . w'_o) / 4 pi, exact for Eddington.
         Phase::Eddington => {
-            for (((s0, sx), (sy, sz)), w) in runs {
+            for (((s0, mx), (my, mz)), w) in runs {
                 for k in 0..LANES {
-                    let along = sx[k] * out.x + sy[k] * out.y + sz[k] * out.z;
-                    w[k] = (s0[k] + 3.0 * g * along) * INV_4PI;
+                    let along = mx[k] * out.x + my[k] * out.y + mz[k] * out.z;
+                    w[k] = s0[k] * (1.0 + 3.0 * g * along) * INV_4PI;
                 }
             }
         }
-        // HG along the mean travel direction of the light in this basis function's band of
-        // path lengths, with g scaled by the directions' mean cosine (module head).
+        // HG along the band's mean travel direction m_j with g scaled by its length (module
+        // head): g_s = g |m|, g_s cos = g m . w'_o, so p = (1 - g^2 |m|^2) / 4 pi (1 + g^2 |m|^2
+        // - 2 g m . w'_o)^(3/2): one square root and one division per band.
         Phase::HenyeyGreenstein => {
             // Eight lanes at a time through `wide` (LLVM leaves this loop scalar otherwise).
             let (g, one, tiny) = (f32x8::splat(g), f32x8::splat(1.0), f32x8::splat(1e-30));
@@ -591,20 +592,17 @@ fn phase_weights(phase: Phase, g: f32, out: Vec3, s: [&mut [f32]; 4], weighted: 
                 f32x8::splat(out.y),
                 f32x8::splat(out.z),
             );
-            for (((s0, sx), (sy, sz)), w) in runs {
-                let (s0, sx, sy, sz) = (
+            for (((s0, mx), (my, mz)), w) in runs {
+                let (s0, mx, my, mz) = (
                     f32x8::from(*s0),
-                    f32x8::from(*sx),
-                    f32x8::from(*sy),
-                    f32x8::from(*sz),
+                    f32x8::from(*mx),
+                    f32x8::from(*my),
+                    f32x8::from(*mz),
                 );
-                let along = sx * ox + sy * oy + sz * oz;
-                let len = (sx * sx + sy * sy + sz * sz).sqrt().max(tiny);
-                let gs = g * (len / s0.max(tiny)).min(one);
-                let cos = (along / len).max(-one).min(one);
-                let d = (one + gs * gs - (gs + gs) * cos).max(tiny);
-                let r =
-                    s0.max(f32x8::ZERO) * (one - gs * gs) * f32x8::splat(INV_4PI) / (d * d.sqrt());
+                let g2m2 = g * g * (mx * mx + my * my + mz * mz);
+                let gm = g * (mx * ox + my * oy + mz * oz);
+                let d = (one + g2m2 - (gm + gm)).max(tiny);
+                let r = s0 * (one - g2m2).max(f32x8::ZERO) * f32x8::splat(INV_4PI) / (d * d.sqrt());
                 *w = r.to_array();
             }
         }
@@ -612,12 +610,13 @@ fn phase_weights(phase: Phase, g: f32, out: Vec3, s: [&mut [f32]; 4], weighted: 
 }
 
 /// S_j stored in 16-bit fixed point: per vertex and light group one f32 scale, the largest
-/// S_j,0 (S_j,0 >= |S_j,vec| >= 0: B_j, E and L are non-negative and w'_i a unit vector), and
-/// the four components of each S_j divided by it, S_j,0 as unsigned (x 65535) and the
-/// direction part as signed (x 32767) integers. Half the memory of f32 — the single-scattering
-/// edit streams the whole of S_j, so half the time — and the rounding bounded relative to the
-/// brightest band of its vertex (`error`). Words are [vertex][group][q][j], each q's run padded
-/// to an even length so two values share a u32 word the GPU unpacks (WGSL unpack2x16unorm /
+/// S_j,0 (B_j, E and L are non-negative), S_j,0 divided by it as an unsigned integer (x 65535),
+/// and the mean travel direction of the band's light m_j = S_j,vec / S_j,0 (|m_j| <= 1: a mean
+/// of unit vectors) as three signed ones (x 32767). Half the memory of f32 S_j, the rounding
+/// bounded (`error`: 2^-16 of the vertex's brightest band for S_j,0, 2^-15 absolute for m_j),
+/// and m_j is what the phase functions want: HG needs no square root or division by S_j,0 at
+/// edit time (`phase_weights`). Words are [vertex][group][q][j], each q's run padded to an even
+/// length so two values share a u32 word the GPU unpacks (WGSL unpack2x16unorm /
 /// unpack2x16snorm decode exactly these integers).
 #[derive(Debug, Clone)]
 pub(crate) struct Quantized {
@@ -627,7 +626,7 @@ pub(crate) struct Quantized {
     pub(crate) scales: Vec<f32>,
     pub(crate) groups: usize,
     pub(crate) n: usize,
-    /// The largest |decoded - stored f32| over every component, relative to its scale.
+    /// The largest rounding: of S_j,0 relative to its scale, of m_j absolute.
     pub(crate) error: f64,
 }
 
@@ -655,7 +654,15 @@ impl Quantized {
             for qq in 0..4 {
                 let k = if qq == 0 { UNORM } else { SNORM };
                 for j in 0..n {
-                    let x = (block[qq * n + j] / scale).clamp(-1.0, 1.0);
+                    // S_j,0 relative to the scale; the mean direction m_j = S_j,vec / S_j,0.
+                    let x = if qq == 0 {
+                        block[j] / scale
+                    } else if block[j] > 0.0 {
+                        block[qq * n + j] / block[j]
+                    } else {
+                        0.0
+                    };
+                    let x = x.clamp(-1.0, 1.0);
                     let i = (x * k).round();
                     out[qq * padded + j] = if qq == 0 {
                         i.max(0.0) as u16
