@@ -17,6 +17,7 @@ pub mod quadrature; // Gauss–Legendre and Simpson rules
 pub mod raytrace; // BVH and shadow rays (obvhs)
 pub mod scene; // a mesh with its lights
 pub mod single_scattering; // Xu 2007 eq. 5's path model, phase functions, brute force
+pub mod spherical_harmonics; // real Y_lm and HG's Legendre series (addition theorem)
 pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)
 
 // Shared by the PRT method, kept apart so other methods may use it.

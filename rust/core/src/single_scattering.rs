@@ -160,6 +160,15 @@ impl<'a> SinglePaths<'a> {
         })
     }
 
+    /// Whether a group's light arrives from a spread of directions (an area light, the world)
+    /// rather than one (a point, spot or sun light).
+    pub fn spread(&self, group: usize) -> bool {
+        matches!(
+            self.sources.get(group),
+            Some(Source::World(..)) | Some(Source::Light(Light::Area { .. }))
+        )
+    }
+
     /// The colour of each group (brightest channel 1): arrivals carry that channel's weight.
     pub fn colours(&self) -> &[[f32; 3]] {
         &self.colours

@@ -439,6 +439,8 @@ impl PyPrt {
                 w.set_item("knots", r.knots.clone())?;
                 w.set_item("step_length", r.step_length)?;
                 w.set_item("groups", r.groups)?;
+                w.set_item("spread_groups", r.spread_groups)?;
+                w.set_item("legendre_order", r.legendre_order)?;
                 w.set_item("transport_bytes", r.transport_bytes)?;
                 w.set_item("quantization_error", r.quantization_error)?;
                 w.set_item("on_gpu", self.inner.single_on_gpu())?;

@@ -555,7 +555,8 @@ impl Prt {
                     allow_software,
                     half,
                 )?;
-                if let Some(s) = &self.single {
+                // Single scattering joins it there unless it holds spread light (CPU only).
+                if let Some(s) = self.single.as_ref().filter(|s| s.gpu_ready()) {
                     s.attach_to(&mut gpu)?;
                 }
                 self.gpu = Some(gpu);
@@ -774,8 +775,8 @@ impl Prt {
         }
         if let Some(gpu) = self.gpu.as_mut() {
             match &single {
-                Some(s) => s.attach_to(gpu)?,
-                None => gpu.detach_single(),
+                Some(s) if s.gpu_ready() => s.attach_to(gpu)?,
+                _ => gpu.detach_single(),
             }
         }
         self.single = single;

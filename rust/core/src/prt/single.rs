@@ -23,6 +23,7 @@ use crate::optics::Material;
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use crate::single_scattering::{exponential_steps, PathSettings, Phase, SinglePaths};
+use crate::spherical_harmonics as sh;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -37,6 +38,12 @@ pub struct SingleSettings {
     pub steps: usize,
     /// E below this relative value is left out: the basis ends at ln(1/tolerance) / sigma_t.
     pub tolerance: f64,
+    /// Light spread over many directions (area lights, the world) is stored as Y_lm moments
+    /// up to the lowest order whose HG residual (`spherical_harmonics::hg_residual`, the worst
+    /// case relative to the isotropic phase) is within this for the representatives' largest
+    /// |g| (at most `spherical_harmonics::MAX_ORDER`: g = 0.3 takes order 6, 0.9 would need
+    /// about 60).
+    pub legendre_tolerance: f64,
     pub paths: PathSettings,
 }
 
@@ -46,6 +53,7 @@ impl Default for SingleSettings {
             coefficients: 16,
             steps: 32,
             tolerance: 1e-6,
+            legendre_tolerance: 0.01,
             paths: PathSettings::default(),
         }
     }
@@ -63,6 +71,10 @@ pub struct SingleReport {
     /// Light groups with their own transport (a light each; the world one, or three for an
     /// environment image).
     pub groups: usize,
+    /// Of those, the groups of spread light (area lights, the world) stored as Y_lm moments.
+    pub spread_groups: usize,
+    /// The order of those moments (0 without spread light).
+    pub legendre_order: usize,
     /// Memory of S_j: 16-bit fixed point and one f32 scale per vertex and light group.
     pub transport_bytes: usize,
     /// The largest rounding of a stored S_j component relative to the largest S_j,0 of its
@@ -78,9 +90,14 @@ pub struct SingleReport {
 #[derive(Debug)]
 pub struct SingleScattering {
     fitter: Fitter,
-    /// S_j in 16-bit fixed point (`Quantized`).
+    /// S_j of the groups of one direction each in 16-bit fixed point (`Quantized`): S_j,0
+    /// and the band's mean direction.
     transport: Quantized,
     colours: Vec<[f32; 3]>,
+    /// S_j of the groups of spread light: S_j,0 and the Y_lm moments up to `order`.
+    spread: Quantized,
+    spread_colours: Vec<[f32; 3]>,
+    order: usize,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     eta: f64,
@@ -152,11 +169,32 @@ impl SingleScattering {
         let paths = SinglePaths::new(scene, tracer, &settings.paths)?;
         let groups = paths.colours().len();
         let n = basis.len();
+        // Each group's slot: (spread, index among its kind).
+        let mut slots = Vec::with_capacity(groups);
+        let (mut colours, mut spread_colours) = (Vec::new(), Vec::new());
+        for (grp, c) in paths.colours().iter().enumerate() {
+            if paths.spread(grp) {
+                slots.push((true, spread_colours.len()));
+                spread_colours.push(*c);
+            } else {
+                slots.push((false, colours.len()));
+                colours.push(*c);
+            }
+        }
+        let g_max = representatives.iter().fold(0.0f64, |m, r| m.max(r.g.abs()));
+        let order = if spread_colours.is_empty() {
+            0
+        } else {
+            sh::order_for(g_max, settings.legendre_tolerance)
+        };
+        let moments = sh::count(order);
+        let direct_row = colours.len() * n * 4;
+        let spread_row = spread_colours.len() * n * moments;
         // The steps' density follows the longest representative mean free path, so every
         // representative's integrand e^(-sigma_t (s + s'_i)) falls at least as fast as it.
         let length = 1.0 / lo_t;
         let mesh = &scene.mesh;
-        let row = groups * n * 4;
+        let row = direct_row + spread_row;
         let mut transport = vec![0f32; mesh.vertex_count() * row];
         let counts: Vec<(u64, bool)> = transport
             .par_chunks_mut(row.max(1))
@@ -171,6 +209,7 @@ impl SingleScattering {
                 }
                 let s_max = paths.far_side(x_o, normal, &mut rays);
                 let mut acc = vec![0f64; row];
+                let mut y = [0f64; 81];
                 for (k, (s, w)) in exponential_steps(settings.steps, length, s_max)
                     .into_iter()
                     .enumerate()
@@ -180,14 +219,23 @@ impl SingleScattering {
                     paths.arrivals(x, salt, &mut rays, &mut |a| {
                         // Xu 2007 eq. 15: G(w'_i) B_j(s'_i + s) L_i F_t(w_i), weighted by the step.
                         let (first, vals) = basis.eval(s + a.refracted_distance);
-                        let g = [1.0, a.travel.x, a.travel.y, a.travel.z];
+                        let (spread, slot) = slots[a.group];
+                        // One direction: (1, w'_i). Spread: (1, Y_lm(w'_i) for lm > 0).
+                        let (base, comps) = if spread {
+                            sh::real_sh(order, a.travel, &mut y);
+                            y[0] = 1.0;
+                            (direct_row + slot * moments * n, moments)
+                        } else {
+                            y[..4].copy_from_slice(&[1.0, a.travel.x, a.travel.y, a.travel.z]);
+                            (slot * 4 * n, 4)
+                        };
                         for (i, b) in vals.iter().take(2).enumerate() {
                             let j = first + i;
                             if j >= n || *b == 0.0 {
                                 continue;
                             }
-                            for (q, gq) in g.iter().enumerate() {
-                                acc[(a.group * 4 + q) * n + j] += w * a.weight * b * gq;
+                            for (q, gq) in y[..comps].iter().enumerate() {
+                                acc[base + q * n + j] += w * a.weight * b * gq;
                             }
                         }
                     });
@@ -198,15 +246,33 @@ impl SingleScattering {
                 (rays, s_max.is_finite())
             })
             .collect();
-        let transport = Quantized::new(&transport, groups, n);
+        let (direct, spread): (Vec<f32>, Vec<f32>) = (
+            transport
+                .chunks(row.max(1))
+                .flat_map(|r| r[..direct_row].iter().copied())
+                .collect(),
+            transport
+                .chunks(row.max(1))
+                .flat_map(|r| r[direct_row..].iter().copied())
+                .collect(),
+        );
+        drop(transport);
+        let transport = Quantized::new(&direct, colours.len(), n, &[1.0; 4]);
+        // Moments divided by S_j,0 and |Y_lm|'s bound: within [-1, 1].
+        let norms: Vec<f32> = (0..moments)
+            .map(|c| sh::bound(sh::degree(c)) as f32)
+            .collect();
+        let spread = Quantized::new(&spread, spread_colours.len(), n, &norms);
         let report = SingleReport {
             coefficients: n,
             steps: settings.steps,
             knots: basis.knots().to_vec(),
             step_length: length,
             groups,
-            transport_bytes: transport.bytes(),
-            quantization_error: transport.error,
+            spread_groups: spread_colours.len(),
+            legendre_order: order,
+            transport_bytes: transport.bytes() + spread.bytes(),
+            quantization_error: transport.error.max(spread.error),
             rays: counts.iter().map(|c| c.0).sum(),
             bounded_paths: counts.iter().filter(|c| c.1).count(),
             seconds: start.elapsed().as_secs_f64(),
@@ -214,7 +280,10 @@ impl SingleScattering {
         Ok(SingleScattering {
             fitter,
             transport,
-            colours: paths.colours().to_vec(),
+            colours,
+            spread,
+            spread_colours,
+            order,
             positions: mesh.positions().to_vec(),
             normals: mesh.normals().to_vec(),
             eta: settings.paths.eta,
@@ -249,6 +318,17 @@ impl SingleScattering {
         (c, err)
     }
 
+    /// What the Legendre series of spread light leaves out of the phase function
+    /// (`spherical_harmonics::hg_residual` at the stored order; 0 for Eddington, exact at
+    /// order 1, and without spread light).
+    pub fn phase_residual(&self, material: &Material, phase: Phase) -> f64 {
+        if self.spread_colours.is_empty() || phase == Phase::Eddington {
+            0.0
+        } else {
+            sh::hg_residual(material.g, self.order)
+        }
+    }
+
     fn check(&self, material: &Material, eye: Option<Vec3>) -> Result<()> {
         if let Some(e) = eye.filter(|e| !e.is_finite()) {
             return Err(Error::InvalidArgument(format!("eye {e:?} is not finite")));
@@ -260,6 +340,12 @@ impl SingleScattering {
             )));
         }
         Ok(())
+    }
+
+    /// Whether the GPU kernel can take this transport: lights of one direction each only (the
+    /// Y_lm moments of area lights and the world are evaluated on the CPU).
+    pub fn gpu_ready(&self) -> bool {
+        self.spread_colours.is_empty()
     }
 
     /// S_j, the vertices and the light colours as the GPU takes them
@@ -288,6 +374,11 @@ impl SingleScattering {
 
     /// Uploads S_j to `gpu` (same mesh), so its edits run single scattering there too.
     pub fn attach_to(&self, gpu: &mut crate::gpu::GpuEvaluator) -> Result<()> {
+        if !self.gpu_ready() {
+            return Err(Error::GpuUnavailable(
+                "single scattering of spread light (Y_lm moments) runs on the CPU only".into(),
+            ));
+        }
         let (words, geometry, colours) = self.gpu_arrays();
         let q = &self.transport;
         gpu.attach_single(&crate::gpu::SingleTransport {
@@ -366,7 +457,9 @@ impl SingleScattering {
     ) -> Result<SingleEvaluation> {
         let t0 = Instant::now();
         self.check(material, eye)?;
-        let (coeffs, error_estimate) = self.coefficients(material);
+        let (coeffs, mut error_estimate) = self.coefficients(material);
+        let residual = self.phase_residual(material, phase);
+        error_estimate.iter_mut().for_each(|e| *e += residual);
         let padded = n_padded(self.basis().len());
         let coeffs: [Vec<f32>; 3] = coeffs.map(|c| {
             let mut v = crate::basis::edit_coefficients(&c);
@@ -378,6 +471,12 @@ impl SingleScattering {
         let kernel = EditKernel {
             q: &self.transport,
             colours: &self.colours,
+            spread: &self.spread,
+            spread_colours: &self.spread_colours,
+            order: match phase {
+                Phase::Eddington => 1,
+                Phase::HenyeyGreenstein => self.order,
+            },
             coeffs: &coeffs,
             padded,
             g: material.g as f32,
@@ -392,7 +491,7 @@ impl SingleScattering {
             .zip(self.positions.par_chunks(CHUNK))
             .zip(self.normals.par_chunks(CHUNK))
             .enumerate();
-        let init = || vec![0f32; 5 * padded];
+        let init = || vec![0f32; (5 + sh::count(self.order)) * padded];
         match ms {
             Some(ms) => jobs.zip(ms.par_chunks_mut(CHUNK)).for_each_init(
                 init,
@@ -423,6 +522,10 @@ const CHUNK: usize = 64;
 struct EditKernel<'a> {
     q: &'a Quantized,
     colours: &'a [[f32; 3]],
+    spread: &'a Quantized,
+    spread_colours: &'a [[f32; 3]],
+    /// The Y_lm order evaluated for spread light (1 for Eddington, exact there).
+    order: usize,
     coeffs: &'a [Vec<f32>; 3],
     padded: usize,
     g: f32,
@@ -486,9 +589,13 @@ fn edit_chunk(
     let (s0, rest) = buffer.split_at_mut(padded);
     let (sx, rest) = rest.split_at_mut(padded);
     let (sy, rest) = rest.split_at_mut(padded);
-    let (sz, weighted) = rest.split_at_mut(padded);
+    let (sz, rest) = rest.split_at_mut(padded);
+    let (weighted, moments) = rest.split_at_mut(padded);
     let groups = k.colours.len();
     let row = k.q.row();
+    let spread_groups = k.spread_colours.len();
+    let spread_row = k.spread.row();
+    let comps = sh::count(k.order);
     for (i, (l, v)) in out.iter_mut().zip(&view[..m]).enumerate() {
         let ft_o = v[3];
         if ft_o <= 0.0 {
@@ -507,13 +614,61 @@ fn edit_chunk(
             if scales[grp] == 0.0 {
                 continue;
             }
-            k.q.decode(words, grp, [s0, sx, sy, sz]);
-            phase_weights(k.phase, k.g, dir, [s0, sx, sy, sz], weighted);
+            k.q.decode(words, grp, [&mut *s0, &mut *sx, &mut *sy, &mut *sz]);
+            phase_weights(
+                k.phase,
+                k.g,
+                dir,
+                [&mut *s0, &mut *sx, &mut *sy, &mut *sz],
+                weighted,
+            );
             for ch in 0..3 {
                 if colour[ch] != 0.0 {
                     let f = f32x8::splat(colour[ch] * scales[grp]);
                     for (c, w) in lanes(&k.coeffs[ch]).zip(lanes(weighted)) {
                         acc[ch] += f32x8::from(*c) * f32x8::from(*w) * f;
+                    }
+                }
+            }
+        }
+        if spread_groups > 0 {
+            // Spread light, the addition theorem: H . S_j = S_j,0 (1 / 4 pi + sum_{lm > 0}
+            // g^l Y_lm(w'_o) bound_l q_lm,j), q the stored moments / (S_j,0 bound_l).
+            let mut y = [0f64; 81];
+            sh::real_sh(k.order, dir.as_dvec3(), &mut y);
+            let weights: Vec<f32> = (0..comps)
+                .map(|c| {
+                    let l = sh::degree(c);
+                    (f64::from(k.g).powi(l as i32) * y[c] * sh::bound(l)) as f32
+                })
+                .collect();
+            let words = &k.spread.words[vertex * spread_row..(vertex + 1) * spread_row];
+            let scales = &k.spread.scales[vertex * spread_groups..(vertex + 1) * spread_groups];
+            for (grp, colour) in k.spread_colours.iter().enumerate() {
+                if scales[grp] == 0.0 {
+                    continue;
+                }
+                k.spread.decode(
+                    words,
+                    grp,
+                    std::iter::once(&mut s0[..])
+                        .chain(moments.chunks_exact_mut(padded).skip(1).take(comps - 1)),
+                );
+                for (j, (w, s)) in lanes_mut(weighted).zip(lanes(s0)).enumerate() {
+                    let mut sum = f32x8::splat(INV_4PI);
+                    for (c, yc) in weights.iter().enumerate().skip(1) {
+                        let q = &moments[c * padded + j * LANES..c * padded + (j + 1) * LANES];
+                        let q: [f32; LANES] = q.try_into().unwrap_or([0.0; LANES]);
+                        sum += f32x8::splat(*yc) * f32x8::from(q);
+                    }
+                    *w = (f32x8::from(*s) * sum).to_array();
+                }
+                for ch in 0..3 {
+                    if colour[ch] != 0.0 {
+                        let f = f32x8::splat(colour[ch] * scales[grp]);
+                        for (c, w) in lanes(&k.coeffs[ch]).zip(lanes(weighted)) {
+                            acc[ch] += f32x8::from(*c) * f32x8::from(*w) * f;
+                        }
                     }
                 }
             }
@@ -626,6 +781,8 @@ pub(crate) struct Quantized {
     pub(crate) scales: Vec<f32>,
     pub(crate) groups: usize,
     pub(crate) n: usize,
+    /// Components per band: 4 for one direction, (L + 1)^2 for spread light.
+    pub(crate) comps: usize,
     /// The largest rounding: of S_j,0 relative to its scale, of m_j absolute.
     pub(crate) error: f64,
 }
@@ -634,16 +791,18 @@ const UNORM: f32 = 65535.0;
 const SNORM: f32 = 32767.0;
 
 impl Quantized {
-    /// Quantizes `values` laid out [vertex][group][q][j] (n per run).
-    fn new(values: &[f32], groups: usize, n: usize) -> Quantized {
+    /// Quantizes `values` laid out [vertex][group][q][j] (n per run), q over `norms.len()`
+    /// components: q = 0 is S_j,0, component q > 0 is stored as S_j,q / (S_j,0 norms[q]).
+    fn new(values: &[f32], groups: usize, n: usize, norms: &[f32]) -> Quantized {
+        let comps = norms.len();
         let padded = n + n % 2;
-        let runs = values.len() / (4 * n.max(1));
-        let mut words = vec![0u16; runs * 4 * padded];
+        let runs = values.len() / (comps * n).max(1);
+        let mut words = vec![0u16; runs * comps * padded];
         let mut scales = vec![0f32; runs];
         let mut error = 0f64;
         for (r, (block, out)) in values
-            .chunks(4 * n.max(1))
-            .zip(words.chunks_mut(4 * padded))
+            .chunks((comps * n).max(1))
+            .zip(words.chunks_mut((comps * padded).max(1)))
             .enumerate()
         {
             let scale = block[..n].iter().fold(0f32, |m, x| m.max(x.abs()));
@@ -651,14 +810,15 @@ impl Quantized {
             if scale <= 0.0 {
                 continue;
             }
-            for qq in 0..4 {
+            for (qq, norm) in norms.iter().enumerate() {
                 let k = if qq == 0 { UNORM } else { SNORM };
                 for j in 0..n {
-                    // S_j,0 relative to the scale; the mean direction m_j = S_j,vec / S_j,0.
+                    // S_j,0 relative to the scale; the rest relative to S_j,0 (for one
+                    // direction: the mean direction m_j = S_j,vec / S_j,0).
                     let x = if qq == 0 {
                         block[j] / scale
                     } else if block[j] > 0.0 {
-                        block[qq * n + j] / block[j]
+                        block[qq * n + j] / (block[j] * norm)
                     } else {
                         0.0
                     };
@@ -678,13 +838,14 @@ impl Quantized {
             scales,
             groups,
             n,
+            comps,
             error,
         }
     }
 
     /// u16 words per vertex.
     pub(crate) fn row(&self) -> usize {
-        self.groups * 4 * (self.n + self.n % 2)
+        self.groups * self.comps * (self.n + self.n % 2)
     }
 
     pub(crate) fn bytes(&self) -> usize {
@@ -693,10 +854,10 @@ impl Quantized {
 
     /// One vertex's S_j of light group `group` in units of its scale, from that vertex's row.
     #[inline(always)]
-    fn decode(&self, row: &[u16], group: usize, out: [&mut [f32]; 4]) {
+    fn decode<'a>(&self, row: &[u16], group: usize, out: impl IntoIterator<Item = &'a mut [f32]>) {
         let padded = self.n + self.n % 2;
-        let base = group * 4 * padded;
-        for (qq, o) in out.into_iter().enumerate() {
+        let base = group * self.comps * padded;
+        for (qq, o) in out.into_iter().take(self.comps).enumerate() {
             let src = &row[base + qq * padded..base + qq * padded + self.n];
             if qq == 0 {
                 for (d, s) in o.iter_mut().zip(src) {
