@@ -155,6 +155,43 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, prof
                 rows.append(Row(method, setting + bounce + walks, name, cycles["label"] + ", all vertices", rms, mx,
                                 pre_full, edit, max(full.last_eval["error_estimate"]),
                                 notes="what the artist sees against what Cycles renders"))
+            if profile == "dipole":
+                rows += single_rows(scene, material, name, receivers, weights, cycles, coefficients, degree)
+    return rows
+
+
+# Basis sizes of single scattering's E swept, as Xu 2007 Fig. 4.
+SINGLE_COEFFICIENTS = (6, 8, 16, 32)
+
+
+def single_rows(scene, material, name, receivers, weights, cycles, coefficients, degree) -> list[Row]:
+    """Issue 11: the dipole's MS + SS (Xu 2007 eq. 1) at 6, 8, 16 and 32 coefficients of E,
+    L^(1) against its brute-force integral of eq. 5 (`reference_single_scattering`, along the
+    normal as a bake sees it) and MS + SS against Cycles, beside the MS-alone row above."""
+    rows = []
+    method = "PRT (Xu 2007), dipole profile, MS + SS"
+    t0 = time.perf_counter()
+    want = translucent.reference_single_scattering(scene, material, receivers=receivers)
+    ref_s = time.perf_counter() - t0
+    for k in SINGLE_COEFFICIENTS:
+        t0 = time.perf_counter()
+        prt = translucent.Prt(scene, material, coefficients=coefficients, degree=degree, backend="cpu",
+                              profile="dipole", interreflection=False, single_scattering=True,
+                              single_coefficients=k)
+        pre = time.perf_counter() - t0
+        edits = []
+        for _ in range(5):
+            radiance = prt.radiance(material)
+            edits.append(prt.last_eval["seconds"])
+        est = max(prt.last_eval["single_error_estimate"])
+        l1 = prt.single_radiance(material)
+        setting = f"{k} coefficients of E (MS: {coefficients})"
+        rms, mx = worst(translucent.relative_error(l1[receivers], want, weights))
+        rows.append(Row(method, setting + ", L1 alone", name, "ground truth (single scattering)", rms, mx,
+                        pre, float(np.median(edits)), est, notes=f"brute force of eq. 5: {ref_s:.1f} s"))
+        rms, mx = worst(translucent.relative_error(radiance, cycles["all"], cycles["weights"]))
+        rows.append(Row(method, setting, name, cycles["label"] + ", all vertices", rms, mx, pre,
+                        float(np.median(edits)), est, notes="MS + SS against what Cycles renders"))
     return rows
 
 

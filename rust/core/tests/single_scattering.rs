@@ -295,14 +295,43 @@ fn a_non_finite_eye_and_another_eta_are_errors() {
 /// Runs on any Vulkan adapter (CI installs Mesa's lavapipe); skips with the reason elsewhere.
 #[test]
 fn gpu_and_cpu_single_scattering_agree() {
+    // Lights of one direction each, then spread light too (an area light and the world, as
+    // Y_lm moments; representatives at g = 0.3 store order 6).
+    for spread in [false, true] {
+        gpu_and_cpu_agree_on(spread);
+    }
+}
+
+fn gpu_and_cpu_agree_on(spread: bool) {
     use translucent_core::gpu::GpuEvaluator;
     let mut scene = Scene::new(sphere(24, 20.0));
     scene.lights = vec![
         Light::point(Vec3::new(30.0, -40.0, 50.0), [4e4, 3e4, 2e4]).unwrap(),
         Light::sun(Vec3::new(-0.3, 0.5, -0.8).normalize(), [1.0, 1.5, 2.0]).unwrap(),
     ];
-    let marble = Material::preset("marble", 1.0).unwrap();
-    let skin = Material::preset("skin1", 1.0).unwrap();
+    let g0 = if spread { 0.3 } else { 0.0 };
+    if spread {
+        scene.lights.push(
+            Light::area(
+                Vec3::new(0.0, 40.0, 10.0),
+                Vec3::new(0.0, -1.0, 0.0),
+                Vec3::new(1.0, 0.0, 0.0),
+                20.0,
+                10.0,
+                [2e4, 2e4, 1e4],
+            )
+            .unwrap(),
+        );
+        scene.world = translucent_core::lights::World::uniform([0.2, 0.3, 0.4]).unwrap();
+    }
+    let marble = Material {
+        g: g0,
+        ..Material::preset("marble", 1.0).unwrap()
+    };
+    let skin = Material {
+        g: g0,
+        ..Material::preset("skin1", 1.0).unwrap()
+    };
     let tracer = Tracer::new(&scene.mesh);
     let settings = SingleSettings {
         paths: PathSettings {
@@ -312,6 +341,9 @@ fn gpu_and_cpu_single_scattering_agree() {
         ..Default::default()
     };
     let ss = SingleScattering::precompute(&scene, &tracer, &[marble, skin], &settings).unwrap();
+    let r = ss.report();
+    assert_eq!(r.spread_groups, if spread { 2 } else { 0 });
+    assert_eq!(r.legendre_order, if spread { 6 } else { 0 });
     let v = scene.mesh.vertex_count();
     // No multiple scattering here: a transport of zeros, one channel, one coefficient.
     let mut gpu = match GpuEvaluator::new(&vec![0.0; v.div_ceil(16) * 16], v, 1, 1, true, false) {
@@ -324,6 +356,11 @@ fn gpu_and_cpu_single_scattering_agree() {
     ss.attach_to(&mut gpu).unwrap();
     let mut worst = 0.0f64;
     for (m, g) in [(marble, 0.0), (skin, 0.9), (marble, -0.3), (skin, 0.3)] {
+        if spread && g > 0.6 {
+            // Far beyond the order stored for g = 0.3: the truncated series cancels (its
+            // error estimate is above 100 %) and f32 rounding differs by 5e-4 there.
+            continue;
+        }
         let m = Material { g, ..m };
         for phase in [Phase::HenyeyGreenstein, Phase::Eddington] {
             if phase == Phase::Eddington && g.abs() > 1.0 / 3.0 {
@@ -340,16 +377,18 @@ fn gpu_and_cpu_single_scattering_agree() {
                 assert!(peak > 0.0);
                 let lit = cpu.iter().filter(|x| x[0] > 0.0).count();
                 assert!(lit > v / 4, "{lit} of {v} vertices lit");
+                let mut here = 0.0f64;
                 for (g, c) in l1.iter().zip(&cpu) {
                     for k in 0..3 {
                         let e = f64::from((g[k] - c[k]).abs() / c[k].abs().max(1e-3 * peak));
-                        worst = worst.max(e);
+                        here = here.max(e);
                     }
                 }
+                worst = worst.max(here);
             }
         }
     }
-    eprintln!("worst GPU/CPU relative difference {worst:.2e}");
+    eprintln!("spread light {spread}: worst GPU/CPU relative difference {worst:.2e}");
     assert!(
         worst <= 1e-5,
         "GPU and CPU single scattering differ by {worst:.2e}"

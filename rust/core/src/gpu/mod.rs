@@ -43,6 +43,15 @@ pub struct SingleTransport<'a> {
     pub n: usize,
     /// u16 values per (vertex, group, q) run: n rounded up to even.
     pub run: usize,
+    /// Spread light (area lights, the world): [vertex][group][moment][run] u16 values, S_j,0
+    /// then the Y_lm moments up to `order` (prt/single.rs `Quantized`).
+    pub spread_words: &'a [u32],
+    /// [vertex][spread group]
+    pub spread_scales: &'a [f32],
+    /// [spread group] light colour (w unused).
+    pub spread_colours: &'a [[f32; 4]],
+    /// The Y_lm order of the moments (0 without spread light).
+    pub order: usize,
 }
 
 /// One edit's single scattering parameters.
@@ -68,6 +77,8 @@ struct SingleResident {
     output: wgpu::Buffer,
     staging: wgpu::Buffer,
     groups: usize,
+    spread_groups: usize,
+    order: usize,
     n: usize,
     run: usize,
     bytes: u64,
@@ -300,12 +311,17 @@ impl GpuEvaluator {
     /// precompute); every `evaluate` with a `SingleEdit` then runs both kernels.
     pub fn attach_single(&mut self, t: &SingleTransport) -> Result<()> {
         let groups = t.colours.len();
+        let spread_groups = t.spread_colours.len();
+        let moments = (t.order + 1) * (t.order + 1);
         let vertices = self.vertices;
         if t.run < t.n
             || t.run % 2 != 0
+            || t.order > crate::spherical_harmonics::MAX_ORDER
             || t.geometry.len() != 2 * vertices
             || t.scales.len() != vertices * groups
             || t.words.len() * 2 != vertices * groups * 4 * t.run
+            || t.spread_scales.len() != vertices * spread_groups
+            || t.spread_words.len() * 2 != vertices * spread_groups * moments * t.run
         {
             return Err(Error::InvalidArgument(
                 "single-scattering transport does not match the mesh on the GPU".into(),
@@ -313,7 +329,8 @@ impl GpuEvaluator {
         }
         let device = &self.device;
         let limit = device.limits().max_storage_buffer_binding_size;
-        let bytes = std::mem::size_of_val(t.words) as u64;
+        let bytes =
+            std::mem::size_of_val(t.words).max(std::mem::size_of_val(t.spread_words)) as u64;
         if bytes > limit {
             return Err(Error::GpuUnavailable(format!(
                 "single-scattering transport of {bytes} bytes exceeds the adapter's storage \
@@ -348,9 +365,12 @@ impl GpuEvaluator {
         let scales = init("single scales", bytemuck::cast_slice(t.scales));
         let geometry = init("single geometry", bytemuck::cast_slice(t.geometry));
         let colours = init("single colours", bytemuck::cast_slice(t.colours));
+        let spread_words = init("spread words", bytemuck::cast_slice(t.spread_words));
+        let spread_scales = init("spread scales", bytemuck::cast_slice(t.spread_scales));
+        let spread_colours = init("spread colours", bytemuck::cast_slice(t.spread_colours));
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("single params"),
-            size: 64,
+            size: 80,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -382,6 +402,9 @@ impl GpuEvaluator {
             &colours,
             &coefficients,
             &output,
+            &spread_words,
+            &spread_scales,
+            &spread_colours,
         ]
         .iter()
         .enumerate()
@@ -403,9 +426,14 @@ impl GpuEvaluator {
             output,
             staging,
             groups,
+            spread_groups,
+            order: t.order,
             n: t.n,
             run: t.run,
-            bytes: bytes + std::mem::size_of_val(t.scales) as u64,
+            bytes: (std::mem::size_of_val(t.words)
+                + std::mem::size_of_val(t.scales)
+                + std::mem::size_of_val(t.spread_words)
+                + std::mem::size_of_val(t.spread_scales)) as u64,
         });
         Ok(())
     }
@@ -467,7 +495,13 @@ impl GpuEvaluator {
             .write_buffer(&self.coefficients, 0, bytemuck::cast_slice(coefficients));
         if let Some((r, edit)) = resident {
             let eye = edit.eye.unwrap_or([0.0; 3]);
-            let params: [u32; 16] = [
+            // Eddington is exact at order 1; HG takes every stored order.
+            let order = if edit.henyey_greenstein {
+                r.order
+            } else {
+                r.order.min(1)
+            };
+            let params: [u32; 20] = [
                 self.vertices as u32,
                 r.groups as u32,
                 r.n as u32,
@@ -483,6 +517,10 @@ impl GpuEvaluator {
                 edit.sigma_s[0].to_bits(),
                 edit.sigma_s[1].to_bits(),
                 edit.sigma_s[2].to_bits(),
+                0,
+                r.spread_groups as u32,
+                ((r.order + 1) * (r.order + 1)) as u32,
+                order as u32,
                 0,
             ];
             self.queue

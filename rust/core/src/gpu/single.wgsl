@@ -20,6 +20,12 @@ struct Params {
     eta: f32,
     eye: vec4<f32>,
     sigma_s: vec4<f32>,
+    // Spread light (area lights, the world): groups, stored Y_lm moments per band, and the
+    // order evaluated (1 for Eddington, exact there; the stored order for HG).
+    spread_groups: u32,
+    moments: u32,
+    order: u32,
+    _pad: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -29,6 +35,10 @@ struct Params {
 @group(0) @binding(4) var<storage, read> colours: array<vec4<f32>>; // [group]
 @group(0) @binding(5) var<storage, read> coefficients: array<f32>; // [3][n]
 @group(0) @binding(6) var<storage, read_write> radiance: array<f32>; // [vertices][3]
+// [vertex][spread group][moment][run] as `words`: S_j,0 then Y_lm moments / (S_j,0 bound_l).
+@group(0) @binding(7) var<storage, read> spread_words: array<u32>;
+@group(0) @binding(8) var<storage, read> spread_scales: array<f32>; // [vertex][spread group]
+@group(0) @binding(9) var<storage, read> spread_colours: array<vec4<f32>>; // [spread group]
 
 const INV_4PI: f32 = 0.07957747154594767;
 
@@ -51,6 +61,63 @@ fn load_unsigned(index: u32) -> f32 {
 fn load_signed(index: u32) -> f32 {
     let pair = unpack2x16snorm(words[index >> 1u]);
     return select(pair.x, pair.y, (index & 1u) == 1u);
+}
+
+fn spread_unsigned(index: u32) -> f32 {
+    let pair = unpack2x16unorm(spread_words[index >> 1u]);
+    return select(pair.x, pair.y, (index & 1u) == 1u);
+}
+
+fn spread_signed(index: u32) -> f32 {
+    let pair = unpack2x16snorm(spread_words[index >> 1u]);
+    return select(pair.x, pair.y, (index & 1u) == 1u);
+}
+
+const MAX_MOMENTS: u32 = 81u;
+
+// g^l Y_lm(d) sqrt((2l + 1) / 4 pi) for l <= order into w[l^2 + l + m]: real orthonormal
+// harmonics by the associated Legendre recurrence, as spherical_harmonics.rs (`real_sh`).
+fn spread_weights(order: u32, d: vec3<f32>, g: f32, w: ptr<function, array<f32, 81>>) {
+    var cm = 1.0;
+    var sm = 0.0;
+    var qmm = 1.0;
+    for (var m = 0u; m <= order; m = m + 1u) {
+        if (m > 0u) {
+            let c = cm * d.x - sm * d.y;
+            let s = cm * d.y + sm * d.x;
+            cm = c;
+            sm = s;
+            qmm = qmm * f32(2u * m - 1u);
+        }
+        var q2 = 0.0;
+        var q1 = qmm;
+        for (var l = m; l <= order; l = l + 1u) {
+            var q = qmm;
+            if (l > m) {
+                q = (f32(2u * l - 1u) * d.z * q1 - f32(l + m - 1u) * q2) / f32(l - m);
+                q2 = q1;
+                q1 = q;
+            }
+            // K_lm = sqrt((2l + 1) / 4 pi (l - m)! / (l + m)!).
+            var ratio = 1.0;
+            for (var k = l - m + 1u; k <= l + m; k = k + 1u) {
+                ratio = ratio / f32(k);
+            }
+            let bound = sqrt(f32(2u * l + 1u) * INV_4PI);
+            var gl = 1.0;
+            for (var i = 0u; i < l; i = i + 1u) {
+                gl = gl * g;
+            }
+            let k = bound * sqrt(ratio) * gl * bound;
+            let base = l * l + l;
+            if (m == 0u) {
+                (*w)[base] = k * q;
+            } else {
+                (*w)[base + m] = 1.4142135623730951 * k * q * cm;
+                (*w)[base - m] = 1.4142135623730951 * k * q * sm;
+            }
+        }
+    }
 }
 
 @compute @workgroup_size(64)
@@ -108,6 +175,35 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     coefficients[2u * params.n + j],
                 );
                 acc = acc + c * weight * colour;
+            }
+        }
+        if (params.spread_groups > 0u) {
+            // Spread light, the addition theorem: H . S_j = S_j,0 (1 / 4 pi + sum_{lm > 0} g^l
+            // Y_lm(w'_o) bound_l q_lm,j).
+            var y: array<f32, 81>;
+            spread_weights(params.order, travel, params.g, &y);
+            let used = (params.order + 1u) * (params.order + 1u);
+            let srow = params.spread_groups * params.moments * params.run;
+            for (var grp = 0u; grp < params.spread_groups; grp = grp + 1u) {
+                let scale = spread_scales[v * params.spread_groups + grp];
+                if (scale == 0.0) {
+                    continue;
+                }
+                let colour = spread_colours[grp].xyz * scale;
+                let base = v * srow + grp * params.moments * params.run;
+                for (var j = 0u; j < params.n; j = j + 1u) {
+                    var sum = INV_4PI;
+                    for (var c = 1u; c < used; c = c + 1u) {
+                        sum = sum + y[c] * spread_signed(base + c * params.run + j);
+                    }
+                    let weight = spread_unsigned(base + j) * sum;
+                    let cf = vec3<f32>(
+                        coefficients[j],
+                        coefficients[params.n + j],
+                        coefficients[2u * params.n + j],
+                    );
+                    acc = acc + cf * weight * colour;
+                }
             }
         }
         acc = max(params.sigma_s.xyz * ft_o * acc, vec3<f32>(0.0));

@@ -342,22 +342,17 @@ impl SingleScattering {
         Ok(())
     }
 
-    /// Whether the GPU kernel can take this transport: lights of one direction each only (the
-    /// Y_lm moments of area lights and the world are evaluated on the CPU).
+    /// Whether the GPU kernel can take this transport (every kind of light, since the Y_lm
+    /// moments of spread light joined it).
     pub fn gpu_ready(&self) -> bool {
-        self.spread_colours.is_empty()
+        true
     }
 
     /// S_j, the vertices and the light colours as the GPU takes them
     /// (`GpuEvaluator::attach_single`): (words, geometry, colours).
     #[allow(clippy::type_complexity)]
     pub fn gpu_arrays(&self) -> (Vec<u32>, Vec<[f32; 4]>, Vec<[f32; 4]>) {
-        let q = &self.transport;
-        let words = q
-            .words
-            .chunks(2)
-            .map(|p| u32::from(p[0]) | (u32::from(p.get(1).copied().unwrap_or(0)) << 16))
-            .collect();
+        let words = pack_words(&self.transport.words);
         let geometry = self
             .positions
             .iter()
@@ -374,13 +369,14 @@ impl SingleScattering {
 
     /// Uploads S_j to `gpu` (same mesh), so its edits run single scattering there too.
     pub fn attach_to(&self, gpu: &mut crate::gpu::GpuEvaluator) -> Result<()> {
-        if !self.gpu_ready() {
-            return Err(Error::GpuUnavailable(
-                "single scattering of spread light (Y_lm moments) runs on the CPU only".into(),
-            ));
-        }
         let (words, geometry, colours) = self.gpu_arrays();
         let q = &self.transport;
+        let spread_words = pack_words(&self.spread.words);
+        let spread_colours: Vec<[f32; 4]> = self
+            .spread_colours
+            .iter()
+            .map(|c| [c[0], c[1], c[2], 0.0])
+            .collect();
         gpu.attach_single(&crate::gpu::SingleTransport {
             words: &words,
             scales: &q.scales,
@@ -388,6 +384,10 @@ impl SingleScattering {
             colours: &colours,
             n: q.n,
             run: q.n + q.n % 2,
+            spread_words: &spread_words,
+            spread_scales: &self.spread.scales,
+            spread_colours: &spread_colours,
+            order: self.order,
         })
     }
 
@@ -401,7 +401,9 @@ impl SingleScattering {
     ) -> Result<(crate::gpu::SingleEdit, [f64; 3], f64)> {
         let t0 = Instant::now();
         self.check(material, eye)?;
-        let (coeffs, error_estimate) = self.coefficients(material);
+        let (coeffs, mut error_estimate) = self.coefficients(material);
+        let residual = self.phase_residual(material, phase);
+        error_estimate.iter_mut().for_each(|e| *e += residual);
         let edit = crate::gpu::SingleEdit {
             coefficients: coeffs
                 .iter()
@@ -513,6 +515,14 @@ impl SingleScattering {
 }
 
 const INV_4PI: f32 = 1.0 / (4.0 * std::f32::consts::PI);
+
+/// u16 values two to a u32 word, the first in the low half (WGSL's unpack2x16 order).
+fn pack_words(values: &[u16]) -> Vec<u32> {
+    values
+        .chunks(2)
+        .map(|p| u32::from(p[0]) | (u32::from(p.get(1).copied().unwrap_or(0)) << 16))
+        .collect()
+}
 
 /// Vertices per rayon job of an edit: their view directions are computed together first.
 const CHUNK: usize = 64;
