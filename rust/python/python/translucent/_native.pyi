@@ -240,7 +240,8 @@ class Prt:
         lights_used, lights_skipped_black, lights_unreached, world_skipped, skipped_beyond_support,
         skipped_dark, single_scattering (bool), single_scattering_share,
         single_scattering_tolerance, single_scattering_reason, single (None, or coefficients,
-        steps, knots, step_length, groups, transport_bytes, rays, bounded_paths, seconds),
+        steps, knots, step_length, groups, spread_groups, legendre_order, transport_bytes,
+        quantization_error, on_gpu, rays, bounded_paths, seconds),
         seconds per step."""
     @property
     def eta(self) -> float:
