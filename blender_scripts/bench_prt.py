@@ -157,18 +157,23 @@ def main() -> int:
     except RuntimeError as e:
         print(f"edit on the GPU: skipped ({e})")
         return 0
+    gpu_edits(f"edit on {where}", lambda k: prt.radiosity(marble if k % 2 else skin), prt, args.edits)
+    return 0
+
+
+def gpu_edits(label, edit, prt, edits) -> None:
+    """Times `edits` GPU edits and prints the medians, transfers and dispatch apart."""
     parts = {k: [] for k in ("fit_seconds", "upload_seconds", "dispatch_seconds", "readback_seconds", "seconds")}
-    for k in range(args.edits):
-        prt.radiosity(marble if k % 2 else skin)
+    for k in range(edits):
+        edit(k)
         for key in parts:
             parts[key].append(prt.last_eval[key])
     med = {k: 1e3 * statistics.median(v) for k, v in parts.items()}
     print(
-        f"edit on {where}: median {med['seconds']:.2f} ms (fit {med['fit_seconds']:.3f}, upload "
+        f"{label}: median {med['seconds']:.2f} ms (fit {med['fit_seconds']:.3f}, upload "
         f"{med['upload_seconds']:.3f}, dispatch+wait {med['dispatch_seconds']:.2f}, readback "
-        f"{med['readback_seconds']:.2f} ms) over {args.edits} edits"
+        f"{med['readback_seconds']:.2f} ms) over {edits} edits"
     )
-    return 0
 
 
 def single_scattering(big, positions, marble, skin, args) -> None:
@@ -206,17 +211,8 @@ def single_scattering(big, positions, marble, skin, args) -> None:
     except RuntimeError as e:
         print(f"MS + SS edit on the GPU: skipped ({e})")
         return
-    parts = {k: [] for k in ("fit_seconds", "upload_seconds", "dispatch_seconds", "readback_seconds", "seconds")}
-    for k in range(args.edits):
-        prt.radiance(marble if k % 2 else skin, eye=eye)
-        for key in parts:
-            parts[key].append(prt.last_eval[key])
-    med = {k: 1e3 * statistics.median(v) for k, v in parts.items()}
-    print(
-        f"MS + SS edit on {where}: median {med['seconds']:.2f} ms (fit {med['fit_seconds']:.3f}, upload "
-        f"{med['upload_seconds']:.3f}, dispatch+wait {med['dispatch_seconds']:.2f}, readback "
-        f"{med['readback_seconds']:.2f} ms) over {args.edits} edits"
-    )
+    gpu_edits(f"MS + SS edit on {where}", lambda k: prt.radiance(marble if k % 2 else skin, eye=eye), prt,
+              args.edits)
 
 
 if __name__ == "__main__":

@@ -112,6 +112,15 @@ def worst(err: dict) -> tuple[float, float]:
 WALK_RAYS = (0, 5_000_000, 20_000_000, 60_000_000)
 
 
+def timed_edits(prt, edit, runs: int = 5):
+    """The last of `runs` edits and the median of their times in the core [s]."""
+    times = []
+    for _ in range(runs):
+        out = edit()
+        times.append(prt.last_eval["seconds"])
+    return out, float(np.median(times))
+
+
 def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, profile="cycles") -> list[Row]:
     """Each PRT setting: one precompute for the material, one (timed) edit, the errors against
     the ground truth (direct light, as the reference integrates it) and, with the object's own
@@ -125,15 +134,12 @@ def prt_rows(scene, material, name, truth, receivers, weights, cycles=None, prof
                               fit_tolerance=fit_tol, backend="cpu", profile=profile, interreflection=False,
                               walks=0 if profile == "cycles" else None)
         pre = time.perf_counter() - t0
-        edits = []
-        for _ in range(5):
-            b = prt.radiosity(material)
-            edits.append(prt.last_eval["seconds"])
+        b, edit_s = timed_edits(prt, lambda: prt.radiosity(material))
         est = max(prt.last_eval["error_estimate"])
         rep = prt.report
         setting = f"{rep['coefficients']} coeff., degree {degree}" + (f", fit tol. {fit_tol:g}" if fit_tol else "")
         rms, mx = worst(translucent.relative_error(b[receivers], truth, weights))
-        rows.append(Row(method, setting, name, "ground truth", rms, mx, pre, float(np.median(edits)), est,
+        rows.append(Row(method, setting, name, "ground truth", rms, mx, pre, edit_s, est,
                         extra=dict(samples=rep["samples"], coefficients=rep["coefficients"])))
         if cycles is not None and (coefficients, degree, fit_tol) == (32, 1, None):
             # The walks' knob (issue 12): rays they may cast, 0 for the half-space table alone.
@@ -179,19 +185,16 @@ def single_rows(scene, material, name, receivers, weights, cycles, coefficients,
                               profile="dipole", interreflection=False, single_scattering=True,
                               single_coefficients=k)
         pre = time.perf_counter() - t0
-        edits = []
-        for _ in range(5):
-            radiance = prt.radiance(material)
-            edits.append(prt.last_eval["seconds"])
+        radiance, edit_s = timed_edits(prt, lambda: prt.radiance(material))
         est = max(prt.last_eval["single_error_estimate"])
         l1 = prt.single_radiance(material)
         setting = f"{k} coefficients of E (MS: {coefficients})"
         rms, mx = worst(translucent.relative_error(l1[receivers], want, weights))
         rows.append(Row(method, setting + ", L1 alone", name, "ground truth (single scattering)", rms, mx,
-                        pre, float(np.median(edits)), est, notes=f"brute force of eq. 5: {ref_s:.1f} s"))
+                        pre, edit_s, est, notes=f"brute force of eq. 5: {ref_s:.1f} s"))
         rms, mx = worst(translucent.relative_error(radiance, cycles["all"], cycles["weights"]))
         rows.append(Row(method, setting, name, cycles["label"] + ", all vertices", rms, mx, pre,
-                        float(np.median(edits)), est, notes="MS + SS against what Cycles renders"))
+                        edit_s, est, notes="MS + SS against what Cycles renders"))
     return rows
 
 

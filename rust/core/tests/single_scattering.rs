@@ -67,6 +67,17 @@ fn sphere(n: usize, radius: f32) -> Mesh {
     Mesh::new(p, t, None).unwrap()
 }
 
+/// Default single-scattering settings at the material's index of refraction.
+fn settings_for(m: &Material) -> SingleSettings {
+    SingleSettings {
+        paths: PathSettings {
+            eta: m.eta,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
 /// Unpolarised dielectric transmittance, written out apart from `optics`.
 fn ft(eta: f64, c: f64) -> f64 {
     let ct = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();
@@ -168,13 +179,7 @@ fn prt_single_scattering_matches_brute_force_on_a_lit_sphere() {
     let tracer = Tracer::new(&scene.mesh);
     let marble = Material::preset("marble", 1.0).unwrap();
     let skin = Material::preset("skin1", 1.0).unwrap();
-    let settings = SingleSettings {
-        paths: PathSettings {
-            eta: marble.eta,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let settings = settings_for(&marble);
     let ss = SingleScattering::precompute(&scene, &tracer, &[marble, skin], &settings).unwrap();
     let paths = SinglePaths::new(&scene, &tracer, &settings.paths).unwrap();
     let eye = Vec3::new(20.0, -40.0, 15.0);
@@ -227,13 +232,7 @@ fn eddington_and_hg_agree_at_g_zero_and_part_with_g() {
     scene.lights = vec![Light::sun(Vec3::new(0.3, 0.2, -1.0), [1.0; 3]).unwrap()];
     let tracer = Tracer::new(&scene.mesh);
     let marble = Material::preset("marble", 1.0).unwrap();
-    let settings = SingleSettings {
-        paths: PathSettings {
-            eta: marble.eta,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let settings = settings_for(&marble);
     let ss = SingleScattering::precompute(&scene, &tracer, &[marble], &settings).unwrap();
     let eye = Some(Vec3::new(0.0, -50.0, 20.0));
     let hg = ss
@@ -271,13 +270,7 @@ fn a_non_finite_eye_and_another_eta_are_errors() {
     scene.lights = vec![Light::sun(-Vec3::Z, [1.0; 3]).unwrap()];
     let tracer = Tracer::new(&scene.mesh);
     let marble = Material::preset("marble", 1.0).unwrap();
-    let settings = SingleSettings {
-        paths: PathSettings {
-            eta: marble.eta,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let settings = settings_for(&marble);
     let ss = SingleScattering::precompute(&scene, &tracer, &[marble], &settings).unwrap();
     let eye = Some(Vec3::new(f32::NAN, 0.0, 1.0));
     assert!(ss.radiance(&marble, eye, Phase::Eddington).is_err());
@@ -333,13 +326,7 @@ fn gpu_and_cpu_agree_on(spread: bool) {
         ..Material::preset("skin1", 1.0).unwrap()
     };
     let tracer = Tracer::new(&scene.mesh);
-    let settings = SingleSettings {
-        paths: PathSettings {
-            eta: marble.eta,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let settings = settings_for(&marble);
     let ss = SingleScattering::precompute(&scene, &tracer, &[marble, skin], &settings).unwrap();
     let r = ss.report();
     assert_eq!(r.spread_groups, if spread { 2 } else { 0 });

@@ -167,6 +167,35 @@ fn pack_half(values: &[f32], run: usize) -> (Vec<u32>, Vec<f32>, f64) {
     (words, scales, worst)
 }
 
+/// What each edit writes and reads back: its coefficients ([3][per_channel] f32, written per
+/// edit), its per-vertex RGB output, and the mappable copy the output is read back through.
+fn edit_buffers(
+    device: &wgpu::Device,
+    label: &str,
+    per_channel: usize,
+    vertices: usize,
+) -> [wgpu::Buffer; 3] {
+    let buffer = |what: &str, size: usize, usage| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(&format!("{label} {what}")),
+            size: size as u64,
+            usage,
+            mapped_at_creation: false,
+        })
+    };
+    let out_size = vertices.max(1) * 3 * 4;
+    use wgpu::BufferUsages as U;
+    [
+        buffer(
+            "coefficients",
+            3 * per_channel * 4,
+            U::STORAGE | U::COPY_DST,
+        ),
+        buffer("output", out_size, U::STORAGE | U::COPY_SRC),
+        buffer("readback", out_size, U::MAP_READ | U::COPY_DST),
+    ]
+}
+
 impl GpuEvaluator {
     /// Uploads `transport` ([block][channel][j][16 lanes] f32, see prt/layout.rs), as f32 or,
     /// with `half`, as IEEE f16 (half the memory and bandwidth; `half_error` says what it costs).
@@ -233,25 +262,7 @@ impl GpuEvaluator {
             contents: bytemuck::cast_slice(&scales),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let coefficients = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("coefficients"),
-            size: (3 * stride * 4) as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let out_size = (vertices.max(1) * 3 * 4) as u64;
-        let output = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("radiosity"),
-            size: out_size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: out_size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let [coefficients, output, staging] = edit_buffers(&device, "radiosity", stride, vertices);
         let layout = pipeline.get_bind_group_layout(0);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("prt dot"),
@@ -374,25 +385,8 @@ impl GpuEvaluator {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let coefficients = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("single coefficients"),
-            size: (3 * t.n.max(1) * 4) as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let out_size = (vertices.max(1) * 3 * 4) as u64;
-        let output = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("single radiance"),
-            size: out_size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("single readback"),
-            size: out_size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let [coefficients, output, staging] =
+            edit_buffers(device, "single radiance", t.n.max(1), vertices);
         let layout = pipeline.get_bind_group_layout(0);
         let entries: Vec<wgpu::BindGroupEntry> = [
             &params,

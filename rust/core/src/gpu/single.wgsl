@@ -52,28 +52,27 @@ fn fresnel_transmittance(eta: f32, cos_in: f32) -> f32 {
     return clamp(1.0 - 0.5 * (rs * rs + rp * rp), 0.0, 1.0);
 }
 
-// The u16 at `index` of the word array: unsigned / 65535 or signed / 32767.
-fn load_unsigned(index: u32) -> f32 {
-    let pair = unpack2x16unorm(words[index >> 1u]);
+// The u16 at `index` of a word array, from the pair its word unpacks to: unsigned / 65535 or
+// signed / 32767.
+fn half_of(pair: vec2<f32>, index: u32) -> f32 {
     return select(pair.x, pair.y, (index & 1u) == 1u);
+}
+
+fn load_unsigned(index: u32) -> f32 {
+    return half_of(unpack2x16unorm(words[index >> 1u]), index);
 }
 
 fn load_signed(index: u32) -> f32 {
-    let pair = unpack2x16snorm(words[index >> 1u]);
-    return select(pair.x, pair.y, (index & 1u) == 1u);
+    return half_of(unpack2x16snorm(words[index >> 1u]), index);
 }
 
 fn spread_unsigned(index: u32) -> f32 {
-    let pair = unpack2x16unorm(spread_words[index >> 1u]);
-    return select(pair.x, pair.y, (index & 1u) == 1u);
+    return half_of(unpack2x16unorm(spread_words[index >> 1u]), index);
 }
 
 fn spread_signed(index: u32) -> f32 {
-    let pair = unpack2x16snorm(spread_words[index >> 1u]);
-    return select(pair.x, pair.y, (index & 1u) == 1u);
+    return half_of(unpack2x16snorm(spread_words[index >> 1u]), index);
 }
-
-const MAX_MOMENTS: u32 = 81u;
 
 // g^l Y_lm(d) sqrt((2l + 1) / 4 pi) for l <= order into w[l^2 + l + m]: real orthonormal
 // harmonics by the associated Legendre recurrence, as spherical_harmonics.rs (`real_sh`).
