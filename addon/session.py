@@ -153,8 +153,9 @@ class HierarchyJob(Job):
                 self._previous.hierarchy.update(positions=self._positions, lights=scene)
                 self.result = self._previous
             else:
+                # The world shadowed by the mesh, as Cycles renders it.
                 h = translucent.Hierarchy(scene, self._material, profile=profile, eps=HIERARCHY_EPS,
-                                          mode="on_the_fly")
+                                          mode="on_the_fly", world_shadows=True)
                 self.result = HierarchyTransport(h, profile)
         except BaseException as e:  # reported by the follow refresh, which falls back to PRT
             self.error = e

@@ -153,3 +153,18 @@ def test_bad_input_raises_value_error_naming_it():
         h.mode = "sometimes"
     # The Hierarchy still works after the errors, with its scene unchanged.
     assert np.isfinite(h.radiosity(m)).all()
+
+
+def test_the_world_by_nine_coefficients_or_shadowed_on_request():
+    """Point 4: the world by its nine SH coefficients, unshadowed (Mertens §5.3: no rays),
+    or traced with shadows on request; on a convex sphere, which shadows nothing, the two
+    agree to the traced world's noise."""
+    p, t = sphere()
+    s = translucent.Scene(p, t)
+    s.set_world(color=(0.8, 0.9, 1.0), strength=1.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    sh = translucent.Hierarchy(s, m, profile="dipole")
+    traced = translucent.Hierarchy(s, m, profile="dipole", world_shadows=True, world_samples=256)
+    assert sh.report["rays"] < traced.report["rays"]
+    a, b = sh.radiosity(m), traced.radiosity(m)
+    assert np.abs(a / b - 1).max() < 0.05, np.abs(a / b - 1).max()

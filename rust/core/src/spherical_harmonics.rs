@@ -101,22 +101,85 @@ pub fn order_for(g_max: f64, tolerance: f64) -> usize {
         .unwrap_or(MAX_ORDER)
 }
 
+/// The world's radiance projected on the Y_lm up to `order` per channel, by a Gauss–Legendre
+/// (cos theta) x uniform (phi) product rule fine enough for a 2-D environment image's
+/// low orders (`rings` x 2 `rings` directions).
+pub fn project(order: usize, rings: usize, radiance: &dyn Fn(DVec3) -> [f64; 3]) -> Vec<[f64; 3]> {
+    let n = count(order);
+    let mut out = vec![[0.0; 3]; n];
+    let mut y = vec![0.0; n];
+    let rule = crate::quadrature::gauss_legendre(rings.max(2));
+    let sectors = 2 * rings.max(2);
+    for &(u, w) in rule.iter() {
+        let sin = (1.0 - u * u).max(0.0).sqrt();
+        for k in 0..sectors {
+            let phi = 2.0 * PI * (k as f64 + 0.5) / sectors as f64;
+            let d = DVec3::new(sin * phi.cos(), sin * phi.sin(), u);
+            real_sh(order, d, &mut y);
+            let l = radiance(d);
+            let dw = w * 2.0 * PI / sectors as f64;
+            for (o, yc) in out.iter_mut().zip(&y) {
+                (0..3).for_each(|c| o[c] += dw * yc * l[c]);
+            }
+        }
+    }
+    out
+}
+
+/// Funk–Hecke: the factors that turn Y_lm coefficients of a radiance into those of its
+/// convolution with the zonal kernel k(cos) (over the whole sphere), 2 pi int k(t) P_l(t) dt
+/// for l <= `order`. With k = F_t(cos) cos for cos > 0 this is the irradiance entering a
+/// surface (Ramamoorthi & Hanrahan 2001 for k = cos: pi, 2 pi / 3, pi / 4 for l = 0, 1, 2).
+pub fn zonal_factors(order: usize, kernel: &dyn Fn(f64) -> f64) -> Vec<f64> {
+    let rule = crate::quadrature::gauss_legendre(64);
+    (0..=order)
+        .map(|l| {
+            rule.iter()
+                .map(|&(x, w)| {
+                    // cos over [0, 1]: t = (x + 1) / 2, dt = dx / 2 (the kernel is 0 below).
+                    let t = 0.5 * (x + 1.0);
+                    0.5 * w * kernel(t) * legendre(l, t)
+                })
+                .sum::<f64>()
+                * 2.0
+                * PI
+        })
+        .collect()
+}
+
+/// P_l(x) by Bonnet's recurrence.
+pub fn legendre(l: usize, x: f64) -> f64 {
+    let (mut p0, mut p1) = (1.0, x);
+    if l == 0 {
+        return 1.0;
+    }
+    for k in 1..l {
+        let p2 = ((2 * k + 1) as f64 * x * p1 - k as f64 * p0) / (k + 1) as f64;
+        p0 = p1;
+        p1 = p2;
+    }
+    p1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Legendre polynomials by Bonnet's recurrence, apart from the code under test.
-    fn legendre(l: usize, x: f64) -> f64 {
-        let (mut p0, mut p1) = (1.0, x);
-        if l == 0 {
-            return 1.0;
+    #[test]
+    fn cosine_factors_are_ramamoorthi_and_hanrahans() {
+        let a = zonal_factors(2, &|t| t);
+        for (got, want) in a.iter().zip([PI, 2.0 * PI / 3.0, PI / 4.0]) {
+            assert!((got - want).abs() < 1e-10, "{got} vs {want}");
         }
-        for k in 1..l {
-            let p2 = ((2 * k + 1) as f64 * x * p1 - k as f64 * p0) / (k + 1) as f64;
-            p0 = p1;
-            p1 = p2;
-        }
-        p1
+        assert!((legendre(2, 0.5) - (-0.125)).abs() < 1e-15);
+        // A radiance 1 + z projects to Y_00 and Y_10 only: sqrt(4 pi) and sqrt(4 pi / 3).
+        let c = project(2, 16, &|d| [1.0 + d.z; 3]);
+        assert!((c[0][0] - (4.0 * PI).sqrt()).abs() < 1e-10);
+        assert!((c[2][0] - (4.0 * PI / 3.0).sqrt()).abs() < 1e-10);
+        assert!(c
+            .iter()
+            .enumerate()
+            .all(|(i, v)| i == 0 || i == 2 || v[0].abs() < 1e-10));
     }
 
     fn dir(theta: f64, phi: f64) -> DVec3 {

@@ -22,7 +22,8 @@ impl PyHierarchy {
     /// modes). Releases the GIL.
     #[new]
     #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.3),
-        mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32))]
+        mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32,
+        world_shadows = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -34,6 +35,7 @@ impl PyHierarchy {
         world_samples: i64,
         area_samples: i64,
         estimate_receivers: i64,
+        world_shadows: bool,
     ) -> PyResult<Self> {
         let model = crate::material::model(profile)?;
         let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
@@ -45,6 +47,7 @@ impl PyHierarchy {
             world_samples: non_negative("world_samples", world_samples)?,
             area_samples: non_negative("area_samples", area_samples)?,
             estimate_receivers: non_negative("estimate_receivers", estimate_receivers)?,
+            world_shadows,
             ..HierarchySettings::default()
         };
         let core_scene = scene.scene.clone();

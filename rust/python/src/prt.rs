@@ -205,6 +205,7 @@ impl PyPrt {
             world_samples,
             area_samples,
             seed: 0,
+            ..Default::default()
         };
         let tracer = scene.tracer();
         let progress = Progress::new(progress);

@@ -57,6 +57,7 @@ pub fn reference_radiosity_py<'py>(
         world_samples,
         area_samples,
         seed: 1,
+        ..Default::default()
     };
     let settings = ReferenceSettings {
         rel_tol,
@@ -169,6 +170,7 @@ pub fn reference_radiance_py<'py>(
         world_samples,
         area_samples,
         seed: 1,
+        ..Default::default()
     };
     let settings = MeshWalkSettings {
         walks,

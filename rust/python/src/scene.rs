@@ -248,6 +248,7 @@ impl PyScene {
             world_samples,
             area_samples,
             seed,
+            ..Default::default()
         };
         let tracer = self.tracer();
         let mesh = &self.scene.mesh;

@@ -77,6 +77,10 @@ pub struct HierarchySettings {
     /// Share of the profile's total left out beyond its support radius.
     pub support_tolerance: f64,
     pub world_samples: u32,
+    /// The world shadowed by the mesh (`world_samples` rays per point) rather than by its
+    /// nine spherical-harmonic coefficients unshadowed (Mertens 2003 §5.3, no rays: the
+    /// paper's choice and the default).
+    pub world_shadows: bool,
     pub area_samples: u32,
     pub seed: u64,
     /// Faces whose radiosity the error estimate recomputes with ε/4.
@@ -92,6 +96,7 @@ impl Default for HierarchySettings {
             mode: Mode::OnTheFly,
             support_tolerance: 1e-4,
             world_samples: 64,
+            world_shadows: false,
             area_samples: 16,
             seed: 1,
             estimate_receivers: 32,
@@ -259,6 +264,7 @@ impl Hierarchy {
             world_samples: self.settings.world_samples,
             area_samples: self.settings.area_samples,
             seed: self.settings.seed,
+            world_unshadowed: !self.settings.world_shadows,
         }
         .for_density(density)
     }

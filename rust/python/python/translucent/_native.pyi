@@ -266,8 +266,11 @@ class Hierarchy:
         world_samples: int = 64,
         area_samples: int = 16,
         estimate_receivers: int = 32,
+        world_shadows: bool = False,
     ) -> None:
-        """Builds the hierarchy and evaluates `material` once. `eps` = (ε₁, ε₂) [sr]: the
+        """Builds the hierarchy and evaluates `material` once. `world_shadows`: False lights
+        by the world's nine spherical-harmonic coefficients, unshadowed (Mertens 2003 §5.3,
+        no rays); True traces `world_samples` shadowed rays per point. `eps` = (ε₁, ε₂) [sr]: the
         receiver's and the emitter's solid-angle thresholds of the refinement oracle.
         `mode`: "on_the_fly" (everything from scratch each evaluation, no links kept),
         "render" (links kept; a light change gathers again over them), "incremental" (links
