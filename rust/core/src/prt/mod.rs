@@ -555,8 +555,8 @@ impl Prt {
                     allow_software,
                     half,
                 )?;
-                // Single scattering joins it there unless it holds spread light (CPU only).
-                if let Some(s) = self.single.as_ref().filter(|s| s.gpu_ready()) {
+                // Single scattering joins it there.
+                if let Some(s) = &self.single {
                     s.attach_to(&mut gpu)?;
                 }
                 self.gpu = Some(gpu);
@@ -775,8 +775,8 @@ impl Prt {
         }
         if let Some(gpu) = self.gpu.as_mut() {
             match &single {
-                Some(s) if s.gpu_ready() => s.attach_to(gpu)?,
-                _ => gpu.detach_single(),
+                Some(s) => s.attach_to(gpu)?,
+                None => gpu.detach_single(),
             }
         }
         self.single = single;
@@ -1330,29 +1330,8 @@ fn transport_row(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::tests::plane;
     use crate::optics::fresnel_transmittance;
-
-    /// A flat square grid of `n` x `n` vertices and side `size`, centred at the origin, normal +Z.
-    pub(crate) fn plane(n: usize, size: f32) -> Mesh {
-        let mut p = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                let x = size * (i as f32 / (n - 1) as f32 - 0.5);
-                let y = size * (j as f32 / (n - 1) as f32 - 0.5);
-                p.push(Vec3::new(x, y, 0.0));
-            }
-        }
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = (j * n + i) as u32;
-                let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
-                t.push([a, b, d]);
-                t.push([a, d, c]);
-            }
-        }
-        Mesh::new(p, t, None).unwrap()
-    }
 
     /// Irradiance of a sun of strength `e` at zenith angle `theta` on the +Z plane (Xu eq. 3
     /// for a delta light): F_t(eta, cos) E cos, the same at every point.

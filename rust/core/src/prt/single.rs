@@ -14,8 +14,9 @@
 //! light on a flat neighbourhood) and treats a spread of directions as HG-shaped (HG's
 //! convolution of g1 and g2 is HG of g1 g2) otherwise. One mean direction per group instead of
 //! per j left 2.2 % on the bunny's skin1 at g = 0.9; per j resolves how the entry normal turns
-//! with depth. The world's light, spread over the
-//! whole sphere, is where that is coarsest; a Legendre expansion for it is not built here.
+//! with depth. Light spread over many directions (area lights, the world), where one mean
+//! direction is coarsest, is kept instead as Y_lm moments of its directions and meets HG by
+//! the addition theorem (`spherical_harmonics`; `SingleSettings::legendre_tolerance`).
 
 use crate::basis::{Basis, Degree, Fitter};
 use crate::error::{Error, Result};
@@ -329,6 +330,22 @@ impl SingleScattering {
         }
     }
 
+    /// What an edit computes before its dot products, on either backend: the inputs checked,
+    /// E fitted per channel, and the error estimate (the fit's, plus the phase residual of
+    /// spread light).
+    fn prepare(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        phase: Phase,
+    ) -> Result<([Vec<f64>; 3], [f64; 3])> {
+        self.check(material, eye)?;
+        let (coeffs, mut error_estimate) = self.coefficients(material);
+        let residual = self.phase_residual(material, phase);
+        error_estimate.iter_mut().for_each(|e| *e += residual);
+        Ok((coeffs, error_estimate))
+    }
+
     fn check(&self, material: &Material, eye: Option<Vec3>) -> Result<()> {
         if let Some(e) = eye.filter(|e| !e.is_finite()) {
             return Err(Error::InvalidArgument(format!("eye {e:?} is not finite")));
@@ -340,12 +357,6 @@ impl SingleScattering {
             )));
         }
         Ok(())
-    }
-
-    /// Whether the GPU kernel can take this transport (every kind of light, since the Y_lm
-    /// moments of spread light joined it).
-    pub fn gpu_ready(&self) -> bool {
-        true
     }
 
     /// S_j, the vertices and the light colours as the GPU takes them
@@ -400,10 +411,7 @@ impl SingleScattering {
         phase: Phase,
     ) -> Result<(crate::gpu::SingleEdit, [f64; 3], f64)> {
         let t0 = Instant::now();
-        self.check(material, eye)?;
-        let (coeffs, mut error_estimate) = self.coefficients(material);
-        let residual = self.phase_residual(material, phase);
-        error_estimate.iter_mut().for_each(|e| *e += residual);
+        let (coeffs, error_estimate) = self.prepare(material, eye, phase)?;
         let edit = crate::gpu::SingleEdit {
             coefficients: coeffs
                 .iter()
@@ -458,10 +466,7 @@ impl SingleScattering {
         ms: Option<&mut [[f32; 3]]>,
     ) -> Result<SingleEvaluation> {
         let t0 = Instant::now();
-        self.check(material, eye)?;
-        let (coeffs, mut error_estimate) = self.coefficients(material);
-        let residual = self.phase_residual(material, phase);
-        error_estimate.iter_mut().for_each(|e| *e += residual);
+        let (coeffs, error_estimate) = self.prepare(material, eye, phase)?;
         let padded = n_padded(self.basis().len());
         let coeffs: [Vec<f32>; 3] = coeffs.map(|c| {
             let mut v = crate::basis::edit_coefficients(&c);
@@ -646,12 +651,12 @@ fn edit_chunk(
             // g^l Y_lm(w'_o) bound_l q_lm,j), q the stored moments / (S_j,0 bound_l).
             let mut y = [0f64; 81];
             sh::real_sh(k.order, dir.as_dvec3(), &mut y);
-            let weights: Vec<f32> = (0..comps)
-                .map(|c| {
-                    let l = sh::degree(c);
-                    (f64::from(k.g).powi(l as i32) * y[c] * sh::bound(l)) as f32
-                })
-                .collect();
+            // On the stack: this runs per vertex.
+            let mut weights = [0f32; 81];
+            for (c, w) in weights[..comps].iter_mut().enumerate() {
+                let l = sh::degree(c);
+                *w = (f64::from(k.g).powi(l as i32) * y[c] * sh::bound(l)) as f32;
+            }
             let words = &k.spread.words[vertex * spread_row..(vertex + 1) * spread_row];
             let scales = &k.spread.scales[vertex * spread_groups..(vertex + 1) * spread_groups];
             for (grp, colour) in k.spread_colours.iter().enumerate() {
@@ -666,7 +671,7 @@ fn edit_chunk(
                 );
                 for (j, (w, s)) in lanes_mut(weighted).zip(lanes(s0)).enumerate() {
                     let mut sum = f32x8::splat(INV_4PI);
-                    for (c, yc) in weights.iter().enumerate().skip(1) {
+                    for (c, yc) in weights[..comps].iter().enumerate().skip(1) {
                         let q = &moments[c * padded + j * LANES..c * padded + (j + 1) * LANES];
                         let q: [f32; LANES] = q.try_into().unwrap_or([0.0; LANES]);
                         sum += f32x8::splat(*yc) * f32x8::from(q);
