@@ -385,6 +385,7 @@ fn worst_rel_rms(a: &[[f64; 3]], b: &[[f64; 3]], w: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::tests::plane;
     use crate::profiles::Dipole;
     use crate::quadrature::GAUSS8;
 
@@ -439,28 +440,6 @@ mod tests {
                 "{x:?}: {exact} vs {bf}"
             );
         }
-    }
-
-    fn plane(n: usize, size: f32) -> Mesh {
-        let mut p = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                p.push(Vec3::new(
-                    size * (i as f32 / (n - 1) as f32 - 0.5),
-                    size * (j as f32 / (n - 1) as f32 - 0.5),
-                    0.0,
-                ));
-            }
-        }
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = (j * n + i) as u32;
-                t.push([a, a + 1, a + n as u32 + 1]);
-                t.push([a, a + n as u32 + 1, a + n as u32]);
-            }
-        }
-        Mesh::new(p, t, None).unwrap()
     }
 
     /// Jensen 2001 closed form, written out apart from `optics`.

@@ -486,31 +486,7 @@ pub fn reference_single(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::Mesh;
-
-    /// A square of side `size` in z = 0, `n` x `n` cells, normals +Z.
-    fn plane(n: usize, size: f32) -> Mesh {
-        let mut p = Vec::new();
-        for j in 0..=n {
-            for i in 0..=n {
-                p.push(Vec3::new(
-                    size * (i as f32 / n as f32 - 0.5),
-                    size * (j as f32 / n as f32 - 0.5),
-                    0.0,
-                ));
-            }
-        }
-        let mut t = Vec::new();
-        let w = (n + 1) as u32;
-        for j in 0..n as u32 {
-            for i in 0..n as u32 {
-                let a = j * w + i;
-                t.push([a, a + 1, a + w + 1]);
-                t.push([a, a + w + 1, a + w]);
-            }
-        }
-        Mesh::new(p, t, None).unwrap()
-    }
+    use crate::mesh::tests::plane;
 
     fn ft(eta: f64, c: f64) -> f64 {
         let ct = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();
@@ -535,7 +511,7 @@ mod tests {
 
     #[test]
     fn brute_force_meets_the_plane_limit_under_a_sun() {
-        let mesh = plane(8, 40.0);
+        let mesh = plane(9, 40.0);
         let mut scene = Scene::new(mesh);
         let tracer = Tracer::new(&scene.mesh);
         for (theta, g) in [(0.0f64, 0.0), (0.6, 0.3), (1.1, -0.3), (0.4, 0.9)] {

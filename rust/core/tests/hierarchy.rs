@@ -3,6 +3,8 @@
 //! mesh under shadowing lights, and itself across modes (render after a light move equals a
 //! fresh on-the-fly evaluation; incremental after a deformation equals a fresh build).
 
+mod common;
+use common::plane;
 use translucent_core::hierarchy::{Hierarchy, HierarchySettings, Mode};
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
 use translucent_core::lights::{Light, World};
@@ -14,28 +16,6 @@ use translucent_core::raytrace::Tracer;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::scene::Scene;
 use translucent_core::Vec3;
-
-fn plane(n: usize, size: f32) -> Mesh {
-    let mut p = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            p.push(Vec3::new(
-                size * (i as f32 / (n - 1) as f32 - 0.5),
-                size * (j as f32 / (n - 1) as f32 - 0.5),
-                0.0,
-            ));
-        }
-    }
-    let mut t = Vec::new();
-    for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let a = (j * n + i) as u32;
-            t.push([a, a + 1, a + n as u32 + 1]);
-            t.push([a, a + n as u32 + 1, a + n as u32]);
-        }
-    }
-    Mesh::new(p, t, None).unwrap()
-}
 
 /// A closed, lumpy sphere of radius ~`r` (a UV sphere with a bump), normals outward.
 fn lumpy_sphere(r: f32, rings: usize, segments: usize, bump: f32) -> Mesh {

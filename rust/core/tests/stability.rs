@@ -35,6 +35,8 @@
 //! dipole for vanishing extinction, `support_radius` without absorption, the full inner disc
 //! at open boundaries, and the phantom radiosity of an isolated vertex off the surface.
 
+mod common;
+use common::{mesh, plane_parts, sphere_parts};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 use std::f64::consts::PI;
@@ -201,63 +203,6 @@ fn elasticity_rd(d: &Dipole, r: f64, eta: f64, g: f64, which: Which) -> f64 {
 }
 
 // ------------------------------------------------------------------------------ meshes
-
-/// A flat square grid of n x n vertices and side `size`, centred at the origin, normal +Z.
-fn plane(n: usize, size: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let mut p = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let x = size * (i as f32 / (n - 1) as f32 - 0.5);
-            let y = size * (j as f32 / (n - 1) as f32 - 0.5);
-            p.push(Vec3::new(x, y, 0.0));
-        }
-    }
-    let mut t = Vec::new();
-    for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let a = (j * n + i) as u32;
-            let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
-            t.push([a, b, d]);
-            t.push([a, d, c]);
-        }
-    }
-    (p, t)
-}
-
-/// A closed UV sphere of `radius`: n - 1 rings of 2n vertices and two poles.
-fn sphere(n: usize, radius: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let mut p = vec![Vec3::new(0.0, 0.0, radius)];
-    for i in 1..n {
-        let th = std::f32::consts::PI * i as f32 / n as f32;
-        for j in 0..2 * n {
-            let ph = std::f32::consts::PI * j as f32 / n as f32;
-            p.push(radius * Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()));
-        }
-    }
-    p.push(Vec3::new(0.0, 0.0, -radius));
-    let seg = 2 * n;
-    let last = (p.len() - 1) as u32;
-    let ring = |i: usize, j: usize| (1 + (i - 1) * seg + (j % seg)) as u32;
-    let mut t: Vec<[u32; 3]> = (0..seg).map(|j| [0, ring(1, j), ring(1, j + 1)]).collect();
-    for i in 1..n - 1 {
-        for j in 0..seg {
-            let (a, b, c, d) = (
-                ring(i, j),
-                ring(i, j + 1),
-                ring(i + 1, j),
-                ring(i + 1, j + 1),
-            );
-            t.push([a, c, d]);
-            t.push([a, d, b]);
-        }
-    }
-    t.extend((0..seg).map(|j| [last, ring(n - 1, j + 1), ring(n - 1, j)]));
-    (p, t)
-}
-
-fn mesh((p, t): (Vec<Vec3>, Vec<[u32; 3]>)) -> Mesh {
-    Mesh::new(p, t, None).expect("a valid test mesh")
-}
 
 fn scaled((p, t): (Vec<Vec3>, Vec<[u32; 3]>), s: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     (p.into_iter().map(|x| x * s).collect(), t)
@@ -679,7 +624,7 @@ proptest! {
         eta in 1.0f64..2.5,
         receiver in 25u32..u32::MAX,
     ) {
-        let mesh = mesh(plane(5, 1.0));
+        let mesh = mesh(plane_parts(5, 1.0));
         let m = Material::preset("marble", 10.0).unwrap();
         let m = Material::new(m.sigma_a, m.sigma_s, 0.0, eta).unwrap();
         let good = PrtSettings { eta, samples: Some(200), ..Default::default() };
@@ -748,7 +693,7 @@ proptest! {
         let o = Params { eta: p.eta, ..other }.material();
         let e = 1.0f32;
         let lit = Lit::new(
-            mesh(scaled(sphere(6, 1.0), s as f32)),
+            mesh(scaled(sphere_parts(6, 1.0), s as f32)),
             vec![Light::sun(sun, [e; 3]).unwrap()],
             World::uniform([world; 3]).unwrap(),
             m.eta,
@@ -817,7 +762,7 @@ proptest! {
         theta in 0.0f64..1.2,
     ) {
         let m = p.material();
-        let lit = Lit::sun(mesh(plane(41, s as f32)), sun_at(theta), 1.0, m.eta);
+        let lit = Lit::sun(mesh(plane_parts(41, s as f32)), sun_at(theta), 1.0, m.eta);
         let b = lit.prt(&[m], Some(40_000)).unwrap().radiosity(&m).unwrap().radiosity;
         let centre = nearest(lit.mesh(), Vec3::ZERO);
         let i = entering(1.0, theta, m.eta);
@@ -848,7 +793,7 @@ proptest! {
         eta in prop_oneof![Just(1.0), Just(2.5), 1.0f64..2.5],
         theta in 0.0f64..1.2,
     ) {
-        let lit = Lit::sun(mesh(plane(21, s as f32)), sun_at(theta), 1.0, eta);
+        let lit = Lit::sun(mesh(plane_parts(21, s as f32)), sun_at(theta), 1.0, eta);
         let i = entering(1.0, theta, eta);
         let centre = nearest(lit.mesh(), Vec3::ZERO);
         let tail_scale = 2.0 + 4.0 * boundary(eta).0 / 3.0;
@@ -888,7 +833,7 @@ proptest! {
         eta in 1.0f64..2.5,
         sun in unit_direction(),
     ) {
-        let lit = Lit::sun(mesh(scaled(sphere(12, 1.0), s as f32)), sun, 1.0, eta);
+        let lit = Lit::sun(mesh(scaled(sphere_parts(12, 1.0), s as f32)), sun, 1.0, eta);
         let st = 1e5 / s;
         let m = Material::new([(1.0 - albedo) * st; 3], [albedo * st; 3], 0.0, eta).unwrap();
         let b = lit.prt(&[m], Some(20_000)).unwrap().radiosity(&m).unwrap().radiosity;
@@ -928,7 +873,7 @@ proptest! {
         let (s, tol) = if decimal { (10f64.powi(k * 4 / 13), 5e-3) } else { (2f64.powi(k), 1e-6) };
         let run = |s: f64| {
             let ms = Material::new(m.sigma_a.map(|x| x / s), m.sigma_s.map(|x| x / s), m.g, m.eta).unwrap();
-            let lit = Lit::new(mesh(scaled(sphere(8, 1.0), s as f32)),
+            let lit = Lit::new(mesh(scaled(sphere_parts(8, 1.0), s as f32)),
                 vec![Light::sun(sun, [1.0; 3]).unwrap()], World::uniform([0.2; 3]).unwrap(), m.eta);
             lit.prt(&[ms], Some(5000)).unwrap().radiosity(&ms).unwrap().radiosity
         };
@@ -993,7 +938,7 @@ proptest! {
     ) {
         let m = p.material();
         let n = 11;
-        let (pos, tris) = scaled(plane(n, 1.0), s as f32);
+        let (pos, tris) = scaled(plane_parts(n, 1.0), s as f32);
         let clean = Lit::sun(Mesh::new(pos.clone(), tris.clone(), None).unwrap(), sun_at(theta), 1.0, m.eta);
         let b_clean = clean.prt(&[m], Some(3000)).unwrap().radiosity(&m).unwrap().radiosity;
 
@@ -1096,7 +1041,7 @@ proptest! {
         y in -0.3f32..0.3,
     ) {
         let n = 11;
-        let (mut pos, tris) = scaled(plane(n, 1.0), s as f32);
+        let (mut pos, tris) = scaled(plane_parts(n, 1.0), s as f32);
         let centre = (n * n / 2) as u32;
         pos.push(pos[centre as usize]);
         pos.push(Vec3::new(x, y, 0.0) * s as f32);
@@ -1171,7 +1116,7 @@ fn support_radius_without_absorption_is_finite() {
 
 fn open_boundaries_get_the_share_of_the_near_disc_that_is_there() {
     let m = Material::new([100.0; 3], [1000.0; 3], 0.0, 1.3).unwrap();
-    let lit = Lit::sun(mesh(plane(21, 1.0)), -Vec3::Z, 1.0, m.eta);
+    let lit = Lit::sun(mesh(plane_parts(21, 1.0)), -Vec3::Z, 1.0, m.eta);
     let b = lit
         .prt(&[m], Some(20_000))
         .unwrap()
@@ -1199,7 +1144,7 @@ fn open_boundaries_get_the_share_of_the_near_disc_that_is_there() {
 #[test]
 
 fn an_isolated_vertex_off_the_surface_gets_no_radiosity() {
-    let (mut p, t) = plane(11, 1.0);
+    let (mut p, t) = plane_parts(11, 1.0);
     p.push(Vec3::new(0.0, 0.0, 5.0));
     p.push(Vec3::new(3.0, 3.0, 0.0));
     let m = Material::preset("marble", 10.0).unwrap();

@@ -1,0 +1,72 @@
+//! Test meshes shared by the integration tests (each test crate uses part of them).
+#![allow(dead_code)]
+
+use translucent_core::mesh::Mesh;
+use translucent_core::Vec3;
+
+/// A flat square grid of `n` x `n` vertices and side `size`, centred at the origin, normal +Z.
+pub fn plane_parts(n: usize, size: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let mut p = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let x = size * (i as f32 / (n - 1) as f32 - 0.5);
+            let y = size * (j as f32 / (n - 1) as f32 - 0.5);
+            p.push(Vec3::new(x, y, 0.0));
+        }
+    }
+    let mut t = Vec::new();
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = (j * n + i) as u32;
+            let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
+            t.push([a, b, d]);
+            t.push([a, d, c]);
+        }
+    }
+    (p, t)
+}
+
+/// `plane_parts` as a mesh.
+pub fn plane(n: usize, size: f32) -> Mesh {
+    mesh(plane_parts(n, size))
+}
+
+/// A closed UV sphere of `radius`: n - 1 rings of 2n vertices and two poles, normals outward.
+pub fn sphere_parts(n: usize, radius: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let mut p = vec![Vec3::new(0.0, 0.0, radius)];
+    for i in 1..n {
+        let th = std::f32::consts::PI * i as f32 / n as f32;
+        for j in 0..2 * n {
+            let ph = std::f32::consts::PI * j as f32 / n as f32;
+            p.push(radius * Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()));
+        }
+    }
+    p.push(Vec3::new(0.0, 0.0, -radius));
+    let seg = 2 * n;
+    let last = (p.len() - 1) as u32;
+    let ring = |i: usize, j: usize| (1 + (i - 1) * seg + (j % seg)) as u32;
+    let mut t: Vec<[u32; 3]> = (0..seg).map(|j| [0, ring(1, j), ring(1, j + 1)]).collect();
+    for i in 1..n - 1 {
+        for j in 0..seg {
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i, j + 1),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+            );
+            t.push([a, c, d]);
+            t.push([a, d, b]);
+        }
+    }
+    t.extend((0..seg).map(|j| [last, ring(n - 1, j + 1), ring(n - 1, j)]));
+    (p, t)
+}
+
+/// `sphere_parts` as a mesh.
+pub fn sphere(n: usize, radius: f32) -> Mesh {
+    mesh(sphere_parts(n, radius))
+}
+
+pub fn mesh((p, t): (Vec<Vec3>, Vec<[u32; 3]>)) -> Mesh {
+    Mesh::new(p, t, None).expect("a valid test mesh")
+}
