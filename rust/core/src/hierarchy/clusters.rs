@@ -69,14 +69,6 @@ fn outer(d: DVec3) -> [f64; 6] {
     ]
 }
 
-/// uᵀ S u for a symmetric S stored as (xx, yy, zz, xy, xz, yz).
-pub fn quadratic_form(s: &[f64; 6], u: DVec3) -> f64 {
-    s[0] * u.x * u.x
-        + s[1] * u.y * u.y
-        + s[2] * u.z * u.z
-        + 2.0 * (s[3] * u.x * u.y + s[4] * u.x * u.z + s[5] * u.y * u.z)
-}
-
 impl ClusterTree {
     pub fn root(&self) -> u32 {
         (self.children.len() - 1) as u32

@@ -25,7 +25,8 @@
 //! to its children on the way down (push, §3.2). It either gathers at once (on-the-fly) or
 //! records the links per receiver (render and incremental modes).
 
-use super::clusters::{quadratic_form, ClusterTree};
+use super::clusters::ClusterTree;
+use super::far::FarEmitters;
 use crate::profiles::{LookupProfile, LookupRgb};
 use crate::surface_integral::{triangle_integral_rgb, EdgeRule, Triangle};
 use glam::DVec3;
@@ -45,6 +46,8 @@ pub struct Context<'a> {
     pub profiles: &'a [LookupProfile; 3],
     /// The same three profiles' R on one table, for the far links.
     pub rgb: &'a LookupRgb,
+    /// The clusters as far emitters (after `pull`).
+    pub far: &'a FarEmitters,
     pub eps_receiver: f64,
     pub eps_emitter: f64,
     /// Largest support radius over the channels: emitters farther away are dropped.
@@ -165,30 +168,6 @@ impl Context<'_> {
         }
     }
 
-    /// The emitter as a point sample (Mertens eq. 6), power × R, with R averaged over the
-    /// emitter's spread instead of taken at its centre (a departure: R is convex, so one
-    /// sample at the centroid underestimates by about ½ R'' σ²). Sigma points of the
-    /// covariance S about the irradiance-weighted centroid: a tangential spread s_t² moves the
-    /// surface out to √(d² + s_t²); the radial variance s_r² = uᵀSu by R(d′ ± s_r) / 2.
-    #[inline]
-    pub fn far_contribution(&self, r: u32, e: u32) -> [f64; 3] {
-        let t = self.tree;
-        let offset = t.emission_centroid[e as usize] - t.centroid[r as usize];
-        let d2 = offset.length_squared();
-        let s = &t.spread[e as usize];
-        let trace = s[0] + s[1] + s[2];
-        let radial = if d2 > 0.0 {
-            quadratic_form(s, offset) / d2
-        } else {
-            trace / 3.0
-        };
-        let d = (d2 + (trace - radial).max(0.0)).sqrt();
-        let sr = radial.max(0.0).sqrt().min(0.9 * d);
-        let p = &t.power[e as usize];
-        let (lo, hi) = (self.rgb.value(d - sr), self.rgb.value(d + sr));
-        std::array::from_fn(|c| 0.5 * p[c] * (lo[c] + hi[c]))
-    }
-
     /// The form factor F(A_E, c_R) per channel (Mertens eq. 7, §4).
     pub fn form_factor(&self, r: u32, e: u32) -> [f32; 3] {
         let x = self.tree.centroid[r as usize];
@@ -248,11 +227,9 @@ impl Context<'_> {
 
     /// The radiosity node `r` gathers over `links`.
     pub fn gather(&self, r: u32, links: &NodeLinks) -> [f64; 3] {
-        let mut b = [0.0f64; 3];
-        for &e in &links.far {
-            let v = self.far_contribution(r, e);
-            (0..3).for_each(|c| b[c] += v[c]);
-        }
+        let mut b = self
+            .far
+            .sum(self.tree.centroid[r as usize], &links.far, self.rgb);
         for (e, f) in &links.near {
             let v = self.near_contribution(*e, f);
             (0..3).for_each(|c| b[c] += v[c]);

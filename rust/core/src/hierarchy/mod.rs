@@ -20,6 +20,7 @@
 //! samples it.
 
 pub mod clusters;
+pub mod far;
 pub mod links;
 
 use crate::error::{Error, Result};
@@ -32,6 +33,7 @@ use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use crate::surface_integral::{EdgeRule, Triangle};
 use clusters::ClusterTree;
+use far::FarEmitters;
 use glam::Vec3;
 use links::{Context, LinkCounts, NodeLinks, Slot};
 use rayon::prelude::*;
@@ -141,6 +143,8 @@ pub struct Hierarchy {
     tree: ClusterTree,
     faces: Vec<Triangle>,
     slots: Vec<Slot>,
+    /// The clusters as far emitters, rebuilt after each pull.
+    far: FarEmitters,
     has_links: bool,
     /// Face irradiance and the eta it was taken with; None when stale.
     face_irradiance: Option<(Vec<[f32; 3]>, f64)>,
@@ -202,6 +206,7 @@ impl Hierarchy {
             tree,
             faces,
             has_links: false,
+            far: FarEmitters::default(),
             face_irradiance: None,
             vertex_irradiance: None,
             profiles: None,
@@ -333,6 +338,7 @@ impl Hierarchy {
             faces: &self.faces,
             profiles: lookup,
             rgb,
+            far: &self.far,
             eps_receiver: self.settings.eps_receiver * scale,
             eps_emitter: self.settings.eps_emitter * scale,
             support: lookup.iter().map(|p| p.support()).fold(0.0, f64::max),
@@ -384,6 +390,7 @@ impl Hierarchy {
         if let Some((irr, _)) = &self.face_irradiance {
             self.tree.pull(irr);
         }
+        self.far.update(&self.tree);
         report.seconds_pull = t.elapsed().as_secs_f64();
 
         let (_, lookup, rgb) = self

@@ -139,6 +139,8 @@ pub struct LookupRgb {
     support: f64,
     scale: f64,
     value: Vec<[f64; 3]>,
+    /// The same nodes in f32, padded to four lanes (for SIMD readers).
+    value32: Vec<[f32; 4]>,
 }
 
 impl LookupRgb {
@@ -159,8 +161,18 @@ impl LookupRgb {
             } else {
                 0.0
             },
+            value32: value
+                .iter()
+                .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0])
+                .collect(),
             value,
         }
+    }
+
+    /// The f32 nodes (NODES + 1 of them, at u = √ρ · scale = 0, 1, ..., NODES), the scale and
+    /// the support: R at ρ is the linear interpolation at u, and 0 from the support on.
+    pub fn f32_table(&self) -> (&[[f32; 4]], f64, f64) {
+        (&self.value32, self.scale, self.support)
     }
 
     /// R(r) of the three channels.
