@@ -107,6 +107,28 @@ pub fn irradiance(
     normals: &[Vec3],
     settings: &IrradianceSettings,
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+    irradiance_of(
+        scene.mesh.bounds(),
+        &scene.lights,
+        &scene.world,
+        tracer,
+        points,
+        normals,
+        settings,
+    )
+}
+
+/// The same from `lights` and `world` alone; `bounds` is the mesh's box (lights that cannot
+/// reach it are left out).
+pub fn irradiance_of(
+    bounds: (Vec3, Vec3),
+    lights: &[Light],
+    world: &World,
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
     if points.len() != normals.len() {
         return Err(Error::InvalidArgument(format!(
             "{} points but {} normals",
@@ -120,14 +142,14 @@ pub fn irradiance(
             settings.eta
         )));
     }
-    let (lo, hi) = scene.mesh.bounds();
-    let emitting: Vec<&Light> = scene.lights.iter().filter(|l| !l.is_black()).collect();
-    let lights: Vec<&Light> = emitting
+    let (lo, hi) = bounds;
+    let emitting: Vec<&Light> = lights.iter().filter(|l| !l.is_black()).collect();
+    let reaching: Vec<&Light> = emitting
         .iter()
         .copied()
         .filter(|l| l.can_reach(lo, hi))
         .collect();
-    let world = (!scene.world.is_black()).then_some(&scene.world);
+    let world = (!world.is_black()).then_some(world);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
     let world_sh = world.filter(|_| settings.world_unshadowed).map(|w| {
         let l = sh::project(2, 32, &|d| w.radiance(d.as_vec3()).map(f64::from));
@@ -155,7 +177,7 @@ pub fn irradiance(
                 return ([0.0; 3], 0);
             }
             let mut sum = [0.0f32; 3];
-            for l in &lights {
+            for l in &reaching {
                 add(&mut sum, est.light(l, settings.area_samples.max(1)));
             }
             if let Some(coefficients) = &world_sh {
@@ -178,12 +200,96 @@ pub fn irradiance(
         .collect();
     let report = IrradianceReport {
         rays: results.iter().map(|r| r.1).sum(),
-        lights_used: lights.len(),
-        lights_skipped: scene.lights.len() - emitting.len(),
-        lights_unreached: emitting.len() - lights.len(),
+        lights_used: reaching.len(),
+        lights_skipped: lights.len() - emitting.len(),
+        lights_unreached: emitting.len() - reaching.len(),
         world_skipped: world.is_none(),
     };
     Ok((results.into_iter().map(|r| r.0).collect(), report))
+}
+
+/// Irradiance at fixed points kept light by light (and the world), so that a changed scene
+/// casts rays only for the lights that changed: moving one light leaves the others' work as it
+/// was. The points must stay the same between calls (`clear` when they move); other settings
+/// clear it on their own.
+#[derive(Debug, Default)]
+pub struct PerSource {
+    settings: Option<IrradianceSettings>,
+    parts: Vec<(Source, Vec<[f32; 3]>)>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Source {
+    Light(Light),
+    World(World),
+}
+
+impl PerSource {
+    /// Forgets every light's values (the points moved).
+    pub fn clear(&mut self) {
+        self.parts.clear();
+        self.settings = None;
+    }
+
+    /// `irradiance(scene, ...)` with the values of lights seen before reused; the report's
+    /// rays are those cast now.
+    pub fn evaluate(
+        &mut self,
+        scene: &Scene,
+        tracer: &Tracer,
+        points: &[Vec3],
+        normals: &[Vec3],
+        settings: &IrradianceSettings,
+    ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+        if self.settings.as_ref() != Some(settings) {
+            self.clear();
+            self.settings = Some(settings.clone());
+        }
+        let bounds = scene.mesh.bounds();
+        let emitting: Vec<&Light> = scene.lights.iter().filter(|l| !l.is_black()).collect();
+        let mut sources: Vec<Source> = emitting
+            .iter()
+            .filter(|l| l.can_reach(bounds.0, bounds.1))
+            .map(|l| Source::Light((*l).clone()))
+            .collect();
+        let lights_used = sources.len();
+        if !scene.world.is_black() {
+            sources.push(Source::World(scene.world.clone()));
+        }
+        let mut old = std::mem::take(&mut self.parts);
+        let mut rays = 0;
+        for src in sources {
+            let kept = old
+                .iter()
+                .position(|(s, v)| *s == src && v.len() == points.len());
+            let values = match kept {
+                Some(i) => old.swap_remove(i).1,
+                None => {
+                    let (lights, world) = match &src {
+                        Source::Light(l) => (std::slice::from_ref(l), &World::Black),
+                        Source::World(w) => (&[][..], w),
+                    };
+                    let (v, r) =
+                        irradiance_of(bounds, lights, world, tracer, points, normals, settings)?;
+                    rays += r.rays;
+                    v
+                }
+            };
+            self.parts.push((src, values));
+        }
+        let mut sum = vec![[0.0f32; 3]; points.len()];
+        for (_, v) in &self.parts {
+            sum.par_iter_mut().zip(v).for_each(|(s, x)| add(s, *x));
+        }
+        let report = IrradianceReport {
+            rays,
+            lights_used,
+            lights_skipped: scene.lights.len() - emitting.len(),
+            lights_unreached: emitting.len() - lights_used,
+            world_skipped: scene.world.is_black(),
+        };
+        Ok((sum, report))
+    }
 }
 
 fn add(sum: &mut [f32; 3], x: [f32; 3]) {
@@ -378,6 +484,67 @@ mod tests {
             ..Default::default()
         };
         irradiance(s, &tracer, pts, &vec![Vec3::Z; pts.len()], &settings).unwrap()
+    }
+
+    #[test]
+    fn per_source_casts_rays_only_for_the_lights_that_changed() {
+        let mut s = scene(4.0, true);
+        let pts: Vec<Vec3> = (0..25)
+            .map(|i| {
+                Vec3::new(
+                    -1.0 + 0.5 * (i % 5) as f32,
+                    -1.0 + 0.5 * (i / 5) as f32,
+                    0.0,
+                )
+            })
+            .collect();
+        let normals = vec![Vec3::Z; pts.len()];
+        let tracer = Tracer::new(&s.mesh);
+        let settings = IrradianceSettings::default();
+        s.lights = vec![
+            Light::sun(Vec3::new(0.3, 0.2, -1.0), [2.0; 3]).unwrap(),
+            Light::point(Vec3::new(0.5, 0.0, 3.0), [40.0, 20.0, 10.0]).unwrap(),
+        ];
+        let mut cache = PerSource::default();
+        let (a, ra) = cache
+            .evaluate(&s, &tracer, &pts, &normals, &settings)
+            .unwrap();
+        assert_eq!(ra.rays, 50, "both lights, every point");
+        // The point light moves; the sun stays.
+        s.lights[1] = Light::point(Vec3::new(-0.5, 0.4, 2.0), [40.0, 20.0, 10.0]).unwrap();
+        let (b, rb) = cache
+            .evaluate(&s, &tracer, &pts, &normals, &settings)
+            .unwrap();
+        assert_eq!(rb.rays, 25, "only the moved light casts rays");
+        let (fresh, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+        for (x, y) in b.iter().zip(&fresh) {
+            for c in 0..3 {
+                assert!(
+                    (x[c] - y[c]).abs() <= 1e-6 * y[c].abs().max(1.0),
+                    "{x:?} vs {y:?}"
+                );
+            }
+        }
+        assert!(a.iter().zip(&b).any(|(x, y)| (x[0] - y[0]).abs() > 0.01));
+        // Nothing changed: no rays; a light removed: no rays and its share gone.
+        let (_, rc) = cache
+            .evaluate(&s, &tracer, &pts, &normals, &settings)
+            .unwrap();
+        assert_eq!(rc.rays, 0);
+        s.lights.truncate(1);
+        let (d, rd) = cache
+            .evaluate(&s, &tracer, &pts, &normals, &settings)
+            .unwrap();
+        assert_eq!(rd.rays, 0);
+        let (sun_only, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+        assert_eq!(d, sun_only);
+        // Another eta is another irradiance: everything again.
+        let eta = IrradianceSettings {
+            eta: 1.4,
+            ..settings
+        };
+        let (_, re) = cache.evaluate(&s, &tracer, &pts, &normals, &eta).unwrap();
+        assert_eq!(re.rays, 25);
     }
 
     /// Unpolarised dielectric transmittance written out apart from `optics`.

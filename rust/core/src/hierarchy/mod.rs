@@ -24,7 +24,7 @@ pub mod far;
 pub mod links;
 
 use crate::error::{Error, Result};
-use crate::irradiance::{irradiance, Density, IrradianceSettings};
+use crate::irradiance::{Density, IrradianceSettings, PerSource};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
 use crate::optics::Material;
@@ -148,6 +148,9 @@ pub struct Hierarchy {
     has_links: bool,
     /// Face irradiance and the eta it was taken with; None when stale.
     face_irradiance: Option<(Vec<[f32; 3]>, f64)>,
+    /// Each light's share of it, so that a moved light costs only its own rays.
+    face_sources: PerSource,
+    vertex_sources: PerSource,
     vertex_irradiance: Option<(Vec<[f32; 3]>, f64)>,
     profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
     geometry_changed: bool,
@@ -208,6 +211,8 @@ impl Hierarchy {
             has_links: false,
             far: FarEmitters::default(),
             face_irradiance: None,
+            face_sources: PerSource::default(),
+            vertex_sources: PerSource::default(),
             vertex_irradiance: None,
             profiles: None,
             geometry_changed: false,
@@ -252,10 +257,13 @@ impl Hierarchy {
         self.geometry_changed = true;
         self.face_irradiance = None;
         self.vertex_irradiance = None;
+        self.face_sources.clear();
+        self.vertex_sources.clear();
         Ok(())
     }
 
-    /// New lights and world: the next evaluation samples the irradiance again.
+    /// New lights and world: the next evaluation samples the irradiance again, for the lights
+    /// that changed only (`irradiance::PerSource`).
     pub fn set_lights(&mut self, lights: Vec<Light>, world: World) {
         self.scene.lights = lights;
         self.scene.world = world;
@@ -291,7 +299,9 @@ impl Hierarchy {
             })
             .unzip();
         let s = self.irradiance_settings(eta, Density::Dense);
-        let (values, r) = irradiance(&self.scene, &self.tracer, &points, &normals, &s)?;
+        let (values, r) =
+            self.face_sources
+                .evaluate(&self.scene, &self.tracer, &points, &normals, &s)?;
         self.face_irradiance = Some((values, eta));
         Ok(r.rays)
     }
@@ -302,7 +312,7 @@ impl Hierarchy {
         }
         let mesh = &self.scene.mesh;
         let s = self.irradiance_settings(eta, Density::Receivers);
-        let (values, r) = irradiance(
+        let (values, r) = self.vertex_sources.evaluate(
             &self.scene,
             &self.tracer,
             mesh.positions(),
