@@ -139,7 +139,7 @@ pub struct LookupRgb {
     support: f64,
     scale: f64,
     value: Vec<[f64; 3]>,
-    /// The same nodes in f32, padded to four lanes (for SIMD readers).
+    /// The same nodes in f32, padded to four lanes (for SIMD readers), and two zero nodes.
     value32: Vec<[f32; 4]>,
 }
 
@@ -164,13 +164,15 @@ impl LookupRgb {
             value32: value
                 .iter()
                 .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0])
+                .chain([[0.0; 4]; 2])
                 .collect(),
             value,
         }
     }
 
-    /// The f32 nodes (NODES + 1 of them, at u = √ρ · scale = 0, 1, ..., NODES), the scale and
-    /// the support: R at ρ is the linear interpolation at u, and 0 from the support on.
+    /// The f32 nodes (NODES + 1 of them, at u = √ρ · scale = 0, 1, ..., NODES, then two zeros
+    /// that a reader past the support may land on), the scale and the support: R at ρ is the
+    /// linear interpolation at u, and 0 from the support on.
     pub fn f32_table(&self) -> (&[[f32; 4]], f64, f64) {
         (&self.value32, self.scale, self.support)
     }
