@@ -172,6 +172,44 @@ fn radiosity_matches_the_ground_truth_on_a_lumpy_sphere() {
 }
 
 #[test]
+fn vertices_on_an_open_edge_match_the_ground_truth() {
+    // A 20 mm sheet of 0.67 mm faces under the sun: along its edges the surface lies on one
+    // side only, and B falls toward the edge within the profile's near length, which the
+    // faces' centroids (inside) overstated: 28-36 % RMS, 97 % at a corner, for the dipole
+    // before the rim's vertices gathered at themselves; now 0.2-0.5 % (dipole) and 3.1-4.2 %
+    // (Cycles' profile: the rest of that gap is not yet explained).
+    let n = 31;
+    let mesh = plane(n, 20.0);
+    let on_edge = |v: usize| {
+        let (i, j) = (v % n, v / n);
+        i == 0 || j == 0 || i == n - 1 || j == n - 1
+    };
+    let receivers: Vec<u32> = (0..n * n)
+        .filter(|&v| on_edge(v))
+        .step_by(3)
+        .map(|v| v as u32)
+        .collect();
+    let weights = vec![1.0f32; receivers.len()];
+    let mut scene = Scene::new(mesh);
+    scene
+        .lights
+        .push(Light::sun(Vec3::new(0.2, 0.1, -1.0), [1.0; 3]).unwrap());
+    for name in ["marble", "skimmilk"] {
+        let m = Material::preset(name, 1.0).unwrap();
+        for model in [Model::Dipole, Model::Cycles] {
+            let mut h = Hierarchy::new(scene.clone(), settings(model, Mode::OnTheFly)).unwrap();
+            let b = h.radiosity(&m).unwrap();
+            let b: Vec<[f32; 3]> = receivers.iter().map(|&v| b[v as usize]).collect();
+            let t = truth(&scene, &m, model, &receivers);
+            let e = relative_error(&b, &t, &weights).unwrap();
+            eprintln!("edge, {name} {model:?}: {e:?}");
+            let bar = if model == Model::Dipole { 0.02 } else { 0.05 };
+            assert!(e.worst_rms() < bar, "{name} {model:?}: {e:?}");
+        }
+    }
+}
+
+#[test]
 fn render_mode_after_a_light_move_equals_a_fresh_evaluation() {
     let mesh = lumpy_sphere(10.0, 16, 32, 0.1);
     let m = Material::preset("skin1", 1.0).unwrap();

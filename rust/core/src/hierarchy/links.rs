@@ -225,6 +225,35 @@ impl Context<'_> {
         }
     }
 
+    /// Every link of leaf `r`, refined from the root at `r` alone (a leaf cannot pass
+    /// candidates down): what `r` gathers from the whole surface.
+    pub fn links_of_leaf(&self, r: u32) -> NodeLinks {
+        let mut links = NodeLinks::default();
+        let (mut down, mut counts) = (Vec::new(), LinkCounts::default());
+        self.refine_at(
+            r,
+            vec![self.tree.root()],
+            &mut links,
+            &mut down,
+            &mut counts,
+        );
+        debug_assert!(down.is_empty());
+        links
+    }
+
+    /// The radiosity at the point `x` over `links` (refined for a receiver near `x`): far
+    /// links sampled from `x`, near faces integrated from `x`.
+    pub fn gather_at(&self, x: DVec3, links: &NodeLinks) -> [f64; 3] {
+        let mut b = self.far.sum(x, &links.far, self.rgb);
+        for (e, _) in &links.near {
+            let face = &self.faces[self.tree.face[*e as usize] as usize];
+            let f = triangle_integral_rgb(x, face, self.profiles, &self.rule).map(|v| v as f32);
+            let v = self.near_contribution(*e, &f);
+            (0..3).for_each(|c| b[c] += v[c]);
+        }
+        b
+    }
+
     /// The radiosity node `r` gathers over `links`.
     pub fn gather(&self, r: u32, links: &NodeLinks) -> [f64; 3] {
         let mut b = self

@@ -143,6 +143,10 @@ pub struct Hierarchy {
     tree: ClusterTree,
     faces: Vec<Triangle>,
     slots: Vec<Slot>,
+    /// Vertices on a hole's rim with the faces around each, gathered at the vertex itself.
+    rim: Vec<(u32, Vec<u32>)>,
+    /// The leaf node of each face.
+    leaf_of_face: Vec<u32>,
     /// The clusters as far emitters, rebuilt after each pull.
     far: FarEmitters,
     has_links: bool,
@@ -155,6 +159,28 @@ pub struct Hierarchy {
     profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
     geometry_changed: bool,
     report: HierarchyReport,
+}
+
+/// The vertices on an open boundary (coverage below 1: a hole's rim, a sheet's edge) with the
+/// faces around each.
+fn rim_vertices(mesh: &Mesh) -> Vec<(u32, Vec<u32>)> {
+    let coverage = mesh.vertex_coverage();
+    let mut rim: Vec<(u32, Vec<u32>)> = Vec::new();
+    let mut slot = vec![u32::MAX; coverage.len()];
+    for (v, c) in coverage.iter().enumerate() {
+        if *c > 0.0 && *c < 1.0 {
+            slot[v] = rim.len() as u32;
+            rim.push((v as u32, Vec::new()));
+        }
+    }
+    for (f, t) in mesh.triangles().iter().enumerate() {
+        for &v in t {
+            if slot[v as usize] != u32::MAX {
+                rim[slot[v as usize] as usize].1.push(f as u32);
+            }
+        }
+    }
+    rim
 }
 
 fn faces_of(mesh: &Mesh) -> Vec<Triangle> {
@@ -193,6 +219,13 @@ impl Hierarchy {
         let tracer = Tracer::new(&scene.mesh);
         let mut tree = tree;
         tree.refit(&faces);
+        let mut leaf_of_face = vec![u32::MAX; faces.len()];
+        for (node, &f) in tree.face.iter().enumerate() {
+            if f != u32::MAX {
+                leaf_of_face[f as usize] = node as u32;
+            }
+        }
+        let rim = rim_vertices(&scene.mesh);
         let report = HierarchyReport {
             mode: settings.mode.name(),
             faces: faces.len(),
@@ -209,6 +242,8 @@ impl Hierarchy {
             tree,
             faces,
             has_links: false,
+            rim,
+            leaf_of_face,
             far: FarEmitters::default(),
             face_irradiance: None,
             face_sources: PerSource::default(),
@@ -433,6 +468,35 @@ impl Hierarchy {
             Some((_, p, _)) => std::array::from_fn(|c| p[c].point_mass()),
             None => [0.0; 3],
         };
+        // A vertex on a hole's rim has surface on one side only: B falls toward the rim within
+        // the profile's near length, and the faces' centroids, inside, overstate it (measured
+        // +26 % for marble on the bunny's rim). There each face around the vertex gathers its
+        // links again at the vertex itself (refined at the face, from the root).
+        if !self.rim.is_empty() {
+            if let Some((_, lookup, rgb)) = &self.profiles {
+                let ctx = self.context(lookup, rgb, true, 1.0);
+                let positions = mesh.positions();
+                let at_rim: Vec<[f64; 4]> = self
+                    .rim
+                    .par_iter()
+                    .map(|(v, faces)| {
+                        let x = positions[*v as usize].as_dvec3();
+                        let mut s = [0.0f64; 4];
+                        for &f in faces {
+                            let links = ctx.links_of_leaf(self.leaf_of_face[f as usize]);
+                            let b = ctx.gather_at(x, &links);
+                            let a = self.faces[f as usize].area;
+                            (0..3).for_each(|c| s[c] += a * b[c]);
+                            s[3] += a;
+                        }
+                        s
+                    })
+                    .collect();
+                for ((v, _), s) in self.rim.iter().zip(at_rim) {
+                    sum[*v as usize] = s;
+                }
+            }
+        }
         let out: Vec<[f32; 3]> = sum
             .iter()
             .enumerate()
