@@ -34,16 +34,12 @@ pub struct ClusterTree {
     pub normal_sum: Vec<DVec3>,
     /// Radius about `centroid` of a sphere holding every face of the cluster.
     pub radius: Vec<f64>,
+    /// Covariance of the cluster's surface (uniform over its area) about `centroid`
+    /// (xx, yy, zz, xy, xz, yz): the second moment the far links' sample rule uses.
+    pub spread: Vec<[f64; 6]>,
     // Irradiance, pulled up by `pull`.
     /// Σ I · area over the faces, per channel.
     pub power: Vec<[f64; 3]>,
-    /// Irradiance-weighted centroid (channel sum): where an emitter cluster is point-sampled.
-    pub emission_centroid: Vec<DVec3>,
-    /// Irradiance-weighted covariance of the cluster's surface about `emission_centroid`
-    /// (xx, yy, zz, xy, xz, yz): the second moment the far links' sample rule uses.
-    pub spread: Vec<[f64; 6]>,
-    /// Each face's own covariance (uniform over the triangle).
-    face_spread: Vec<[f64; 6]>,
 }
 
 /// Covariance of the uniform distribution on a triangle: (1/12) Σ_k d_k d_kᵀ, d_k the corners
@@ -256,9 +252,7 @@ impl ClusterTree {
             normal_sum: vec![DVec3::ZERO; total],
             radius: vec![0.0; total],
             power: vec![[0.0; 3]; total],
-            emission_centroid: vec![DVec3::ZERO; total],
             spread: vec![[0.0; 6]; total],
-            face_spread: vec![[0.0; 6]; total],
         }
     }
 
@@ -271,7 +265,7 @@ impl ClusterTree {
                     self.area[node] = t.area;
                     self.centroid[node] = t.centroid;
                     self.normal_sum[node] = t.normal * t.area;
-                    self.face_spread[node] = triangle_spread(t);
+                    self.spread[node] = triangle_spread(t);
                     self.radius[node] = t
                         .corners
                         .iter()
@@ -291,49 +285,34 @@ impl ClusterTree {
                     self.normal_sum[node] = self.normal_sum[a] + self.normal_sum[b];
                     self.radius[node] = ((self.centroid[a] - c).length() + self.radius[a])
                         .max((self.centroid[b] - c).length() + self.radius[b]);
+                    let (wa, wb) = if area > 0.0 {
+                        (self.area[a] / area, self.area[b] / area)
+                    } else {
+                        (0.5, 0.5)
+                    };
+                    let (oa, ob) = (outer(self.centroid[a] - c), outer(self.centroid[b] - c));
+                    // Parallel axes: each child's spread plus its offset from the new centre.
+                    let (sa, sb) = (self.spread[a], self.spread[b]);
+                    self.spread[node] =
+                        std::array::from_fn(|k| wa * (sa[k] + oa[k]) + wb * (sb[k] + ob[k]));
                 }
             }
         }
     }
 
-    /// Pulls the faces' irradiance up the tree (Mertens §3.2, §5.3): power Σ I A per channel
-    /// and the irradiance-weighted centroid.
+    /// Pulls the faces' irradiance up the tree (Mertens §3.2, §5.3): power Σ I A per channel.
     pub fn pull(&mut self, face_irradiance: &[[f32; 3]]) {
-        let mut weight = vec![0.0f64; self.len()];
         for node in 0..self.len() {
-            match self.children[node] {
+            self.power[node] = match self.children[node] {
                 None => {
                     let i = face_irradiance[self.face[node] as usize];
-                    let a = self.area[node];
-                    self.power[node] = i.map(|x| f64::from(x) * a);
-                    weight[node] = self.power[node].iter().sum();
-                    self.emission_centroid[node] = self.centroid[node];
-                    self.spread[node] = self.face_spread[node];
+                    i.map(|x| f64::from(x) * self.area[node])
                 }
                 Some([a, b]) => {
                     let (a, b) = (a as usize, b as usize);
-                    self.power[node] = std::array::from_fn(|c| self.power[a][c] + self.power[b][c]);
-                    let w = weight[a] + weight[b];
-                    weight[node] = w;
-                    // Dark clusters are weighted by area (they are sampled only in stored links).
-                    let (wa, wb) = if w > 0.0 {
-                        (weight[a] / w, weight[b] / w)
-                    } else {
-                        let area = (self.area[a] + self.area[b]).max(f64::MIN_POSITIVE);
-                        (self.area[a] / area, self.area[b] / area)
-                    };
-                    let c = self.emission_centroid[a] * wa + self.emission_centroid[b] * wb;
-                    self.emission_centroid[node] = c;
-                    // Parallel axes: each child's spread plus its offset from the new centre.
-                    let (oa, ob) = (
-                        outer(self.emission_centroid[a] - c),
-                        outer(self.emission_centroid[b] - c),
-                    );
-                    self.spread[node] = std::array::from_fn(|k| {
-                        wa * (self.spread[a][k] + oa[k]) + wb * (self.spread[b][k] + ob[k])
-                    });
+                    std::array::from_fn(|c| self.power[a][c] + self.power[b][c])
                 }
-            }
+            };
         }
     }
 }
@@ -417,7 +396,7 @@ mod tests {
         assert!((tree.centroid[root] - DVec3::new(4.0, 4.0, 0.0)).length() < 1e-9);
         assert!((tree.planarity(tree.root()) - 1.0).abs() < 1e-12);
         assert!(tree.radius[root] >= 32f64.sqrt() - 1e-9);
-        // Irradiance 1 on the half x < 4, 0 elsewhere: the emission centroid sits at x = 2.
+        // Irradiance 1 on the half x < 4, 0 elsewhere: half the area's power.
         let irr: Vec<[f32; 3]> = faces
             .iter()
             .map(|f| {
@@ -430,13 +409,9 @@ mod tests {
             .collect();
         tree.pull(&irr);
         assert!((tree.power[root][0] - 32.0).abs() < 1e-9);
-        assert!((tree.emission_centroid[root].x - 2.0).abs() < 1e-9);
-        // Uniform on [0, 4] x [0, 8]: variances 16/12 and 64/12, no covariance.
-        let s = tree.spread[root];
-        assert!(
-            (s[0] - 16.0 / 12.0).abs() < 1e-9 && (s[1] - 64.0 / 12.0).abs() < 1e-9,
-            "{s:?}"
-        );
-        assert!(s[2].abs() < 1e-12 && s[3].abs() < 1e-9);
+        // Uniform on [0, 8]^2 about (4, 4): variances 64/12, no covariance.
+        let g = tree.spread[root];
+        assert!((g[0] - 64.0 / 12.0).abs() < 1e-9 && (g[1] - 64.0 / 12.0).abs() < 1e-9);
+        assert!(g[3].abs() < 1e-9);
     }
 }

@@ -11,13 +11,13 @@
 //! still fails ε₂ is integrated (a near link: the polygon form factor of `surface_integral`,
 //! Mertens §4, from c_R over the face, times its mean irradiance) when it lies within
 //! `NEAR_FACTOR` of its radii, else sampled like a cluster. Every other link is a far link:
-//! the emitter's power times the profile sampled about its irradiance-weighted centroid
-//! (Mertens §3.1, eq. 6).
+//! the emitter's power times the profile sampled about its centroid (Mertens §3.1, eq. 6), a
+//! factor that render and incremental modes store with the link (`far`).
 //!
 //! Departures from the paper, each where the profile must have a say or where one sample is
 //! biased: emitters beyond the profile's support are dropped; a cluster wider than
 //! `DECAY_SHARE` of the shortest decay length among the channels reaching it is opened; a far link samples the profile at two
-//! sigma points of the emitter's irradiance-weighted spread instead of once at its centre
+//! sigma points of the emitter's spread (its surface's covariance) instead of once at its centre
 //! (R is convex: one sample underestimates by about ½ R″ σ², 5–10 % per link at ε₂ = 0.05).
 //!
 //! The traversal walks the receiver tree top-down carrying the candidate emitters, so that the
@@ -66,6 +66,8 @@ pub struct Context<'a> {
 pub struct NodeLinks {
     /// Emitters point-sampled.
     pub far: Vec<u32>,
+    /// Their factors from the geometric moments (stored links only; `far::FarEmitters`).
+    pub far_factors: Vec<[f32; 4]>,
     /// Emitter faces integrated, with the form factor per channel (geometry and profile only).
     pub near: Vec<(u32, [f32; 3])>,
 }
@@ -225,30 +227,35 @@ impl Context<'_> {
         }
     }
 
+    /// The stored factors of receiver `r`'s far links.
+    pub fn far_factors(&self, r: u32, far: &[u32]) -> Vec<[f32; 4]> {
+        self.far
+            .factors(self.tree.centroid[r as usize], far, self.rgb)
+    }
+
     /// Every link of leaf `r`, refined from the root at `r` alone (a leaf cannot pass
-    /// candidates down): what `r` gathers from the whole surface.
-    pub fn links_of_leaf(&self, r: u32) -> NodeLinks {
+    /// candidates down), with the near faces' form factors taken from the point `x` (near
+    /// `r`) instead of `r`'s centroid.
+    pub fn links_at(&self, x: DVec3, r: u32) -> NodeLinks {
         let mut links = NodeLinks::default();
         let (mut down, mut counts) = (Vec::new(), LinkCounts::default());
-        self.refine_at(
-            r,
-            vec![self.tree.root()],
-            &mut links,
-            &mut down,
-            &mut counts,
-        );
+        let root = self.tree.root();
+        self.refine_at(r, vec![root], &mut links, &mut down, &mut counts);
         debug_assert!(down.is_empty());
+        for (e, f) in links.near.iter_mut() {
+            let face = &self.faces[self.tree.face[*e as usize] as usize];
+            *f = triangle_integral_rgb(x, face, self.profiles, &self.rule).map(|v| v as f32);
+        }
+        links.far_factors = self.far.factors(x, &links.far, self.rgb);
         links
     }
 
-    /// The radiosity at the point `x` over `links` (refined for a receiver near `x`): far
-    /// links sampled from `x`, near faces integrated from `x`.
-    pub fn gather_at(&self, x: DVec3, links: &NodeLinks) -> [f64; 3] {
-        let mut b = self.far.sum(x, &links.far, self.rgb);
-        for (e, _) in &links.near {
-            let face = &self.faces[self.tree.face[*e as usize] as usize];
-            let f = triangle_integral_rgb(x, face, self.profiles, &self.rule).map(|v| v as f32);
-            let v = self.near_contribution(*e, &f);
+    /// The radiosity at the point `x` over `links` from `links_at(x, ..)` (their factors
+    /// taken from `x`).
+    pub fn gather_at(&self, links: &NodeLinks) -> [f64; 3] {
+        let mut b = self.far.sum_stored(&links.far, &links.far_factors);
+        for (e, f) in &links.near {
+            let v = self.near_contribution(*e, f);
             (0..3).for_each(|c| b[c] += v[c]);
         }
         b
@@ -256,9 +263,12 @@ impl Context<'_> {
 
     /// The radiosity node `r` gathers over `links`.
     pub fn gather(&self, r: u32, links: &NodeLinks) -> [f64; 3] {
-        let mut b = self
-            .far
-            .sum(self.tree.centroid[r as usize], &links.far, self.rgb);
+        let x = self.tree.centroid[r as usize];
+        let mut b = if links.far_factors.len() == links.far.len() {
+            self.far.sum_stored(&links.far, &links.far_factors)
+        } else {
+            self.far.sum(x, &links.far, self.rgb)
+        };
         for (e, f) in &links.near {
             let v = self.near_contribution(*e, f);
             (0..3).for_each(|c| b[c] += v[c]);
@@ -293,6 +303,9 @@ impl Context<'_> {
         let mut down = Vec::new();
         let mut counts = LinkCounts::default();
         self.refine_at(r, stack, &mut links, &mut down, &mut counts);
+        if keep {
+            links.far_factors = self.far_factors(r, &links.far);
+        }
         let own = self.gather(r, &links);
         let total: [f64; 3] = std::array::from_fn(|c| pushed[c] + own[c]);
         let (rest, this) = slots.split_at_mut(slots.len() - 1);

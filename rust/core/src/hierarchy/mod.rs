@@ -145,6 +145,8 @@ pub struct Hierarchy {
     slots: Vec<Slot>,
     /// Vertices on a hole's rim with the faces around each, gathered at the vertex itself.
     rim: Vec<(u32, Vec<u32>)>,
+    /// The links of each rim vertex's faces, gathered at the vertex (render, incremental).
+    rim_links: Vec<Vec<NodeLinks>>,
     /// The leaf node of each face.
     leaf_of_face: Vec<u32>,
     /// The clusters as far emitters, rebuilt after each pull.
@@ -243,6 +245,7 @@ impl Hierarchy {
             faces,
             has_links: false,
             rim,
+            rim_links: Vec::new(),
             leaf_of_face,
             far: FarEmitters::default(),
             face_irradiance: None,
@@ -472,19 +475,40 @@ impl Hierarchy {
         // the profile's near length, and the faces' centroids, inside, overstate it (measured
         // +26 % for marble on the bunny's rim). There each face around the vertex gathers its
         // links again at the vertex itself (refined at the face, from the root).
+        // Render and incremental modes keep those links (and the form factors from the
+        // vertex) until the material or the shape changes.
         if !self.rim.is_empty() {
             if let Some((_, lookup, rgb)) = &self.profiles {
-                let ctx = self.context(lookup, rgb, true, 1.0);
+                let keep = self.settings.mode != Mode::OnTheFly;
+                let ctx = self.context(lookup, rgb, !keep, 1.0);
                 let positions = mesh.positions();
+                let fresh = !keep
+                    || material_changed
+                    || geometry_changed
+                    || self.rim_links.len() != self.rim.len();
+                let relinked: Vec<Vec<NodeLinks>> = if fresh {
+                    self.rim
+                        .par_iter()
+                        .map(|(v, faces)| {
+                            let x = positions[*v as usize].as_dvec3();
+                            faces
+                                .iter()
+                                .map(|&f| ctx.links_at(x, self.leaf_of_face[f as usize]))
+                                .collect()
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                let links = if fresh { &relinked } else { &self.rim_links };
                 let at_rim: Vec<[f64; 4]> = self
                     .rim
                     .par_iter()
-                    .map(|(v, faces)| {
-                        let x = positions[*v as usize].as_dvec3();
+                    .zip(links.par_iter())
+                    .map(|((_, faces), links)| {
                         let mut s = [0.0f64; 4];
-                        for &f in faces {
-                            let links = ctx.links_of_leaf(self.leaf_of_face[f as usize]);
-                            let b = ctx.gather_at(x, &links);
+                        for (&f, links) in faces.iter().zip(links) {
+                            let b = ctx.gather_at(links);
                             let a = self.faces[f as usize].area;
                             (0..3).for_each(|c| s[c] += a * b[c]);
                             s[3] += a;
@@ -494,6 +518,9 @@ impl Hierarchy {
                     .collect();
                 for ((v, _), s) in self.rim.iter().zip(at_rim) {
                     sum[*v as usize] = s;
+                }
+                if fresh {
+                    self.rim_links = if keep { relinked } else { Vec::new() };
                 }
             }
         }
@@ -569,6 +596,7 @@ impl Hierarchy {
                     for (e, f) in s.links.near.iter_mut() {
                         *f = ctx.form_factor(r as u32, *e);
                     }
+                    s.links.far_factors = ctx.far_factors(r as u32, &s.links.far);
                 });
             }
             slots.par_iter_mut().enumerate().for_each(|(r, s)| {
