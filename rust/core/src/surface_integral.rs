@@ -19,7 +19,7 @@
 //! quadrature (tests below): `EdgeRule::PRECISE` within 2e-5 relative, `EdgeRule::FAST` within
 //! 1e-3, for the dipole and Cycles' walk table, points inside, outside, on and off the plane.
 
-use crate::profiles::RadialProfile;
+use crate::profiles::{RadialProfile, RgbProfile};
 use crate::quadrature::GAUSS8;
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -219,10 +219,10 @@ pub fn triangle_integral<P: RadialProfile + ?Sized>(
 
 /// `triangle_integral` for the three channels' profiles at once: the edges' geometry and
 /// pieces are shared (pieces split for the shortest near length of the three).
-pub fn triangle_integral_rgb<P: RadialProfile>(
+pub fn triangle_integral_rgb<P: RgbProfile + ?Sized>(
     x: DVec3,
     t: &Triangle,
-    profiles: &[P; 3],
+    profiles: &P,
     rule: &EdgeRule,
 ) -> [f64; 3] {
     if t.area <= 0.0 {
@@ -233,12 +233,8 @@ pub fn triangle_integral_rgb<P: RadialProfile>(
     let q = x - h * n;
     let h = h.abs();
     let h2 = h * h;
-    let base: [f64; 3] = std::array::from_fn(|c| profiles[c].disc_integral(h));
-    let near = profiles
-        .iter()
-        .filter(|p| !p.is_zero())
-        .map(|p| p.length_scales().near)
-        .fold(f64::INFINITY, f64::min);
+    let base = profiles.disc_rgb(h);
+    let near = profiles.near();
     if !near.is_finite() {
         return [0.0; 3];
     }
@@ -263,9 +259,9 @@ pub fn triangle_integral_rgb<P: RadialProfile>(
             let (mid, half) = (0.5 * (p0 + p1), 0.5 * (p1 - p0));
             let mut at = |s: f64, w: f64| {
                 let rho = d / (mid + half * s).cos();
-                let r = (rho * rho + h2).sqrt();
+                let disc = profiles.disc_rgb((rho * rho + h2).sqrt());
                 for c in 0..3 {
-                    total[c] += sign * w * half * (profiles[c].disc_integral(r) - base[c]);
+                    total[c] += sign * w * half * (disc[c] - base[c]);
                 }
             };
             if rule.eight_points {

@@ -27,7 +27,7 @@
 
 use super::clusters::ClusterTree;
 use super::far::FarEmitters;
-use crate::profiles::{LookupProfile, LookupRgb};
+use crate::profiles::LookupRgb;
 use crate::surface_integral::{triangle_integral_rgb, EdgeRule, Triangle};
 use glam::DVec3;
 
@@ -43,8 +43,7 @@ pub const NEAR_FACTOR: f64 = 1.2;
 pub struct Context<'a> {
     pub tree: &'a ClusterTree,
     pub faces: &'a [Triangle],
-    pub profiles: &'a [LookupProfile; 3],
-    /// The same three profiles' R on one table, for the far links.
+    /// The three channels' profiles on one table: R for the far links, C for the near ones.
     pub rgb: &'a LookupRgb,
     /// The clusters as far emitters (after `pull`).
     pub far: &'a FarEmitters,
@@ -174,7 +173,7 @@ impl Context<'_> {
     pub fn form_factor(&self, r: u32, e: u32) -> [f32; 3] {
         let x = self.tree.centroid[r as usize];
         let face = &self.faces[self.tree.face[e as usize] as usize];
-        triangle_integral_rgb(x, face, self.profiles, &self.rule).map(|v| v as f32)
+        triangle_integral_rgb(x, face, self.rgb, &self.rule).map(|v| v as f32)
     }
 
     /// F times the face's mean irradiance.
@@ -244,7 +243,7 @@ impl Context<'_> {
         debug_assert!(down.is_empty());
         for (e, f) in links.near.iter_mut() {
             let face = &self.faces[self.tree.face[*e as usize] as usize];
-            *f = triangle_integral_rgb(x, face, self.profiles, &self.rule).map(|v| v as f32);
+            *f = triangle_integral_rgb(x, face, self.rgb, &self.rule).map(|v| v as f32);
         }
         links.far_factors = self.far.factors(x, &links.far, self.rgb);
         links

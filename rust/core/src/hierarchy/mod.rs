@@ -384,7 +384,6 @@ impl Hierarchy {
         Context {
             tree: &self.tree,
             faces: &self.faces,
-            profiles: lookup,
             rgb,
             far: &self.far,
             eps_receiver: self.settings.eps_receiver * scale,

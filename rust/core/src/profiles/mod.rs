@@ -106,6 +106,26 @@ impl LengthScales {
     }
 }
 
+/// Three channels' profiles read together, as the hierarchy's form factors want them.
+pub trait RgbProfile {
+    /// Each channel's `disc_integral` at `rho`.
+    fn disc_rgb(&self, rho: f64) -> [f64; 3];
+    /// The shortest near length among the channels that are not zero (infinite if all are).
+    fn near(&self) -> f64;
+}
+
+impl<P: RadialProfile> RgbProfile for [P; 3] {
+    fn disc_rgb(&self, rho: f64) -> [f64; 3] {
+        std::array::from_fn(|c| self[c].disc_integral(rho))
+    }
+    fn near(&self) -> f64 {
+        self.iter()
+            .filter(|p| !p.is_zero())
+            .map(|p| p.length_scales().near)
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
 /// A radial profile of one colour channel. Lengths in scene units, R in 1/unit^2.
 pub trait RadialProfile {
     /// R(r) >= 0, per unit area.
