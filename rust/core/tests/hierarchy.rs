@@ -9,7 +9,7 @@ use translucent_core::hierarchy::{Hierarchy, HierarchySettings, Mode};
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
 use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
-use translucent_core::metrics::relative_error;
+use translucent_core::metrics::{relative_error, ErrorStats};
 use translucent_core::optics::{fresnel_transmittance, Material};
 use translucent_core::profiles::{Model, RadialProfile};
 use translucent_core::raytrace::Tracer;
@@ -137,6 +137,21 @@ fn truth(scene: &Scene, m: &Material, model: Model, receivers: &[u32]) -> Vec<[f
         .radiosity
 }
 
+/// A fresh on-the-fly hierarchy's B at `receivers` against the ground truth.
+fn error_on(
+    scene: &Scene,
+    m: &Material,
+    model: Model,
+    receivers: &[u32],
+    weights: &[f32],
+) -> ErrorStats {
+    let mut h = Hierarchy::new(scene.clone(), settings(model, Mode::OnTheFly)).unwrap();
+    let b = h.radiosity(m).unwrap();
+    let b: Vec<[f32; 3]> = receivers.iter().map(|&v| b[v as usize]).collect();
+    let t = truth(scene, m, model, receivers);
+    relative_error(&b, &t, weights).unwrap()
+}
+
 fn lit(mesh: Mesh, light: Vec3) -> Scene {
     let mut scene = Scene::new(mesh);
     scene.lights.push(Light::point(light, [4e4; 3]).unwrap());
@@ -160,12 +175,8 @@ fn radiosity_matches_the_ground_truth_on_a_lumpy_sphere() {
     for name in ["marble", "ketchup"] {
         let m = Material::preset(name, 1.0).unwrap();
         for model in [Model::Dipole, Model::Cycles] {
-            let mut h = Hierarchy::new(scene.clone(), settings(model, Mode::OnTheFly)).unwrap();
-            let b = h.radiosity(&m).unwrap();
-            let b: Vec<[f32; 3]> = receivers.iter().map(|&v| b[v as usize]).collect();
-            let t = truth(&scene, &m, model, &receivers);
-            let e = relative_error(&b, &t, &weights).unwrap();
-            eprintln!("{name} {model:?}: {e:?}, report {:?}", h.report());
+            let e = error_on(&scene, &m, model, &receivers, &weights);
+            eprintln!("{name} {model:?}: {e:?}");
             assert!(e.worst_rms() < 0.02, "{name} {model:?}: {e:?}");
         }
     }
@@ -197,11 +208,7 @@ fn vertices_on_an_open_edge_match_the_ground_truth() {
     for name in ["marble", "skimmilk"] {
         let m = Material::preset(name, 1.0).unwrap();
         for model in [Model::Dipole, Model::Cycles] {
-            let mut h = Hierarchy::new(scene.clone(), settings(model, Mode::OnTheFly)).unwrap();
-            let b = h.radiosity(&m).unwrap();
-            let b: Vec<[f32; 3]> = receivers.iter().map(|&v| b[v as usize]).collect();
-            let t = truth(&scene, &m, model, &receivers);
-            let e = relative_error(&b, &t, &weights).unwrap();
+            let e = error_on(&scene, &m, model, &receivers, &weights);
             eprintln!("edge, {name} {model:?}: {e:?}");
             let bar = if model == Model::Dipole { 0.02 } else { 0.05 };
             assert!(e.worst_rms() < bar, "{name} {model:?}: {e:?}");

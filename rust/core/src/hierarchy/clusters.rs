@@ -383,13 +383,8 @@ mod tests {
     fn refit_and_pull_sum_the_faces() {
         let (p, t) = grid(8);
         let mut tree = ClusterTree::build(&p, &t);
-        let faces: Vec<Triangle> = t
-            .iter()
-            .map(|f| {
-                let [a, b, c] = f.map(|v| p[v as usize].as_dvec3());
-                Triangle::new(a, b, c)
-            })
-            .collect();
+        let mesh = crate::mesh::Mesh::new(p.clone(), t.clone(), None).unwrap();
+        let faces = super::super::faces_of(&mesh);
         tree.refit(&faces);
         let root = tree.root() as usize;
         assert!((tree.area[root] - 64.0).abs() < 1e-9);

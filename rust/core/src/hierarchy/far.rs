@@ -229,7 +229,6 @@ mod tests {
     use super::*;
     use crate::optics::Material;
     use crate::profiles::{LookupProfile, Model};
-    use crate::surface_integral::Triangle;
     use glam::Vec3;
 
     /// The far rule in f64, as `links` states it: power × ½ (R(d′ − s_r) + R(d′ + s_r)) about
@@ -278,13 +277,8 @@ mod tests {
                     t.push([a, a + w + 1, a + w]);
                 }
             }
-            let faces: Vec<Triangle> = t
-                .iter()
-                .map(|f| {
-                    let [a, b, c] = f.map(|v| p[v as usize].as_dvec3());
-                    Triangle::new(a, b, c)
-                })
-                .collect();
+            let mesh = crate::mesh::Mesh::new(p.clone(), t.clone(), None).unwrap();
+            let faces = super::super::faces_of(&mesh);
             let mut tree = ClusterTree::build(&p, &t);
             tree.refit(&faces);
             let irr: Vec<[f32; 3]> = (0..faces.len())
