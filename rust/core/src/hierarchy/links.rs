@@ -250,24 +250,26 @@ impl Context<'_> {
     }
 
     /// The radiosity at the point `x` over `links` from `links_at(x, ..)` (their factors
-    /// taken from `x`).
+    /// taken from `x`), or over stored links.
     pub fn gather_at(&self, links: &NodeLinks) -> [f64; 3] {
-        let mut b = self.far.sum_stored(&links.far, &links.far_factors);
-        for (e, f) in &links.near {
-            let v = self.near_contribution(*e, f);
-            (0..3).for_each(|c| b[c] += v[c]);
-        }
-        b
+        let b = self.far.sum_stored(&links.far, &links.far_factors);
+        self.with_near(b, links)
     }
 
-    /// The radiosity node `r` gathers over `links`.
+    /// The radiosity node `r` gathers over `links`: stored factors where the links keep them,
+    /// else the far emitters sampled from `r`'s centroid.
     pub fn gather(&self, r: u32, links: &NodeLinks) -> [f64; 3] {
-        let x = self.tree.centroid[r as usize];
-        let mut b = if links.far_factors.len() == links.far.len() {
-            self.far.sum_stored(&links.far, &links.far_factors)
-        } else {
-            self.far.sum(x, &links.far, self.rgb)
-        };
+        if links.far_factors.len() == links.far.len() {
+            return self.gather_at(links);
+        }
+        let b = self
+            .far
+            .sum(self.tree.centroid[r as usize], &links.far, self.rgb);
+        self.with_near(b, links)
+    }
+
+    /// `b` plus the near links' form factors times their faces' irradiance.
+    fn with_near(&self, mut b: [f64; 3], links: &NodeLinks) -> [f64; 3] {
         for (e, f) in &links.near {
             let v = self.near_contribution(*e, f);
             (0..3).for_each(|c| b[c] += v[c]);
