@@ -120,9 +120,17 @@ impl Context<'_> {
     /// The oracle (Mertens §5.2) with the profile's support and decay.
     fn judge(&self, r: u32, e: u32) -> Verdict {
         let t = self.tree;
-        let (ri, ei) = (r as usize, e as usize);
-        let d = (t.centroid[ri] - t.centroid[ei]).length();
-        let gap = d - t.radius[ri] - t.radius[ei];
+        let ri = r as usize;
+        self.judge_from(t.centroid[ri], t.radius[ri], t.children[ri], e)
+    }
+
+    /// The oracle for a receiver of centre `x`, radius `radius` and children `kids` (a point:
+    /// radius 0, no children).
+    fn judge_from(&self, x: DVec3, radius: f64, kids: Option<[u32; 2]>, e: u32) -> Verdict {
+        let t = self.tree;
+        let ei = e as usize;
+        let d = (x - t.centroid[ei]).length();
+        let gap = d - radius - t.radius[ei];
         if gap > self.support {
             return Verdict::Drop;
         }
@@ -131,8 +139,8 @@ impl Context<'_> {
             .map(|c| self.decays[c])
             .fold(f64::INFINITY, f64::min);
         let emitter_leaf = t.is_leaf(e);
-        let w = self.omega(t.centroid[ri], ei);
-        let receiver_fails = match t.children[ri] {
+        let w = self.omega(x, ei);
+        let receiver_fails = match kids {
             None => false,
             Some(kids) => {
                 !w.is_finite()
@@ -160,7 +168,7 @@ impl Context<'_> {
             (false, true) => Verdict::OpenEmitter,
             (true, false) => Verdict::MoveDown,
             (true, true) => {
-                if !emitter_leaf && t.radius[ei] > t.radius[ri] {
+                if !emitter_leaf && t.radius[ei] > radius {
                     Verdict::OpenEmitter
                 } else {
                     Verdict::MoveDown
@@ -171,7 +179,11 @@ impl Context<'_> {
 
     /// The form factor F(A_E, c_R) per channel (Mertens eq. 7, §4).
     pub fn form_factor(&self, r: u32, e: u32) -> [f32; 3] {
-        let x = self.tree.centroid[r as usize];
+        self.form_factor_at(self.tree.centroid[r as usize], e)
+    }
+
+    /// F(A_E, x) per channel.
+    fn form_factor_at(&self, x: DVec3, e: u32) -> [f32; 3] {
         let face = &self.faces[self.tree.face[e as usize] as usize];
         triangle_integral_rgb(x, face, self.rgb, &self.rule).map(|v| v as f32)
     }
@@ -200,12 +212,26 @@ impl Context<'_> {
         down: &mut Vec<u32>,
         counts: &mut LinkCounts,
     ) {
+        let at = self.tree.centroid[r as usize];
+        self.refine(&|e| self.judge(r, e), at, &mut stack, links, down, counts);
+    }
+
+    /// The refinement loop under the oracle `judge`; near faces integrated from `at`.
+    fn refine(
+        &self,
+        judge: &dyn Fn(u32) -> Verdict,
+        at: DVec3,
+        stack: &mut Vec<u32>,
+        links: &mut NodeLinks,
+        down: &mut Vec<u32>,
+        counts: &mut LinkCounts,
+    ) {
         while let Some(e) = stack.pop() {
             if self.skip_dark && self.tree.power[e as usize].iter().all(|p| *p == 0.0) {
                 continue;
             }
             counts.oracle_tests += 1;
-            match self.judge(r, e) {
+            match judge(e) {
                 Verdict::Drop => counts.dropped_beyond_support += 1,
                 Verdict::Far => {
                     counts.far += 1;
@@ -213,7 +239,7 @@ impl Context<'_> {
                 }
                 Verdict::Near => {
                     counts.near += 1;
-                    links.near.push((e, self.form_factor(r, e)));
+                    links.near.push((e, self.form_factor_at(at, e)));
                 }
                 Verdict::OpenEmitter => {
                     if let Some([a, b]) = self.tree.children[e as usize] {
@@ -232,25 +258,20 @@ impl Context<'_> {
             .factors(self.tree.centroid[r as usize], far, self.rgb)
     }
 
-    /// Every link of leaf `r`, refined from the root at `r` alone (a leaf cannot pass
-    /// candidates down), with the near faces' form factors taken from the point `x` (near
-    /// `r`) instead of `r`'s centroid.
-    pub fn links_at(&self, x: DVec3, r: u32) -> NodeLinks {
+    /// Every link of the point `x` as a receiver of its own (radius 0, no children), refined
+    /// from the root: its nearest faces integrated from `x`, the far factors taken from `x`.
+    pub fn links_at(&self, x: DVec3) -> NodeLinks {
         let mut links = NodeLinks::default();
         let (mut down, mut counts) = (Vec::new(), LinkCounts::default());
-        let root = self.tree.root();
-        self.refine_at(r, vec![root], &mut links, &mut down, &mut counts);
+        let mut stack = vec![self.tree.root()];
+        let judge = |e| self.judge_from(x, 0.0, None, e);
+        self.refine(&judge, x, &mut stack, &mut links, &mut down, &mut counts);
         debug_assert!(down.is_empty());
-        for (e, f) in links.near.iter_mut() {
-            let face = &self.faces[self.tree.face[*e as usize] as usize];
-            *f = triangle_integral_rgb(x, face, self.rgb, &self.rule).map(|v| v as f32);
-        }
         links.far_factors = self.far.factors(x, &links.far, self.rgb);
         links
     }
 
-    /// The radiosity at the point `x` over `links` from `links_at(x, ..)` (their factors
-    /// taken from `x`), or over stored links.
+    /// The radiosity at the point `x` over `links` from `links_at(x)`, or over stored links.
     pub fn gather_at(&self, links: &NodeLinks) -> [f64; 3] {
         let b = self.far.sum_stored(&links.far, &links.far_factors);
         self.with_near(b, links)

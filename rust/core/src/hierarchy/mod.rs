@@ -143,12 +143,10 @@ pub struct Hierarchy {
     tree: ClusterTree,
     faces: Vec<Triangle>,
     slots: Vec<Slot>,
-    /// Vertices on a hole's rim with the faces around each, gathered at the vertex itself.
-    rim: Vec<(u32, Vec<u32>)>,
-    /// The links of each rim vertex's faces, gathered at the vertex (render, incremental).
-    rim_links: Vec<Vec<NodeLinks>>,
-    /// The leaf node of each face.
-    leaf_of_face: Vec<u32>,
+    /// Vertices on a hole's rim or a sheet's edge: receivers of their own.
+    rim: Vec<u32>,
+    /// Their links (render, incremental).
+    rim_links: Vec<NodeLinks>,
     /// The clusters as far emitters, rebuilt after each pull.
     far: FarEmitters,
     has_links: bool,
@@ -161,28 +159,6 @@ pub struct Hierarchy {
     profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
     geometry_changed: bool,
     report: HierarchyReport,
-}
-
-/// The vertices on an open boundary (coverage below 1: a hole's rim, a sheet's edge) with the
-/// faces around each.
-fn rim_vertices(mesh: &Mesh) -> Vec<(u32, Vec<u32>)> {
-    let coverage = mesh.vertex_coverage();
-    let mut rim: Vec<(u32, Vec<u32>)> = Vec::new();
-    let mut slot = vec![u32::MAX; coverage.len()];
-    for (v, c) in coverage.iter().enumerate() {
-        if *c > 0.0 && *c < 1.0 {
-            slot[v] = rim.len() as u32;
-            rim.push((v as u32, Vec::new()));
-        }
-    }
-    for (f, t) in mesh.triangles().iter().enumerate() {
-        for &v in t {
-            if slot[v as usize] != u32::MAX {
-                rim[slot[v as usize] as usize].1.push(f as u32);
-            }
-        }
-    }
-    rim
 }
 
 fn faces_of(mesh: &Mesh) -> Vec<Triangle> {
@@ -221,13 +197,10 @@ impl Hierarchy {
         let tracer = Tracer::new(&scene.mesh);
         let mut tree = tree;
         tree.refit(&faces);
-        let mut leaf_of_face = vec![u32::MAX; faces.len()];
-        for (node, &f) in tree.face.iter().enumerate() {
-            if f != u32::MAX {
-                leaf_of_face[f as usize] = node as u32;
-            }
-        }
-        let rim = rim_vertices(&scene.mesh);
+        let rim: Vec<u32> = (scene.mesh.vertex_coverage().iter().enumerate())
+            .filter(|(_, c)| **c > 0.0 && **c < 1.0)
+            .map(|(v, _)| v as u32)
+            .collect();
         let report = HierarchyReport {
             mode: settings.mode.name(),
             faces: faces.len(),
@@ -246,7 +219,6 @@ impl Hierarchy {
             has_links: false,
             rim,
             rim_links: Vec::new(),
-            leaf_of_face,
             far: FarEmitters::default(),
             face_irradiance: None,
             face_sources: PerSource::default(),
@@ -472,10 +444,9 @@ impl Hierarchy {
         };
         // A vertex on a hole's rim has surface on one side only: B falls toward the rim within
         // the profile's near length, and the faces' centroids, inside, overstate it (measured
-        // +26 % for marble on the bunny's rim). There each face around the vertex gathers its
-        // links again at the vertex itself (refined at the face, from the root).
-        // Render and incremental modes keep those links (and the form factors from the
-        // vertex) until the material or the shape changes.
+        // +26 % for marble on the bunny's rim). Such a vertex is a receiver of its own, refined
+        // from the root (its nearest faces integrated from it). Render and incremental modes
+        // keep its links until the material or the shape changes.
         if !self.rim.is_empty() {
             if let Some((_, lookup, rgb)) = &self.profiles {
                 let keep = self.settings.mode != Mode::OnTheFly;
@@ -485,38 +456,18 @@ impl Hierarchy {
                     || material_changed
                     || geometry_changed
                     || self.rim_links.len() != self.rim.len();
-                let relinked: Vec<Vec<NodeLinks>> = if fresh {
+                let relinked: Vec<NodeLinks> = if fresh {
                     self.rim
                         .par_iter()
-                        .map(|(v, faces)| {
-                            let x = positions[*v as usize].as_dvec3();
-                            faces
-                                .iter()
-                                .map(|&f| ctx.links_at(x, self.leaf_of_face[f as usize]))
-                                .collect()
-                        })
+                        .map(|&v| ctx.links_at(positions[v as usize].as_dvec3()))
                         .collect()
                 } else {
                     Vec::new()
                 };
                 let links = if fresh { &relinked } else { &self.rim_links };
-                let at_rim: Vec<[f64; 4]> = self
-                    .rim
-                    .par_iter()
-                    .zip(links.par_iter())
-                    .map(|((_, faces), links)| {
-                        let mut s = [0.0f64; 4];
-                        for (&f, links) in faces.iter().zip(links) {
-                            let b = ctx.gather_at(links);
-                            let a = self.faces[f as usize].area;
-                            (0..3).for_each(|c| s[c] += a * b[c]);
-                            s[3] += a;
-                        }
-                        s
-                    })
-                    .collect();
-                for ((v, _), s) in self.rim.iter().zip(at_rim) {
-                    sum[*v as usize] = s;
+                let at_rim: Vec<[f64; 3]> = links.par_iter().map(|l| ctx.gather_at(l)).collect();
+                for (&v, b) in self.rim.iter().zip(at_rim) {
+                    sum[v as usize] = [b[0], b[1], b[2], 1.0];
                 }
                 if fresh {
                     self.rim_links = if keep { relinked } else { Vec::new() };
