@@ -142,13 +142,7 @@ pub fn irradiance_of(
             settings.eta
         )));
     }
-    let (lo, hi) = bounds;
-    let emitting: Vec<&Light> = lights.iter().filter(|l| !l.is_black()).collect();
-    let reaching: Vec<&Light> = emitting
-        .iter()
-        .copied()
-        .filter(|l| l.can_reach(lo, hi))
-        .collect();
+    let (reaching, counts) = lights_at_work(lights, world, bounds);
     let world = (!world.is_black()).then_some(world);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
     let world_sh = world.filter(|_| settings.world_unshadowed).map(|w| {
@@ -200,12 +194,31 @@ pub fn irradiance_of(
         .collect();
     let report = IrradianceReport {
         rays: results.iter().map(|r| r.1).sum(),
-        lights_used: reaching.len(),
-        lights_skipped: lights.len() - emitting.len(),
-        lights_unreached: emitting.len() - reaching.len(),
-        world_skipped: world.is_none(),
+        ..counts
     };
     Ok((results.into_iter().map(|r| r.0).collect(), report))
+}
+
+/// The lights that emit and can reach the mesh's box `bounds`, and the report's counts of
+/// lights used, skipped and unreached and of the world (no rays yet).
+fn lights_at_work<'a>(
+    lights: &'a [Light],
+    world: &World,
+    (lo, hi): (Vec3, Vec3),
+) -> (Vec<&'a Light>, IrradianceReport) {
+    let emitting = lights.iter().filter(|l| !l.is_black()).count();
+    let reaching: Vec<&Light> = lights
+        .iter()
+        .filter(|l| !l.is_black() && l.can_reach(lo, hi))
+        .collect();
+    let counts = IrradianceReport {
+        rays: 0,
+        lights_used: reaching.len(),
+        lights_skipped: lights.len() - emitting,
+        lights_unreached: emitting - reaching.len(),
+        world_skipped: world.is_black(),
+    };
+    (reaching, counts)
 }
 
 /// Irradiance at fixed points kept light by light (and the world), so that a changed scene
@@ -246,13 +259,11 @@ impl PerSource {
             self.settings = Some(settings.clone());
         }
         let bounds = scene.mesh.bounds();
-        let emitting: Vec<&Light> = scene.lights.iter().filter(|l| !l.is_black()).collect();
-        let mut sources: Vec<Source> = emitting
-            .iter()
-            .filter(|l| l.can_reach(bounds.0, bounds.1))
-            .map(|l| Source::Light((*l).clone()))
+        let (reaching, counts) = lights_at_work(&scene.lights, &scene.world, bounds);
+        let mut sources: Vec<Source> = reaching
+            .into_iter()
+            .map(|l| Source::Light(l.clone()))
             .collect();
-        let lights_used = sources.len();
         if !scene.world.is_black() {
             sources.push(Source::World(scene.world.clone()));
         }
@@ -281,14 +292,7 @@ impl PerSource {
         for (_, v) in &self.parts {
             sum.par_iter_mut().zip(v).for_each(|(s, x)| add(s, *x));
         }
-        let report = IrradianceReport {
-            rays,
-            lights_used,
-            lights_skipped: scene.lights.len() - emitting.len(),
-            lights_unreached: emitting.len() - lights_used,
-            world_skipped: scene.world.is_black(),
-        };
-        Ok((sum, report))
+        Ok((sum, IrradianceReport { rays, ..counts }))
     }
 }
 
@@ -547,7 +551,6 @@ mod tests {
         assert_eq!(re.rays, 25);
     }
 
-    /// Unpolarised dielectric transmittance written out apart from `optics`.
     /// The world by nine SH coefficients, unshadowed (Mertens §5.3): an environment of
     /// radiance 1 + z/2 over an upward plane has E = pi + pi/3 for eta = 1 (Ramamoorthi &
     /// Hanrahan's pi and 2 pi / 3 on Y_00 and Y_10, written out here), no rays; the traced
@@ -602,6 +605,7 @@ mod tests {
         );
     }
 
+    /// Unpolarised dielectric transmittance written out apart from `optics`.
     fn ft(eta: f64, c: f64) -> f64 {
         let ct = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();
         let rs = (c - eta * ct) / (c + eta * ct);
