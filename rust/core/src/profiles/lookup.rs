@@ -63,22 +63,42 @@ impl LookupProfile {
         self.support
     }
 
-    /// The node below √ρ and the fraction past it; None beyond the support.
     #[inline]
     fn locate(&self, rho: f64) -> Option<(usize, f64)> {
-        if rho >= self.support || rho.is_nan() {
-            return None;
-        }
-        let u = rho.max(0.0).sqrt() * self.scale;
-        let i = (u as usize).min(NODES - 1);
-        Some((i, u - i as f64))
+        locate(rho, self.support, self.scale)
     }
+}
 
-    #[inline]
-    fn rho_at(&self, i: usize) -> f64 {
-        let u = i as f64 / NODES as f64;
-        self.support * u * u
+/// On a table up to `support` with `scale` = NODES / √support: the node below √ρ and the
+/// fraction past it; None from the support on.
+#[inline]
+fn locate(rho: f64, support: f64, scale: f64) -> Option<(usize, f64)> {
+    if rho >= support || rho.is_nan() {
+        return None;
     }
+    let u = rho.max(0.0).sqrt() * scale;
+    let i = (u as usize).min(NODES - 1);
+    Some((i, u - i as f64))
+}
+
+/// The weights of C_i, R_i, C_i+1 and R_i+1 in the cubic Hermite of C in ρ on [ρ_i, ρ_i+1]
+/// (ρ_i = support (i / NODES)²) with slopes C'(ρ) = 2πρR(ρ).
+#[inline]
+fn hermite(rho: f64, support: f64, i: usize) -> [f64; 4] {
+    let rho_at = |k: usize| {
+        let u = k as f64 / NODES as f64;
+        support * u * u
+    };
+    let (r0, r1) = (rho_at(i), rho_at(i + 1));
+    let h = r1 - r0;
+    let t = ((rho - r0) / h).clamp(0.0, 1.0);
+    let (t2, t3) = (t * t, t * t * t);
+    [
+        2.0 * t3 - 3.0 * t2 + 1.0,
+        (t3 - 2.0 * t2 + t) * 2.0 * PI * r0 * h,
+        -2.0 * t3 + 3.0 * t2,
+        (t3 - t2) * 2.0 * PI * r1 * h,
+    ]
 }
 
 impl RadialProfile for LookupProfile {
@@ -95,19 +115,11 @@ impl RadialProfile for LookupProfile {
         let Some((i, _)) = self.locate(rho) else {
             return self.disc[NODES];
         };
-        // Cubic Hermite in ρ on [ρ_i, ρ_i+1] with slopes C'(ρ) = 2πρR(ρ).
-        let (r0, r1) = (self.rho_at(i), self.rho_at(i + 1));
-        let h = r1 - r0;
-        let t = ((rho - r0) / h).clamp(0.0, 1.0);
-        let (m0, m1) = (
-            2.0 * PI * r0 * self.value[i] * h,
-            2.0 * PI * r1 * self.value[i + 1] * h,
-        );
-        let (t2, t3) = (t * t, t * t * t);
-        (2.0 * t3 - 3.0 * t2 + 1.0) * self.disc[i]
-            + (t3 - 2.0 * t2 + t) * m0
-            + (-2.0 * t3 + 3.0 * t2) * self.disc[i + 1]
-            + (t3 - t2) * m1
+        let w = hermite(rho, self.support, i);
+        w[0] * self.disc[i]
+            + w[1] * self.value[i]
+            + w[2] * self.disc[i + 1]
+            + w[3] * self.value[i + 1]
     }
 
     fn tail(&self, rho: f64) -> f64 {
@@ -188,12 +200,9 @@ impl LookupRgb {
     /// R(r) of the three channels.
     #[inline]
     pub fn value(&self, r: f64) -> [f64; 3] {
-        if r >= self.support || r.is_nan() {
+        let Some((i, f)) = locate(r, self.support, self.scale) else {
             return [0.0; 3];
-        }
-        let u = r.max(0.0).sqrt() * self.scale;
-        let i = (u as usize).min(NODES - 1);
-        let f = u - i as f64;
+        };
         let (a, b) = (&self.value[i], &self.value[i + 1]);
         [
             a[0] + f * (b[0] - a[0]),
@@ -208,33 +217,17 @@ impl RgbProfile for LookupRgb {
     /// with slopes C' = 2πρR at the nodes.
     #[inline]
     fn disc_rgb(&self, rho: f64) -> [f64; 3] {
-        if rho >= self.support || rho.is_nan() {
+        let Some((i, _)) = locate(rho, self.support, self.scale) else {
             return self.disc[NODES];
-        }
-        let u = rho.max(0.0).sqrt() * self.scale;
-        let i = (u as usize).min(NODES - 1);
-        let node = |k: usize| {
-            let v = k as f64 / NODES as f64;
-            self.support * v * v
         };
-        let (r0, r1) = (node(i), node(i + 1));
-        let h = r1 - r0;
-        let t = ((rho - r0) / h).clamp(0.0, 1.0);
-        let (t2, t3) = (t * t, t * t * t);
-        let (h00, h10, h01, h11) = (
-            2.0 * t3 - 3.0 * t2 + 1.0,
-            t3 - 2.0 * t2 + t,
-            -2.0 * t3 + 3.0 * t2,
-            t3 - t2,
-        );
-        let (s0, s1) = (2.0 * PI * r0 * h, 2.0 * PI * r1 * h);
+        let w = hermite(rho, self.support, i);
         let (d0, d1, v0, v1) = (
             &self.disc[i],
             &self.disc[i + 1],
             &self.value[i],
             &self.value[i + 1],
         );
-        std::array::from_fn(|c| h00 * d0[c] + h10 * s0 * v0[c] + h01 * d1[c] + h11 * s1 * v1[c])
+        std::array::from_fn(|c| w[0] * d0[c] + w[1] * v0[c] + w[2] * d1[c] + w[3] * v1[c])
     }
 
     fn near(&self) -> f64 {
