@@ -32,3 +32,7 @@ pub mod reference; // brute-force integration of the same model: the ground trut
 
 pub use error::{Error, Result};
 pub use glam::Vec3;
+
+// The test meshes of `tests/common` name this crate as the integration tests do.
+#[cfg(test)]
+extern crate self as translucent_core;

@@ -378,32 +378,14 @@ fn bounding_diagonal(points: &[Vec3]) -> f32 {
     (hi - lo).length()
 }
 
+/// The integration tests' meshes (`tests/common`), for the unit tests too.
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
+#[path = "../tests/common/mod.rs"]
+pub(crate) mod test_meshes;
 
-    /// A flat square grid of `n` x `n` vertices and side `size`, centred at the origin, normal
-    /// +Z: the unit tests' plane.
-    pub(crate) fn plane(n: usize, size: f32) -> Mesh {
-        let mut p = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                let x = size * (i as f32 / (n - 1) as f32 - 0.5);
-                let y = size * (j as f32 / (n - 1) as f32 - 0.5);
-                p.push(Vec3::new(x, y, 0.0));
-            }
-        }
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = (j * n + i) as u32;
-                let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
-                t.push([a, b, d]);
-                t.push([a, d, c]);
-            }
-        }
-        Mesh::new(p, t, None).unwrap()
-    }
+#[cfg(test)]
+mod tests {
+    use super::*;
 
     #[test]
     fn coverage_is_one_inside_and_the_angle_share_on_the_boundary() {

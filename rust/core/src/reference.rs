@@ -385,7 +385,7 @@ fn worst_rel_rms(a: &[[f64; 3]], b: &[[f64; 3]], w: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::tests::plane;
+    use crate::mesh::test_meshes::plane;
     use crate::profiles::Dipole;
     use crate::quadrature::GAUSS8;
 

@@ -486,7 +486,7 @@ pub fn reference_single(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::tests::plane;
+    use crate::mesh::test_meshes::plane;
 
     fn ft(eta: f64, c: f64) -> f64 {
         let ct = (1.0 - (1.0 - c * c) / (eta * eta)).sqrt();

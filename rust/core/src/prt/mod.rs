@@ -1330,7 +1330,7 @@ fn transport_row(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::tests::plane;
+    use crate::mesh::test_meshes::plane;
     use crate::optics::fresnel_transmittance;
 
     /// Irradiance of a sun of strength `e` at zenith angle `theta` on the +Z plane (Xu eq. 3

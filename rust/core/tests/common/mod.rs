@@ -1,4 +1,5 @@
-//! Test meshes shared by the integration tests (each test crate uses part of them).
+//! Test meshes shared by the integration tests (each test crate uses part of them) and, as
+//! `mesh::test_meshes`, by the unit tests.
 #![allow(dead_code)]
 
 use translucent_core::mesh::Mesh;
