@@ -19,7 +19,7 @@
 //! quadrature (tests below): `EdgeRule::PRECISE` within 2e-5 relative, `EdgeRule::FAST` within
 //! 1e-3, for the dipole and Cycles' walk table, points inside, outside, on and off the plane.
 
-use crate::profiles::{RadialProfile, RgbProfile};
+use crate::profiles::{LookupRgb, RadialProfile, RgbProfile};
 use crate::quadrature::GAUSS8;
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -54,6 +54,18 @@ impl Triangle {
             normal: if len > 0.0 { cross / len } else { DVec3::Z },
             area: 0.5 * len,
             diam: (b - a).length().max((c - b).length()).max((a - c).length()),
+        }
+    }
+
+    /// The interior angle at corner `k` [rad]; 0 where an edge from it has no length.
+    pub fn corner_angle(&self, k: usize) -> f64 {
+        let o = self.corners[k];
+        let (u, v) = (self.corners[(k + 1) % 3] - o, self.corners[(k + 2) % 3] - o);
+        let (lu, lv) = (u.length(), v.length());
+        if lu > 0.0 && lv > 0.0 {
+            (u.dot(v) / (lu * lv)).clamp(-1.0, 1.0).acos()
+        } else {
+            0.0
         }
     }
 }
@@ -340,6 +352,52 @@ pub fn corner_moment<P: RadialProfile + ?Sized>(
     sum
 }
 
+/// The form factor and the first moment of T from its corner `c` for the three channels of a
+/// lookup table at once: F = ∫_T R(|x − y|) dA and M = ∫_T R(|x − y|) (y − x) dA, x the
+/// corner. Polar about x, only the opposite edge bounds T, at ρ(ψ) = d / cos ψ: F = (1/2π)
+/// ∫ C(ρ(ψ)) dψ (Mertens eq. 8 with h = 0) and M = ∫ R₂(ρ(ψ)) (cos ψ n + sin ψ e) dψ with
+/// R₂(ρ) = ∫_0^ρ s² R(s) ds from the table (`corner_moment` integrates R₂ itself, for any
+/// profile). With them a linear irradiance over T is integrated exactly (`corner_integral`).
+pub fn corner_terms_rgb(
+    t: &Triangle,
+    c: usize,
+    rgb: &LookupRgb,
+    rule: &EdgeRule,
+) -> ([f64; 3], [DVec3; 3]) {
+    let (mut f, mut m) = ([0.0f64; 3], [DVec3::ZERO; 3]);
+    let x = t.corners[c];
+    let (a, b) = (t.corners[(c + 1) % 3], t.corners[(c + 2) % 3]);
+    let edge = b - a;
+    let len = edge.length();
+    if t.area <= 0.0 || len <= 0.0 || !rgb.near().is_finite() {
+        return (f, m);
+    }
+    let e = edge / len;
+    let foot = a + (x - a).dot(e) * e;
+    let d = (foot - x).length();
+    if d <= 1e-12 * t.diam {
+        return (f, m);
+    }
+    let n_e = (foot - x) / d;
+    let (s_a, s_b) = ((a - foot).dot(e), (b - foot).dot(e));
+    let (lo, hi) = (s_a.min(s_b), s_a.max(s_b));
+    for_each_piece(lo, hi, d, rgb.near(), rule, |p0, p1| {
+        let (mid, half) = (0.5 * (p0 + p1), 0.5 * (p1 - p0));
+        let nodes: &[(f64, f64)] = if rule.eight_points { &GAUSS8 } else { &GAUSS4 };
+        for &(s, w) in nodes {
+            let psi = mid + half * s;
+            let (sin, cos) = psi.sin_cos();
+            let (disc, second) = rgb.disc_second_rgb(d / cos);
+            let dir = cos * n_e + sin * e;
+            for k in 0..3 {
+                f[k] += w * half * disc[k];
+                m[k] += (w * half * second[k]) * dir;
+            }
+        }
+    });
+    (f.map(|v| (v / (2.0 * PI)).max(0.0)), m)
+}
+
 /// ∫_T R(|x − y|) I(y) dA over a triangle T that has the point x at its corner `c`, I linear
 /// between the corner values `corner_irr`: I_c K0 + Σ (I_j − I_c) K1 · w_j, with w_j the dual
 /// vectors of T's edges from x (y − x = α u_1 + β u_2, α = (y − x) · w_1).
@@ -350,10 +408,18 @@ pub fn corner_integral<P: RadialProfile + ?Sized>(
     corner_irr: [f64; 3],
     rule: &EdgeRule,
 ) -> f64 {
+    let k0 = triangle_integral(t.corners[c], t, profile, rule);
+    let k1 = corner_moment(t, c, profile, rule);
+    linear_from_corner(t, c, k0, k1, corner_irr)
+}
+
+/// ∫_T R(|x − y|) I(y) dA for I linear between the corner values `corner_irr`, from the form
+/// factor `k0` and first moment `k1` of T about its corner `c` (x): I_c K0 + Σ (I_j − I_c)
+/// K1 · w_j, with w_j the dual vectors of T's edges from x (y − x = α u_1 + β u_2,
+/// α = (y − x) · w_1).
+pub fn linear_from_corner(t: &Triangle, c: usize, k0: f64, k1: DVec3, corner_irr: [f64; 3]) -> f64 {
     let x = t.corners[c];
     let (u1, u2) = (t.corners[(c + 1) % 3] - x, t.corners[(c + 2) % 3] - x);
-    let k0 = triangle_integral(x, t, profile, rule);
-    let k1 = corner_moment(t, c, profile, rule);
     // Dual basis in the plane: w1 . u1 = 1, w1 . u2 = 0 and so on.
     let (g11, g12, g22) = (u1.dot(u1), u1.dot(u2), u2.dot(u2));
     let det = g11 * g22 - g12 * g12;
@@ -378,7 +444,7 @@ mod tests {
     //! cancels the walk profile's 1/r at the entry point) with intervals graded toward the apex.
     use super::*;
     use crate::optics::Material;
-    use crate::profiles::{Model, Profile, RadialProfile};
+    use crate::profiles::{LookupProfile, Model, Profile, RadialProfile};
 
     fn product_rule(x: DVec3, t: &Triangle, p: &Profile, k: usize) -> f64 {
         let [a, b, c] = t.corners;
@@ -485,6 +551,45 @@ mod tests {
                         "{name}, {where_}, {rule:?}: {got} vs quadrature {truth} ({:.2e})",
                         (got - truth).abs() / truth
                     );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn corner_terms_from_the_table_match_the_exact_profiles() {
+        // F against the polygon integral of the exact profile, M against `corner_moment`, which
+        // integrates R₂ of the exact profile by quadrature (itself checked against brute force
+        // below): both PRECISE, the table's terms FAST.
+        let t = Triangle::new(
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.2, 0.1),
+            DVec3::new(0.4, 1.5, -0.2),
+        );
+        for name in ["marble", "ketchup", "skin1"] {
+            for model in [Model::Dipole, Model::Cycles] {
+                for scale in [1.0, 8.0] {
+                    let m = Material::preset(name, scale).unwrap();
+                    let exact = model.profiles(&m).unwrap();
+                    let lookup = std::array::from_fn(|c| LookupProfile::new(&exact[c], 1e-6));
+                    let rgb = LookupRgb::new(&lookup);
+                    for corner in 0..3 {
+                        let (f, mom) = corner_terms_rgb(&t, corner, &rgb, &EdgeRule::FAST);
+                        let x = t.corners[corner];
+                        for c in 0..3 {
+                            let want_f = triangle_integral(x, &t, &exact[c], &EdgeRule::PRECISE);
+                            let want_m = corner_moment(&t, corner, &exact[c], &EdgeRule::PRECISE);
+                            let ok_f = (f[c] - want_f).abs() <= 1e-3 * want_f + 1e-9;
+                            let ok_m = (mom[c] - want_m).length() <= 2e-3 * want_m.length() + 1e-9;
+                            assert!(
+                                ok_f && ok_m,
+                                "{name} {model:?} x{scale} corner {corner} channel {c}: \
+                                 F {} vs {want_f}, M {} vs {want_m}",
+                                f[c],
+                                mom[c]
+                            );
+                        }
+                    }
                 }
             }
         }

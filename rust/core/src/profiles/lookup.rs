@@ -81,15 +81,18 @@ fn locate(rho: f64, support: f64, scale: f64) -> Option<(usize, f64)> {
     Some((i, u - i as f64))
 }
 
+/// ρ_i = support (i / NODES)².
+#[inline]
+fn node(support: f64, i: usize) -> f64 {
+    let u = i as f64 / NODES as f64;
+    support * u * u
+}
+
 /// The weights of C_i, R_i, C_i+1 and R_i+1 in the cubic Hermite of C in ρ on [ρ_i, ρ_i+1]
 /// (ρ_i = support (i / NODES)²) with slopes C'(ρ) = 2πρR(ρ).
 #[inline]
 fn hermite(rho: f64, support: f64, i: usize) -> [f64; 4] {
-    let rho_at = |k: usize| {
-        let u = k as f64 / NODES as f64;
-        support * u * u
-    };
-    let (r0, r1) = (rho_at(i), rho_at(i + 1));
+    let (r0, r1) = (node(support, i), node(support, i + 1));
     let h = r1 - r0;
     let t = ((rho - r0) / h).clamp(0.0, 1.0);
     let (t2, t3) = (t * t, t * t * t);
@@ -153,6 +156,9 @@ pub struct LookupRgb {
     value: Vec<[f64; 3]>,
     /// C of each channel at the same nodes (its own table's, the total from its support on).
     disc: Vec<[f64; 3]>,
+    /// R₂(ρ) = ∫_0^ρ s² R(s) ds of each channel at the same nodes: the radial weight of the
+    /// first moment ∫ R(|y − x|) (y − x) dA (`surface_integral::corner_terms_rgb`).
+    second: Vec<[f64; 3]>,
     /// The shortest near length of the channels that are not zero.
     near: f64,
     /// The same nodes in f32, padded to four lanes (for SIMD readers), and two zero nodes.
@@ -172,7 +178,21 @@ impl LookupRgb {
                 *d = std::array::from_fn(|c| channels[c].disc_integral(rho));
             }
         }
+        // By parts, s² R = s C'(s) / 2π: R₂(ρ) = (ρ C(ρ) − ∫_0^ρ C) / 2π, the integral of C
+        // over each interval that of its cubic Hermite, h (C₀ + C₁) / 2 + h² (C₀' − C₁') / 12.
+        let mut second = vec![[0.0; 3]; NODES + 1];
+        for i in 0..NODES {
+            let (r0, r1) = (node(support, i), node(support, i + 1));
+            let h = r1 - r0;
+            second[i + 1] = std::array::from_fn(|c| {
+                let (c0, c1) = (disc[i][c], disc[i + 1][c]);
+                let (s0, s1) = (2.0 * PI * r0 * value[i][c], 2.0 * PI * r1 * value[i + 1][c]);
+                let area = h * (c0 + c1) / 2.0 + h * h * (s0 - s1) / 12.0;
+                second[i][c] + (r1 * c1 - r0 * c0 - area) / (2.0 * PI)
+            });
+        }
         LookupRgb {
+            second,
             support,
             scale: if support > 0.0 {
                 NODES as f64 / support.sqrt()
@@ -195,6 +215,28 @@ impl LookupRgb {
     /// linear interpolation at u, and 0 from the support on.
     pub fn f32_table(&self) -> (&[[f32; 4]], f64, f64) {
         (&self.value32, self.scale, self.support)
+    }
+
+    /// C(ρ) and R₂(ρ) = ∫_0^ρ s² R(s) ds of the three channels (one node search): R₂ by the
+    /// cubic Hermite in ρ with slopes R₂' = ρ² R at the nodes.
+    #[inline]
+    pub fn disc_second_rgb(&self, rho: f64) -> ([f64; 3], [f64; 3]) {
+        let Some((i, _)) = locate(rho, self.support, self.scale) else {
+            return (self.disc[NODES], self.second[NODES]);
+        };
+        let w = hermite(rho, self.support, i);
+        let (r0, r1) = (node(self.support, i), node(self.support, i + 1));
+        // hermite's slope weights carry C' = 2πρR; R₂' = ρ² R is that times ρ / 2π.
+        let (k0, k1) = (r0 / (2.0 * PI), r1 / (2.0 * PI));
+        let (v0, v1) = (&self.value[i], &self.value[i + 1]);
+        let (d0, d1) = (&self.disc[i], &self.disc[i + 1]);
+        let (s0, s1) = (&self.second[i], &self.second[i + 1]);
+        (
+            std::array::from_fn(|c| w[0] * d0[c] + w[1] * v0[c] + w[2] * d1[c] + w[3] * v1[c]),
+            std::array::from_fn(|c| {
+                w[0] * s0[c] + w[1] * k0 * v0[c] + w[2] * s1[c] + w[3] * k1 * v1[c]
+            }),
+        )
     }
 
     /// R(r) of the three channels.
