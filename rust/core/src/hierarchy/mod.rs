@@ -22,6 +22,7 @@
 pub mod clusters;
 pub mod far;
 pub mod links;
+pub mod ring;
 
 use crate::error::{Error, Result};
 use crate::irradiance::{Density, IrradianceSettings, PerSource};
@@ -37,6 +38,7 @@ use far::FarEmitters;
 use glam::Vec3;
 use links::{Context, LinkCounts, NodeLinks, Slot};
 use rayon::prelude::*;
+use ring::Rings;
 use std::time::Instant;
 
 /// Which of Mertens' three modes (§5.5) an evaluation runs in.
@@ -147,6 +149,11 @@ pub struct Hierarchy {
     rim: Vec<u32>,
     /// Their links (render, incremental).
     rim_links: Vec<NodeLinks>,
+    /// Each vertex's faces (`ring`: the irradiance linear across them where the profile is
+    /// short).
+    rings: Rings,
+    /// Each face's angle at its corners: the weights of the average to the vertices.
+    corner_angles: Vec<[f64; 3]>,
     /// The clusters as far emitters, rebuilt after each pull.
     far: FarEmitters,
     has_links: bool,
@@ -159,6 +166,17 @@ pub struct Hierarchy {
     profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
     geometry_changed: bool,
     report: HierarchyReport,
+}
+
+/// Each channel's decay length (infinite where nothing diffuses).
+fn decays(lookup: &[LookupProfile; 3]) -> [f64; 3] {
+    std::array::from_fn(|c| {
+        if lookup[c].is_zero() {
+            f64::INFINITY
+        } else {
+            lookup[c].length_scales().decay
+        }
+    })
 }
 
 fn faces_of(mesh: &Mesh) -> Vec<Triangle> {
@@ -201,6 +219,7 @@ impl Hierarchy {
             .filter(|(_, c)| **c > 0.0 && **c < 1.0)
             .map(|(v, _)| v as u32)
             .collect();
+        let rings = Rings::new(scene.mesh.vertex_count(), scene.mesh.triangles());
         let report = HierarchyReport {
             mode: settings.mode.name(),
             faces: faces.len(),
@@ -219,6 +238,8 @@ impl Hierarchy {
             has_links: false,
             rim,
             rim_links: Vec::new(),
+            rings,
+            corner_angles: Vec::new(),
             far: FarEmitters::default(),
             face_irradiance: None,
             face_sources: PerSource::default(),
@@ -362,13 +383,7 @@ impl Hierarchy {
             eps_emitter: self.settings.eps_emitter * scale,
             support: lookup.iter().map(|p| p.support()).fold(0.0, f64::max),
             supports: std::array::from_fn(|c| lookup[c].support()),
-            decays: std::array::from_fn(|c| {
-                if lookup[c].is_zero() {
-                    f64::INFINITY
-                } else {
-                    lookup[c].length_scales().decay
-                }
-            }),
+            decays: decays(lookup),
             rule: EdgeRule::FAST,
             skip_dark,
         }
@@ -392,6 +407,11 @@ impl Hierarchy {
             self.tree.refit(&self.faces);
             self.geometry_changed = false;
         }
+        if geometry_changed || self.corner_angles.len() != self.faces.len() {
+            self.corner_angles = (self.faces.par_iter())
+                .map(|f| std::array::from_fn(|k| f.corner_angle(k)))
+                .collect();
+        }
         report.seconds_refit = t.elapsed().as_secs_f64();
         let t = Instant::now();
         let eta = self.settings.model.irradiance_eta(material);
@@ -401,7 +421,12 @@ impl Hierarchy {
             .as_ref()
             .map(|(_, p, _)| p.iter().any(|p| p.point_mass() > 0.0))
             .unwrap_or(false);
-        if point_mass {
+        let short = match &self.profiles {
+            Some((_, lookup, _)) => self.rings.short_channels(&self.faces, &decays(lookup)),
+            None => Vec::new(),
+        };
+        let ring_linear = short.iter().any(|s| *s != 0);
+        if point_mass || ring_linear {
             report.rays += self.sample_vertices(eta)?;
         }
         report.seconds_irradiance = t.elapsed().as_secs_f64();
@@ -426,13 +451,16 @@ impl Hierarchy {
         self.profiles = Some((*material, lookup, rgb));
         let face_b = result?;
 
-        // Average to the vertices (area-weighted over the faces around each, §3.2).
+        // Average to the vertices (§3.2), each face weighted by its angle at the vertex: where
+        // the profile is short against the faces, B at a vertex is the irradiance of the faces
+        // around it in proportion to the angle each spans there, and B at each face's centroid
+        // is its own irradiance (area weights measured 0.3–0.5 % worse on the bunny).
         let t = Instant::now();
         let mesh = &self.scene.mesh;
         let mut sum = vec![[0.0f64; 4]; mesh.vertex_count()];
         for (f, tri) in mesh.triangles().iter().enumerate() {
-            let a = self.faces[f].area;
-            for &v in tri {
+            for (k, &v) in tri.iter().enumerate() {
+                let a = self.corner_angles[f][k];
                 let s = &mut sum[v as usize];
                 (0..3).for_each(|c| s[c] += a * face_b[f][c]);
                 s[3] += a;
@@ -474,7 +502,7 @@ impl Hierarchy {
                 }
             }
         }
-        let out: Vec<[f32; 3]> = sum
+        let mut out: Vec<[f32; 3]> = sum
             .iter()
             .enumerate()
             .map(|(v, s)| {
@@ -488,6 +516,27 @@ impl Hierarchy {
                 })
             })
             .collect();
+        if let (true, Some((face_irr, _)), Some((vertex_irr, _)), Some((_, _, rgb))) = (
+            ring_linear,
+            &self.face_irradiance,
+            &self.vertex_irradiance,
+            &self.profiles,
+        ) {
+            let delta = self.rings.corrections(
+                &self.faces,
+                mesh.triangles(),
+                &short,
+                face_irr,
+                vertex_irr,
+                &self.rim,
+                rgb,
+                &EdgeRule::FAST,
+            );
+            for (v, d) in delta {
+                let o = &mut out[v as usize];
+                (0..3).for_each(|c| o[c] = (f64::from(o[c]) + d[c]).max(0.0) as f32);
+            }
+        }
         report.seconds_push += t.elapsed().as_secs_f64();
         report.seconds = start.elapsed().as_secs_f64();
         self.report = report;
