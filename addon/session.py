@@ -199,7 +199,7 @@ def _params(settings) -> tuple:
 
 # ------------------------------------------------------------------------------- methods
 
-HIERARCHY_EPS = (0.005, 0.3)  # receiver and emitter thresholds (eps1, eps2): translucent.Hierarchy's defaults
+HIERARCHY_EPS = (0.005, 0.5)  # receiver and emitter thresholds (eps1, eps2): translucent.Hierarchy's defaults
 
 
 def hierarchy_available() -> bool:

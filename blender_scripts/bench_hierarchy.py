@@ -89,7 +89,7 @@ def main() -> int:
     args = ap.parse_args()
     print(f"machine: {machine()}; load average {os.getloadavg()[0]:.1f} at start")
     print(f"translucent {translucent.__version__}; {args.profile} profile, marble, bunny at 10 cm, "
-          f"median of {args.runs} runs; eps = (0.005, 0.3)")
+          f"median of {args.runs} runs; eps = (0.005, 0.5)")
     marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
     p, t = base_mesh()
     rows = []

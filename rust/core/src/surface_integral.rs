@@ -94,7 +94,7 @@ impl EdgeRule {
     /// length ratio 1.5, which this rule's coarser pieces took the hierarchy's on-the-fly
     /// evaluation from 557 to about 480 ms with its bunny errors unchanged to 0.01 %).
     pub const FAST: EdgeRule = EdgeRule {
-        max_angle: 2.0,
+        max_angle: 2.3,
         max_length_ratio: 2.5,
         eight_points: false,
     };

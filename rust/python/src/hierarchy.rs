@@ -21,7 +21,7 @@ impl PyHierarchy {
     /// Builds the hierarchy and evaluates `material` once (links, in render and incremental
     /// modes). Releases the GIL.
     #[new]
-    #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.3),
+    #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.5),
         mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32,
         world_shadows = false))]
     #[allow(clippy::too_many_arguments)]

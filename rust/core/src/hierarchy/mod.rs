@@ -95,7 +95,7 @@ impl Default for HierarchySettings {
     fn default() -> Self {
         Self {
             eps_receiver: 0.005,
-            eps_emitter: 0.3,
+            eps_emitter: 0.5,
             model: Model::Cycles,
             mode: Mode::OnTheFly,
             support_tolerance: 1e-4,

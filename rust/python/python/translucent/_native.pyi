@@ -261,7 +261,7 @@ class Hierarchy:
         scene: Scene,
         material: Material,
         profile: Profile = "cycles",
-        eps: tuple[float, float] = (0.005, 0.3),
+        eps: tuple[float, float] = (0.005, 0.5),
         mode: Literal["on_the_fly", "incremental", "render"] = "on_the_fly",
         world_samples: int = 64,
         area_samples: int = 16,
