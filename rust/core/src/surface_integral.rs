@@ -536,11 +536,7 @@ mod tests {
     #[test]
     fn triangle_integral_matches_two_dimensional_quadrature() {
         // A 2 x 1.5 mm triangle: a few of marble's near lengths, a fraction of its decay length.
-        let t = Triangle::new(
-            DVec3::new(0.0, 0.0, 0.0),
-            DVec3::new(2.0, 0.2, 0.1),
-            DVec3::new(0.4, 1.5, -0.2),
-        );
+        let t = skew_triangle();
         for (name, p) in profiles() {
             for (where_, x) in points(&t) {
                 let truth = brute(x, &t, &p);
@@ -556,16 +552,21 @@ mod tests {
         }
     }
 
+    /// A 2 x 1.5 mm triangle off every axis plane.
+    fn skew_triangle() -> Triangle {
+        Triangle::new(
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.2, 0.1),
+            DVec3::new(0.4, 1.5, -0.2),
+        )
+    }
+
     #[test]
     fn corner_terms_from_the_table_match_the_exact_profiles() {
         // F against the polygon integral of the exact profile, M against `corner_moment`, which
         // integrates R₂ of the exact profile by quadrature (itself checked against brute force
         // below): both PRECISE, the table's terms FAST.
-        let t = Triangle::new(
-            DVec3::ZERO,
-            DVec3::new(2.0, 0.2, 0.1),
-            DVec3::new(0.4, 1.5, -0.2),
-        );
+        let t = skew_triangle();
         for name in ["marble", "ketchup", "skin1"] {
             for model in [Model::Dipole, Model::Cycles] {
                 for scale in [1.0, 8.0] {
@@ -597,11 +598,7 @@ mod tests {
 
     #[test]
     fn the_three_channels_at_once_equal_each_alone() {
-        let t = Triangle::new(
-            DVec3::ZERO,
-            DVec3::new(2.0, 0.2, 0.1),
-            DVec3::new(0.4, 1.5, -0.2),
-        );
+        let t = skew_triangle();
         let m = Material::preset("skin1", 1.0).unwrap();
         let p = Model::Dipole.profiles(&m).unwrap();
         for (_, x) in points(&t) {
