@@ -229,14 +229,21 @@ impl LookupRgb {
         // hermite's slope weights carry C' = 2πρR; R₂' = ρ² R is that times ρ / 2π.
         let (k0, k1) = (r0 / (2.0 * PI), r1 / (2.0 * PI));
         let (v0, v1) = (&self.value[i], &self.value[i + 1]);
-        let (d0, d1) = (&self.disc[i], &self.disc[i + 1]);
         let (s0, s1) = (&self.second[i], &self.second[i + 1]);
         (
-            std::array::from_fn(|c| w[0] * d0[c] + w[1] * v0[c] + w[2] * d1[c] + w[3] * v1[c]),
+            self.disc_between(i, &w),
             std::array::from_fn(|c| {
                 w[0] * s0[c] + w[1] * k0 * v0[c] + w[2] * s1[c] + w[3] * k1 * v1[c]
             }),
         )
+    }
+
+    /// C of the three channels on [ρ_i, ρ_i+1] from `hermite`'s weights `w`.
+    #[inline]
+    fn disc_between(&self, i: usize, w: &[f64; 4]) -> [f64; 3] {
+        let (d0, d1) = (&self.disc[i], &self.disc[i + 1]);
+        let (v0, v1) = (&self.value[i], &self.value[i + 1]);
+        std::array::from_fn(|c| w[0] * d0[c] + w[1] * v0[c] + w[2] * d1[c] + w[3] * v1[c])
     }
 
     /// R(r) of the three channels.
@@ -262,14 +269,7 @@ impl RgbProfile for LookupRgb {
         let Some((i, _)) = locate(rho, self.support, self.scale) else {
             return self.disc[NODES];
         };
-        let w = hermite(rho, self.support, i);
-        let (d0, d1, v0, v1) = (
-            &self.disc[i],
-            &self.disc[i + 1],
-            &self.value[i],
-            &self.value[i + 1],
-        );
-        std::array::from_fn(|c| w[0] * d0[c] + w[1] * v0[c] + w[2] * d1[c] + w[3] * v1[c])
+        self.disc_between(i, &hermite(rho, self.support, i))
     }
 
     fn near(&self) -> f64 {
