@@ -154,6 +154,8 @@ pub struct Hierarchy {
     rings: Rings,
     /// Each face's angle at its corners: the weights of the average to the vertices.
     corner_angles: Vec<[f64; 3]>,
+    /// Each vertex's mean edge length (`ring`: which channels are short there).
+    mean_edges: Vec<f64>,
     /// The clusters as far emitters, rebuilt after each pull.
     far: FarEmitters,
     has_links: bool,
@@ -240,6 +242,7 @@ impl Hierarchy {
             rim_links: Vec::new(),
             rings,
             corner_angles: Vec::new(),
+            mean_edges: Vec::new(),
             far: FarEmitters::default(),
             face_irradiance: None,
             face_sources: PerSource::default(),
@@ -411,6 +414,7 @@ impl Hierarchy {
             self.corner_angles = (self.faces.par_iter())
                 .map(|f| std::array::from_fn(|k| f.corner_angle(k)))
                 .collect();
+            self.mean_edges = self.rings.mean_edges(&self.faces);
         }
         report.seconds_refit = t.elapsed().as_secs_f64();
         let t = Instant::now();
@@ -422,7 +426,7 @@ impl Hierarchy {
             .map(|(_, p, _)| p.iter().any(|p| p.point_mass() > 0.0))
             .unwrap_or(false);
         let short = match &self.profiles {
-            Some((_, lookup, _)) => self.rings.short_channels(&self.faces, &decays(lookup)),
+            Some((_, lookup, _)) => Rings::short_channels(&self.mean_edges, &decays(lookup)),
             None => Vec::new(),
         };
         let ring_linear = short.iter().any(|s| *s != 0);

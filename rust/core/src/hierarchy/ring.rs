@@ -64,23 +64,31 @@ impl Rings {
         &self.faces[self.first[v] as usize..self.first[v + 1] as usize]
     }
 
-    /// Per vertex, a bit per channel whose decay is short against the vertex's edges.
-    pub fn short_channels(&self, faces: &[Triangle], decays: &[f64; 3]) -> Vec<u8> {
+    /// The mean length of each vertex's edges (0 for a vertex on no face): geometry alone,
+    /// kept until the mesh deforms.
+    pub fn mean_edges(&self, faces: &[Triangle]) -> Vec<f64> {
         (0..self.first.len() - 1)
             .into_par_iter()
             .map(|v| {
                 let ring = self.of(v);
-                if ring.is_empty() {
-                    return 0;
-                }
-                let mean = ring
+                let sum: f64 = ring
                     .iter()
                     .map(|&(f, k)| {
                         let t = &faces[f as usize];
                         (t.corners[(k as usize + 1) % 3] - t.corners[k as usize]).length()
                     })
-                    .sum::<f64>()
-                    / ring.len() as f64;
+                    .sum();
+                sum / ring.len().max(1) as f64
+            })
+            .collect()
+    }
+
+    /// Per vertex, a bit per channel whose decay is short against the vertex's edges
+    /// (`mean_edges`).
+    pub fn short_channels(mean_edges: &[f64], decays: &[f64; 3]) -> Vec<u8> {
+        mean_edges
+            .iter()
+            .map(|&mean| {
                 (0..3)
                     .filter(|&c| decays[c] < RING_DECAY * mean)
                     .fold(0u8, |bits, c| bits | 1 << c)
