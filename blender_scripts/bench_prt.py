@@ -80,6 +80,7 @@ def main() -> int:
         print(
             f"\nprecompute, bunny 10 cm ({scene.vertex_count} vertices, {r['samples']} samples), marble, "
             f"{profile} profile, 32 coefficients: median {statistics.median(times):.2f} s over {args.runs} runs "
+            f"(the first {times[0]:.2f} s) "
             f"(irradiance {r['seconds_irradiance']:.2f} s, tree {r['seconds_tree']:.2f} s, "
             f"transport {r['seconds_transport']:.2f} s, the object's own light {r['seconds_interreflection']:.2f} s "
             f"for {r['interreflection_rays']} rays{walks}) [budget 20 s]"

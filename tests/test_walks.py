@@ -169,7 +169,9 @@ def test_a_part_sunk_into_another_is_walked_as_its_own_class():
     k = translucent.layer_weight(m.roughness, 1.0, m.eta) / math.pi
     walked = translucent.Prt(s, m, backend="cpu", interreflection=False, walk_rays=3_000_000)
     half = translucent.Prt(s, m, backend="cpu", interreflection=False, walks=0)
-    assert walked.report["walks"]["refined_vertices"] > 0
+    # The sunk part walked closer than the rest (a second pass), or every vertex walked.
+    report = walked.report["walks"]
+    assert report["refined_vertices"] > 0 or report["walked_vertices"] == s.vertex_count, report
     for sel, bound in ((inside, 0.35), (np.ones(len(small), bool), 0.12)):
         err = max(translucent.relative_error((walked.radiosity(m) * k)[small][sel], truth[sel], w[small][sel])["rms"])
         err_half = max(translucent.relative_error((half.radiosity(m) * k)[small][sel], truth[sel], w[small][sel])["rms"])

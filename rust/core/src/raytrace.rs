@@ -33,6 +33,9 @@ pub struct Tracer {
 
 /// Ray origin offset in the unit-sized frame.
 const EPSILON: f32 = 1e-5;
+/// How far behind a point inside the mesh its rays start (unit frame): twice the distance
+/// within which obvhs' traversal skips nodes.
+const INSIDE_BACKOFF: f32 = 2e-4;
 
 impl Tracer {
     pub fn new(mesh: &Mesh) -> Tracer {
@@ -111,7 +114,27 @@ impl Tracer {
 
     /// The closest hit along `direction` (unit) from `origin` within (epsilon, t_max).
     pub fn intersect(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        let ray = self.ray(origin, direction, t_max);
+        self.closest(self.ray(origin, direction, t_max))
+    }
+
+    /// As `intersect` from `t` = 0: for a point strictly inside a closed mesh (a subsurface
+    /// walk's collision), which may lie closer to the surface than epsilon and must still
+    /// find it. obvhs' wide-BVH traversal skips every node whose box ends within 1e-4 of the
+    /// origin (in the unit frame, whatever the ray's t_min: `cwbvh::node::EPSILON`), so a walk
+    /// within that of a flat part of the surface saw no surface and walked on outside
+    /// (measured: 7e-5 below the top of a unit box, rays straight up missed it). The ray
+    /// starts `INSIDE_BACKOFF` behind the point instead and counts hits from the point on.
+    pub fn intersect_from_inside(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
+        let back = INSIDE_BACKOFF * self.scale;
+        let mut ray = self.ray(origin - direction * back, direction, t_max + back);
+        ray.tmin = INSIDE_BACKOFF;
+        self.closest(ray).map(|h| Hit {
+            t: (h.t - back).max(0.0),
+            triangle: h.triangle,
+        })
+    }
+
+    fn closest(&self, ray: Ray) -> Option<Hit> {
         let mut hit = RayHit::none();
         if self
             .bvh
