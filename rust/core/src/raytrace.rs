@@ -134,6 +134,30 @@ impl Tracer {
         })
     }
 
+    /// Whether the ray from `p` along `direction` (the outward normal of the surface `p` lies
+    /// on) first meets a surface of `mesh` from behind: `p` lies inside a closed part of the
+    /// mesh (an eyeball sunk into a head), where no light from outside reaches it.
+    pub fn inside_a_part(&self, mesh: &Mesh, p: Vec3, direction: Vec3) -> bool {
+        self.intersect(self.offset_origin(p, direction), direction, f32::INFINITY)
+            .is_some_and(|h| {
+                let [a, b, c] =
+                    mesh.triangles()[h.triangle as usize].map(|i| mesh.positions()[i as usize]);
+                (b - a).cross(c - a).dot(direction) > 0.0
+            })
+    }
+
+    /// Per vertex of `mesh`: `inside_a_part` along its normal (false where it has none).
+    pub fn embedded_vertices(&self, mesh: &Mesh) -> Vec<bool> {
+        use rayon::prelude::*;
+        (0..mesh.vertex_count())
+            .into_par_iter()
+            .map(|v| {
+                let n = mesh.normals()[v];
+                n != Vec3::ZERO && self.inside_a_part(mesh, mesh.positions()[v], n)
+            })
+            .collect()
+    }
+
     fn closest(&self, ray: Ray) -> Option<Hit> {
         let mut hit = RayHit::none();
         if self
@@ -185,6 +209,69 @@ fn intersect(tri: &Triangle, ray: &Ray) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An axis-aligned cube, wound outwards, appended to (p, t).
+    fn cube(p: &mut Vec<Vec3>, t: &mut Vec<[u32; 3]>, centre: Vec3, half: f32) {
+        let base = p.len() as u32;
+        for k in 0..8 {
+            let s = |b: usize| if k & b != 0 { 1.0 } else { -1.0 };
+            p.push(centre + half * Vec3::new(s(1), s(2), s(4)));
+        }
+        // Faces as corner quads (bit masks), counter-clockwise seen from outside.
+        for q in [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ] {
+            t.push([base + q[0], base + q[1], base + q[2]]);
+            t.push([base + q[0], base + q[2], base + q[3]]);
+        }
+    }
+
+    #[test]
+    fn vertices_inside_another_part_are_embedded_and_no_others() {
+        // A small cube sunk halfway into the +x face of a large one: its four corners at
+        // x = 0.7 lie inside the large cube, its four at x = 1.3 outside; the large cube's
+        // corners are all outside.
+        let (mut p, mut t) = (Vec::new(), Vec::new());
+        cube(&mut p, &mut t, Vec3::ZERO, 1.0);
+        cube(&mut p, &mut t, Vec3::new(1.0, 0.0, 0.0), 0.3);
+        let mesh = Mesh::new(p, t, None).unwrap();
+        let tracer = Tracer::new(&mesh);
+        let embedded = tracer.embedded_vertices(&mesh);
+        for (v, e) in embedded.iter().enumerate() {
+            let inside = v >= 8 && mesh.positions()[v].x < 1.0;
+            assert_eq!(*e, inside, "vertex {v} at {:?}", mesh.positions()[v]);
+        }
+    }
+
+    #[test]
+    fn points_inside_another_part_are_inside_and_no_others() {
+        // The same two cubes: points on the large cube's +x face (x = 1, normal +x) lie inside
+        // the small cube where |y|, |z| < 0.3, outside beyond; points on the small cube's -x
+        // face (x = 0.7, normal -x) lie inside the large cube.
+        let (mut p, mut t) = (Vec::new(), Vec::new());
+        cube(&mut p, &mut t, Vec3::ZERO, 1.0);
+        cube(&mut p, &mut t, Vec3::new(1.0, 0.0, 0.0), 0.3);
+        let mesh = Mesh::new(p, t, None).unwrap();
+        let tracer = Tracer::new(&mesh);
+        for (y, z, inside) in [
+            (0.0, 0.0, true),
+            (0.2, -0.25, true),
+            (0.35, 0.0, false),
+            (0.0, -0.5, false),
+            (0.9, 0.9, false),
+        ] {
+            let q = Vec3::new(1.0, y, z);
+            assert_eq!(tracer.inside_a_part(&mesh, q, Vec3::X), inside, "{q:?}");
+        }
+        let q = Vec3::new(0.7, 0.1, 0.1);
+        assert!(tracer.inside_a_part(&mesh, q, -Vec3::X));
+        assert!(!tracer.inside_a_part(&mesh, Vec3::new(1.3, 0.1, 0.1), Vec3::X));
+    }
 
     /// Two parallel unit squares at z = 0 and z = h, scaled by `s`.
     fn two_squares(s: f32, h: f32) -> Mesh {

@@ -159,7 +159,7 @@ impl GeometryTerm {
         let n = mesh.vertex_count();
         // Vertices inside another part of the mesh (an eyeball sunk into a head) are their own
         // class: walked closer together, averaged only among themselves.
-        let embedded = embedded_vertices(mesh, tracer);
+        let embedded = tracer.embedded_vertices(mesh);
         // Flat neighbourhoods get D = 0 and no walks.
         let reach = (REACH_LENGTHS * longest) as f32;
         let tolerance = (FLAT_TOLERANCE * shortest) as f32;
@@ -502,29 +502,6 @@ fn combine(a: &MeshWalkResult, b: &MeshWalkResult, na: usize, nb: usize) -> Mesh
     }
 }
 
-/// Per vertex: whether the ray along its normal first meets a surface from behind, i.e. the
-/// vertex lies inside a closed part of the mesh (an eyeball sunk into a head). Cycles' walk
-/// from there leaves into the enclosing part's inside, in the dark, where a half-space profile
-/// sees the lit surface around it.
-fn embedded_vertices(mesh: &Mesh, tracer: &Tracer) -> Vec<bool> {
-    let (p, nrm) = (mesh.positions(), mesh.normals());
-    (0..mesh.vertex_count())
-        .into_par_iter()
-        .map(|v| {
-            let n = nrm[v];
-            if n == Vec3::ZERO {
-                return false;
-            }
-            tracer
-                .intersect(tracer.offset_origin(p[v], n), n, f32::INFINITY)
-                .is_some_and(|h| {
-                    let [a, b, c] = mesh.triangles()[h.triangle as usize].map(|i| p[i as usize]);
-                    (b - a).cross(c - a).dot(n) > 0.0
-                })
-        })
-        .collect()
-}
-
 /// A deterministic, well-spread subset of the vertices about `spacing` apart (greedy
 /// Poisson-disc over the vertices in a fixed scrambled order), among those `allowed` keeps.
 fn spread_where(mesh: &Mesh, spacing: f32, allowed: impl Fn(u32) -> bool) -> Vec<u32> {
@@ -702,44 +679,6 @@ mod tests {
             assert!(near < s, "{near}");
         }
         assert_eq!(chosen, spread_where(&mesh, s, |_| true), "deterministic");
-    }
-
-    /// An axis-aligned cube, wound outwards, appended to (p, t).
-    fn cube(p: &mut Vec<Vec3>, t: &mut Vec<[u32; 3]>, centre: Vec3, half: f32) {
-        let base = p.len() as u32;
-        for k in 0..8 {
-            let s = |b: usize| if k & b != 0 { 1.0 } else { -1.0 };
-            p.push(centre + half * Vec3::new(s(1), s(2), s(4)));
-        }
-        // Faces as corner quads (bit masks), counter-clockwise seen from outside.
-        for q in [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ] {
-            t.push([base + q[0], base + q[1], base + q[2]]);
-            t.push([base + q[0], base + q[2], base + q[3]]);
-        }
-    }
-
-    #[test]
-    fn vertices_inside_another_part_are_embedded_and_no_others() {
-        // A small cube sunk halfway into the +x face of a large one: its four corners at
-        // x = 0.7 lie inside the large cube, its four at x = 1.3 outside; the large cube's
-        // corners are all outside.
-        let (mut p, mut t) = (Vec::new(), Vec::new());
-        cube(&mut p, &mut t, Vec3::ZERO, 1.0);
-        cube(&mut p, &mut t, Vec3::new(1.0, 0.0, 0.0), 0.3);
-        let mesh = Mesh::new(p, t, None).unwrap();
-        let tracer = Tracer::new(&mesh);
-        let embedded = embedded_vertices(&mesh, &tracer);
-        for (v, e) in embedded.iter().enumerate() {
-            let inside = v >= 8 && mesh.positions()[v].x < 1.0;
-            assert_eq!(*e, inside, "vertex {v} at {:?}", mesh.positions()[v]);
-        }
     }
 
     #[test]
