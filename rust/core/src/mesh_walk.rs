@@ -440,7 +440,9 @@ impl Walker<'_> {
         } else {
             0.0
         };
-        let mean = mx - beta * (my - e * plane);
+        // B >= 0: the control can take a few walks' mean below it (a nearly transparent
+        // medium, 8 walks: -2e-4 where B is 0.3).
+        let mean = (mx - beta * (my - e * plane)).max(0.0);
         let var = (vx - 2.0 * beta * cxy + beta * beta * vy).max(0.0);
         let se = if s.walks > 1 {
             (var / (k - 1.0)).sqrt()
