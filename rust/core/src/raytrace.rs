@@ -231,16 +231,22 @@ mod tests {
         }
     }
 
-    #[test]
-    fn vertices_inside_another_part_are_embedded_and_no_others() {
-        // A small cube sunk halfway into the +x face of a large one: its four corners at
-        // x = 0.7 lie inside the large cube, its four at x = 1.3 outside; the large cube's
-        // corners are all outside.
+    /// A small cube (half 0.3) sunk halfway into the +x face of a unit one (half 1).
+    fn sunk_cube() -> (Mesh, Tracer) {
         let (mut p, mut t) = (Vec::new(), Vec::new());
         cube(&mut p, &mut t, Vec3::ZERO, 1.0);
         cube(&mut p, &mut t, Vec3::new(1.0, 0.0, 0.0), 0.3);
         let mesh = Mesh::new(p, t, None).unwrap();
         let tracer = Tracer::new(&mesh);
+        (mesh, tracer)
+    }
+
+    #[test]
+    fn vertices_inside_another_part_are_embedded_and_no_others() {
+        // A small cube sunk halfway into the +x face of a large one: its four corners at
+        // x = 0.7 lie inside the large cube, its four at x = 1.3 outside; the large cube's
+        // corners are all outside.
+        let (mesh, tracer) = sunk_cube();
         let embedded = tracer.embedded_vertices(&mesh);
         for (v, e) in embedded.iter().enumerate() {
             let inside = v >= 8 && mesh.positions()[v].x < 1.0;
@@ -253,11 +259,7 @@ mod tests {
         // The same two cubes: points on the large cube's +x face (x = 1, normal +x) lie inside
         // the small cube where |y|, |z| < 0.3, outside beyond; points on the small cube's -x
         // face (x = 0.7, normal -x) lie inside the large cube.
-        let (mut p, mut t) = (Vec::new(), Vec::new());
-        cube(&mut p, &mut t, Vec3::ZERO, 1.0);
-        cube(&mut p, &mut t, Vec3::new(1.0, 0.0, 0.0), 0.3);
-        let mesh = Mesh::new(p, t, None).unwrap();
-        let tracer = Tracer::new(&mesh);
+        let (mesh, tracer) = sunk_cube();
         for (y, z, inside) in [
             (0.0, 0.0, true),
             (0.2, -0.25, true),
