@@ -23,11 +23,11 @@
 //! numbers (the same directions; flight lengths differ only where the two surfaces are at
 //! different distances), and the twin's exits are scored with the irradiance's tangent-plane
 //! linearisation E(v) + grad E . (y - v). The twin's mean is known without rays: E(v) times the
-//! half-space walk's total (simulated once per channel, `PLANE_WALKS`; the gradient term
-//! averages to 0 by the half-space's symmetry about the normal). It is subtracted as a control
-//! variate (Glasserman, Monte Carlo Methods in Financial Engineering, §4.1; the coefficient
-//! fitted to the walks, in [0, 1]), so only what the mesh and the irradiance's curvature change
-//! is sampled. Measured on Suzanne in skin1 (7,958 vertices, 256 walks): the walks' noise
+//! half-space walk's total (`PLANE_WALKS` ray-free walks, once per medium and process; the
+//! gradient term averages to 0 by the half-space's symmetry about the normal). It is
+//! subtracted as a control variate (Glasserman, Monte Carlo Methods in Financial Engineering,
+//! §4.1; the coefficient fitted to the walks, in [0, 1]), so only what the mesh and the
+//! irradiance's curvature change is sampled. Measured on Suzanne in skin1 (7,958 vertices, 256 walks): the walks' noise
 //! 1.6 / 1.3 / 1.1 % of B per channel instead of 3.4 / 4.8 / 6.1 %, for 15 % more time, and
 //! the mean unchanged (1,024 walks each way: ratio 0.999-1.000, per-vertex z-scores of the
 //! difference mean 0.0, spread 1.0).
