@@ -74,9 +74,12 @@ def main() -> int:
             reports.append(prt.report)
         r = reports[-1]
         w = r["walks"]
+        wi = r.get("walks_indirect")
         walks = (f", walks through the mesh {w['seconds']:.2f} s: {w['walks_per_vertex']} walks per vertex x "
                  f"{w['walked_vertices']} vertices ({w['skipped_flat']} flat, skipped), {w['rays'] / 1e6:.1f} M rays, "
                  f"their noise {100 * max(w['noise']):.1f} % of B" if w else "")
+        walks += (f"; for the object's own light {wi['seconds']:.2f} s: {wi['walks_per_vertex']} walks per vertex x "
+                  f"{wi['walked_vertices']} vertices, {wi['rays'] / 1e6:.1f} M rays" if wi else "")
         print(
             f"\nprecompute, bunny 10 cm ({scene.vertex_count} vertices, {r['samples']} samples), marble, "
             f"{profile} profile, 32 coefficients: median {statistics.median(times):.2f} s over {args.runs} runs "

@@ -153,9 +153,11 @@ def test_a_part_sunk_into_another_is_walked_as_its_own_class():
     """A 1.5 mm marble sphere sunk a third of its height into a 4 mm one (an eyeball in a head),
     lit from above. The walks from the sunk part leave into the large sphere's inside, in the
     dark (they cross the large sphere's surface, inside the small one, before any other: Cycles'
-    exit at the first surface crossed), where the half-space profile sees the lit surface around
-    it. PRT with walks: dark there (measured 1e-4 of the lit part's level; the half-space 0.8 of
-    it), and on the small sphere as a whole against the walks at every vertex (no kernel)."""
+    exit at the first surface crossed, and what tunnels on from there leaves the mesh), where the
+    half-space profile sees the lit surface around it. PRT with walks: dark there (measured 1e-4
+    of the lit part's level; the half-space 0.4-0.5 of it: the lit part gains the large sphere's
+    light through the tunnel), and on the small sphere as a whole against the walks at every
+    vertex (no kernel)."""
     pb, tb = sphere(16, 4.0)
     ps, ts = sphere(8, 1.5)
     ps = ps + np.array([0.0, 0.0, 3.8], np.float32)
@@ -177,7 +179,7 @@ def test_a_part_sunk_into_another_is_walked_as_its_own_class():
     lit = truth[~inside].mean(axis=0)
     assert np.all(truth[inside].mean(axis=0) < 0.01 * lit), truth[inside].mean(axis=0)
     assert np.all(bw[inside].mean(axis=0) < 0.05 * lit), (bw[inside].mean(axis=0), lit)
-    assert np.all(bh[inside].mean(axis=0) > 0.5 * lit), (bh[inside].mean(axis=0), lit)
+    assert np.all(bh[inside].mean(axis=0) > 0.3 * lit), (bh[inside].mean(axis=0), lit)
     err = max(translucent.relative_error(bw, truth, w[small])["rms"])
     err_half = max(translucent.relative_error(bh, truth, w[small])["rms"])
     assert err < 0.12, (err, err_half)

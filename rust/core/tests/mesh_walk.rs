@@ -6,6 +6,8 @@
 //!   half-space sees: the walks' transmission against a brute-force walk between two planes;
 //! - the same seed gives the same bits whatever the thread count.
 
+mod common;
+
 use translucent_core::mesh::Mesh;
 use translucent_core::mesh_walk::{walk_radiosity, MeshWalkSettings};
 use translucent_core::optics::{Layers, Material};
@@ -274,6 +276,25 @@ fn on_a_plane_under_linear_light_the_control_variate_leaves_no_noise() {
 /// matched both), isotropic scattering, entering straight down (Roughness 0): the fraction that
 /// leaves through the far plane. Written here from the walk's description.
 fn brute_transmission(alpha: f64, thickness: f64, walks: usize) -> f64 {
+    brute_transmission_across(alpha, thickness, None, walks)
+}
+
+/// As `brute_transmission`, with a diffuse interface at depth `interface` (as Cycles passes a
+/// surface inside another part: the walk leaves through it, a cosine-distributed path ray
+/// carries it across, and a new walk starts beyond, refracted by 1/1.01, without a collision
+/// first).
+fn brute_transmission_across(
+    alpha: f64,
+    thickness: f64,
+    interface: Option<f64>,
+    walks: usize,
+) -> f64 {
+    brute_slab(alpha, thickness, interface, walks).1
+}
+
+/// The walk of `brute_transmission_across`: the fractions that leave through the entry plane
+/// and through the far one.
+fn brute_slab(alpha: f64, thickness: f64, interface: Option<f64>, walks: usize) -> (f64, f64) {
     let mut state = 0x1234_5678_9abc_def1u64;
     let mut uniform = move || {
         state ^= state >> 12;
@@ -281,12 +302,25 @@ fn brute_transmission(alpha: f64, thickness: f64, walks: usize) -> f64 {
         state ^= state >> 27;
         (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
     };
-    let mut through = 0usize;
+    let (mut back, mut through) = (0usize, 0usize);
     for _ in 0..walks {
         let (mut z, mut dz) = (0.0f64, -1.0f64);
         for _ in 0..256 {
-            z += dz * -(1.0 - uniform()).ln();
+            let next = z + dz * -(1.0 - uniform()).ln();
+            if let Some(depth) = interface {
+                let zi = -depth;
+                if (z - zi) * (next - zi) < 0.0 {
+                    // Across: cos theta of a cosine-distributed direction, then Snell.
+                    let cos_i = (1.0 - uniform()).sqrt();
+                    let eta = 1.0 / 1.01;
+                    let cos_t = (1.0 - eta * eta * (1.0 - cos_i * cos_i)).sqrt();
+                    (z, dz) = (zi, cos_t * dz.signum());
+                    continue;
+                }
+            }
+            z = next;
             if z > 0.0 {
+                back += 1;
                 break;
             }
             if z < -thickness {
@@ -299,7 +333,7 @@ fn brute_transmission(alpha: f64, thickness: f64, walks: usize) -> f64 {
             dz = 1.0 - 2.0 * uniform();
         }
     }
-    through as f64 / walks as f64
+    (back as f64 / walks as f64, through as f64 / walks as f64)
 }
 
 #[test]
@@ -331,6 +365,98 @@ fn a_thin_slab_lets_light_through_to_its_far_side() {
     let expected = brute_transmission(alpha, 2.0, 400_000);
     let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
     eprintln!("transmission: walks {b:.4} +- {se:.4}, brute force {expected:.4}");
+    assert!(expected > 0.1);
+    assert!((b - expected).abs() <= 0.02 * expected + 4.0 * se);
+}
+
+#[test]
+fn a_surface_crossed_from_outside_gives_no_light() {
+    // Two open sheets, both facing up, 2 cm apart, every vertex lit: a walk entering the upper
+    // one and reaching the lower one crosses it from its outside (a walk that left an open mesh
+    // through a hole), where Cycles' exit lobe faces down, away from the walk, and finds no
+    // light. So the upper sheet's centre gets what the brute-force slab walk returns through
+    // its entry plane alone (not that plus what reaches the far plane).
+    let alpha = 0.95;
+    let m = Material::new([100.0 * (1.0 - alpha); 3], [100.0 * alpha; 3], 0.0, 1.01)
+        .unwrap()
+        .with_layers(Layers {
+            roughness: 0.0,
+            ..Layers::default()
+        })
+        .unwrap();
+    let (mut p, mut t) = common::plane_parts(41, 1.0);
+    let (lp, lt) = common::plane_parts(41, 1.0);
+    let base = p.len() as u32;
+    p.extend(lp.iter().map(|q| *q - Vec3::Z * 0.02));
+    t.extend(lt.iter().map(|tri| tri.map(|i| i + base)));
+    let mesh = Mesh::new(p, t, None).unwrap();
+    let tracer = Tracer::new(&mesh);
+    let e = vec![[1.0f32; 3]; mesh.vertex_count()];
+    let centre = nearest(&mesh, 0.0, 0.0);
+    let settings = MeshWalkSettings {
+        walks: 40_000,
+        ..MeshWalkSettings::default()
+    };
+    let r = walk_radiosity(&mesh, &tracer, &m, &e, Some(&[centre]), &settings, None).unwrap();
+    let (back, through) = brute_slab(alpha, 2.0, None, 400_000);
+    let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
+    eprintln!(
+        "open sheets: walks {b:.4} +- {se:.4}, brute force back {back:.4} (through {through:.4})"
+    );
+    assert!(through > 0.1);
+    assert!((b - back).abs() <= 0.02 * back + 4.0 * se);
+}
+
+/// `grid_box` moved down by `dz`, as triangles and positions to merge.
+fn shifted_box(w: f32, depth: f32, n: usize, dz: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let b = grid_box(w, depth, n);
+    let p = b.positions().iter().map(|p| *p - Vec3::Z * dz).collect();
+    (p, b.triangles().to_vec())
+}
+
+#[test]
+fn light_passes_a_part_sunk_into_another_as_cycles_passes_it() {
+    // The thin slab of the test above cut in two boxes that overlap by 2 delta (a sunk part):
+    // the upper one's walks meet the lower box's top inside the upper box. Cycles leaves
+    // there, crosses the overlap on a path ray and walks on in the lower box; the light that
+    // reaches the top is the brute-force walk's across a diffuse interface, the overlap's
+    // 2 delta taken out of the slab. (Ending the walks there would leave the top dark.)
+    let alpha = 0.95;
+    let m = Material::new([100.0 * (1.0 - alpha); 3], [100.0 * alpha; 3], 0.0, 1.01)
+        .unwrap()
+        .with_layers(Layers {
+            roughness: 0.0,
+            ..Layers::default()
+        })
+        .unwrap();
+    let delta = 0.001f32;
+    let (mut p, mut t) = shifted_box(1.0, 0.01 + delta, 21, 0.0);
+    // The lower box a little narrower, so that its top lies wholly inside the upper box.
+    let (lp, lt) = shifted_box(0.98, 0.01 + delta, 21, 0.01 - delta);
+    let base = p.len() as u32;
+    p.extend(lp);
+    t.extend(lt.iter().map(|tri| tri.map(|i| i + base)));
+    let mesh = Mesh::new(p, t, None).unwrap();
+    let tracer = Tracer::new(&mesh);
+    let e: Vec<[f32; 3]> = mesh
+        .positions()
+        .iter()
+        .map(|p| if p.z < -0.0199 { [1.0; 3] } else { [0.0; 3] })
+        .collect();
+    let centre = nearest(&mesh, 0.0, 0.0);
+    let settings = MeshWalkSettings {
+        walks: 40_000,
+        ..MeshWalkSettings::default()
+    };
+    let r = walk_radiosity(&mesh, &tracer, &m, &e, Some(&[centre]), &settings, None).unwrap();
+    let sigma = 100.0;
+    let upper = sigma * f64::from(0.01 - delta);
+    let expected = brute_transmission_across(alpha, 2.0 * upper, Some(upper), 400_000);
+    let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
+    eprintln!(
+        "across a sunk part: walks {b:.4} +- {se:.4}, brute force {expected:.4} (no interface {:.4})",
+        brute_transmission(alpha, 2.0 * upper, 400_000)
+    );
     assert!(expected > 0.1);
     assert!((b - expected).abs() <= 0.02 * expected + 4.0 * se);
 }

@@ -463,24 +463,29 @@ impl PyPrt {
         d.set_item("interreflection_rays", r.interreflection_rays)?;
         d.set_item("interreflection_share", r.interreflection_share)?;
         d.set_item("seconds_interreflection", r.seconds_interreflection)?;
-        match &r.geometry {
-            Some(g) => {
-                let w = PyDict::new(py);
-                w.set_item("walked_vertices", g.walked_vertices)?;
-                w.set_item("skipped_flat", g.skipped_flat)?;
-                w.set_item("walks_per_vertex", g.walks_per_vertex)?;
-                w.set_item("refined_vertices", g.refined_vertices)?;
-                w.set_item("refined_walks_per_vertex", g.refined_walks_per_vertex)?;
-                w.set_item("walks", g.walks)?;
-                w.set_item("rays", g.rays)?;
-                w.set_item("spacing", g.spacing)?;
-                w.set_item("kernel_radius", g.kernel_radius)?;
-                w.set_item("noise", g.noise.to_vec())?;
-                w.set_item("share", g.share.to_vec())?;
-                w.set_item("seconds", g.seconds)?;
-                d.set_item("walks", w)?;
+        for (key, report) in [
+            ("walks", &r.geometry),
+            ("walks_indirect", &r.geometry_indirect),
+        ] {
+            match report {
+                Some(g) => {
+                    let w = PyDict::new(py);
+                    w.set_item("walked_vertices", g.walked_vertices)?;
+                    w.set_item("skipped_flat", g.skipped_flat)?;
+                    w.set_item("walks_per_vertex", g.walks_per_vertex)?;
+                    w.set_item("refined_vertices", g.refined_vertices)?;
+                    w.set_item("refined_walks_per_vertex", g.refined_walks_per_vertex)?;
+                    w.set_item("walks", g.walks)?;
+                    w.set_item("rays", g.rays)?;
+                    w.set_item("spacing", g.spacing)?;
+                    w.set_item("kernel_radius", g.kernel_radius)?;
+                    w.set_item("noise", g.noise.to_vec())?;
+                    w.set_item("share", g.share.to_vec())?;
+                    w.set_item("seconds", g.seconds)?;
+                    d.set_item(key, w)?;
+                }
+                None => d.set_item(key, py.None())?,
             }
-            None => d.set_item("walks", py.None())?,
         }
         d.set_item("seconds_tree", r.seconds_tree)?;
         d.set_item("seconds_transport", r.seconds_transport)?;

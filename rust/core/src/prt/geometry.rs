@@ -431,6 +431,17 @@ impl GeometryTerm {
     /// edit's diffusion length left the walked range by more than LENGTH_MARGIN (a refresh is
     /// advised).
     pub fn add_to(&self, radiosity: &mut [[f32; 3]], profiles: &[Profile; 3]) -> [f64; 3] {
+        self.add_scaled_to(radiosity, profiles, [1.0; 3])
+    }
+
+    /// As `add_to`, the term scaled per channel by `factor` (the object's own light: how much
+    /// more or less the edited material sends out than the representative did).
+    pub fn add_scaled_to(
+        &self,
+        radiosity: &mut [[f32; 3]],
+        profiles: &[Profile; 3],
+        factor: [f32; 3],
+    ) -> [f64; 3] {
         if self.lengths.is_empty() {
             return [0.0; 3];
         }
@@ -461,7 +472,7 @@ impl GeometryTerm {
             } as f32;
             ([a.1, b.1], [1.0 - t, t])
         });
-        let scale = albedo.map(|a| a as f32);
+        let scale: [f32; 3] = std::array::from_fn(|c| albedo[c] as f32 * factor[c]);
         radiosity
             .par_iter_mut()
             .zip(self.per_albedo.par_iter())

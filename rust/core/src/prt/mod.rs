@@ -44,6 +44,8 @@ pub const REFRESH_FACTOR: f64 = 3.0;
 /// what a point sees of the object, 0.2-0.3 in a concave character) of the one before, so
 /// three leave about a percent of the series.
 pub const INTERREFLECTION_BOUNCES: usize = 3;
+/// Share of the walks' ray budget (and walked vertices) spent on the object's own light.
+pub const INDIRECT_WALK_SHARE: f64 = 0.25;
 
 /// The most samples the default spacing asks for.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
@@ -141,8 +143,10 @@ pub struct PrtReport {
     pub seconds_tree: f64,
     pub seconds_transport: f64,
     pub seconds_total: f64,
-    /// The walks through the mesh, when asked for.
+    /// The walks through the mesh, when asked for: for the direct light, and for the object's
+    /// own light (when interreflection is on too).
     pub geometry: Option<GeometryReport>,
+    pub geometry_indirect: Option<GeometryReport>,
 }
 
 /// Where the per-edit dot product runs.
@@ -183,16 +187,19 @@ pub struct Prt {
 }
 
 /// The object's own light, computed at the precompute for the first representative
-/// (`INTERREFLECTION_BOUNCES` bounces) and carried to any edit: the indirect irradiance E_ind
-/// per vertex (rays cast from each vertex, `interreflection`), which the receiver turns into
-/// radiosity locally,
-/// B += (R_total + point mass) E_ind (indirect light varies slowly against the profile), scaled
-/// per channel by how much more or less light the edited material sends out than the
-/// representative did (the ratio of their slab albedos seen along the normal).
+/// (`INTERREFLECTION_BOUNCES` bounces of the B it sends out, the walks' term included) and
+/// carried to any edit: the indirect irradiance E_ind per vertex (rays cast from each vertex,
+/// `interreflection`), which the receiver turns into radiosity locally,
+/// B += (R_total + point mass) E_ind (indirect light varies slowly against the profile), plus,
+/// with the walks, what walks through the mesh make of E_ind beyond that (a geometry term of
+/// its own), both scaled per channel by how much more or less light the edited material sends
+/// out than the representative did (the ratio of their slab albedos seen along the normal).
 #[derive(Debug, Clone)]
 struct Bounce {
     irradiance: Vec<[f32; 3]>,
     source_albedo: [f64; 3],
+    /// What the walks through the mesh make of E_ind beyond its local conversion.
+    walked: Option<GeometryTerm>,
 }
 
 /// A material projected on the basis: the dot-product coefficients per channel and the fit's
@@ -438,39 +445,17 @@ impl Prt {
             .then(|| crate::raytrace::Tracer::new(mesh));
         if let (Some(g), Some(tracer)) = (&settings.geometry, &tracer) {
             let rep = &representatives[0];
-            let mut halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
-            // The object's own light goes through thin parts too (it lights the front of an
-            // ear, Cycles' walk carries it to the back), which the bounce's local term,
-            // (R_total + point mass) E_ind, cannot: the walks gather the direct irradiance
-            // plus an estimate of E_ind (one bounce of the half-space B), and the term is taken
-            // against the half-space B plus that local term, so it holds what the walks carry
-            // of both.
-            let mut lit = prt.vertex_irradiance.clone();
-            if let Some(strata) = bounce_strata {
-                let estimate = crate::interreflection::indirect_irradiance(
-                    mesh,
-                    tracer,
-                    &halfspace,
-                    &|cos| settings.model.exit_weight(rep, cos),
-                    strata,
-                );
-                let receiving = lobe_totals(settings.model, rep)?;
-                for ((l, h), e) in lit.iter_mut().zip(halfspace.iter_mut()).zip(&estimate) {
-                    for c in 0..3 {
-                        l[c] += e[c];
-                        h[c] += receiving[c] as f32 * e[c];
-                    }
-                }
-            }
+            let halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
+            let end = if bounce_strata.is_some() { 0.85 } else { 0.95 };
             let term = GeometryTerm::compute(
                 mesh,
                 tracer,
                 rep,
-                &lit,
+                &prt.vertex_irradiance,
                 &halfspace,
                 g,
                 progress
-                    .map(|p| move |f: f32| p(0.6 + 0.35 * f))
+                    .map(|p| move |f: f32| p(0.6 + (end - 0.6) * f))
                     .as_ref()
                     .map(|f| f as _),
             )?;
@@ -481,6 +466,8 @@ impl Prt {
         if let (Some(strata), Some(tracer)) = (bounce_strata, &tracer) {
             let t_bounce = Instant::now();
             let rep = &representatives[0];
+            // The light sent out is B with the walks' term: the far side of a lit ear glows,
+            // and lights what faces it (the half-space B would leave it dark).
             let direct = prt.radiosity(rep)?.radiosity;
             let model = settings.model;
             let source_albedo = slab_albedo(model, rep)?;
@@ -516,9 +503,42 @@ impl Prt {
             prt.report.interreflection_rays =
                 (INTERREFLECTION_BOUNCES * mesh.vertex_count() * strata * strata) as u64;
             prt.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();
+            // The indirect light enters through the real geometry too (what falls on the
+            // front of an ear comes out at its back): walks gather E_ind against its local
+            // conversion (R_total + point mass) E_ind, on a share of the walks' budget (E_ind
+            // is a few per cent of the light, so is the noise that share leaves).
+            let walked = match &settings.geometry {
+                Some(g) => {
+                    let local: Vec<[f32; 3]> = irradiance
+                        .iter()
+                        .map(|e| std::array::from_fn(|c| receiving[c] as f32 * e[c]))
+                        .collect();
+                    let shared = GeometrySettings {
+                        rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
+                        vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
+                        ..g.clone()
+                    };
+                    let term = GeometryTerm::compute(
+                        mesh,
+                        tracer,
+                        rep,
+                        &irradiance,
+                        &local,
+                        &shared,
+                        progress
+                            .map(|p| move |f: f32| p(0.85 + 0.14 * f))
+                            .as_ref()
+                            .map(|f| f as _),
+                    )?;
+                    prt.report.geometry_indirect = Some(term.report.clone());
+                    Some(term)
+                }
+                None => None,
+            };
             prt.bounce = Some(Bounce {
                 irradiance,
                 source_albedo,
+                walked,
             });
             prt.report.seconds_total = start.elapsed().as_secs_f64();
         }
@@ -740,6 +760,21 @@ impl Prt {
                 .par_iter_mut()
                 .zip(bounce.irradiance.par_iter())
                 .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
+            if let Some(g) = bounce.walked.as_ref().filter(|_| walks) {
+                let ratio: [f32; 3] = std::array::from_fn(|ch| {
+                    if bounce.source_albedo[ch] > 0.0 {
+                        (albedo[ch] / bounce.source_albedo[ch]) as f32
+                    } else {
+                        0.0
+                    }
+                });
+                // Its noise is relative to the indirect light, a share of B.
+                let share = self.report.interreflection_share;
+                let added = g.add_scaled_to(&mut radiosity, &profiles, ratio);
+                for (e, a) in error_estimate.iter_mut().zip(added) {
+                    *e += if a >= 1.0 { a } else { a * share };
+                }
+            }
         }
         Ok((
             Evaluation {

@@ -243,7 +243,10 @@ class Prt:
         skipped_dark, single_scattering (bool), single_scattering_share,
         single_scattering_tolerance, single_scattering_reason, single (None, or coefficients,
         steps, knots, step_length, groups, spread_groups, legendre_order, transport_bytes,
-        quantization_error, on_gpu, rays, bounded_paths, seconds),
+        quantization_error, on_gpu, rays, bounded_paths, seconds), walks and walks_indirect
+        (None, or walked_vertices, skipped_flat, walks_per_vertex, refined_vertices,
+        refined_walks_per_vertex, walks, rays, spacing, kernel_radius, noise, share, seconds:
+        the walks through the mesh for the direct light and for the object's own light),
         seconds per step."""
     @property
     def eta(self) -> float:
