@@ -16,6 +16,7 @@ pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabul
 pub mod quadrature; // Gauss–Legendre and Simpson rules
 pub mod raytrace; // BVH, shadow rays, rays from inside a part, the inside test (obvhs)
 pub mod scene; // a mesh with its lights
+pub mod shadow_edges; // the irradiance on a finer grid where a shadow's edge crosses a triangle
 pub mod single_scattering; // Xu 2007 eq. 5's path model, phase functions, brute force
 pub mod spherical_harmonics; // real Y_lm and HG's Legendre series (addition theorem)
 pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)

@@ -23,7 +23,8 @@
 //! the surface at distance s, the flight leaves there with probability e^(-sigma s), which is
 //! scored, and the walk goes on with the flight conditioned to stay inside (a truncated
 //! exponential) and weight (1 - e^(-sigma s)). Unbiased, one ray per flight, and it removes
-//! most of the noise of thin parts. The exit's irradiance is interpolated from the vertices'.
+//! most of the noise of thin parts. The exit's irradiance is interpolated from the vertices',
+//! and from a finer grid where a shadow's edge crosses the triangle (`shadow_edges`).
 //!
 //! Every walk runs beside a twin in the entry vertex's tangent half-space on the same random
 //! numbers (the same directions; flight lengths differ only where the two surfaces are at
@@ -50,6 +51,7 @@ use crate::profiles::walk::{
     entry_direction, henyey_greenstein, uniform, ANISOTROPIC_BOUNCES, MAX_BOUNCES,
 };
 use crate::raytrace::Tracer;
+use crate::shadow_edges::ShadowEdges;
 use glam::{DVec3, Vec3};
 use rand_core::SeedableRng;
 use rand_pcg::Pcg64Mcg;
@@ -135,6 +137,7 @@ struct Walker<'a> {
     mesh: &'a Mesh,
     tracer: &'a Tracer,
     irradiance: &'a [[f32; 3]],
+    edges: &'a ShadowEdges,
     g: f64,
     entry_alpha: f64,
     inv_ior: f64,
@@ -209,7 +212,35 @@ pub fn walk_radiosity(
     settings: &MeshWalkSettings,
     progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
 ) -> Result<MeshWalkResult> {
+    let light = ExitLight {
+        vertices: irradiance,
+        edges: &ShadowEdges::none(),
+    };
+    walk_radiosity_lit(
+        mesh, tracer, material, &light, receivers, settings, progress,
+    )
+}
+
+/// The light the walks' exits read: per vertex, and finer where a shadow's edge crosses a
+/// triangle (`shadow_edges`).
+#[derive(Debug, Clone, Copy)]
+pub struct ExitLight<'a> {
+    pub vertices: &'a [[f32; 3]],
+    pub edges: &'a ShadowEdges,
+}
+
+/// As `walk_radiosity`, the exits reading `light`.
+pub fn walk_radiosity_lit(
+    mesh: &Mesh,
+    tracer: &Tracer,
+    material: &Material,
+    light: &ExitLight,
+    receivers: Option<&[u32]>,
+    settings: &MeshWalkSettings,
+    progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
+) -> Result<MeshWalkResult> {
     let start = Instant::now();
+    let irradiance = light.vertices;
     let n = mesh.vertex_count();
     if irradiance.len() != n {
         return Err(Error::InvalidArgument(format!(
@@ -258,6 +289,7 @@ pub fn walk_radiosity(
         mesh,
         tracer,
         irradiance,
+        edges: light.edges,
         g: material.g,
         entry_alpha: material.layers.roughness * material.layers.roughness,
         inv_ior: 1.0 / material.eta.clamp(1.01, 3.8),
@@ -736,6 +768,9 @@ impl Walker<'_> {
         let Some(w) = barycentric(&corners, y.as_vec3()) else {
             return Exit::Lit(0.0);
         };
+        if let Some(e) = self.edges.value(triangle, w, c) {
+            return Exit::Lit(f64::from(e));
+        }
         Exit::Lit(
             tri.iter()
                 .zip(w)

@@ -463,6 +463,9 @@ impl PyPrt {
         d.set_item("interreflection_rays", r.interreflection_rays)?;
         d.set_item("interreflection_share", r.interreflection_share)?;
         d.set_item("seconds_interreflection", r.seconds_interreflection)?;
+        d.set_item("shadow_edge_triangles", r.shadow_edge_triangles)?;
+        d.set_item("shadow_edge_points", r.shadow_edge_points)?;
+        d.set_item("seconds_shadow_edges", r.seconds_shadow_edges)?;
         for (key, report) in [
             ("walks", &r.geometry),
             ("walks_indirect", &r.geometry_indirect),

@@ -8,10 +8,11 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
-use translucent_core::mesh_walk::{walk_radiosity, MeshWalkSettings};
+use translucent_core::mesh_walk::{walk_radiosity_lit, ExitLight, MeshWalkSettings};
 use translucent_core::metrics;
 use translucent_core::profiles::Model;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
+use translucent_core::shadow_edges::ShadowEdges;
 use translucent_core::single_scattering::{reference_single, PathSettings, Phase};
 use translucent_core::Vec3;
 
@@ -191,12 +192,26 @@ pub fn reference_radiance_py<'py>(
                     mesh.normals(),
                     &irr.for_density(Density::Receivers),
                 )?;
+                // The exits read the light finer where a shadow's edge crosses a triangle.
+                let edges = ShadowEdges::new(mesh, &e, &|p, n| {
+                    irradiance(
+                        core_scene,
+                        &tracer,
+                        p,
+                        n,
+                        &irr.for_density(Density::Receivers),
+                    )
+                    .map(|(v, _)| v)
+                })?;
                 let tick = |f: f32| progress.call(f);
-                walk_radiosity(
+                walk_radiosity_lit(
                     mesh,
                     &tracer,
                     &m,
-                    &e,
+                    &ExitLight {
+                        vertices: &e,
+                        edges: &edges,
+                    },
                     receivers.as_deref(),
                     &settings,
                     if progress.is_set() { Some(&tick) } else { None },

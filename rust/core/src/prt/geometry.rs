@@ -25,7 +25,7 @@
 
 use crate::error::Result;
 use crate::mesh::Mesh;
-use crate::mesh_walk::{walk_radiosity, MeshWalkResult, MeshWalkSettings};
+use crate::mesh_walk::{walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings};
 use crate::optics::{Material, CHANNELS};
 use crate::profiles::{Model, Profile, RadialProfile};
 use crate::raytrace::Tracer;
@@ -140,14 +140,15 @@ fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
 }
 
 impl GeometryTerm {
-    /// Walks `mesh` for `material` (Cycles' model), lit by `irradiance` per vertex, against
+    /// Walks `mesh` for `material` (Cycles' model), lit by `irradiance` (per vertex, finer across
+    /// shadow edges), against
     /// `halfspace` (B of the half-space profile per vertex, direct light, point mass included).
     #[allow(clippy::too_many_arguments)]
     pub fn compute(
         mesh: &Mesh,
         tracer: &Tracer,
         material: &Material,
-        irradiance: &[[f32; 3]],
+        irradiance: &ExitLight,
         halfspace: &[[f32; 3]],
         settings: &GeometrySettings,
         progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
@@ -184,7 +185,7 @@ impl GeometryTerm {
         };
         let walk = |walked: &[u32], walks: usize, seed: u64, from: f32, to: f32| {
             let tick = progress.map(|p| move |f: f32| p(from + (to - from) * f));
-            walk_radiosity(
+            walk_radiosity_lit(
                 mesh,
                 tracer,
                 material,

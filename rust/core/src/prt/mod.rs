@@ -21,8 +21,10 @@ use crate::basis::{Basis, Degree, Fit, Fitter};
 use crate::error::{Error, Result};
 pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
+use crate::mesh_walk::ExitLight;
 use crate::optics::Material;
 use crate::profiles::{Model, Profile, RadialProfile};
+use crate::shadow_edges::ShadowEdges;
 use geometry::{GeometryReport, GeometrySettings, GeometryTerm};
 use glam::{DVec3, Vec3};
 use layout::Transport;
@@ -147,6 +149,11 @@ pub struct PrtReport {
     /// own light (when interreflection is on too).
     pub geometry: Option<GeometryReport>,
     pub geometry_indirect: Option<GeometryReport>,
+    /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
+    /// evaluated there, and the time it took.
+    pub shadow_edge_triangles: usize,
+    pub shadow_edge_points: usize,
+    pub seconds_shadow_edges: f64,
 }
 
 /// Where the per-edit dot product runs.
@@ -447,11 +454,23 @@ impl Prt {
             let rep = &representatives[0];
             let halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
             let end = if bounce_strata.is_some() { 0.85 } else { 0.95 };
+            // The walks' exits read the light finer where a shadow's edge crosses a triangle.
+            let t_edges = Instant::now();
+            let edges = ShadowEdges::new(mesh, &prt.vertex_irradiance, &|p, n| {
+                irradiance(p, n, Density::Receivers)
+            })?;
+            prt.report.shadow_edge_triangles = edges.len();
+            prt.report.shadow_edge_points = edges.points();
+            prt.report.seconds_shadow_edges = t_edges.elapsed().as_secs_f64();
+            let lit = ExitLight {
+                vertices: &prt.vertex_irradiance,
+                edges: &edges,
+            };
             let term = GeometryTerm::compute(
                 mesh,
                 tracer,
                 rep,
-                &prt.vertex_irradiance,
+                &lit,
                 &halfspace,
                 g,
                 progress
@@ -522,7 +541,10 @@ impl Prt {
                         mesh,
                         tracer,
                         rep,
-                        &irradiance,
+                        &ExitLight {
+                            vertices: &irradiance,
+                            edges: &ShadowEdges::none(),
+                        },
                         &local,
                         &shared,
                         progress

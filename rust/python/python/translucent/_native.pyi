@@ -247,7 +247,8 @@ class Prt:
         (None, or walked_vertices, skipped_flat, walks_per_vertex, refined_vertices,
         refined_walks_per_vertex, walks, rays, spacing, kernel_radius, noise, share, seconds:
         the walks through the mesh for the direct light and for the object's own light),
-        seconds per step."""
+        shadow_edge_triangles and shadow_edge_points (where the walks read the light on a finer
+        grid), seconds per step."""
     @property
     def eta(self) -> float:
         """The IOR of the irradiance's Fresnel factor (1 for the Cycles profile)."""
