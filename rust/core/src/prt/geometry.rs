@@ -79,6 +79,9 @@ pub struct GeometrySettings {
     /// vertex are fixed (`rays` 0).
     pub vertices: usize,
     pub seed: u64,
+    /// Whether the second pass walks again where D changes faster than the spacing (the
+    /// object's own light, smooth, does without).
+    pub refine: bool,
 }
 
 impl Default for GeometrySettings {
@@ -89,6 +92,7 @@ impl Default for GeometrySettings {
             max_walks: 4096,
             vertices: 1000,
             seed: MeshWalkSettings::default().seed,
+            refine: true,
         }
     }
 }
@@ -282,7 +286,11 @@ impl GeometryTerm {
         let mut near_flagged = vec![false; n];
         let mut fine_spacing = spacing;
         let any_embedded = embedded.iter().any(|e| *e);
-        if (!flagged.is_empty() || any_embedded) && per_walk.is_finite() && settings.rays > 0 {
+        if (!flagged.is_empty() || any_embedded)
+            && per_walk.is_finite()
+            && settings.rays > 0
+            && settings.refine
+        {
             let flag_grid = Grid::new(mesh, &flagged, spacing);
             near_flagged = (0..n)
                 .into_par_iter()

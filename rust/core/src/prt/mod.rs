@@ -46,8 +46,11 @@ pub const REFRESH_FACTOR: f64 = 3.0;
 /// what a point sees of the object, 0.2-0.3 in a concave character) of the one before, so
 /// three leave about a percent of the series.
 pub const INTERREFLECTION_BOUNCES: usize = 3;
+/// Bounces after the first cast this share of the first one's strata per side (they carry a
+/// few per cent of B; 2/3: 64 rays per vertex instead of 144, 1.3 s less on the 10 cm bunny).
+const LATER_BOUNCE_STRATA: (usize, usize) = (2, 3);
 /// Share of the walks' ray budget (and walked vertices) spent on the object's own light.
-pub const INDIRECT_WALK_SHARE: f64 = 0.25;
+pub const INDIRECT_WALK_SHARE: f64 = 0.2;
 
 /// The most samples the default spacing asks for.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
@@ -492,21 +495,26 @@ impl Prt {
             let source_albedo = slab_albedo(model, rep)?;
             let receiving = lobe_totals(model, rep)?;
             // Bounce after bounce: the light sent out is the direct B plus what the indirect
-            // irradiance of the previous pass returns, (R_total + point mass) E_ind.
-            let mut irradiance = vec![[0f32; 3]; mesh.vertex_count()];
-            for _ in 0..INTERREFLECTION_BOUNCES {
-                let sent: Vec<[f32; 3]> = direct
+            // irradiance of the previous pass returns, (R_total + point mass) E_ind. The cast
+            // is linear in what is sent, so E_ind = cast(B) + cast(R E_ind of the pass before):
+            // the first bounce with every ray, the later (a few per cent of B) with fewer.
+            let exit = |cos: f64| model.exit_weight(rep, cos);
+            let first =
+                crate::interreflection::indirect_irradiance(mesh, tracer, &direct, &exit, strata);
+            let later = (strata * LATER_BOUNCE_STRATA.0 / LATER_BOUNCE_STRATA.1).max(1);
+            let mut irradiance = first.clone();
+            for _ in 1..INTERREFLECTION_BOUNCES {
+                let sent: Vec<[f32; 3]> = irradiance
                     .iter()
-                    .zip(&irradiance)
-                    .map(|(b, e)| std::array::from_fn(|c| b[c] + (receiving[c] as f32) * e[c]))
+                    .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
                     .collect();
-                irradiance = crate::interreflection::indirect_irradiance(
-                    mesh,
-                    tracer,
-                    &sent,
-                    &|cos| model.exit_weight(rep, cos),
-                    strata,
-                );
+                let more =
+                    crate::interreflection::indirect_irradiance(mesh, tracer, &sent, &exit, later);
+                irradiance = first
+                    .iter()
+                    .zip(&more)
+                    .map(|(a, b)| std::array::from_fn(|c| a[c] + b[c]))
+                    .collect();
             }
             let (mut added, mut had) = ([0.0f64; 3], [0.0f64; 3]);
             for ((e, b), w) in irradiance.iter().zip(&direct).zip(mesh.vertex_areas()) {
@@ -519,8 +527,9 @@ impl Prt {
                 .filter(|&c| had[c] > 0.0)
                 .map(|c| added[c] / had[c])
                 .fold(0.0, f64::max);
-            prt.report.interreflection_rays =
-                (INTERREFLECTION_BOUNCES * mesh.vertex_count() * strata * strata) as u64;
+            prt.report.interreflection_rays = (mesh.vertex_count()
+                * (strata * strata + (INTERREFLECTION_BOUNCES - 1) * later * later))
+                as u64;
             prt.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();
             // The indirect light enters through the real geometry too (what falls on the
             // front of an ear comes out at its back): walks gather E_ind against its local
@@ -535,6 +544,7 @@ impl Prt {
                     let shared = GeometrySettings {
                         rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
                         vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
+                        refine: false,
                         ..g.clone()
                     };
                     let term = GeometryTerm::compute(
