@@ -336,34 +336,50 @@ fn brute_slab(alpha: f64, thickness: f64, interface: Option<f64>, walks: usize) 
     (back as f64 / walks as f64, through as f64 / walks as f64)
 }
 
-#[test]
-fn a_thin_slab_lets_light_through_to_its_far_side() {
-    // sigma_t 100 per metre, 2 cm thick (2 mean free paths), lit only from below: the top's
-    // centre receives what crosses the slab, which a half-space profile calls zero.
-    let alpha = 0.95;
-    let m = Material::new([100.0 * (1.0 - alpha); 3], [100.0 * alpha; 3], 0.0, 1.01)
+/// sigma_t 100 per metre (mean free path 1 cm), single-scattering albedo `alpha`, g 0,
+/// Roughness 0, IOR 1.01 (the walk enters straight down): the two-plane walks' medium.
+fn thin_medium(alpha: f64) -> Material {
+    Material::new([100.0 * (1.0 - alpha); 3], [100.0 * alpha; 3], 0.0, 1.01)
         .unwrap()
         .with_layers(Layers {
             roughness: 0.0,
             ..Layers::default()
         })
-        .unwrap();
-    let mesh = grid_box(1.0, 0.02, 21);
-    let tracer = Tracer::new(&mesh);
-    let e: Vec<[f32; 3]> = mesh
-        .positions()
+        .unwrap()
+}
+
+/// Irradiance 1 at the vertices below height `z`, 0 elsewhere.
+fn lit_below(mesh: &Mesh, z: f32) -> Vec<[f32; 3]> {
+    mesh.positions()
         .iter()
-        .map(|p| if p.z < -0.0199 { [1.0; 3] } else { [0.0; 3] })
-        .collect();
-    let centre = nearest(&mesh, 0.0, 0.0);
+        .map(|p| if p.z < z { [1.0; 3] } else { [0.0; 3] })
+        .collect()
+}
+
+/// B in the red channel at the vertex nearest (0, 0, 0) from 40,000 walks, and its standard
+/// error.
+fn walk_centre(mesh: &Mesh, tracer: &Tracer, m: &Material, e: &[[f32; 3]]) -> (f64, f64) {
+    let centre = nearest(mesh, 0.0, 0.0);
     let settings = MeshWalkSettings {
         walks: 40_000,
         ..MeshWalkSettings::default()
     };
-    let r = walk_radiosity(&mesh, &tracer, &m, &e, Some(&[centre]), &settings, None).unwrap();
+    let r = walk_radiosity(mesh, tracer, m, e, Some(&[centre]), &settings, None).unwrap();
+    (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]))
+}
+
+#[test]
+fn a_thin_slab_lets_light_through_to_its_far_side() {
+    // sigma_t 100 per metre, 2 cm thick (2 mean free paths), lit only from below: the top's
+    // centre receives what crosses the slab, which a half-space profile calls zero.
+    let alpha = 0.95;
+    let m = thin_medium(alpha);
+    let mesh = grid_box(1.0, 0.02, 21);
+    let tracer = Tracer::new(&mesh);
+    let e = lit_below(&mesh, -0.0199);
+    let (b, se) = walk_centre(&mesh, &tracer, &m, &e);
     // Reciprocity: light entering at the top's centre and leaving through the lit bottom.
     let expected = brute_transmission(alpha, 2.0, 400_000);
-    let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
     eprintln!("transmission: walks {b:.4} +- {se:.4}, brute force {expected:.4}");
     assert!(expected > 0.1);
     assert!((b - expected).abs() <= 0.02 * expected + 4.0 * se);
@@ -377,13 +393,7 @@ fn a_surface_crossed_from_outside_gives_no_light() {
     // light. So the upper sheet's centre gets what the brute-force slab walk returns through
     // its entry plane alone (not that plus what reaches the far plane).
     let alpha = 0.95;
-    let m = Material::new([100.0 * (1.0 - alpha); 3], [100.0 * alpha; 3], 0.0, 1.01)
-        .unwrap()
-        .with_layers(Layers {
-            roughness: 0.0,
-            ..Layers::default()
-        })
-        .unwrap();
+    let m = thin_medium(alpha);
     let (mut p, mut t) = common::plane_parts(41, 1.0);
     let (lp, lt) = common::plane_parts(41, 1.0);
     let base = p.len() as u32;
@@ -392,14 +402,8 @@ fn a_surface_crossed_from_outside_gives_no_light() {
     let mesh = Mesh::new(p, t, None).unwrap();
     let tracer = Tracer::new(&mesh);
     let e = vec![[1.0f32; 3]; mesh.vertex_count()];
-    let centre = nearest(&mesh, 0.0, 0.0);
-    let settings = MeshWalkSettings {
-        walks: 40_000,
-        ..MeshWalkSettings::default()
-    };
-    let r = walk_radiosity(&mesh, &tracer, &m, &e, Some(&[centre]), &settings, None).unwrap();
+    let (b, se) = walk_centre(&mesh, &tracer, &m, &e);
     let (back, through) = brute_slab(alpha, 2.0, None, 400_000);
-    let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
     eprintln!(
         "open sheets: walks {b:.4} +- {se:.4}, brute force back {back:.4} (through {through:.4})"
     );
@@ -422,13 +426,7 @@ fn light_passes_a_part_sunk_into_another_as_cycles_passes_it() {
     // reaches the top is the brute-force walk's across a diffuse interface, the overlap's
     // 2 delta taken out of the slab. (Ending the walks there would leave the top dark.)
     let alpha = 0.95;
-    let m = Material::new([100.0 * (1.0 - alpha); 3], [100.0 * alpha; 3], 0.0, 1.01)
-        .unwrap()
-        .with_layers(Layers {
-            roughness: 0.0,
-            ..Layers::default()
-        })
-        .unwrap();
+    let m = thin_medium(alpha);
     let delta = 0.001f32;
     let (mut p, mut t) = shifted_box(1.0, 0.01 + delta, 21, 0.0);
     // The lower box a little narrower, so that its top lies wholly inside the upper box.
@@ -438,21 +436,11 @@ fn light_passes_a_part_sunk_into_another_as_cycles_passes_it() {
     t.extend(lt.iter().map(|tri| tri.map(|i| i + base)));
     let mesh = Mesh::new(p, t, None).unwrap();
     let tracer = Tracer::new(&mesh);
-    let e: Vec<[f32; 3]> = mesh
-        .positions()
-        .iter()
-        .map(|p| if p.z < -0.0199 { [1.0; 3] } else { [0.0; 3] })
-        .collect();
-    let centre = nearest(&mesh, 0.0, 0.0);
-    let settings = MeshWalkSettings {
-        walks: 40_000,
-        ..MeshWalkSettings::default()
-    };
-    let r = walk_radiosity(&mesh, &tracer, &m, &e, Some(&[centre]), &settings, None).unwrap();
+    let e = lit_below(&mesh, -0.0199);
+    let (b, se) = walk_centre(&mesh, &tracer, &m, &e);
     let sigma = 100.0;
     let upper = sigma * f64::from(0.01 - delta);
     let expected = brute_transmission_across(alpha, 2.0 * upper, Some(upper), 400_000);
-    let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
     eprintln!(
         "across a sunk part: walks {b:.4} +- {se:.4}, brute force {expected:.4} (no interface {:.4})",
         brute_transmission(alpha, 2.0 * upper, 400_000)
