@@ -12,7 +12,7 @@
 //! `CONTRAST` get `LEVEL` x `LEVEL` sub-triangles with the irradiance evaluated at their
 //! corners.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::mesh::{interpolated_normal, Mesh};
 use glam::Vec3;
 use std::collections::HashMap;
@@ -80,6 +80,13 @@ impl ShadowEdges {
         } else {
             evaluate(&points, &normals)?
         };
+        if values.len() != points.len() {
+            return Err(Error::InvalidArgument(format!(
+                "{} irradiance values for {} points",
+                values.len(),
+                points.len()
+            )));
+        }
         // The corners keep the vertices' own values: the grid meets its unrefined neighbours.
         for (k, &t) in refined.iter().enumerate() {
             let tri = mesh.triangles()[t as usize];
@@ -179,6 +186,9 @@ mod tests {
         };
         let edges = ShadowEdges::new(&mesh, &corners, &eval).unwrap();
         assert_eq!((edges.len(), edges.points()), (1, POINTS));
+        // An evaluator that answers for fewer points is an error, not a panic.
+        let short = |_: &[Vec3], _: &[Vec3]| -> Result<Vec<[f32; 3]>> { Ok(vec![[0.0; 3]; 2]) };
+        assert!(ShadowEdges::new(&mesh, &corners, &short).is_err());
         // The mean over the triangle (a fine barycentric grid) against the exact one: the lit
         // region is the triangle (0.8, 0), (1, 0), (1 - y_b, y_b) with y_b = 0.2 / 0.9 (where
         // the edge meets x + y = 1), a share 0.2 y_b of the triangle's area.
