@@ -499,15 +499,18 @@ impl Prt {
             // is linear in what is sent, so E_ind = cast(B) + cast(R E_ind of the pass before):
             // the first bounce with every ray, the later (a few per cent of B) with fewer.
             let exit = |cos: f64| model.exit_weight(rep, cos);
+            // What the receiver returns of E_ind locally: (R_total + point mass) E_ind.
+            let returned = |e: &[[f32; 3]]| -> Vec<[f32; 3]> {
+                e.iter()
+                    .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
+                    .collect()
+            };
             let first =
                 crate::interreflection::indirect_irradiance(mesh, tracer, &direct, &exit, strata);
             let later = (strata * LATER_BOUNCE_STRATA.0 / LATER_BOUNCE_STRATA.1).max(1);
             let mut irradiance = first.clone();
             for _ in 1..INTERREFLECTION_BOUNCES {
-                let sent: Vec<[f32; 3]> = irradiance
-                    .iter()
-                    .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
-                    .collect();
+                let sent = returned(&irradiance);
                 let more =
                     crate::interreflection::indirect_irradiance(mesh, tracer, &sent, &exit, later);
                 irradiance = first
@@ -537,10 +540,7 @@ impl Prt {
             // is a few per cent of the light, so is the noise that share leaves).
             let walked = match &settings.geometry {
                 Some(g) => {
-                    let local: Vec<[f32; 3]> = irradiance
-                        .iter()
-                        .map(|e| std::array::from_fn(|c| receiving[c] as f32 * e[c]))
-                        .collect();
+                    let local = returned(&irradiance);
                     let shared = GeometrySettings {
                         rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
                         vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
@@ -781,28 +781,23 @@ impl Prt {
             let receiving = totals(&profiles);
             let w = self.model.exit_weight(material, 1.0);
             let albedo = receiving.map(|t| w * t);
-            let k: [f32; 3] = std::array::from_fn(|ch| {
+            // How much more or less light the edited material sends out than the source did.
+            let ratio: [f64; 3] = std::array::from_fn(|ch| {
                 if bounce.source_albedo[ch] > 0.0 {
-                    (receiving[ch] * albedo[ch] / bounce.source_albedo[ch]) as f32
+                    albedo[ch] / bounce.source_albedo[ch]
                 } else {
                     0.0
                 }
             });
+            let k: [f32; 3] = std::array::from_fn(|ch| (receiving[ch] * ratio[ch]) as f32);
             radiosity
                 .par_iter_mut()
                 .zip(bounce.irradiance.par_iter())
                 .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
             if let Some(g) = bounce.walked.as_ref().filter(|_| walks) {
-                let ratio: [f32; 3] = std::array::from_fn(|ch| {
-                    if bounce.source_albedo[ch] > 0.0 {
-                        (albedo[ch] / bounce.source_albedo[ch]) as f32
-                    } else {
-                        0.0
-                    }
-                });
                 // Its noise is relative to the indirect light, a share of B.
                 let share = self.report.interreflection_share;
-                let added = g.add_scaled_to(&mut radiosity, &profiles, ratio);
+                let added = g.add_scaled_to(&mut radiosity, &profiles, ratio.map(|r| r as f32));
                 for (e, a) in error_estimate.iter_mut().zip(added) {
                     *e += if a >= 1.0 { a } else { a * share };
                 }
