@@ -411,6 +411,73 @@ fn a_surface_crossed_from_outside_gives_no_light() {
     assert!((b - back).abs() <= 0.02 * back + 4.0 * se);
 }
 
+/// An independent analogue walk about the half-plane sheet z = 0, x < 0 (medium everywhere
+/// else: an open mesh's edge), isotropic scattering, entering at the edge straight down: the
+/// fraction that leaves up through the sheet (lit); meeting it from above ends the walk dark.
+/// Written here from the walk's description.
+fn brute_edge(alpha: f64, walks: usize) -> f64 {
+    let mut state = 0x0fed_cba9_8765_4321u64;
+    let mut uniform = move || {
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut lit = 0usize;
+    for _ in 0..walks {
+        let (mut x, mut z, mut dx, mut dz) = (0.0f64, 0.0f64, 0.0f64, -1.0f64);
+        for _ in 0..256 {
+            let t = -(1.0 - uniform()).ln();
+            let (nx, nz) = (x + dx * t, z + dz * t);
+            if z * nz < 0.0 || (z == 0.0 && nz > 0.0) {
+                let xc = x + dx * (-z / dz);
+                if xc < 0.0 {
+                    lit += usize::from(dz > 0.0);
+                    break;
+                }
+            }
+            (x, z) = (nx, nz);
+            if uniform() >= alpha {
+                break;
+            }
+            // Isotropic: only the x and z components matter.
+            let cos = 1.0 - 2.0 * uniform();
+            let phi = std::f64::consts::TAU * uniform();
+            (dx, dz) = ((1.0 - cos * cos).sqrt() * phi.cos(), cos);
+        }
+    }
+    lit as f64 / walks as f64
+}
+
+#[test]
+fn at_an_open_edge_walks_go_round_it_into_the_open() {
+    // The edge of an open sheet (a scan's hole): a walk entering there can pass round the edge
+    // into the open, where it walks on (as Cycles' walk does: no surface, no exit) until it
+    // meets the sheet from below (lit) or from above (its outside: dark), or fades.
+    let alpha = 0.95;
+    let m = thin_medium(alpha);
+    let mesh = common::plane(41, 1.0);
+    let tracer = Tracer::new(&mesh);
+    let e = vec![[1.0f32; 3]; mesh.vertex_count()];
+    let edge = nearest(&mesh, 0.5, 0.0);
+    let settings = MeshWalkSettings {
+        walks: 40_000,
+        ..MeshWalkSettings::default()
+    };
+    let r = walk_radiosity(&mesh, &tracer, &m, &e, Some(&[edge]), &settings, None).unwrap();
+    let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
+    let expected = brute_edge(alpha, 400_000);
+    let (interior, _) = brute_slab(alpha, 1e9, None, 400_000);
+    eprintln!(
+        "open edge: walks {b:.4} +- {se:.4}, brute force {expected:.4} (interior {interior:.4})"
+    );
+    assert!(
+        expected < 0.8 * interior,
+        "the edge loses light: {expected} vs {interior}"
+    );
+    assert!((b - expected).abs() <= 0.02 * expected + 4.0 * se);
+}
+
 /// `grid_box` moved down by `dz`, as triangles and positions to merge.
 fn shifted_box(w: f32, depth: f32, n: usize, dz: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     let b = grid_box(w, depth, n);
