@@ -1,0 +1,81 @@
+"""Where Cycles' vertex bake samples: an open 10 cm sheet under a sun, its 1024-spp vertex bake
+against the walk reference at the vertices, along a row from the sheet's edge inwards.
+
+Blender bakes a vertex colour as the mean over its corners of Cycles' answer at a point moved
+from the vertex towards the corner triangle's centroid by min(that distance,
+1e-4 * max(1, largest |coordinate|)) (`bake_offset_towards_center`). At the sheet's edge the
+radiance changes within that offset; a row of vertices shows where the bake and the reference
+part. `--origin X` moves the sheet X metres along x (the offset grows with |coordinate|).
+
+Run: .venv/bin/python blender_scripts/bake_sample_points.py [--material aniso08] [--origin 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+
+import numpy as np
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "blender_scripts"))
+
+import bpy  # noqa: E402
+
+import translucent  # noqa: E402
+
+
+def sheet(n: int, size: float, origin: float) -> bpy.types.Object:
+    """An open square sheet of n x n vertices at z = 0, its edge at x = origin, under a sun."""
+    h = size / (n - 1)
+    p = [(origin + i * h, j * h, 0.0) for j in range(n) for i in range(n)]
+    t = []
+    for j in range(n - 1):
+        for i in range(n - 1):
+            a, b, c, d = j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i
+            t += [(a, b, c), (a, c, d)]
+    mesh = bpy.data.meshes.new("sheet")
+    mesh.from_pydata(p, [], t)
+    mesh.shade_smooth()
+    obj = bpy.data.objects.new("sheet", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    sun = bpy.data.lights.new("sun", "SUN")
+    sun.energy, sun.angle = 1.0, 0.0
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("sun", sun))
+    world = bpy.data.worlds.new("black")
+    bpy.context.scene.world = world
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    return obj
+
+
+def main(argv=None) -> int:
+    import cycles_gap
+    import cycles_reference
+    from addon import export
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--material", default="aniso08")
+    ap.add_argument("--origin", type=float, default=0.0)
+    ap.add_argument("--vertices", type=int, default=41, help="per side of the 10 cm sheet")
+    args = ap.parse_args(argv)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    n = args.vertices
+    obj = sheet(n, 0.1, args.origin)
+    scene, _ = export.export_scene([obj])
+    m = cycles_gap.material(args.material)
+    row = [n // 2 * n + i for i in range(6)]
+    cyc, seconds = cycles_reference.bake_vertices(obj, m, 1024)
+    ref = translucent.reference_radiance(scene, m, walks=4096, receivers=row)
+    print(f"{args.material}, sheet's edge at x = {args.origin} m, bake {seconds:.0f} s")
+    for k, v in enumerate(row):
+        d = 1000 * 0.1 * k / (n - 1)
+        print(f"  {d:5.2f} mm from the edge: bake {np.round(cyc[v], 4)}  walk reference {np.round(ref[k], 4)}  "
+              f"ratio {np.round(cyc[v] / ref[k], 3)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
