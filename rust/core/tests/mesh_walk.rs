@@ -292,16 +292,22 @@ fn brute_transmission_across(
     brute_slab(alpha, thickness, interface, walks).1
 }
 
-/// The walk of `brute_transmission_across`: the fractions that leave through the entry plane
-/// and through the far one.
-fn brute_slab(alpha: f64, thickness: f64, interface: Option<f64>, walks: usize) -> (f64, f64) {
-    let mut state = 0x1234_5678_9abc_def1u64;
-    let mut uniform = move || {
+/// Uniform numbers in [0, 1) from an xorshift64* stream (the brute-force walks' own, apart
+/// from the walks' generator).
+fn uniform_stream(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
         state ^= state >> 12;
         state ^= state << 25;
         state ^= state >> 27;
         (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    }
+}
+
+/// The walk of `brute_transmission_across`: the fractions that leave through the entry plane
+/// and through the far one.
+fn brute_slab(alpha: f64, thickness: f64, interface: Option<f64>, walks: usize) -> (f64, f64) {
+    let mut uniform = uniform_stream(0x1234_5678_9abc_def1);
     let (mut back, mut through) = (0usize, 0usize);
     for _ in 0..walks {
         let (mut z, mut dz) = (0.0f64, -1.0f64);
@@ -416,13 +422,7 @@ fn a_surface_crossed_from_outside_gives_no_light() {
 /// fraction that leaves up through the sheet (lit); meeting it from above ends the walk dark.
 /// Written here from the walk's description.
 fn brute_edge(alpha: f64, walks: usize) -> f64 {
-    let mut state = 0x0fed_cba9_8765_4321u64;
-    let mut uniform = move || {
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut uniform = uniform_stream(0x0fed_cba9_8765_4321);
     let mut lit = 0usize;
     for _ in 0..walks {
         let (mut x, mut z, mut dx, mut dz) = (0.0f64, 0.0f64, 0.0f64, -1.0f64);
