@@ -365,12 +365,24 @@ fn lit_below(mesh: &Mesh, z: f32) -> Vec<[f32; 3]> {
 /// B in the red channel at the vertex nearest (0, 0, 0) from 40,000 walks, and its standard
 /// error.
 fn walk_centre(mesh: &Mesh, tracer: &Tracer, m: &Material, e: &[[f32; 3]]) -> (f64, f64) {
-    let centre = nearest(mesh, 0.0, 0.0);
+    walk_at(mesh, tracer, m, e, 0.0, 0.0)
+}
+
+/// As `walk_centre`, at the vertex nearest (x, y).
+fn walk_at(
+    mesh: &Mesh,
+    tracer: &Tracer,
+    m: &Material,
+    e: &[[f32; 3]],
+    x: f32,
+    y: f32,
+) -> (f64, f64) {
+    let vertex = nearest(mesh, x, y);
     let settings = MeshWalkSettings {
         walks: 40_000,
         ..MeshWalkSettings::default()
     };
-    let r = walk_radiosity(mesh, tracer, m, e, Some(&[centre]), &settings, None).unwrap();
+    let r = walk_radiosity(mesh, tracer, m, e, Some(&[vertex]), &settings, None).unwrap();
     (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]))
 }
 
@@ -459,13 +471,7 @@ fn at_an_open_edge_walks_go_round_it_into_the_open() {
     let mesh = common::plane(41, 1.0);
     let tracer = Tracer::new(&mesh);
     let e = vec![[1.0f32; 3]; mesh.vertex_count()];
-    let edge = nearest(&mesh, 0.5, 0.0);
-    let settings = MeshWalkSettings {
-        walks: 40_000,
-        ..MeshWalkSettings::default()
-    };
-    let r = walk_radiosity(&mesh, &tracer, &m, &e, Some(&[edge]), &settings, None).unwrap();
-    let (b, se) = (f64::from(r.radiosity[0][0]), f64::from(r.std_error[0][0]));
+    let (b, se) = walk_at(&mesh, &tracer, &m, &e, 0.5, 0.0);
     let expected = brute_edge(alpha, 400_000);
     let (interior, _) = brute_slab(alpha, 1e9, None, 400_000);
     eprintln!(
