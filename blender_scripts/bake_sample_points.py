@@ -26,6 +26,8 @@ import bpy  # noqa: E402
 
 import translucent  # noqa: E402
 
+SIZE = 0.1  # the sheet's side [m]
+
 
 def sheet(n: int, size: float, origin: float) -> bpy.types.Object:
     """An open square sheet of n x n vertices at z = 0, its edge at x = origin, under a sun."""
@@ -59,11 +61,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--material", default="aniso08")
     ap.add_argument("--origin", type=float, default=0.0)
-    ap.add_argument("--vertices", type=int, default=41, help="per side of the 10 cm sheet")
+    ap.add_argument("--vertices", type=int, default=41, help="per side of the sheet")
     args = ap.parse_args(argv)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     n = args.vertices
-    obj = sheet(n, 0.1, args.origin)
+    obj = sheet(n, SIZE, args.origin)
     scene, _ = export.export_scene([obj])
     m = cycles_gap.material(args.material)
     row = [n // 2 * n + i for i in range(6)]
@@ -71,7 +73,7 @@ def main(argv=None) -> int:
     ref = translucent.reference_radiance(scene, m, walks=4096, receivers=row)
     print(f"{args.material}, sheet's edge at x = {args.origin} m, bake {seconds:.0f} s")
     for k, v in enumerate(row):
-        d = 1000 * 0.1 * k / (n - 1)
+        d = 1000 * SIZE * k / (n - 1)
         print(f"  {d:5.2f} mm from the edge: bake {np.round(cyc[v], 4)}  walk reference {np.round(ref[k], 4)}  "
               f"ratio {np.round(cyc[v] / ref[k], 3)}")
     return 0

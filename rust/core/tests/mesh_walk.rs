@@ -441,7 +441,7 @@ fn brute_edge(alpha: f64, walks: usize) -> f64 {
         for _ in 0..256 {
             let t = -(1.0 - uniform()).ln();
             let (nx, nz) = (x + dx * t, z + dz * t);
-            if z * nz < 0.0 || (z == 0.0 && nz > 0.0) {
+            if z * nz < 0.0 {
                 let xc = x + dx * (-z / dz);
                 if xc < 0.0 {
                     lit += usize::from(dz > 0.0);
