@@ -3,6 +3,7 @@
 //! own crate. One module per concept (DESIGN.md), grouped as the README's layout is.
 
 // Shared: what every method uses.
+pub mod bake_points; // where Cycles' vertex bake samples a vertex (its corners, 0.1 mm in)
 pub mod error; // the one error type
 pub mod gpu; // one wgpu context and the per-method kernels
 pub mod interreflection; // the object's own light falling back on it (ray cast)

@@ -43,6 +43,7 @@
 //! by about a mean free path in one direction, which a radial table never sees: measured on a
 //! half-lit plane, `tests/mesh_walk.rs`. Plain pseudo-random numbers have no such bias.)
 
+use crate::bake_points::BakePoints;
 use crate::error::{Error, Result};
 use crate::mesh::{barycentric, Mesh};
 use crate::optics::{principled, Material, CHANNELS};
@@ -67,6 +68,10 @@ pub struct MeshWalkSettings {
     pub seed: u64,
     /// 256 in Cycles.
     pub max_bounces: usize,
+    /// Enter at Cycles' vertex-bake sample points (`bake_points`: 0.1 mm into each corner
+    /// triangle at 10 cm scale, the walks spread evenly over them) instead of at the vertex
+    /// itself: what a vertex bake records.
+    pub at_bake_points: bool,
 }
 
 impl Default for MeshWalkSettings {
@@ -75,6 +80,7 @@ impl Default for MeshWalkSettings {
             walks: 256,
             seed: 0x6d65_7368_7761_6c6b,
             max_bounces: MAX_BOUNCES,
+            at_bake_points: true,
         }
     }
 }
@@ -145,6 +151,8 @@ struct Walker<'a> {
     /// Per triangle: where it lies against the other parts of the mesh (a head's triangles
     /// beneath a sunk eyeball are inside it, those at the eyeball's rim cross its surface).
     placement: Vec<Placement>,
+    /// Where the walks of a vertex enter: Cycles' bake sample points, or (None) the vertex.
+    bake_points: Option<BakePoints>,
 }
 
 /// Where a triangle lies against the other parts of the mesh.
@@ -295,6 +303,7 @@ pub fn walk_radiosity_lit(
         inv_ior: 1.0 / material.eta.clamp(1.01, 3.8),
         max_bounces: settings.max_bounces,
         placement: placements(mesh, tracer),
+        bake_points: settings.at_bake_points.then(|| BakePoints::new(mesh)),
     };
     let active: Vec<usize> = (0..CHANNELS).filter(|&c| media[c].scale > 0.0).collect();
     // The control variate's known mean: the half-space twin's total per channel.
@@ -488,12 +497,27 @@ impl Walker<'_> {
         let key = s.seed
             ^ (u64::from(v) * CHANNELS as u64 + c as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
         let mut streams = Streams::new(key);
-        // Sums of x (mesh), y (control), x^2, y^2, xy.
+        // Where the walks enter: Cycles' bake points, walk i at point (r + i) mod k from a
+        // rotation r drawn from the key, so each walk's point is uniform over the corners (the
+        // mean is the bake's mean over corners) and their counts differ by at most one.
+        let starts: Vec<(Vec3, Vec3, Option<DVec3>)> = match &self.bake_points {
+            Some(b) if !b.of(v).is_empty() => b
+                .of(v)
+                .iter()
+                .map(|q| (q.position, q.normal, Some(q.face_normal.as_dvec3())))
+                .collect(),
+            _ => vec![(p, n, None)],
+        };
+        let rotation = (key >> 17) as usize % starts.len();
+        // Sums of x (mesh), y (control, less its known mean), x^2, y^2, xy.
         let mut sums = [0f64; 5];
         let mut rays = 0;
-        for _ in 0..s.walks {
-            let (x, twin, r) = self.walk(p, n, c, m, &mut streams, true);
-            let y = e * twin.total + g.dot(twin.offset);
+        for i in 0..s.walks {
+            let (q, nq, ng) = starts[(rotation + i) % starts.len()];
+            // The control's irradiance, linear about the vertex, at the entry point.
+            let eq = e + g.dot((q - p).as_dvec3());
+            let (x, twin, r) = self.walk(q, nq, ng, c, m, &mut streams, true);
+            let y = eq * twin.total + g.dot(twin.offset) - eq * plane;
             sums[0] += x;
             sums[1] += y;
             sums[2] += x * x;
@@ -515,7 +539,7 @@ impl Walker<'_> {
         };
         // B >= 0: the control can take a few walks' mean below it (a nearly transparent
         // medium, 8 walks: -2e-4 where B is 0.3).
-        let mean = (mx - beta * (my - e * plane)).max(0.0);
+        let mean = (mx - beta * my).max(0.0);
         let var = (vx - 2.0 * beta * cxy + beta * beta * vy).max(0.0);
         let se = if s.walks > 1 {
             (var / (k - 1.0)).sqrt()
@@ -525,13 +549,18 @@ impl Walker<'_> {
         (mean, se, rays)
     }
 
-    /// One walk entering at `p` with normal `n`: its throughput times the irradiance at its
-    /// exits (scored by expected value), its half-space twin's sums, and the rays cast. With
-    /// `mesh` false only the twin walks (`p` on an unbounded plane) and no rays are cast.
+    /// One walk entering at `p` with (smooth) normal `n`: its throughput times the irradiance
+    /// at its exits (scored by expected value), its half-space twin's sums, and the rays cast.
+    /// `face`: the entry triangle's normal Ng where the walk enters on a triangle (a bake
+    /// point): it starts just beneath that triangle, and an entry direction that does not go
+    /// into it ends the mesh walk as Cycles does (`dot(-Ng, D) <= 0`). With `mesh` false only
+    /// the twin walks (`p` on an unbounded plane) and no rays are cast.
+    #[allow(clippy::too_many_arguments)]
     fn walk(
         &self,
         p: Vec3,
         n: Vec3,
+        face: Option<DVec3>,
         c: usize,
         m: &Medium,
         streams: &mut Streams,
@@ -554,10 +583,11 @@ impl Walker<'_> {
         // The mesh walk's own direction: the twin's, until a tunnel (`Walker::tunnel`) sends
         // it elsewhere.
         let (mut dir_in, mut diverged) = (dir, false);
+        let below = face.unwrap_or(n);
         let mut inside = Walking {
-            pos: self.tracer.offset_origin(p, -n.as_vec3()).as_dvec3(),
+            pos: self.tracer.offset_origin(p, -below.as_vec3()).as_dvec3(),
             weight: 1.0,
-            alive: mesh,
+            alive: mesh && dir.dot(below) < 0.0,
         };
         // The twin starts where the walk does, just beneath the surface.
         let mut twin = Walking {
@@ -728,7 +758,7 @@ impl Walker<'_> {
                 let mut streams = Streams::new(key);
                 (0..PLANE_CHUNK)
                     .map(|_| {
-                        self.walk(Vec3::ZERO, Vec3::Z, 0, m, &mut streams, false)
+                        self.walk(Vec3::ZERO, Vec3::Z, None, 0, m, &mut streams, false)
                             .1
                             .total
                     })
