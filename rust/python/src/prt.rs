@@ -478,6 +478,8 @@ impl PyPrt {
                     w.set_item("walks_per_vertex", g.walks_per_vertex)?;
                     w.set_item("refined_vertices", g.refined_vertices)?;
                     w.set_item("refined_walks_per_vertex", g.refined_walks_per_vertex)?;
+                    w.set_item("sharp_vertices", g.sharp_vertices)?;
+                    w.set_item("sharp_walks_per_vertex", g.sharp_walks_per_vertex)?;
                     w.set_item("walks", g.walks)?;
                     w.set_item("rays", g.rays)?;
                     w.set_item("spacing", g.spacing)?;

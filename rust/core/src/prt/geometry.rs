@@ -18,12 +18,18 @@
 //! whose D stands out from their neighbourhood's average (`REFINE_TOLERANCE`), and every
 //! vertex that lies inside another part of the mesh (the ray along its normal meets a surface
 //! from behind: an eyeball sunk into a head), which is averaged only among its own class.
-//! Their rays are `REFINE_SHARE` of the budget on top of it.
+//! Their rays (with the sharp vertices' below) are `REFINE_SHARE` of the budget on top of it.
+//!
+//! Vertices where Cycles' vertex bake samples another radiance than the vertex's
+//! neighbourhood has (`bake_points::sharp_vertices`: an open mesh's rim, a spike's apex whose
+//! triangles face away from its normal) are walked one by one at their bake points and keep
+//! their own D, outside every kernel.
 //!
 //! Vertices whose neighbourhood within the reach of the walks is flat (every walked vertex
 //! within it lies within `FLAT_TOLERANCE` L of the tangent plane and faces the same way) get
 //! D = 0 without walks: there the half-space table is the walk.
 
+use crate::bake_points::sharp_vertices;
 use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::mesh_walk::{walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings};
@@ -63,8 +69,14 @@ const SPREAD_FACING: f32 = 0.7;
 /// vertices within one spacing of it are walked again, `REFINE_FACTOR` times closer.
 const REFINE_TOLERANCE: f32 = 0.1;
 const REFINE_FACTOR: f32 = 3.0;
-/// The refinement's rays, as a share of the main budget (on top of it).
+/// The rays of the sharp vertices and the refinement together, as a share of the main
+/// budget (on top of it).
 const REFINE_SHARE: f64 = 0.5;
+/// Sharp vertices (`bake_points::sharp_vertices`): a corner triangle facing more than 60
+/// degrees away from the vertex normal, or an open edge. Each is walked with at least
+/// `SHARP_WALKS` walks (its own D has no kernel to average its noise).
+const SHARP_FACING: f32 = 0.5;
+const SHARP_WALKS: usize = 64;
 
 /// D per channel and its variance, at one walked vertex.
 type Diff = ([f32; 3], [f32; 3]);
@@ -112,6 +124,9 @@ pub struct GeometryReport {
     /// resolved (`REFINE_TOLERANCE`), and their walks per vertex.
     pub refined_vertices: usize,
     pub refined_walks_per_vertex: usize,
+    /// Sharp vertices (open edges, apexes) walked one by one, and their walks per vertex.
+    pub sharp_vertices: usize,
+    pub sharp_walks_per_vertex: usize,
     pub walks_per_vertex: usize,
     pub walks: u64,
     pub rays: u64,
@@ -169,6 +184,8 @@ impl GeometryTerm {
         // Vertices inside another part of the mesh (an eyeball sunk into a head) are their own
         // class: walked closer together, averaged only among themselves.
         let embedded = tracer.embedded_vertices(mesh);
+        // Sharp vertices: their own walks and D, in no kernel.
+        let sharp = sharp_vertices(mesh, SHARP_FACING);
         // Flat neighbourhoods get D = 0 and no walks.
         let reach = (REACH_LENGTHS * longest) as f32;
         let tolerance = (FLAT_TOLERANCE * shortest) as f32;
@@ -177,10 +194,12 @@ impl GeometryTerm {
             // Every vertex walked: the sunk ones too (their class keeps their kernel apart).
             let candidates = if count >= n {
                 (0..n as u32)
-                    .filter(|&v| mesh.normals()[v as usize] != Vec3::ZERO)
+                    .filter(|&v| mesh.normals()[v as usize] != Vec3::ZERO && !sharp[v as usize])
                     .collect()
             } else {
-                spread_where(mesh, spacing, |v| !embedded[v as usize])
+                spread_where(mesh, spacing, |v| {
+                    !embedded[v as usize] && !sharp[v as usize]
+                })
             };
             let flat = flat_vertices(mesh, &candidates, reach, tolerance);
             let walked = candidates
@@ -211,6 +230,8 @@ impl GeometryTerm {
             select(settings.vertices.clamp(1, n.max(1)));
         let first = walk(&walked, settings.walks, settings.seed, 0.0, 0.2)?;
         let (main_from, main_to) = (0.2, 0.8);
+        // Then the sharp vertices, then the second pass.
+        const SHARP_TO: f32 = 0.85;
         // Rays per walk (all channels) from this first pass; the budget then buys either more
         // walked vertices (short-reaching materials: finer detail for the same rays) or more
         // walks at the same ones.
@@ -249,6 +270,38 @@ impl GeometryTerm {
             }
         };
         let mut walks_total = (walks.walks, walks.rays);
+        // Sharp vertices, one by one.
+        let sharp_list: Vec<u32> = (0..n as u32)
+            .filter(|&v| sharp[v as usize] && mesh.normals()[v as usize] != Vec3::ZERO)
+            .collect();
+        let sharp_walks = SHARP_WALKS
+            .max(walks_per_vertex)
+            .min(settings.max_walks.max(1));
+        let mut own: HashMap<u32, Diff> = HashMap::new();
+        let mut sharp_rays = 0u64;
+        if !sharp_list.is_empty() {
+            let w = walk(
+                &sharp_list,
+                sharp_walks,
+                settings.seed ^ 0x5a4e,
+                main_to,
+                SHARP_TO,
+            )?;
+            for (k, &v) in sharp_list.iter().enumerate() {
+                let (b, se) = (w.radiosity[k], w.std_error[k]);
+                let h = halfspace[v as usize];
+                own.insert(
+                    v,
+                    (
+                        std::array::from_fn(|c| b[c] - h[c]),
+                        std::array::from_fn(|c| se[c] * se[c]),
+                    ),
+                );
+            }
+            walks_total.0 += w.walks;
+            walks_total.1 += w.rays;
+            sharp_rays = w.rays;
+        }
         // Per candidate: D and its variance (flat ones: exactly 0).
         let mut diff = vec![([0f32; 3], [0f32; 3]); candidates.len()];
         let mut k = 0;
@@ -313,7 +366,7 @@ impl GeometryTerm {
             let taken: std::collections::HashSet<u32> = walked.iter().copied().collect();
             let spread_fine = |fine_spacing: f32| -> Vec<u32> {
                 let fine: Vec<u32> = spread_where(mesh, fine_spacing, |v| {
-                    near_flagged[v as usize] && !taken.contains(&v)
+                    near_flagged[v as usize] && !taken.contains(&v) && !sharp[v as usize]
                 });
                 let fine_flat = flat_vertices(mesh, &fine, reach, tolerance);
                 fine.into_iter()
@@ -322,7 +375,8 @@ impl GeometryTerm {
                     .map(|(v, _)| v)
                     .collect()
             };
-            let budget = REFINE_SHARE * settings.rays as f64;
+            // The sharp vertices' rays come out of the second pass's share.
+            let budget = (REFINE_SHARE * settings.rays as f64 - sharp_rays as f64).max(0.0);
             let mut fine = spread_fine(fine_spacing);
             // The second pass keeps to its share of the rays: where more vertices stand out
             // than it can give `settings.walks` walks each (the control variate's small
@@ -338,7 +392,7 @@ impl GeometryTerm {
             if !fine.is_empty() {
                 let w = ((budget / (per_walk * fine.len() as f64)) as usize)
                     .clamp(settings.walks, walks_per_vertex.max(settings.walks));
-                let more = walk(&fine, w, settings.seed ^ 0xf1e, main_to, 1.0)?;
+                let more = walk(&fine, w, settings.seed ^ 0xf1e, SHARP_TO, 1.0)?;
                 refined = (
                     fine.iter()
                         .enumerate()
@@ -371,6 +425,9 @@ impl GeometryTerm {
         let smoothed: Vec<([f32; 3], [f32; 3])> = (0..n)
             .into_par_iter()
             .map(|v| {
+                if let Some(d) = own.get(&(v as u32)) {
+                    return *d;
+                }
                 if near_flagged[v] {
                     let (d, var) =
                         fine_grid.average(mesh, v as u32, &fine_points, &fine_diff, &embedded);
@@ -428,6 +485,12 @@ impl GeometryTerm {
                 walks_per_vertex,
                 refined_vertices: refined.0.len(),
                 refined_walks_per_vertex: refined.1,
+                sharp_vertices: sharp_list.len(),
+                sharp_walks_per_vertex: if sharp_list.is_empty() {
+                    0
+                } else {
+                    sharp_walks
+                },
                 walks: walks_total.0,
                 rays: walks_total.1,
                 spacing: f64::from(spacing),
