@@ -136,10 +136,12 @@ pub fn relative_error<'py>(
 /// light. Only `profile="cycles"`: the dipole is not a walk. Returns (K, 3) float32 for the
 /// `receivers` (all vertices by default); with `details=True` (radiance, dict) with its
 /// standard error per receiver, the walks' own noise (area-weighted relative RMS per channel),
-/// walks, rays and seconds.
+/// walks, rays and seconds. `at="bake"` enters where Cycles' vertex bake samples (each corner,
+/// 1e-4 max(1, |P|) towards its centroid: `bake_points`), `at="vertex"` at the vertex itself.
 #[pyfunction]
 #[pyo3(signature = (scene, material, profile = "cycles", walks = 256, receivers = None,
-    seed = 0, world_samples = 64, area_samples = 16, progress = None, details = false))]
+    seed = 0, world_samples = 64, area_samples = 16, progress = None, details = false,
+    at = "bake"))]
 #[allow(clippy::too_many_arguments)]
 #[pyo3(name = "reference_radiance")]
 pub fn reference_radiance_py<'py>(
@@ -154,7 +156,17 @@ pub fn reference_radiance_py<'py>(
     area_samples: i64,
     progress: Option<Py<PyAny>>,
     details: bool,
+    at: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let at_bake_points = match at {
+        "bake" => true,
+        "vertex" => false,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "at must be 'bake' (Cycles' vertex-bake sample points) or 'vertex', not {other:?}"
+            )))
+        }
+    };
     if crate::material::model(profile)? != Model::Cycles {
         return Err(PyValueError::new_err(
             "reference_radiance traces Cycles' random walk (profile='cycles'); for the dipole \
@@ -176,6 +188,7 @@ pub fn reference_radiance_py<'py>(
     let settings = MeshWalkSettings {
         walks,
         seed: MeshWalkSettings::default().seed ^ seed,
+        at_bake_points,
         ..MeshWalkSettings::default()
     };
     let tracer = scene.tracer();

@@ -245,7 +245,8 @@ class Prt:
         steps, knots, step_length, groups, spread_groups, legendre_order, transport_bytes,
         quantization_error, on_gpu, rays, bounded_paths, seconds), walks and walks_indirect
         (None, or walked_vertices, skipped_flat, walks_per_vertex, refined_vertices,
-        refined_walks_per_vertex, walks, rays, spacing, kernel_radius, noise, share, seconds:
+        refined_walks_per_vertex, sharp_vertices, sharp_walks_per_vertex (open edges and apexes,
+        walked one by one), walks, rays, spacing, kernel_radius, noise, share, seconds:
         the walks through the mesh for the direct light and for the object's own light),
         shadow_edge_triangles and shadow_edge_points (where the walks read the light on a finer
         grid), seconds per step."""
@@ -347,11 +348,15 @@ def reference_radiance(
     area_samples: int = 16,
     progress: Progress | None = None,
     details: Literal[False] = False,
+    at: Literal["bake", "vertex"] = "bake",
 ) -> npt.NDArray[np.float32]:
     """Cycles' answer without Blender: radiance along each receiver's normal (as a vertex bake
     records it) from Cycles 5.0's random walk traced inside the mesh, `walks` per vertex and
     channel, direct light; each walk with its tangent half-space twin as a control variate
-    (the standard error is that of the corrected mean). Releases the GIL."""
+    (the standard error is that of the corrected mean). `at="bake"` enters where Blender's
+    vertex bake samples (each corner's point 1e-4 * max(1, largest |coordinate|) towards the
+    corner triangle's centroid, the walks spread evenly over them), `at="vertex"` at the
+    vertex. Releases the GIL."""
 @overload
 def reference_radiance(
     scene: Scene,
@@ -365,6 +370,7 @@ def reference_radiance(
     progress: Progress | None = None,
     *,
     details: Literal[True],
+    at: Literal["bake", "vertex"] = "bake",
 ) -> tuple[npt.NDArray[np.float32], dict[str, object]]: ...
 @overload
 def reference_single_scattering(
