@@ -1,5 +1,6 @@
 """Where Cycles' vertex bake samples: an open 10 cm sheet under a sun, its 1024-spp vertex bake
-against the walk reference at the vertices, along a row from the sheet's edge inwards.
+against the walk reference entering at the bake's sample points and at the vertices, along a
+row from the sheet's edge inwards.
 
 Blender bakes a vertex colour as the mean over its corners of Cycles' answer at a point moved
 from the vertex towards the corner triangle's centroid by min(that distance,
@@ -71,11 +72,12 @@ def main(argv=None) -> int:
     row = [n // 2 * n + i for i in range(6)]
     cyc, seconds = cycles_reference.bake_vertices(obj, m, 1024)
     ref = translucent.reference_radiance(scene, m, walks=4096, receivers=row)
+    at_vertex = translucent.reference_radiance(scene, m, walks=4096, receivers=row, at="vertex")
     print(f"{args.material}, sheet's edge at x = {args.origin} m, bake {seconds:.0f} s")
     for k, v in enumerate(row):
         d = 1000 * SIZE * k / (n - 1)
-        print(f"  {d:5.2f} mm from the edge: bake {np.round(cyc[v], 4)}  walk reference {np.round(ref[k], 4)}  "
-              f"ratio {np.round(cyc[v] / ref[k], 3)}")
+        print(f"  {d:5.2f} mm from the edge: bake {np.round(cyc[v], 4)}  walk reference at the bake points "
+              f"{np.round(ref[k], 4)} (ratio {np.round(cyc[v] / ref[k], 3)}), at the vertex {np.round(at_vertex[k], 4)}")
     return 0
 
 
