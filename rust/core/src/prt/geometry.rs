@@ -8,7 +8,7 @@
 //! channel. D is smooth on the scale of the diffusion length, so it is carried to every vertex
 //! by a kernel average over the walked vertices facing the same way (which also averages the
 //! walks' noise down). An edit keeps dot products: per channel, D / A (A the thick slab's
-//! albedo, total + point mass) is looked up at the edited channel's diffusion length
+//! albedo, the subsurface lobe's total) is looked up at the edited channel's diffusion length
 //! L = 1 / sigma_tr, interpolated in ln L between the three channels the precompute walked,
 //! and scaled by the edited A. An edit whose L leaves the walked range by more than
 //! `LENGTH_MARGIN` is flagged (the error estimate grows, a refresh is advised).
@@ -153,13 +153,18 @@ pub struct GeometryTerm {
 }
 
 /// Diffusion length 1 / sigma_tr of each channel's profile (capped at a large multiple of the
-/// near length where nothing is absorbed), and the slab albedo A (`totals`).
+/// near length where nothing is absorbed), and the subsurface lobe's slab albedo A (its total,
+/// Subsurface Weight included). Not the point mass: the diffuse lobe returns light where it
+/// enters, the same on the mesh as on the half-space, so D is the subsurface lobe's alone (an
+/// edit of Subsurface Weight w scales D by w; with the point mass in A it was scaled by
+/// (w T + (1 - w) Base Color) / T, and at w 0.4 the rim of an open sheet was up to 32 % too
+/// bright, `test_the_lobes_add_up_as_cycles_weighs_them`).
 fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
     let l = std::array::from_fn(|c| {
         let s = p[c].length_scales();
         s.decay.min(1e6 * s.near).max(1e-30)
     });
-    (l, super::totals(p))
+    (l, std::array::from_fn(|c| p[c].total()))
 }
 
 impl GeometryTerm {
