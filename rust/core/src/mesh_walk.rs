@@ -2,8 +2,13 @@
 //! Cycles renders at a vertex, without Blender, and where the half-space profiles'
 //! flat-surface assumption stops holding (ears, noses, thin and curved parts).
 //!
+//! A vertex's walks enter where Blender's vertex bake samples it (`bake_points`: each corner,
+//! 0.1 mm towards the corner triangle's centroid at 10 cm scale, with the smooth normal there),
+//! spread evenly over its corners, so that a vertex means what a vertex bake means (at a
+//! spike's apex or an open rim the radiance changes within that 0.1 mm).
+//!
 //! The walk is the one `profiles::walk` simulates in a half-space (intern/cycles/kernel/
-//! integrator/subsurface_random_walk.h): entry along the vertex normal refracted by 1/IOR
+//! integrator/subsurface_random_walk.h): entry along the (smooth) normal refracted by 1/IOR
 //! through a GGX visible normal of alpha = Roughness^2, exponential free flights, Henyey–
 //! Greenstein(g) for collisions 1..9, from collision 10 on the similarity-transformed
 //! isotropic medium (sigma_t* = sigma_t (1 - alpha g), alpha* = alpha (1 - g) / (1 - alpha g)),
