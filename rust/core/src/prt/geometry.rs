@@ -282,7 +282,7 @@ impl GeometryTerm {
         let sharp_walks = SHARP_WALKS
             .max(walks_per_vertex)
             .min(settings.max_walks.max(1));
-        let mut own: HashMap<u32, Diff> = HashMap::new();
+        let mut own: Vec<Option<Diff>> = vec![None; n];
         let mut sharp_rays = 0u64;
         if !sharp_list.is_empty() {
             let w = walk(
@@ -293,15 +293,7 @@ impl GeometryTerm {
                 SHARP_TO,
             )?;
             for (k, &v) in sharp_list.iter().enumerate() {
-                let (b, se) = (w.radiosity[k], w.std_error[k]);
-                let h = halfspace[v as usize];
-                own.insert(
-                    v,
-                    (
-                        std::array::from_fn(|c| b[c] - h[c]),
-                        std::array::from_fn(|c| se[c] * se[c]),
-                    ),
-                );
+                own[v as usize] = Some(diff_at(&w, k, halfspace[v as usize]));
             }
             walks_total.0 += w.walks;
             walks_total.1 += w.rays;
@@ -315,12 +307,7 @@ impl GeometryTerm {
             if walked.get(k) != Some(&v) {
                 continue;
             }
-            let (b, se) = (walks.radiosity[k], walks.std_error[k]);
-            let h = halfspace[v as usize];
-            diff[i] = (
-                std::array::from_fn(|c| b[c] - h[c]),
-                std::array::from_fn(|c| se[c] * se[c]),
-            );
+            diff[i] = diff_at(&walks, k, halfspace[v as usize]);
             k += 1;
         }
         let radius = KERNEL_SPACINGS * spacing;
@@ -401,17 +388,7 @@ impl GeometryTerm {
                 refined = (
                     fine.iter()
                         .enumerate()
-                        .map(|(k, &v)| {
-                            let (b, se) = (more.radiosity[k], more.std_error[k]);
-                            let h = halfspace[v as usize];
-                            (
-                                v,
-                                (
-                                    std::array::from_fn(|c| b[c] - h[c]),
-                                    std::array::from_fn(|c| se[c] * se[c]),
-                                ),
-                            )
-                        })
+                        .map(|(k, &v)| (v, diff_at(&more, k, halfspace[v as usize])))
                         .collect::<Vec<_>>(),
                     w,
                 );
@@ -430,8 +407,8 @@ impl GeometryTerm {
         let smoothed: Vec<([f32; 3], [f32; 3])> = (0..n)
             .into_par_iter()
             .map(|v| {
-                if let Some(d) = own.get(&(v as u32)) {
-                    return *d;
+                if let Some(d) = own[v] {
+                    return d;
                 }
                 if near_flagged[v] {
                     let (d, var) =
@@ -565,6 +542,16 @@ impl GeometryTerm {
             });
         error
     }
+}
+
+/// D = B_walk - B_half-space at the `k`-th walked vertex of `walks`, whose half-space B is
+/// `halfspace`, and its variance.
+fn diff_at(walks: &MeshWalkResult, k: usize, halfspace: [f32; 3]) -> Diff {
+    let (b, se) = (walks.radiosity[k], walks.std_error[k]);
+    (
+        std::array::from_fn(|c| b[c] - halfspace[c]),
+        std::array::from_fn(|c| se[c] * se[c]),
+    )
 }
 
 /// Two runs of walks at the same vertices as one: the walk-weighted mean and its standard
