@@ -87,15 +87,14 @@ impl BakePoints {
 }
 
 /// Vertices whose bake points may see another radiance than the vertex itself: on an open
-/// edge (an edge of one triangle: the rim of the bunny's open base, where the bake is 1.3-2.4x
+/// edge (`Mesh::open_edge_vertices`: the rim of the bunny's open base, where the bake is 1.3-2.4x
 /// the radiance at the vertex in blue in every material), or with a corner triangle facing
 /// more than acos(`facing`) away from the vertex normal (a spike's apex). Counted with
 /// `facing` 0.5 on this project's meshes: Suzanne 168 (all on open edges), the bunny at 10 cm
 /// 223 on open edges and 28 by facing, the horse 126 by facing, of 8k-48k vertices.
 pub fn sharp_vertices(mesh: &Mesh, facing: f32) -> Vec<bool> {
     let (p, nrm) = (mesh.positions(), mesh.normals());
-    let mut sharp = vec![false; mesh.vertex_count()];
-    let mut edges: Vec<(u32, u32)> = Vec::with_capacity(3 * mesh.triangles().len());
+    let mut sharp = mesh.open_edge_vertices();
     for tri in mesh.triangles() {
         let x = tri.map(|i| p[i as usize]);
         if let Some(face) = (x[1] - x[0]).cross(x[2] - x[0]).try_normalize() {
@@ -104,23 +103,6 @@ pub fn sharp_vertices(mesh: &Mesh, facing: f32) -> Vec<bool> {
                 sharp[v as usize] |= n != Vec3::ZERO && face.dot(n) < facing;
             }
         }
-        for k in 0..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            edges.push((a.min(b), a.max(b)));
-        }
-    }
-    edges.sort_unstable();
-    let mut i = 0;
-    while i < edges.len() {
-        let mut j = i + 1;
-        while j < edges.len() && edges[j] == edges[i] {
-            j += 1;
-        }
-        if j - i == 1 {
-            sharp[edges[i].0 as usize] = true;
-            sharp[edges[i].1 as usize] = true;
-        }
-        i = j;
     }
     sharp
 }

@@ -200,21 +200,7 @@ impl Mesh {
     /// triangle of positive area uses. An edge is on the boundary when exactly one triangle of
     /// positive area uses it.
     pub fn vertex_coverage(&self) -> Vec<f32> {
-        use std::collections::HashMap;
-        // Vertices at the same position are one point of the surface (a seam split by an
-        // exporter is not a boundary).
-        let mut canonical: HashMap<[u32; 3], u32> = HashMap::new();
-        let weld: Vec<u32> = self
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                *canonical
-                    .entry(p.to_array().map(f32::to_bits))
-                    .or_insert(i as u32)
-            })
-            .collect();
-        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        let (weld, boundary) = self.welded_open_edges();
         let mut angles = vec![0f64; self.positions.len()];
         let mut used = vec![false; self.positions.len()];
         for (tri, area) in self.triangles.iter().zip(&self.triangle_areas) {
@@ -231,6 +217,49 @@ impl Mesh {
                 );
                 angles[v as usize] += ea.angle_between(eb);
                 used[v as usize] = true;
+            }
+        }
+        weld.iter()
+            .map(|&v| match (used[v as usize], boundary[v as usize]) {
+                (false, _) => 0.0,
+                (true, false) => 1.0,
+                (true, true) => ((angles[v as usize] / std::f64::consts::TAU) as f32).min(1.0),
+            })
+            .collect()
+    }
+
+    /// Per vertex, whether it lies on an open boundary (an edge exactly one triangle of
+    /// positive area uses; vertices at the same position are one point, as in
+    /// `vertex_coverage`).
+    pub fn open_edge_vertices(&self) -> Vec<bool> {
+        let (weld, boundary) = self.welded_open_edges();
+        weld.iter().map(|&w| boundary[w as usize]).collect()
+    }
+
+    /// Per vertex the first vertex at its position (a seam split by an exporter is not a
+    /// boundary), and per such welded vertex whether an edge exactly one triangle of positive
+    /// area uses ends there.
+    fn welded_open_edges(&self) -> (Vec<u32>, Vec<bool>) {
+        use std::collections::HashMap;
+        let mut canonical: HashMap<[u32; 3], u32> = HashMap::new();
+        let weld: Vec<u32> = self
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                *canonical
+                    .entry(p.to_array().map(f32::to_bits))
+                    .or_insert(i as u32)
+            })
+            .collect();
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        for (tri, area) in self.triangles.iter().zip(&self.triangle_areas) {
+            if *area <= 0.0 {
+                continue;
+            }
+            let w = tri.map(|v| weld[v as usize]);
+            for k in 0..3 {
+                let (v, a) = (w[k], w[(k + 1) % 3]);
                 *edges.entry((v.min(a), v.max(a))).or_insert(0) += 1;
             }
         }
@@ -241,13 +270,7 @@ impl Mesh {
                 boundary[b as usize] = true;
             }
         }
-        weld.iter()
-            .map(|&v| match (used[v as usize], boundary[v as usize]) {
-                (false, _) => 0.0,
-                (true, false) => 1.0,
-                (true, true) => ((angles[v as usize] / std::f64::consts::TAU) as f32).min(1.0),
-            })
-            .collect()
+        (weld, boundary)
     }
 
     /// The axis-aligned bounding box (lo, hi) of the vertices.
