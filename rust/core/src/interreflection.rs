@@ -2,10 +2,12 @@
 //! irradiance each vertex receives from the radiance the mesh sends out, by ray casting.
 //!
 //! E_ind(x) = int_H L(y(w), -w) (n . w) dw, y(w) the first surface point along w, L the
-//! outgoing radiance there, L = W(mu_y) B(y) / pi with B interpolated from the vertices and W
-//! the profile's exit weight (`Model::exit_weight`). Cosine-weighted directions on a stratified
-//! grid (rotated per vertex) give E_ind = pi mean L. Rays that leave the mesh, or meet the
-//! inside of a surface, bring nothing.
+//! outgoing radiance there, a sum of sources L = sum_k W_k(mu_y) V_k(y) / pi, each V_k
+//! interpolated from the vertices with its weight per channel W_k at the view cosine mu_y: the
+//! radiosity B under the profile's exit weight (`Model::exit_weight`), and for Cycles the
+//! irradiance the specular layer reflects (`Model::specular_reflectance`). Cosine-weighted
+//! directions on a stratified grid (rotated per vertex) give E_ind = pi mean L. Rays that leave
+//! the mesh, or meet the inside of a surface, bring nothing.
 
 use crate::mesh::{barycentric, interpolated_normal, Mesh};
 use crate::raytrace::Tracer;
@@ -13,14 +15,20 @@ use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
-/// Irradiance per vertex from the mesh's own outgoing light. `radiosity` per vertex (B),
-/// `exit_weight(cos)` the factor from B / pi to radiance at view cosine cos; `strata` x
+/// One kind of light the mesh sends out: `values` per vertex, and `weight(cos)` per channel,
+/// the factor from values / pi to radiance at view cosine cos.
+#[derive(Clone, Copy)]
+pub struct Source<'a> {
+    pub values: &'a [[f32; 3]],
+    pub weight: &'a (dyn Fn(f64) -> [f64; 3] + Sync),
+}
+
+/// Irradiance per vertex from the mesh's own outgoing light, the sum of `sources`; `strata` x
 /// `strata` rays per vertex.
 pub fn indirect_irradiance(
     mesh: &Mesh,
     tracer: &Tracer,
-    radiosity: &[[f32; 3]],
-    exit_weight: &(dyn Fn(f64) -> f64 + Sync),
+    sources: &[Source],
     strata: usize,
 ) -> Vec<[f32; 3]> {
     let strata = strata.max(1);
@@ -46,9 +54,7 @@ pub fn indirect_irradiance(
                     let (r, phi) = (u.sqrt(), 2.0 * PI * w);
                     let z = (1.0 - u).max(0.0).sqrt();
                     let dir = (t * (r * phi.cos()) + b * (r * phi.sin()) + n * z).normalize();
-                    if let Some(l) =
-                        radiance_along(mesh, tracer, radiosity, exit_weight, origin, dir)
-                    {
+                    if let Some(l) = radiance_along(mesh, tracer, sources, origin, dir) {
                         for c in 0..3 {
                             sum[c] += l[c];
                         }
@@ -65,8 +71,7 @@ pub fn indirect_irradiance(
 fn radiance_along(
     mesh: &Mesh,
     tracer: &Tracer,
-    radiosity: &[[f32; 3]],
-    exit_weight: &(dyn Fn(f64) -> f64 + Sync),
+    sources: &[Source],
     origin: Vec3,
     dir: Vec3,
 ) -> Option<[f32; 3]> {
@@ -82,11 +87,15 @@ fn radiance_along(
     if cos <= 0.0 || flat.dot(dir) >= 0.0 {
         return None; // the inside of a surface: no light leaves it toward the origin
     }
-    let w = exit_weight(f64::from(cos)) as f32 / PI;
-    let [ra, rb, rc] = tri.map(|i| radiosity[i as usize]);
-    Some(std::array::from_fn(|k| {
-        w * (bu * ra[k] + bv * rb[k] + bw * rc[k])
-    }))
+    let mut l = [0f32; 3];
+    for source in sources {
+        let w = (source.weight)(f64::from(cos));
+        let [ra, rb, rc] = tri.map(|i| source.values[i as usize]);
+        for k in 0..3 {
+            l[k] += w[k] as f32 / PI * (bu * ra[k] + bv * rb[k] + bw * rc[k]);
+        }
+    }
+    Some(l)
 }
 
 #[cfg(test)]
@@ -128,7 +137,16 @@ mod tests {
         let mesh = Mesh::new(p, t, None).unwrap();
         let tracer = Tracer::new(&mesh);
         let b = vec![[1.0f32, 0.5, 0.0]; mesh.vertex_count()];
-        let e = indirect_irradiance(&mesh, &tracer, &b, &|_| 1.0, 24);
+        let one = |_: f64| [1.0; 3];
+        let e = indirect_irradiance(
+            &mesh,
+            &tracer,
+            &[Source {
+                values: &b,
+                weight: &one,
+            }],
+            24,
+        );
         // Centre of the lower square: a point under a 4 x 4 square at height 1. The point-to-
         // rectangle form factor (Howell C-15 for a parallel rectangle with the point under a
         // corner, times four quarters): F = 4 * (1/2pi) [A/sqrt(1+A^2) atan(B/sqrt(1+A^2))
@@ -146,5 +164,27 @@ mod tests {
             got[0]
         );
         assert!((got[1] - 0.5 * got[0]).abs() < 1e-6 && got[2] == 0.0);
+        // Two sources add, each under its own weight per channel: B above as before, and a
+        // second value at a third of its radiance in blue alone.
+        let third = |_: f64| [0.0, 0.0, 1.0 / 3.0];
+        let e2 = vec![[0.0f32, 0.0, 3.0]; mesh.vertex_count()];
+        let both = indirect_irradiance(
+            &mesh,
+            &tracer,
+            &[
+                Source {
+                    values: &b,
+                    weight: &one,
+                },
+                Source {
+                    values: &e2,
+                    weight: &third,
+                },
+            ],
+            24,
+        );
+        let got = both[centre];
+        assert!((f64::from(got[0]) - f).abs() < 0.02 * f);
+        assert!((f64::from(got[2]) - f).abs() < 0.02 * f, "{got:?} vs {f}");
     }
 }

@@ -73,6 +73,26 @@ impl Model {
         }
     }
 
+    /// What the surface reflects of the irradiance on it without entering, toward a viewer at
+    /// cosine `cos_o`, times pi: the object's own light falling back on it meets this as well
+    /// as the lobes under it. Cycles: the dielectric specular layer's albedo E_spec(cos_o)
+    /// (1 - Metallic) (`principled::specular_albedo`; taken as Lambertian, a metallic lobe's own
+    /// reflection left out). The dipole: 0 (the papers' model has no such layer).
+    pub fn specular_reflectance(self, material: &Material, cos_o: f64) -> f64 {
+        match self {
+            Model::Dipole => 0.0,
+            Model::Cycles => {
+                if cos_o <= 0.0 {
+                    0.0
+                } else {
+                    let l = &material.layers;
+                    (1.0 - l.metallic)
+                        * principled::specular_albedo(l.roughness, cos_o, material.eta)
+                }
+            }
+        }
+    }
+
     /// The three channels' profiles of `material` under this model. For Cycles the walk tables
     /// of the material's (g, IOR, Roughness) are looked up, and built when they are missing
     /// (`table::tables_for`); g must lie in Cycles' [0, 0.9].
@@ -224,6 +244,7 @@ pub(crate) fn support_by_bisection(p: &impl RadialProfile, rel_tol: f64, start: 
 pub(crate) mod tests {
     //! The property every profile must have, checked on each implementation.
     use super::*;
+    use crate::optics::Layers;
     use crate::quadrature::simpson;
     use std::f64::consts::PI;
 
@@ -261,6 +282,34 @@ pub(crate) mod tests {
                 "disc integral at {rho}: closed {disc} vs quadrature {acc} (total {total})"
             );
             assert!((disc + p.tail(rho) - total).abs() <= 1e-9 * total);
+        }
+    }
+
+    #[test]
+    fn a_smooth_surface_reflects_its_fresnel_factor_and_metal_none_of_it() {
+        // Cycles: at Roughness 0 and normal incidence the specular layer reflects F0 =
+        // ((eta - 1) / (eta + 1))^2 (Fresnel), over the non-metallic share only; behind the
+        // surface nothing. The dipole: no layer at all.
+        let base = Material::preset("marble", 1.0).unwrap();
+        for eta in [1.3, 1.5] {
+            let m = Material { eta, ..base }
+                .with_layers(Layers {
+                    roughness: 0.0,
+                    ..base.layers
+                })
+                .unwrap();
+            let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
+            let got = Model::Cycles.specular_reflectance(&m, 1.0);
+            assert!((got - f0).abs() < 1e-6, "eta {eta}: {got} vs {f0}");
+            let half = m
+                .with_layers(Layers {
+                    metallic: 0.5,
+                    ..m.layers
+                })
+                .unwrap();
+            assert!((Model::Cycles.specular_reflectance(&half, 1.0) - 0.5 * f0).abs() < 1e-6);
+            assert_eq!(Model::Cycles.specular_reflectance(&m, -0.2), 0.0);
+            assert_eq!(Model::Dipole.specular_reflectance(&m, 1.0), 0.0);
         }
     }
 
