@@ -497,8 +497,8 @@ impl Prt {
             // `PATH_RAY_DIFFUSE_ANCESTOR` suggests in Cycles' source).
             let direct = prt.radiosity(rep)?.radiosity;
             let model = settings.model;
-            let source_albedo = slab_albedo(model, rep)?;
             let receiving = lobe_totals(model, rep)?;
+            let source_albedo = sent_on(model, rep, receiving, 1.0);
             // Bounce after bounce: the light sent out is the direct B plus what the indirect
             // irradiance of the previous pass returns, (R_total + point mass) E_ind, and what
             // the surface reflects of either. The cast is linear in what is sent, so E_ind =
@@ -531,11 +531,7 @@ impl Prt {
             );
             // The later passes send E_ind on: its lobes' share W (R_total + point mass) and the
             // specular layer's.
-            let onward = |cos: f64| -> [f64; 3] {
-                let w = model.exit_weight(rep, cos);
-                let s = model.specular_reflectance(rep, cos);
-                std::array::from_fn(|c| w * receiving[c] + s)
-            };
+            let onward = |cos: f64| sent_on(model, rep, receiving, cos);
             let later = (strata * LATER_BOUNCE_STRATA.0 / LATER_BOUNCE_STRATA.1).max(1);
             let mut irradiance = first.clone();
             for _ in 1..INTERREFLECTION_BOUNCES {
@@ -814,9 +810,7 @@ impl Prt {
         }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
             let receiving = totals(&profiles);
-            let w = self.model.exit_weight(material, 1.0);
-            let s = self.model.specular_reflectance(material, 1.0);
-            let albedo = receiving.map(|t| w * t + s);
+            let albedo = sent_on(self.model, material, receiving, 1.0);
             // How much more or less light the edited material sends out than the source did.
             let ratio: [f64; 3] = std::array::from_fn(|ch| {
                 if bounce.source_albedo[ch] > 0.0 {
@@ -984,12 +978,13 @@ pub(crate) fn totals(p: &[Profile; 3]) -> [f64; 3] {
     std::array::from_fn(|c| p[c].total() + p[c].point_mass())
 }
 
-/// What a thick slab sends out per unit irradiance, seen along the normal: the exit weight
-/// times `lobe_totals`, plus what the surface reflects (`Model::specular_reflectance`).
-fn slab_albedo(model: Model, material: &Material) -> Result<[f64; 3]> {
-    let w = model.exit_weight(material, 1.0);
-    let s = model.specular_reflectance(material, 1.0);
-    Ok(lobe_totals(model, material)?.map(|t| w * t + s))
+/// What a surface of `material` sends on per unit irradiance toward a viewer at cosine `cos`,
+/// times pi: the exit weight times its lobes' `totals`, plus what it reflects
+/// (`Model::specular_reflectance`). Along the normal, a thick slab's albedo.
+fn sent_on(model: Model, material: &Material, totals: [f64; 3], cos: f64) -> [f64; 3] {
+    let w = model.exit_weight(material, cos);
+    let s = model.specular_reflectance(material, cos);
+    totals.map(|t| w * t + s)
 }
 
 /// Turns radiosity into outgoing radiance toward `eye` in place: L_d = W(cos_o) B / pi with
