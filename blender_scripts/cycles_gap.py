@@ -3,21 +3,23 @@
 The preview (PRT, radiance along the normal as a vertex bake records it) with each profile
 against a Cycles 5.0 vertex bake of the diffuse passes of the same Principled material, and
 that distance taken apart:
-- Cycles' own noise: two bakes with different seeds, rms(a - b) / sqrt(2);
+- Cycles' own noise: `--seeds` bakes (default 2) with seeds 0, 1, ..., one bake's spread about
+  their mean; and the preview against that mean (Cycles at seeds x spp samples) beside the
+  seed-0 bake, with what is left beyond the mean's own noise (noise^2 / seeds);
 - interreflection: the bake with and without indirect light (the object's own light);
 - the half-space assumption (curvature, thin parts): the profile's ground truth, which is the
   half-space model integrated exactly over the mesh, against Cycles' direct light;
 - PRT's own error: PRT against that ground truth;
 - the walks through the mesh (issue 12): the preview as shipped (Cycles' profile with the
   walks) beside the half-space table alone, and the in-house walk reference
-  (`reference_radiance`, 4096 walks per receiver) against the mean of two seeds' bakes of
+  (`reference_radiance`, 4096 walks per receiver) against the mean of the seeds' bakes of
   Cycles' direct light, with what is left beyond the noise of both at those receivers.
 Errors are area-weighted relative RMS (worst channel); the preview-vs-Cycles figures over all
 vertices, those involving the ground truth over `--receivers` random vertices. Everything
 rendered is cached (out/cache), so a second run only recomputes PRT.
 
 Run: .venv/bin/python blender_scripts/cycles_gap.py [--models suzanne suzanne-backlit stanford-bunny.obj]
-     [--materials marble skin1 ketchup aniso08] [--spp 1024] [--receivers 60] [--out out/gap]
+     [--materials marble skin1 ketchup aniso08] [--spp 1024] [--seeds 2] [--receivers 60] [--out out/gap]
 """
 
 from __future__ import annotations
@@ -69,8 +71,19 @@ def ratio(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
     return [float((w * a[:, c]).sum() / max((w * b[:, c]).sum(), 1e-30)) for c in range(3)]
 
 
+def noise_of_one(bakes: list[np.ndarray], w: np.ndarray) -> list[float]:
+    """One bake's own noise per channel, from several seeds' bakes of the same thing: the
+    area-weighted relative RMS of a bake about the seeds' mean, sqrt(sum_i w_i s_i^2 /
+    sum_i w_i mean_i^2) with s_i^2 the seeds' unbiased variance at vertex i."""
+    a = np.stack([np.asarray(b, np.float64) for b in bakes])
+    mean = a.mean(0)
+    var = ((a - mean) ** 2).sum(0) / (len(a) - 1)
+    w = np.asarray(w, np.float64)[:, None]
+    return np.sqrt((w * var).sum(0) / np.maximum((w * mean ** 2).sum(0), 1e-300)).tolist()
+
+
 def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float,
-            walk_reference_walks: int = 4096, one_bake: bool = False) -> list[dict]:
+            walk_reference_walks: int = 4096, seeds: int = 2, direct_seeds: int | None = None) -> list[dict]:
     import cycles_reference as cr
     import demo
     import report
@@ -89,16 +102,20 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
     for name in names:
         m = material(name)
         cyc, cyc_s = cr.bake_vertices(bake_obj, m, spp)
-        row = dict(model=model, material=name, vertices=scene.vertex_count, spp=spp, bake_s=cyc_s,
+        row = dict(model=model, material=name, vertices=scene.vertex_count, spp=spp, bake_s=cyc_s, seeds=seeds,
+                   direct_seeds=0 if seeds < 2 else max(2, direct_seeds or seeds),
                    noise=float("nan"), interreflection_rms=float("nan"), interreflection_share=[float("nan")] * 3)
-        direct = direct2 = None
-        if not one_bake:
-            cyc2, _ = cr.bake_vertices(bake_obj, m, spp, seed=1)
-            direct, _ = cr.bake_vertices(bake_obj, m, spp, direct_only=True)
-            direct2, _ = cr.bake_vertices(bake_obj, m, spp, direct_only=True, seed=1)
-            # The noise of one bake: two seeds differ by sqrt(2) of it.
-            row.update(noise=rel(cyc, cyc2, w_all) / np.sqrt(2.0), interreflection_rms=rel(direct, cyc, w_all),
-                       interreflection_share=[1 - r for r in ratio(direct, cyc, w_all)])
+        fulls, directs = [cyc], []
+        if seeds > 1:
+            fulls += [cr.bake_vertices(bake_obj, m, spp, seed=s)[0] for s in range(1, seeds)]
+            directs = [cr.bake_vertices(bake_obj, m, spp, direct_only=True, seed=s)[0]
+                       for s in range(max(2, direct_seeds or seeds))]
+            mean_direct_all = np.mean(directs, axis=0)
+            row.update(noise=max(noise_of_one(fulls, w_all)), interreflection_rms=rel(mean_direct_all, cyc, w_all),
+                       interreflection_share=[1 - r for r in ratio(mean_direct_all, np.mean(fulls, axis=0), w_all)])
+        direct = np.mean(directs, axis=0) if directs else None
+        # Cycles converged as far as these bakes go: the seeds' mean (seeds x spp samples).
+        cyc_mean = np.mean(fulls, axis=0)
         # The preview as shipped (Cycles' profile with the walks through the mesh), the
         # half-space table alone, and the dipole.
         for key, profile, walks in (("cycles", "cycles", None), ("halfspace", "cycles", 0), ("dipole", "dipole", None)):
@@ -110,10 +127,18 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
             edit = prt.last_eval["seconds"]
             row[key] = dict(vs_cycles=rel(preview, cyc, w_all), ratio=ratio(preview, cyc, w_all),
                             vs_cycles_channels=rel_channels(preview, cyc, w_all),
+                            vs_cycles_mean_channels=rel_channels(preview, cyc_mean, w_all),
+                            ratio_mean=ratio(preview, cyc_mean, w_all),
                             interreflection_share=prt.report["interreflection_share"],
                             vs_direct=rel(preview, direct, w_all) if direct is not None else float("nan"),
                             precompute_s=pre, edit_ms=1e3 * edit,
                             estimate=max(prt.last_eval["error_estimate"]), walks=prt.report["walks"])
+            row[key]["vs_cycles_mean"] = max(row[key]["vs_cycles_mean_channels"])
+            if seeds > 1:
+                # Against the mean of the seeds' bakes the bakes still bring noise^2 / seeds.
+                noise = np.array(noise_of_one(fulls, w_all))
+                row[key]["beyond_noise"] = float(np.sqrt(np.maximum(
+                    np.array(row[key]["vs_cycles_mean_channels"]) ** 2 - noise ** 2 / seeds, 0.0)).max())
             if direct is not None and (key == "halfspace" or (key == "dipole" and m.g == 0.0)):
                 gt = report.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
                 # The ground truth is the direct-light model: PRT without the bounce against it.
@@ -124,20 +149,20 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
                 row[key]["prt_vs_truth"] = rel(prt.radiosity(m, interreflection=False)[idx], gt, w)
                 row[key]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
                 row[key]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
-        if direct is not None:
+        if directs:
             # The in-house walk reference (Cycles' walk through the mesh, no Blender) against the
-            # mean of two seeds' bakes of Cycles' direct light at the receivers, per channel, with
-            # the noise of both taken out: the bakes' noise at these receivers, from the two seeds
+            # mean of the seeds' bakes of Cycles' direct light at the receivers, per channel, with
+            # the noise of both taken out: the bakes' noise at these receivers, from the seeds
             # (the all-vertex figure misses that a few receivers carry much of the area, and one
             # seed's error there: Suzanne in ketchup, blue, 9.4 % over all vertices, 15.5 % at
             # the receivers).
             t0 = time.perf_counter()
             ref, d = translucent.reference_radiance(scene, m, walks=walk_reference_walks, receivers=idx.tolist(),
                                                     details=True)
-            mean_direct = 0.5 * (direct[idx] + direct2[idx])
+            mean_direct = np.mean([x[idx] for x in directs], axis=0)
             measured = np.array(rel_channels(ref, mean_direct, w))
-            # The mean of two bakes is sqrt(2) less noisy than one, whose noise is rms(a - b) / sqrt(2).
-            mean_noise = np.array(rel_channels(direct[idx], direct2[idx], w)) / 2.0
+            # The seeds' mean is sqrt(seeds) less noisy than one bake.
+            mean_noise = np.array(noise_of_one([x[idx] for x in directs], w)) / np.sqrt(len(directs))
             beyond = np.sqrt(np.maximum(measured ** 2 - mean_noise ** 2 - np.array(d["noise"]) ** 2, 0.0))
             row["walk_reference"] = dict(vs_direct=float(measured.max()), vs_direct_channels=measured.tolist(),
                                          ratio=ratio(ref, mean_direct, w), noise=max(d["noise"]),
@@ -150,20 +175,24 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
 
 def table(rows: list[dict]) -> str:
     pct = lambda x: "—" if x != x else f"{100 * x:.1f}"  # noqa: E731
+    nan = float("nan")
     lines = [
-        "| scene | material | preview vs Cycles % | mean ratio | half-space table vs Cycles % | dipole vs Cycles % | "
-        "Cycles noise % | walk reference vs Cycles direct %: measured (beyond both noises) | "
+        "| scene | material | preview vs Cycles % | preview vs the seeds' mean % (beyond its noise) | mean ratio | "
+        "half-space table vs Cycles % | dipole vs Cycles % | Cycles noise % (seeds) | "
+        "walk reference vs Cycles direct %: measured (beyond both noises) | "
         "interreflection % | walks per vertex x walked vertices | precompute s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         c, h, d = r["cycles"], r["halfspace"], r["dipole"]
-        wr = r.get("walk_reference", dict(vs_direct=float("nan"), beyond_noise=float("nan")))
+        wr = r.get("walk_reference", dict(vs_direct=nan, beyond_noise=nan))
+        seeds = r.get("seeds", 1)
         w = c.get("walks") or {}
         lines.append(
             f"| {r['model']} | {r['material']} | **{pct(c['vs_cycles'])}** | "
+            f"{pct(c.get('vs_cycles_mean', nan)) if seeds > 1 else '—'} ({pct(c.get('beyond_noise', nan))}) | "
             f"{', '.join(f'{x:.3f}' for x in c['ratio'])} | {pct(h['vs_cycles'])} | {pct(d['vs_cycles'])} | "
-            f"{pct(r['noise'])} | {pct(wr['vs_direct'])} ({pct(wr['beyond_noise'])}) | "
+            f"{pct(r['noise'])} ({seeds}) | {pct(wr['vs_direct'])} ({pct(wr['beyond_noise'])}) | "
             f"{pct(r['interreflection_rms'])} | {w.get('walks_per_vertex', 0)} x {w.get('walked_vertices', 0)} | "
             f"{c['precompute_s']:.1f} |")
     return "\n".join(lines)
@@ -177,12 +206,18 @@ def main(argv=None) -> int:
     ap.add_argument("--receivers", type=int, default=60)
     ap.add_argument("--rel-tol", type=float, default=2e-3)
     ap.add_argument("--out", default=str(REPO / "out" / "gap"))
+    ap.add_argument("--seeds", type=int, default=2,
+                    help="bakes with seeds 0..N-1 (full and direct light): Cycles' noise, and the preview against "
+                         "their mean as well as against the seed-0 bake")
+    ap.add_argument("--direct-seeds", type=int, default=None,
+                    help="seeds of the direct-light bakes (the walk reference's comparison; default --seeds)")
     ap.add_argument("--one-bake", action="store_true",
                     help="only the seed-0 bake: the preview's distances, no noise, direct-light or walk-reference columns")
     args = ap.parse_args(argv)
     rows = []
     for model in args.models:
-        rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol, one_bake=args.one_bake)
+        rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol,
+                        seeds=1 if args.one_bake else args.seeds, direct_seeds=args.direct_seeds)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "gap.json").write_text(json.dumps(rows, indent=1))

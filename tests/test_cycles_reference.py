@@ -41,3 +41,19 @@ def test_bakes_are_cached_and_keyed_by_their_inputs(empty_blend, tmp_path, monke
     cr.bake_vertices(obj, m, 2)
     assert len(list(tmp_path.glob("*.npz"))) == 3
     assert obj.data.color_attributes.get("cycles_bake") is None, "the bake's attribute is removed"
+
+
+def test_one_bakes_noise_is_read_from_several_seeds():
+    """`cycles_gap.noise_of_one`: bakes that scatter about the truth by a known 10 % (Gaussian,
+    per vertex and channel; 5 % in green) read as 10 % (5 %) noisy whatever the number of
+    seeds, not the seeds' biased spread (8 seeds: 7 % low) and not their mean's."""
+    import cycles_gap
+
+    rng = np.random.default_rng(7)
+    truth = rng.uniform(0.1, 2.0, (3000, 3))
+    area = rng.uniform(0.5, 2.0, 3000)
+    sigma = np.array([0.10, 0.05, 0.10])
+    for seeds in (2, 8):
+        bakes = [truth * (1 + sigma * rng.standard_normal(truth.shape)) for _ in range(seeds)]
+        # Relative RMS about the mean: sqrt(sum w sigma^2 t^2 / sum w mean^2) = sigma (to 1/sqrt(N)).
+        np.testing.assert_allclose(cycles_gap.noise_of_one(bakes, area), sigma, rtol=0.04)
