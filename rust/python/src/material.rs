@@ -183,8 +183,8 @@ impl PyMaterial {
         let profiles = py
             .detach(|| guard(|| model.profiles(&m)))
             .map_err(|e| e.into_py(None))?;
-        let w = model.exit_weight(&m, cos_view);
-        let r = |c: usize| w * (profiles[c].total() + profiles[c].point_mass());
+        let w = model.exit_weights(&m, &profiles, cos_view);
+        let r = |c: usize| w[c] * (profiles[c].total() + profiles[c].point_mass());
         Ok((r(0), r(1), r(2)))
     }
 

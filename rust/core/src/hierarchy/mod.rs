@@ -691,6 +691,7 @@ impl Hierarchy {
         }
         let mut b = self.radiosity(material)?;
         let model = self.settings.model;
+        let profiles = model.profiles(material)?;
         let mesh = &self.scene.mesh;
         b.par_iter_mut()
             .zip(mesh.positions().par_iter().zip(mesh.normals().par_iter()))
@@ -699,9 +700,9 @@ impl Hierarchy {
                     Some(eye) => n.dot((eye - *p).normalize_or_zero()),
                     None => 1.0,
                 };
-                let k =
-                    (model.exit_weight(material, f64::from(cos_o)) / std::f64::consts::PI) as f32;
-                *b = b.map(|x| x * k);
+                // W(cos_o) V(cos_o) per channel (`Model::exit_weights`).
+                let k = model.exit_weights(material, &profiles, f64::from(cos_o));
+                *b = std::array::from_fn(|c| b[c] * (k[c] / std::f64::consts::PI) as f32);
             });
         Ok(b)
     }

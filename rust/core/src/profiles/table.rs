@@ -44,7 +44,16 @@ pub fn default_walks(g: f64) -> usize {
 }
 const BATCHES: usize = 16;
 /// Bumped whenever the simulation or the layout changes: old files on disk are not read.
-const FORMAT: u64 = 3;
+const FORMAT: u64 = 4;
+
+/// View cosines the view factor is simulated at (`WalkTable::view_row`), falling; 1 first, the
+/// ratios' reference. Below the last the factor is held (a grazing view sees little of it:
+/// the exit weight falls to 0 there).
+pub const VIEW_COSINES: [f64; 7] = [1.0, 0.85, 0.7, 0.55, 0.4, 0.25, 0.1];
+/// Walks per view cosine, a fraction of the table's: every view runs on the same random
+/// numbers (the entry's microfacet and the flights), so the ratios' noise is far below each
+/// total's.
+const VIEW_WALKS_DIVISOR: usize = 16;
 
 /// Spacing of the tables in g (rows are interpolated linearly between two), and the steps
 /// Roughness and IOR are rounded to. Measured on the tables: over the whole of [0, 1] Roughness
@@ -126,6 +135,35 @@ impl TableKey {
     }
 }
 
+/// Per view cosine (VIEW_COSINES) and albedo, the total of walks entering from that view over
+/// the total of those entering along the normal, on the same random numbers.
+fn view_ratios(key: &TableKey, albedos: &[f64]) -> Result<Vec<f64>> {
+    let walks = (key.walks / VIEW_WALKS_DIVISOR).max(1024);
+    // One bin edge beyond which nothing is binned apart: only the totals are wanted.
+    let totals = VIEW_COSINES
+        .iter()
+        .map(|&view_cos| {
+            let s = WalkSettings {
+                walks,
+                view_cos,
+                ..key.settings()
+            };
+            let h = walk::simulate(&s, albedos, &[LAST_EDGE], 1, None)?;
+            Ok((0..albedos.len())
+                .map(|a| h.weights[a * h.bins()..(a + 1) * h.bins()].iter().sum())
+                .collect::<Vec<f64>>())
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(totals
+        .iter()
+        .flat_map(|t| {
+            t.iter()
+                .zip(&totals[0])
+                .map(|(x, n)| if *n > 0.0 { x / n } else { 1.0 })
+        })
+        .collect())
+}
+
 /// The albedo grid: uniform in u = sqrt(1 - alpha) from MAX_ALBEDO down to MIN_ALBEDO.
 pub fn albedo_grid() -> Vec<f64> {
     let (u0, u1) = ((1.0 - MAX_ALBEDO).sqrt(), (1.0 - MIN_ALBEDO).sqrt());
@@ -160,6 +198,10 @@ pub struct WalkTable {
     /// row's total (at least 0.01), over the rows (from 16 batches of walks).
     pub noise_total: f64,
     pub noise_disc: f64,
+    /// view[v * rows + a]: the total of walks entering from view cosine VIEW_COSINES[v] over
+    /// that of walks entering along the normal, for row a (Cycles refracts the incoming ray
+    /// into the medium, so a slanted view enters shallower and more of its light comes out).
+    view: Vec<f64>,
     /// Wall time of the simulation [s] (0 when read from disk).
     pub seconds: f64,
 }
@@ -204,6 +246,7 @@ impl WalkTable {
         let u: Vec<f64> = albedos.iter().map(|a| (1.0 - a).sqrt()).collect();
         let radii: Vec<f64> = std::iter::once(0.0).chain(edges).collect();
         let du_slopes = column_slopes(&u, &cum, knots);
+        let view = view_ratios(key, &albedos)?;
         Ok(WalkTable {
             key: *key,
             u,
@@ -212,7 +255,21 @@ impl WalkTable {
             du_slopes,
             noise_total,
             noise_disc,
+            view,
             seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The view factor's ratios (see `view`) for any albedo (clamped), linear in u between
+    /// rows, at each of VIEW_COSINES.
+    pub fn view_row(&self, albedo: f64) -> [f64; VIEW_COSINES.len()] {
+        let u = (1.0 - albedo.clamp(MIN_ALBEDO, MAX_ALBEDO)).sqrt();
+        let rows = self.u.len();
+        let i = self.u.partition_point(|&x| x <= u).clamp(1, rows - 1) - 1;
+        let t = ((u - self.u[i]) / (self.u[i + 1] - self.u[i])).clamp(0.0, 1.0);
+        std::array::from_fn(|v| {
+            let (a, b) = (self.view[v * rows + i], self.view[v * rows + i + 1]);
+            a + t * (b - a)
         })
     }
 
@@ -260,6 +317,7 @@ impl WalkTable {
             .chain(&self.cum)
             .chain(&self.du_slopes)
             .chain([&self.noise_total, &self.noise_disc])
+            .chain(&self.view)
         {
             put(x.to_bits());
         }
@@ -286,6 +344,7 @@ impl WalkTable {
         let cum = take(n_u * n_r)?;
         let du_slopes = take(n_u * n_r)?;
         let noise = take(2)?;
+        let view = take(VIEW_COSINES.len() * n_u)?;
         (n_u >= 2 && n_r >= 2).then(|| WalkTable {
             key: *key,
             u,
@@ -294,6 +353,7 @@ impl WalkTable {
             du_slopes,
             noise_total: noise[0],
             noise_disc: noise[1],
+            view,
             seconds: 0.0,
         })
     }
@@ -414,6 +474,8 @@ pub struct WalkProfile {
     /// theory): the length scales.
     sigma_t_prime: f64,
     sigma_tr: f64,
+    /// The view factor's ratios at VIEW_COSINES (`WalkTable::view_row`), rows blended.
+    view: [f64; VIEW_COSINES.len()],
 }
 
 impl WalkProfile {
@@ -433,7 +495,11 @@ impl WalkProfile {
         };
         let radii = &tables[0].0.radii;
         let mut cum = vec![0.0; radii.len()];
+        let mut view = [0.0; VIEW_COSINES.len()];
         for (table, w) in tables {
+            for (v, x) in view.iter_mut().zip(table.view_row(albedo)) {
+                *v += w * x;
+            }
             debug_assert_eq!(&table.radii, radii);
             for (c, x) in cum.iter_mut().zip(table.row(albedo)) {
                 *c += w * x;
@@ -459,7 +525,33 @@ impl WalkProfile {
             point: layers.diffuse * material.layers.base_color[c],
             sigma_t_prime,
             sigma_tr: (3.0 * sigma_t * (1.0 - walked) * sigma_t_prime).sqrt(),
+            view,
         }
+    }
+
+    /// How much brighter the light these lobes send toward a viewer at cosine `cos_o` is than
+    /// toward the normal, the exit weight left aside: in a half-space under even light, the
+    /// walk's total entering from that view over the total entering along the normal (Cycles
+    /// walks from the incoming ray refracted into the medium: a slanted view enters shallower,
+    /// and less is absorbed on the way out), and 1 for the diffuse lobe beside it. Linear
+    /// between VIEW_COSINES, held below the last.
+    pub fn view_factor(&self, cos_o: f64) -> f64 {
+        let (total, point) = (self.total(), self.point);
+        if total <= 0.0 || cos_o >= 1.0 {
+            return 1.0;
+        }
+        let n = VIEW_COSINES.len();
+        let v = if cos_o <= VIEW_COSINES[n - 1] {
+            self.view[n - 1]
+        } else {
+            let k = VIEW_COSINES
+                .partition_point(|&c| c >= cos_o)
+                .clamp(1, n - 1)
+                - 1;
+            let t = (VIEW_COSINES[k] - cos_o) / (VIEW_COSINES[k] - VIEW_COSINES[k + 1]);
+            self.view[k] + t * (self.view[k + 1] - self.view[k])
+        };
+        (total * v + point) / (total + point)
     }
 
     /// C and dC/drho at optical radius rho (C = total beyond the last knot).

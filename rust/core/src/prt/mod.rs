@@ -496,15 +496,29 @@ impl Prt {
             // 0.28 / 0.10 (tests/test_bpy_walks.py; no diffuse fallback at the wall, whatever
             // `PATH_RAY_DIFFUSE_ANCESTOR` suggests in Cycles' source).
             let direct = prt.radiosity(rep)?.radiosity;
+            // The half-space part of B and what the walks through the mesh add to it (thin
+            // parts' transmitted glow): sent under different view factors, below.
+            let half_space = prt.radiosity_parts(rep, false, false)?.radiosity;
+            let walked_part: Vec<[f32; 3]> = direct
+                .iter()
+                .zip(&half_space)
+                .map(|(b, h)| std::array::from_fn(|c| b[c] - h[c]))
+                .collect();
             let model = settings.model;
-            let receiving = lobe_totals(model, rep)?;
-            let source_albedo = sent_on(model, rep, receiving, 1.0);
+            let rep_profiles = model.profiles(rep)?;
+            let receiving = totals(&rep_profiles);
+            let source_albedo = sent_on(model, rep, &rep_profiles, 1.0);
             // Bounce after bounce: the light sent out is the direct B plus what the indirect
             // irradiance of the previous pass returns, (R_total + point mass) E_ind, and what
             // the surface reflects of either. The cast is linear in what is sent, so E_ind =
             // cast(B, E) + cast(E_ind of the pass before): the first bounce with every ray, the
             // later (a few per cent of B) with fewer.
-            let exit = |cos: f64| [model.exit_weight(rep, cos); 3];
+            // Toward a receiver at cosine cos from the sender's normal: the half-space B under
+            // W(cos) V(cos), the view factor V included (a slanted view enters Cycles' walk
+            // shallower: more comes out); the walks' term under W(cos) alone (light through a
+            // thin part: a slanted view enters shallower there too, and less gets through).
+            let exit = |cos: f64| model.exit_weights(rep, &rep_profiles, cos);
+            let exit_plain = |cos: f64| [model.exit_weight(rep, cos); 3];
             // What the receiver returns of E_ind locally: (R_total + point mass) E_ind.
             let returned = |e: &[[f32; 3]]| -> Vec<[f32; 3]> {
                 e.iter()
@@ -519,8 +533,12 @@ impl Prt {
                 tracer,
                 &[
                     Source {
-                        values: &direct,
+                        values: &half_space,
                         weight: &exit,
+                    },
+                    Source {
+                        values: &walked_part,
+                        weight: &exit_plain,
                     },
                     Source {
                         values: &prt.vertex_irradiance,
@@ -531,7 +549,7 @@ impl Prt {
             );
             // The later passes send E_ind on: its lobes' share W (R_total + point mass) and the
             // specular layer's.
-            let onward = |cos: f64| sent_on(model, rep, receiving, cos);
+            let onward = |cos: f64| sent_on(model, rep, &rep_profiles, cos);
             let later = (strata * LATER_BOUNCE_STRATA.0 / LATER_BOUNCE_STRATA.1).max(1);
             let mut irradiance = first.clone();
             for _ in 1..INTERREFLECTION_BOUNCES {
@@ -810,7 +828,7 @@ impl Prt {
         }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
             let receiving = totals(&profiles);
-            let albedo = sent_on(self.model, material, receiving, 1.0);
+            let albedo = sent_on(self.model, material, &profiles, 1.0);
             // How much more or less light the edited material sends out than the source did.
             let ratio: [f64; 3] = std::array::from_fn(|ch| {
                 if bounce.source_albedo[ch] > 0.0 {
@@ -949,13 +967,16 @@ impl Prt {
         let (mut e, l1) = self.radiosity_inner(material, true, true, single)?;
         let t = Instant::now();
         match eye {
-            Some(eye) => radiance_from_radiosity(
-                &mut e.radiosity,
-                &self.positions,
-                &self.normals,
-                eye,
-                &|cos_o| self.model.exit_weight(material, cos_o),
-            ),
+            Some(eye) => {
+                let profiles = self.model.profiles(material)?;
+                radiance_from_radiosity(
+                    &mut e.radiosity,
+                    &self.positions,
+                    &self.normals,
+                    eye,
+                    &|cos_o| self.model.exit_weights(material, &profiles, cos_o),
+                )
+            }
             None => {
                 let w = self.model.exit_weight(material, 1.0);
                 let k = (w / std::f64::consts::PI) as f32;
@@ -967,42 +988,39 @@ impl Prt {
     }
 }
 
-/// What a thick slab of `material` returns per unit irradiance, profile and lobes: the
-/// profile's total plus its point mass, per channel.
-fn lobe_totals(model: Model, material: &Material) -> Result<[f64; 3]> {
-    Ok(totals(&model.profiles(material)?))
-}
-
-/// `lobe_totals` of the three profiles at hand.
+/// What a thick slab returns per unit irradiance under the three profiles at hand, profile
+/// and lobes: the profile's total plus its point mass, per channel.
 pub(crate) fn totals(p: &[Profile; 3]) -> [f64; 3] {
     std::array::from_fn(|c| p[c].total() + p[c].point_mass())
 }
 
-/// What a surface of `material` sends on per unit irradiance toward a viewer at cosine `cos`,
-/// times pi: the exit weight times its lobes' `totals`, plus what it reflects
-/// (`Model::specular_reflectance`). Along the normal, a thick slab's albedo.
-fn sent_on(model: Model, material: &Material, totals: [f64; 3], cos: f64) -> [f64; 3] {
-    let w = model.exit_weight(material, cos);
+/// What a surface of `material` (its `profiles`) sends on per unit irradiance toward a viewer
+/// at cosine `cos`, times pi: the exit weight with the view factor (`Model::exit_weights`)
+/// times its lobes' `totals`, plus what it reflects (`Model::specular_reflectance`). Along the
+/// normal, a thick slab's albedo.
+fn sent_on(model: Model, material: &Material, profiles: &[Profile; 3], cos: f64) -> [f64; 3] {
+    let w = model.exit_weights(material, profiles, cos);
     let s = model.specular_reflectance(material, cos);
-    totals.map(|t| w * t + s)
+    let t = totals(profiles);
+    std::array::from_fn(|c| w[c] * t[c] + s)
 }
 
-/// Turns radiosity into outgoing radiance toward `eye` in place: L_d = W(cos_o) B / pi with
-/// `exit_weight` W (`Model::exit_weight`).
+/// Turns radiosity into outgoing radiance toward `eye` in place: L_d = W(cos_o) V(cos_o) B / pi
+/// with `exit_weights` per channel (`Model::exit_weights`).
 pub fn radiance_from_radiosity(
     values: &mut [[f32; 3]],
     positions: &[Vec3],
     normals: &[Vec3],
     eye: Vec3,
-    exit_weight: &(dyn Fn(f64) -> f64 + Sync),
+    exit_weights: &(dyn Fn(f64) -> [f64; 3] + Sync),
 ) {
     values
         .par_iter_mut()
         .zip(positions.par_iter().zip(normals.par_iter()))
         .for_each(|(b, (p, n))| {
             let cos_o = n.dot((eye - *p).normalize_or_zero());
-            let k = (exit_weight(f64::from(cos_o)) / std::f64::consts::PI) as f32;
-            *b = b.map(|x| x * k);
+            let k = exit_weights(f64::from(cos_o));
+            *b = std::array::from_fn(|c| b[c] * (k[c] / std::f64::consts::PI) as f32);
         });
 }
 
