@@ -66,6 +66,24 @@ def test_low_single_scattering_albedo_is_flagged_inexact():
     assert cycles.to_principled((0.1, 0.1, 0.1), (10.0, 10.0, 10.0)).exact is True
 
 
+def ortho_cycles(bpy, ortho_scale, samples):
+    """An orthographic camera `ortho_scale` wide as the scene's, Cycles on the CPU at
+    `samples` spp, no denoising, 16 x 16 pixels, linear EXR out."""
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    cam.data.type, cam.data.ortho_scale = "ORTHO", ortho_scale
+    scene = bpy.context.scene
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.cycles.use_denoising = False
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    return cam, scene
+
+
 @pytest.mark.bpy
 def test_a_thick_slab_in_cycles_is_what_the_walk_table_predicts(empty_blend):
     """A 1 m x 1 m x 0.5 m slab (mean free path 1-2 cm) under a uniform white world, seen from
@@ -91,20 +109,8 @@ def test_a_thick_slab_in_cycles_is_what_the_walk_table_predicts(empty_blend):
         world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
     bpy.context.scene.world = world
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 0.1
+    cam, scene = ortho_cycles(bpy, 0.1, 128)
     cam.location = (0, 0, 1)
-    bpy.context.scene.collection.objects.link(cam)
-    scene = bpy.context.scene
-    scene.camera = cam
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 128
-    scene.cycles.use_denoising = False
-    scene.render.resolution_x = scene.render.resolution_y = 16
-    scene.view_settings.view_transform = "Standard"
-    scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.filepath = "/tmp/slab/slab.exr"
     bpy.ops.render.render(write_still=True)
     img = bpy.data.images.load("/tmp/slab/slab.exr")
@@ -167,18 +173,7 @@ def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(emp
         world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     bpy.context.scene.world = world
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    cam.data.type, cam.data.ortho_scale = "ORTHO", 0.02
-    scene = bpy.context.scene
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 256
-    scene.cycles.use_denoising = False
-    scene.render.resolution_x = scene.render.resolution_y = 16
-    scene.view_settings.view_transform = "Standard"
-    scene.render.image_settings.file_format = "OPEN_EXR"
+    cam, scene = ortho_cycles(bpy, 0.02, 256)
 
     def seen(deg):
         t = math.radians(deg)

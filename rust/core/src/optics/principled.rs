@@ -258,7 +258,7 @@ fn lambda(alpha: f64, mu: f64) -> f64 {
 
 /// A GGX visible normal for the direction `wi` (normal +z) from (u1, u2) in [0, 1)^2
 /// (Heitz 2018, "Sampling the GGX distribution of visible normals").
-fn visible_normal(wi: DVec3, alpha: f64, u1: f64, u2: f64) -> DVec3 {
+pub(crate) fn visible_normal(wi: DVec3, alpha: f64, u1: f64, u2: f64) -> DVec3 {
     let vh = DVec3::new(alpha * wi.x, alpha * wi.y, wi.z).normalize();
     let len2 = vh.x * vh.x + vh.y * vh.y;
     let t1 = if len2 > 0.0 {

@@ -453,21 +453,7 @@ pub(crate) fn entry_direction_from(
     let h = if alpha <= 0.0 {
         DVec3::Z
     } else {
-        // Stretch, sample the projected hemisphere's disc, unstretch (Heitz 2018).
-        let vh = DVec3::new(alpha * wi.x, alpha * wi.y, wi.z).normalize();
-        let len_sq = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if len_sq > 0.0 {
-            DVec3::new(-vh.y, vh.x, 0.0) / len_sq.sqrt()
-        } else {
-            DVec3::X
-        };
-        let t2 = vh.cross(t1);
-        let (r, phi) = (u.sqrt(), 2.0 * PI * v);
-        let p1 = r * phi.cos();
-        let s = 0.5 * (1.0 + vh.z);
-        let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * phi.sin();
-        let nh = t1 * p1 + t2 * p2 + vh * (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
-        DVec3::new(alpha * nh.x, alpha * nh.y, nh.z.max(0.0)).normalize()
+        crate::optics::principled::visible_normal(wi, alpha, u, v)
     };
     let cos_i = wi.dot(h);
     if cos_i <= 0.0 {
