@@ -76,7 +76,10 @@ class Material:
     def slab_reflectance(
         self, profile: Profile = "cycles", cos_view: float = 1.0
     ) -> tuple[float, float, float]:
-        """A thick slab's radiance under a white world of radiance 1, seen at `cos_view`."""
+        """A thick slab's radiance under a white world of radiance 1, seen at `cos_view`: what
+        the specular layer leaves, W(cos_view), times the view factor V(cos_view) (Cycles' walk
+        enters along the view refracted into the medium; 1 along the normal and for the
+        dipole) times the lobes' totals."""
 
 class Scene:
     """A triangle mesh with its lights and world."""
@@ -214,8 +217,9 @@ class Prt:
         eye: Vec3 | None = None,
         phase: Literal["hg", "eddington"] = "hg",
     ) -> npt.NDArray[np.float32]:
-        """(N, 3) radiance toward the point `eye`, W(w_o) B / pi (W: F_t for the dipole, what the
-        specular layer leaves for Cycles); without an eye, along each vertex normal (a bake).
+        """(N, 3) radiance toward the point `eye`, W(w_o) V(w_o) B / pi (W: F_t for the dipole, what
+        the specular layer leaves for Cycles; V: Cycles' view factor, see `Material.slab_reflectance`,
+        1 for the dipole); without an eye, along each vertex normal (a bake).
         With single scattering (report["single_scattering"]) plus L^(1) toward the eye, with
         the Henyey-Greenstein ("hg") or Eddington (Xu eq. 11) phase function."""
     def single_radiance(
