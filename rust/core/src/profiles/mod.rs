@@ -79,7 +79,8 @@ impl Model {
     /// sees) and for the dipole. Measured on a thick block in Cycles 5.0.1 (ketchup under a sun
     /// along the normal, the specular layer's own reflection taken off, the subsurface's
     /// radiance seen at 60 / 75 degrees over that along the normal): 1.14 / 1.19 in red, 1.20 /
-    /// 1.31 in green, where W alone gives 0.97 / 0.92 (tests/test_bpy_walks.py).
+    /// 1.31 in green, where W alone gives 0.97 / 0.92 (tests/test_cycles_mapping.py renders it,
+    /// tests/test_profiles.py holds PRT to it).
     pub fn exit_weights(
         self,
         material: &Material,

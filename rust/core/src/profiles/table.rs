@@ -44,7 +44,7 @@ pub fn default_walks(g: f64) -> usize {
 }
 const BATCHES: usize = 16;
 /// Bumped whenever the simulation or the layout changes: old files on disk are not read.
-const FORMAT: u64 = 4;
+const FORMAT: u64 = 5;
 
 /// View cosines the view factor is simulated at (`WalkTable::view_row`), falling; 1 first, the
 /// ratios' reference. Below the last the factor is held (a grazing view sees little of it:
@@ -143,9 +143,11 @@ fn view_ratios(key: &TableKey, albedos: &[f64]) -> Result<Vec<f64>> {
     let totals = VIEW_COSINES
         .iter()
         .map(|&view_cos| {
+            // Plain numbers for every view, the normal one too: the same numbers in each.
             let s = WalkSettings {
                 walks,
                 view_cos,
+                stratified: false,
                 ..key.settings()
             };
             let h = walk::simulate(&s, albedos, &[LAST_EDGE], 1, None)?;

@@ -454,9 +454,17 @@ impl Prt {
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);
         let tracer = (settings.geometry.is_some() || bounce_strata.is_some())
             .then(|| crate::raytrace::Tracer::new(mesh));
+        // The first representative's half-space B (no walks, no own light): what the walks
+        // correct, and the part of B the own light sends under the view factor.
+        let halfspace = match &tracer {
+            Some(_) => {
+                prt.radiosity_parts(&representatives[0], false, false)?
+                    .radiosity
+            }
+            None => Vec::new(),
+        };
         if let (Some(g), Some(tracer)) = (&settings.geometry, &tracer) {
             let rep = &representatives[0];
-            let halfspace = prt.radiosity_parts(rep, false, false)?.radiosity;
             let end = if bounce_strata.is_some() { 0.85 } else { 0.95 };
             // The walks' exits read the light finer where a shadow's edge crosses a triangle.
             let t_edges = Instant::now();
@@ -495,15 +503,16 @@ impl Prt {
             // to 0.22 / 0.069 / 0.013 (1024 spp) where the wall's shadowed side shows 0.51 /
             // 0.28 / 0.10 (tests/test_bpy_walks.py; no diffuse fallback at the wall, whatever
             // `PATH_RAY_DIFFUSE_ANCESTOR` suggests in Cycles' source).
+            // B's half-space part and what the walks through the mesh add to it (thin parts'
+            // transmitted glow), sent under different view factors below.
             let direct = prt.radiosity(rep)?.radiosity;
-            // The half-space part of B and what the walks through the mesh add to it (thin
-            // parts' transmitted glow): sent under different view factors, below.
-            let half_space = prt.radiosity_parts(rep, false, false)?.radiosity;
-            let walked_part: Vec<[f32; 3]> = direct
-                .iter()
-                .zip(&half_space)
-                .map(|(b, h)| std::array::from_fn(|c| b[c] - h[c]))
-                .collect();
+            let walked_part = prt.geometry.as_ref().map(|_| {
+                direct
+                    .iter()
+                    .zip(&halfspace)
+                    .map(|(b, h)| std::array::from_fn(|c| b[c] - h[c]))
+                    .collect::<Vec<[f32; 3]>>()
+            });
             let model = settings.model;
             let rep_profiles = model.profiles(rep)?;
             let receiving = totals(&rep_profiles);
@@ -528,25 +537,23 @@ impl Prt {
             // Beside the lobes' B, the surface where the light falls back reflects part of the
             // irradiance there without entering (Cycles' specular layer, E_spec(mu) E).
             let reflected = |cos: f64| [model.specular_reflectance(rep, cos); 3];
-            let first = crate::interreflection::indirect_irradiance(
-                mesh,
-                tracer,
-                &[
-                    Source {
-                        values: &half_space,
-                        weight: &exit,
-                    },
-                    Source {
-                        values: &walked_part,
-                        weight: &exit_plain,
-                    },
-                    Source {
-                        values: &prt.vertex_irradiance,
-                        weight: &reflected,
-                    },
-                ],
-                strata,
-            );
+            let mut sources = vec![
+                Source {
+                    values: &halfspace,
+                    weight: &exit,
+                },
+                Source {
+                    values: &prt.vertex_irradiance,
+                    weight: &reflected,
+                },
+            ];
+            if let Some(d) = &walked_part {
+                sources.push(Source {
+                    values: d,
+                    weight: &exit_plain,
+                });
+            }
+            let first = crate::interreflection::indirect_irradiance(mesh, tracer, &sources, strata);
             // The later passes send E_ind on: its lobes' share W (R_total + point mass) and the
             // specular layer's.
             let onward = |cos: f64| sent_on(model, rep, &rep_profiles, cos);
