@@ -125,6 +125,8 @@ pub struct MeshWalkResult {
     pub walks: u64,
     /// Rays cast (one per flight).
     pub rays: u64,
+    /// Rays cast per receiver (all channels): what its walks cost.
+    pub receiver_rays: Vec<u64>,
     /// Channels that carry no subsurface light (zero weight or no scattering): no walks.
     pub channels_skipped: usize,
     pub seconds: f64,
@@ -319,6 +321,7 @@ pub fn walk_radiosity_lit(
     let gradients = tangent_gradients(mesh, irradiance);
     let mut radiosity = Vec::with_capacity(receivers.len());
     let mut std_error = Vec::with_capacity(receivers.len());
+    let mut receiver_rays = Vec::with_capacity(receivers.len());
     let mut rays = 0u64;
     for (k, chunk) in receivers.chunks(TICK).enumerate() {
         let part: Vec<([f32; 3], [f32; 3], u64)> = chunk
@@ -342,6 +345,7 @@ pub fn walk_radiosity_lit(
         for (b, se, r) in part {
             radiosity.push(b);
             std_error.push(se);
+            receiver_rays.push(r);
             rays += r;
         }
         if let Some(p) = progress {
@@ -350,10 +354,31 @@ pub fn walk_radiosity_lit(
             }
         }
     }
+    let noise = relative_noise(mesh, receivers, &radiosity, &std_error);
+    Ok(MeshWalkResult {
+        radiosity,
+        std_error,
+        noise,
+        walks: (receivers.len() * active.len() * settings.walks) as u64,
+        rays,
+        receiver_rays,
+        channels_skipped: CHANNELS - active.len(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The walks' own noise: the area-weighted relative RMS of the standard errors over the
+/// receivers, per channel.
+pub(crate) fn relative_noise(
+    mesh: &Mesh,
+    receivers: &[u32],
+    radiosity: &[[f32; 3]],
+    std_error: &[[f32; 3]],
+) -> [f64; 3] {
     let areas = mesh.vertex_areas();
-    let noise = std::array::from_fn(|c| {
+    std::array::from_fn(|c| {
         let (mut num, mut den) = (0.0f64, 0.0f64);
-        for ((&v, b), se) in receivers.iter().zip(&radiosity).zip(&std_error) {
+        for ((&v, b), se) in receivers.iter().zip(radiosity).zip(std_error) {
             let a = f64::from(areas[v as usize]);
             num += a * f64::from(se[c]).powi(2);
             den += a * f64::from(b[c]).powi(2);
@@ -363,15 +388,6 @@ pub fn walk_radiosity_lit(
         } else {
             0.0
         }
-    });
-    Ok(MeshWalkResult {
-        radiosity,
-        std_error,
-        noise,
-        walks: (receivers.len() * active.len() * settings.walks) as u64,
-        rays,
-        channels_skipped: CHANNELS - active.len(),
-        seconds: start.elapsed().as_secs_f64(),
     })
 }
 

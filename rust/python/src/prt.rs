@@ -13,10 +13,13 @@ use translucent_core::irradiance::{irradiance, Density, IrradianceReport, Irradi
 use translucent_core::optics::Material;
 use translucent_core::prt::geometry::GeometrySettings;
 
-/// The walks' default ray budget: 20 M rays (about 5 s on 2 cores), and at most 2500 per
+/// The walks' default ray budget: 20 M rays (8-9 s on 2 cores for the 10 cm bunny), at least
+/// 600 per vertex (a larger mesh gets the bunny's walks per vertex, so the same noise per
+/// vertex, in proportionally more time: the horse's 48,485 vertices 29 M) and at most 2500 per
 /// vertex (a small mesh needs fewer for the same noise per area).
 const DEFAULT_WALK_RAYS: u64 = 20_000_000;
-const WALK_RAYS_PER_VERTEX: u64 = 2500;
+const MIN_WALK_RAYS_PER_VERTEX: u64 = 600;
+const MAX_WALK_RAYS_PER_VERTEX: u64 = 2500;
 use translucent_core::prt::{single, Backend, Evaluation, Prt, PrtSettings};
 use translucent_core::single_scattering::{PathSettings, Phase};
 
@@ -138,7 +141,10 @@ impl PyPrt {
         let walk_rays: u64 = match walk_rays {
             Some(r) => non_negative("walk_rays", r)?,
             None => {
-                DEFAULT_WALK_RAYS.min(WALK_RAYS_PER_VERTEX * scene.scene.mesh.vertex_count() as u64)
+                let n = scene.scene.mesh.vertex_count() as u64;
+                DEFAULT_WALK_RAYS
+                    .max(MIN_WALK_RAYS_PER_VERTEX * n)
+                    .min(MAX_WALK_RAYS_PER_VERTEX * n)
             }
         };
         let walk_vertices: usize = non_negative("walk_vertices", walk_vertices)?;

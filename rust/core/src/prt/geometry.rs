@@ -7,7 +7,10 @@
 //! the difference D = B_walk - B_halfspace is taken there for the first representative, per
 //! channel. D is smooth on the scale of the diffusion length, so it is carried to every vertex
 //! by a kernel average over the walked vertices facing the same way (which also averages the
-//! walks' noise down). An edit keeps dot products: per channel, D / A (A the thick slab's
+//! walks' noise down). Half of the walks are spread evenly over the walked vertices; the rest
+//! go where those spread most (`more_where_noisy`, Neyman allocation): measured against
+//! eight 1024-spp Cycles bakes in ketchup, the bunny 5.5 -> 4.8 % and the horse 5.6 -> 5.2 %
+//! (red) for the same rays. An edit keeps dot products: per channel, D / A (A the thick slab's
 //! albedo, the subsurface lobe's total) is looked up at the edited channel's diffusion length
 //! L = 1 / sigma_tr, interpolated in ln L between the three channels the precompute walked,
 //! and scaled by the edited A. An edit whose L leaves the walked range by more than
@@ -32,7 +35,9 @@
 use crate::bake_points::sharp_vertices;
 use crate::error::Result;
 use crate::mesh::Mesh;
-use crate::mesh_walk::{walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings};
+use crate::mesh_walk::{
+    relative_noise, walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings,
+};
 use crate::optics::{Material, CHANNELS};
 use crate::profiles::{Model, Profile, RadialProfile};
 use crate::raytrace::Tracer;
@@ -77,6 +82,11 @@ const REFINE_SHARE: f64 = 0.5;
 /// `SHARP_WALKS` walks (its own D has no kernel to average its noise).
 const SHARP_FACING: f32 = 0.5;
 const SHARP_WALKS: usize = 64;
+/// The share of the main pass's walks spread evenly over the walked vertices; the rest go
+/// where those walks spread most (`more_where_noisy`).
+const EVEN_SHARE: f64 = 0.5;
+/// The walks' spread is averaged over this many kernel radii before it allocates walks.
+const SPREAD_KERNEL: f32 = 2.0;
 
 /// D per channel and its variance, at one walked vertex.
 type Diff = ([f32; 3], [f32; 3]);
@@ -258,21 +268,48 @@ impl GeometryTerm {
         {
             (spacing, candidates, walked) = select(wanted.min(n));
             let w = budget_walks(walked.len()).max(settings.walks);
-            (
-                walk(&walked, w, settings.seed ^ 0x5eed, main_from, main_to)?,
-                w,
-            )
+            let even = ((w as f64 * EVEN_SHARE) as usize)
+                .max(settings.walks)
+                .min(w);
+            let mid = main_from + (main_to - main_from) * EVEN_SHARE as f32;
+            let base = walk(&walked, even, settings.seed ^ 0x5eed, main_from, mid)?;
+            let left = settings.rays as f64 - base.rays as f64;
+            let radius = KERNEL_SPACINGS * spacing;
+            let more = |v: &[u32], k: usize, salt: u64, a: f32, b: f32| {
+                walk(v, k, settings.seed ^ 0xada0 ^ salt, a, b)
+            };
+            more_where_noisy(
+                mesh,
+                &walked,
+                base,
+                even,
+                left,
+                radius,
+                &embedded,
+                settings.max_walks,
+                (mid, main_to),
+                more,
+            )?
+        } else if settings.rays > 0 && !walked.is_empty() {
+            let left = settings.rays as f64 - first.rays as f64;
+            let radius = KERNEL_SPACINGS * spacing;
+            let more = |v: &[u32], k: usize, salt: u64, a: f32, b: f32| {
+                walk(v, k, settings.seed ^ 0x5eed ^ salt, a, b)
+            };
+            more_where_noisy(
+                mesh,
+                &walked,
+                first,
+                settings.walks,
+                left,
+                radius,
+                &embedded,
+                settings.max_walks,
+                (main_from, main_to),
+                more,
+            )?
         } else {
-            let more = budget_walks(walked.len()).saturating_sub(settings.walks);
-            if more > 0 && !walked.is_empty() {
-                let second = walk(&walked, more, settings.seed ^ 0x5eed, main_from, main_to)?;
-                (
-                    combine(&first, &second, settings.walks, more),
-                    settings.walks + more,
-                )
-            } else {
-                (first, settings.walks)
-            }
+            (first, settings.walks)
         };
         let mut walks_total = (walks.walks, walks.rays);
         // Sharp vertices, one by one.
@@ -554,31 +591,136 @@ fn diff_at(walks: &MeshWalkResult, k: usize, halfspace: [f32; 3]) -> Diff {
     )
 }
 
-/// Two runs of walks at the same vertices as one: the walk-weighted mean and its standard
-/// error.
-fn combine(a: &MeshWalkResult, b: &MeshWalkResult, na: usize, nb: usize) -> MeshWalkResult {
-    let (wa, wb) = (na as f32, nb as f32);
-    let n = wa + wb;
-    let mix = |x: &[[f32; 3]], y: &[[f32; 3]], f: &dyn Fn(f32, f32) -> f32| -> Vec<[f32; 3]> {
-        x.iter()
-            .zip(y)
-            .map(|(p, q)| std::array::from_fn(|c| f(p[c], q[c])))
-            .collect()
+/// The rays left after `base` (`even` walks at each of `walked`) spent where the walks spread
+/// most: walked vertex i gets n_i ~ s_i sqrt(a_i / c_i) more walks, a_i its area, s_i its
+/// walks' spread (per walk, relative to the channel's RMS B, worst channel) and c_i their rays
+/// per walk, both averaged over its neighbourhood (`SPREAD_KERNEL` kernel radii). That
+/// minimises sum_i a_i s_i^2 / n_i, the error metric's noise, for the rays sum_i n_i c_i
+/// (Neyman allocation with costs: Cochran, Sampling Techniques, 3rd ed., §5.5); the
+/// neighbourhood's spread instead of the vertex's own keeps a vertex's count nearly
+/// independent of its own first walks (so its mean stays unbiased to first order). Counts are
+/// rounded to powers of two and walked in one run per count, each run with its own seed.
+/// Returns the merged walks and the mean walks per vertex.
+#[allow(clippy::too_many_arguments)]
+fn more_where_noisy(
+    mesh: &Mesh,
+    walked: &[u32],
+    base: MeshWalkResult,
+    even: usize,
+    rays_left: f64,
+    radius: f32,
+    class: &[bool],
+    max_walks: usize,
+    (from, to): (f32, f32),
+    walk: impl Fn(&[u32], usize, u64, f32, f32) -> Result<MeshWalkResult>,
+) -> Result<(MeshWalkResult, usize)> {
+    let per_walk = base.rays as f64 / (walked.len() * even).max(1) as f64;
+    let extra = if per_walk > 0.0 {
+        rays_left / per_walk
+    } else {
+        0.0
     };
-    MeshWalkResult {
-        radiosity: mix(&a.radiosity, &b.radiosity, &|p, q| (wa * p + wb * q) / n),
-        std_error: mix(&a.std_error, &b.std_error, &|p, q| {
-            ((wa * p).powi(2) + (wb * q).powi(2)).sqrt() / n
-        }),
-        noise: std::array::from_fn(|c| {
-            ((f64::from(wa) * a.noise[c]).powi(2) + (f64::from(wb) * b.noise[c]).powi(2)).sqrt()
-                / f64::from(n)
-        }),
-        walks: a.walks + b.walks,
-        rays: a.rays + b.rays,
-        channels_skipped: a.channels_skipped,
-        seconds: a.seconds + b.seconds,
+    if walked.is_empty() || extra < walked.len() as f64 * 0.5 || even >= max_walks {
+        return Ok((base, even));
     }
+    let areas = mesh.vertex_areas();
+    let norm: [f64; 3] = std::array::from_fn(|c| {
+        let (mut num, mut den) = (0f64, 0f64);
+        for (k, &v) in walked.iter().enumerate() {
+            let a = f64::from(areas[v as usize]);
+            num += a * f64::from(base.radiosity[k][c]).powi(2);
+            den += a;
+        }
+        if num > 0.0 {
+            den / num
+        } else {
+            0.0
+        }
+    });
+    let spread: Vec<Diff> = (0..walked.len())
+        .map(|k| {
+            let s = (0..3)
+                .map(|c| f64::from(base.std_error[k][c]).powi(2) * even as f64 * norm[c])
+                .fold(0.0, f64::max) as f32;
+            ([s; 3], [0.0; 3])
+        })
+        .collect();
+    let grid = Grid::new(mesh, walked, SPREAD_KERNEL * radius);
+    // Rays per walk at each vertex, averaged over its neighbourhood as the spread is.
+    let walk_cost: Vec<Diff> = base
+        .receiver_rays
+        .iter()
+        .map(|&r| ([(r as f64 / even as f64) as f32; 3], [0.0; 3]))
+        .collect();
+    let cost: Vec<f64> = walked
+        .par_iter()
+        .map(|&v| {
+            let (c, _) = grid.average(mesh, v, walked, &walk_cost, class);
+            f64::from(c[0]).max(0.1 * per_walk)
+        })
+        .collect();
+    let weight: Vec<f64> = walked
+        .par_iter()
+        .map(|&v| {
+            let (s, _) = grid.average(mesh, v, walked, &spread, class);
+            (f64::from(areas[v as usize]) * f64::from(s[0].max(0.0))).sqrt()
+        })
+        .zip(&cost)
+        .map(|(w, c)| w / c.sqrt())
+        .collect();
+    // n_i ~ sqrt(a_i / c_i) s_i with c_i the rays per walk, spending the rays left:
+    // sum n_i c_i = rays_left.
+    let total: f64 = weight.iter().zip(&cost).map(|(w, c)| w * c).sum();
+    if total.is_nan() || total <= 0.0 {
+        return Ok((base, even));
+    }
+    let cap = (max_walks - even) as f64;
+    let mut levels: Vec<(usize, Vec<usize>)> = Vec::new();
+    for (k, w) in weight.iter().enumerate() {
+        let want = (rays_left * w / total).min(cap);
+        if want < 0.5 {
+            continue;
+        }
+        let level = 1usize << (want.log2().round().max(0.0) as u32);
+        match levels.iter_mut().find(|(l, _)| *l == level) {
+            Some((_, list)) => list.push(k),
+            None => levels.push((level, vec![k])),
+        }
+    }
+    levels.sort_by_key(|(l, _)| *l);
+    let mut counts = vec![even as f32; walked.len()];
+    let mut merged = base;
+    let planned: f64 = levels.iter().map(|(l, list)| (l * list.len()) as f64).sum();
+    let mut done = 0f64;
+    for (level, list) in &levels {
+        let verts: Vec<u32> = list.iter().map(|&k| walked[k]).collect();
+        let share = (level * list.len()) as f64 / planned;
+        let (a, b) = (
+            from + (to - from) * done as f32,
+            from + (to - from) * (done + share) as f32,
+        );
+        done += share;
+        let r = walk(&verts, *level, *level as u64, a, b)?;
+        for (j, &k) in list.iter().enumerate() {
+            let (na, nb) = (counts[k], *level as f32);
+            let n = na + nb;
+            for c in 0..3 {
+                merged.radiosity[k][c] = (na * merged.radiosity[k][c] + nb * r.radiosity[j][c]) / n;
+                merged.std_error[k][c] = ((na * merged.std_error[k][c]).powi(2)
+                    + (nb * r.std_error[j][c]).powi(2))
+                .sqrt()
+                    / n;
+            }
+            counts[k] = n;
+            merged.receiver_rays[k] += r.receiver_rays[j];
+        }
+        merged.walks += r.walks;
+        merged.rays += r.rays;
+        merged.seconds += r.seconds;
+    }
+    merged.noise = relative_noise(mesh, walked, &merged.radiosity, &merged.std_error);
+    let mean = counts.iter().map(|&c| f64::from(c)).sum::<f64>() / walked.len() as f64;
+    Ok((merged, mean.round() as usize))
 }
 
 /// A deterministic, well-spread subset of the vertices about `spacing` apart (greedy
@@ -738,6 +880,122 @@ mod tests {
             }
         }
         Mesh::new(p, t, None).unwrap()
+    }
+
+    /// Walks stood in for by draws of known spread: per walk, vertex v's B is 1 plus a
+    /// normal number times `sigma(v)`, and each walk costs `cost(v)` rays.
+    fn fake_walks(
+        sigma: impl Fn(u32) -> f64 + Copy,
+        cost: impl Fn(u32) -> u64 + Copy,
+    ) -> impl Fn(&[u32], usize, u64, f32, f32) -> Result<MeshWalkResult> {
+        move |verts: &[u32], k: usize, salt: u64, _: f32, _: f32| {
+            use crate::profiles::walk::uniform;
+            use rand_core::SeedableRng;
+            let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(salt ^ 0xfa4e);
+            let mut normal = || {
+                // Box-Muller.
+                let (u, v) = (uniform(&mut rng), uniform(&mut rng));
+                (-2.0 * (1.0 - u).ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+            };
+            let mut r = MeshWalkResult {
+                radiosity: Vec::new(),
+                std_error: Vec::new(),
+                noise: [0.0; 3],
+                walks: (verts.len() * k * 3) as u64,
+                rays: 0,
+                receiver_rays: Vec::new(),
+                channels_skipped: 0,
+                seconds: 0.0,
+            };
+            for &v in verts {
+                let se = sigma(v) / (k as f64).sqrt();
+                let b = (1.0 + se * normal()) as f32;
+                r.radiosity.push([b; 3]);
+                r.std_error.push([se as f32; 3]);
+                r.receiver_rays.push(cost(v) * k as u64);
+                r.rays += cost(v) * k as u64;
+            }
+            Ok(r)
+        }
+    }
+
+    #[test]
+    fn the_rays_left_go_where_the_walks_spread_most_as_neyman_allocates() {
+        // A 40 x 40 grid (equal areas inside): walks spread 8x more on the left half than on
+        // the right. Neyman's allocation n ~ sqrt(a / c) s gives the left 8x the walks, and
+        // with the left's walks 4x as costly, 4x.
+        let mesh = grid(40, 0.0);
+        let walked: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
+        let left = |v: u32| mesh.positions()[v as usize].x < 0.5;
+        let inner = |v: u32| {
+            let p = mesh.positions()[v as usize];
+            (0.1..0.4).contains(&p.x) || (0.6..0.9).contains(&p.x)
+        };
+        let class = vec![false; walked.len()];
+        let radius = 2.0 / 39.0;
+        for (left_cost, expected) in [(1u64, 8.0), (4, 4.0)] {
+            let sigma = move |v: u32| if left(v) { 0.8 } else { 0.1 };
+            let cost = move |v: u32| if left(v) { 10 * left_cost } else { 10 };
+            let walk = fake_walks(sigma, cost);
+            let even = 16;
+            let base = walk(&walked, even, 1, 0.0, 0.0).unwrap();
+            let left_rays = 64.0 * 10.0 * walked.len() as f64;
+            let (merged, _) = more_where_noisy(
+                &mesh,
+                &walked,
+                base.clone(),
+                even,
+                left_rays,
+                radius,
+                &class,
+                4096,
+                (0.0, 1.0),
+                &walk,
+            )
+            .unwrap();
+            let extra = |pick: &dyn Fn(u32) -> bool| {
+                let (mut walks, mut count) = (0.0, 0.0);
+                for (k, &v) in walked.iter().enumerate() {
+                    if pick(v) && inner(v) {
+                        let rays = merged.receiver_rays[k] as f64 / cost(v) as f64;
+                        walks += rays - even as f64;
+                        count += 1.0;
+                    }
+                }
+                walks / count
+            };
+            let ratio = extra(&|v| left(v)) / extra(&|v| !left(v));
+            // Powers of two: the counts are rounded within a factor sqrt(2) either way.
+            assert!(
+                ratio > expected / 2f64.sqrt() - 1e-9 && ratio < expected * 2f64.sqrt() + 1e-9,
+                "left gets {ratio}x the right's walks, Neyman {expected}x"
+            );
+            let spent = (merged.rays - base.rays) as f64;
+            assert!(
+                (0.6..1.5).contains(&(spent / left_rays)),
+                "spent {spent} of {left_rays} rays"
+            );
+            // The noise (B = 1: area-weighted RMS of the standard errors) against the same
+            // rays spread evenly, and against Neyman's continuous optimum for them.
+            let a = mesh.vertex_areas();
+            let noise = |walks: &dyn Fn(u32) -> f64| {
+                let num: f64 = walked
+                    .iter()
+                    .map(|&v| f64::from(a[v as usize]) * sigma(v).powi(2) / walks(v))
+                    .sum();
+                (num / a.iter().map(|&x| f64::from(x)).sum::<f64>()).sqrt()
+            };
+            let total_cost: f64 = walked.iter().map(|&v| cost(v) as f64).sum();
+            let even_noise = noise(&|_| even as f64 + spent / total_cost);
+            let weight = |v: u32| (f64::from(a[v as usize]) / cost(v) as f64).sqrt() * sigma(v);
+            let norm: f64 = walked.iter().map(|&v| weight(v) * cost(v) as f64).sum();
+            let best = noise(&|v| even as f64 + spent * weight(v) / norm);
+            assert!(
+                merged.noise[0] < 1.03 * best && merged.noise[0] < even_noise,
+                "noise {} against {even_noise} spread evenly and {best} at Neyman's optimum",
+                merged.noise[0],
+            );
+        }
     }
 
     #[test]
