@@ -262,7 +262,10 @@ impl GeometryTerm {
                 .min(settings.max_walks)
         };
         let wanted = (settings.rays as f64 / (per_walk * TARGET_WALKS as f64).max(1.0)) as usize;
-        let (walks, walks_per_vertex) = if settings.rays > 0
+        // The main pass: more walked vertices (a first half of the walks spread evenly over
+        // them), or the first pass's vertices; then the rest of the rays where the walks
+        // spread most.
+        let (base, even, from, salt) = if settings.rays > 0
             && wanted as f64 > 1.5 * candidates.len() as f64
             && candidates.len() < n
         {
@@ -273,10 +276,14 @@ impl GeometryTerm {
                 .min(w);
             let mid = main_from + (main_to - main_from) * EVEN_SHARE as f32;
             let base = walk(&walked, even, settings.seed ^ 0x5eed, main_from, mid)?;
+            (base, even, mid, 0xada0)
+        } else {
+            (first, settings.walks, main_from, 0x5eed)
+        };
+        let (walks, walks_per_vertex) = if settings.rays > 0 {
             let left = settings.rays as f64 - base.rays as f64;
-            let radius = KERNEL_SPACINGS * spacing;
-            let more = |v: &[u32], k: usize, salt: u64, a: f32, b: f32| {
-                walk(v, k, settings.seed ^ 0xada0 ^ salt, a, b)
+            let more = |v: &[u32], k: usize, level: u64, a: f32, b: f32| {
+                walk(v, k, settings.seed ^ salt ^ level, a, b)
             };
             more_where_noisy(
                 mesh,
@@ -284,32 +291,14 @@ impl GeometryTerm {
                 base,
                 even,
                 left,
-                radius,
+                KERNEL_SPACINGS * spacing,
                 &embedded,
                 settings.max_walks,
-                (mid, main_to),
-                more,
-            )?
-        } else if settings.rays > 0 && !walked.is_empty() {
-            let left = settings.rays as f64 - first.rays as f64;
-            let radius = KERNEL_SPACINGS * spacing;
-            let more = |v: &[u32], k: usize, salt: u64, a: f32, b: f32| {
-                walk(v, k, settings.seed ^ 0x5eed ^ salt, a, b)
-            };
-            more_where_noisy(
-                mesh,
-                &walked,
-                first,
-                settings.walks,
-                left,
-                radius,
-                &embedded,
-                settings.max_walks,
-                (main_from, main_to),
+                (from, main_to),
                 more,
             )?
         } else {
-            (first, settings.walks)
+            (base, even)
         };
         let mut walks_total = (walks.walks, walks.rays);
         // Sharp vertices, one by one.
