@@ -137,6 +137,8 @@ pub struct GeometryReport {
     /// Sharp vertices (open edges, apexes) walked one by one, and their walks per vertex.
     pub sharp_vertices: usize,
     pub sharp_walks_per_vertex: usize,
+    /// The main pass's walks per walked vertex and channel (the mean: `more_where_noisy`
+    /// gives some vertices more than others).
     pub walks_per_vertex: usize,
     pub walks: u64,
     pub rays: u64,
@@ -670,7 +672,7 @@ fn more_where_noisy(
         if want < 0.5 {
             continue;
         }
-        let level = 1usize << (want.log2().round().max(0.0) as u32);
+        let level = (1usize << (want.log2().round().max(0.0) as u32)).min(cap as usize);
         match levels.iter_mut().find(|(l, _)| *l == level) {
             Some((_, list)) => list.push(k),
             None => levels.push((level, vec![k])),
