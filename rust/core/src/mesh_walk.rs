@@ -741,7 +741,9 @@ impl Walker<'_> {
     /// `plane_total`, kept for the process per medium (the geometry term walks the same
     /// material up to three times; marble's 2^16 half-space walks take 0.8 s on 2 cores).
     fn plane_total_cached(&self, m: &Medium) -> f64 {
-        static TOTALS: Mutex<Vec<([u64; 8], f64)>> = Mutex::new(Vec::new());
+        static TOTALS: Mutex<Vec<([u64; 9], f64)>> = Mutex::new(Vec::new());
+        // The twin starts the tracer's epsilon beneath the surface (`walk`), which scales with
+        // the mesh: part of the key, so a second mesh never reads the first one's total.
         let key = [
             m.sigma_t,
             m.alpha,
@@ -751,6 +753,7 @@ impl Walker<'_> {
             self.entry_alpha,
             self.inv_ior,
             self.max_bounces as f64,
+            f64::from(self.tracer.epsilon()),
         ]
         .map(f64::to_bits);
         let lock = || TOTALS.lock().unwrap_or_else(|e| e.into_inner());
@@ -767,9 +770,10 @@ impl Walker<'_> {
     }
 
     /// The mean unit-irradiance exit weight of a walk in a half-space (the control variate's
-    /// mean), from `PLANE_WALKS` walks of the twin alone: a function of the medium only (seeded
-    /// by `PLANE_SEED` and the chunk, not by channel or call), so a cached total is the same
-    /// whichever call computed it.
+    /// mean), from `PLANE_WALKS` walks of the twin alone: a function of the medium and of the
+    /// depth the twin starts at (the tracer's epsilon) only (seeded by `PLANE_SEED` and the
+    /// chunk, not by channel or call), so a cached total is the same whichever call computed
+    /// it.
     fn plane_total(&self, m: &Medium) -> f64 {
         let chunks = PLANE_WALKS / PLANE_CHUNK;
         let sums: Vec<f64> = (0..chunks)
@@ -964,4 +968,50 @@ fn placements(mesh: &Mesh, tracer: &Tracer) -> Vec<Placement> {
             _ => Placement::Crossed,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle(scale: f32) -> Mesh {
+        let p = vec![Vec3::ZERO, Vec3::X * scale, Vec3::Y * scale];
+        Mesh::new(p, vec![[0, 1, 2]], None).unwrap()
+    }
+
+    #[test]
+    fn the_half_space_total_is_cached_per_start_depth() {
+        // The twin starts the tracer's epsilon deep, 1e-5 of the mesh's size: on a 1000-unit
+        // mesh 0.014 mean free paths of this medium, on a 1-unit one 1.4e-5. The totals
+        // differ, and each mesh's cached total is its own whichever mesh asked first (a
+        // process that previewed Suzanne first read Suzanne's total for the bunny).
+        let material = Material::new([0.1; 3], [0.9; 3], 0.0, 1.4).unwrap();
+        let m = media(&material).unwrap()[0];
+        let edges = ShadowEdges::none();
+        let meshes = [triangle(1.0), triangle(1000.0)];
+        let tracers = [Tracer::new(&meshes[0]), Tracer::new(&meshes[1])];
+        let irradiance = [[1f32; 3]; 3];
+        let walkers: Vec<Walker> = (0..2)
+            .map(|i| Walker {
+                mesh: &meshes[i],
+                tracer: &tracers[i],
+                irradiance: &irradiance,
+                edges: &edges,
+                g: material.g,
+                entry_alpha: material.layers.roughness * material.layers.roughness,
+                inv_ior: 1.0 / material.eta,
+                max_bounces: MAX_BOUNCES,
+                placement: vec![Placement::Outside],
+                bake_points: None,
+            })
+            .collect();
+        let own: Vec<f64> = walkers.iter().map(|w| w.plane_total(&m)).collect();
+        assert!(
+            (own[0] - own[1]).abs() > 1e-4 * own[0],
+            "start depth should matter: {own:?}"
+        );
+        for (w, own) in walkers.iter().zip(&own) {
+            assert_eq!(w.plane_total_cached(&m), *own);
+        }
+    }
 }
