@@ -628,37 +628,27 @@ fn more_where_noisy(
             0.0
         }
     });
-    let spread: Vec<Diff> = (0..walked.len())
+    // Per walked vertex, its walks' spread (channel 0) and rays per walk (channel 1), then
+    // both averaged over its neighbourhood in one kernel pass.
+    let own: Vec<Diff> = (0..walked.len())
         .map(|k| {
-            let s = (0..3)
+            let spread = (0..3)
                 .map(|c| f64::from(base.std_error[k][c]).powi(2) * even as f64 * norm[c])
                 .fold(0.0, f64::max) as f32;
-            ([s; 3], [0.0; 3])
+            let cost = (base.receiver_rays[k] as f64 / even as f64) as f32;
+            ([spread, cost, 0.0], [0.0; 3])
         })
         .collect();
     let grid = Grid::new(mesh, walked, SPREAD_KERNEL * radius);
-    // Rays per walk at each vertex, averaged over its neighbourhood as the spread is.
-    let walk_cost: Vec<Diff> = base
-        .receiver_rays
-        .iter()
-        .map(|&r| ([(r as f64 / even as f64) as f32; 3], [0.0; 3]))
-        .collect();
-    let cost: Vec<f64> = walked
+    let (weight, cost): (Vec<f64>, Vec<f64>) = walked
         .par_iter()
         .map(|&v| {
-            let (c, _) = grid.average(mesh, v, walked, &walk_cost, class);
-            f64::from(c[0]).max(0.1 * per_walk)
+            let ([spread, cost, _], _) = grid.average(mesh, v, walked, &own, class);
+            let cost = f64::from(cost).max(0.1 * per_walk);
+            let a = f64::from(areas[v as usize]);
+            ((a * f64::from(spread.max(0.0))).sqrt() / cost.sqrt(), cost)
         })
-        .collect();
-    let weight: Vec<f64> = walked
-        .par_iter()
-        .map(|&v| {
-            let (s, _) = grid.average(mesh, v, walked, &spread, class);
-            (f64::from(areas[v as usize]) * f64::from(s[0].max(0.0))).sqrt()
-        })
-        .zip(&cost)
-        .map(|(w, c)| w / c.sqrt())
-        .collect();
+        .unzip();
     // n_i ~ sqrt(a_i / c_i) s_i with c_i the rays per walk, spending the rays left:
     // sum n_i c_i = rays_left.
     let total: f64 = weight.iter().zip(&cost).map(|(w, c)| w * c).sum();
