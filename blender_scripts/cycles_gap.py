@@ -13,13 +13,16 @@ that distance taken apart:
 - the walks through the mesh (issue 12): the preview as shipped (Cycles' profile with the
   walks) beside the half-space table alone, and the in-house walk reference
   (`reference_radiance`, 4096 walks per receiver) against the mean of the seeds' bakes of
-  Cycles' direct light, with what is left beyond the noise of both at those receivers.
+  Cycles' direct light, with what is left beyond the noise of both at those receivers; with
+  `--receiver-spp` against bakes of the receivers alone (`cycles_reference.bake_receivers`:
+  the same sample points, every sample taken, a cost that does not grow with the mesh).
 Errors are area-weighted relative RMS (worst channel); the preview-vs-Cycles figures over all
 vertices, those involving the ground truth over `--receivers` random vertices. Everything
 rendered is cached (out/cache), so a second run only recomputes PRT.
 
 Run: .venv/bin/python blender_scripts/cycles_gap.py [--models suzanne suzanne-backlit stanford-bunny.obj]
      [--materials marble skin1 ketchup aniso08] [--spp 1024] [--seeds 2] [--receivers 60] [--out out/gap]
+     [--one-bake] [--receiver-spp 4096 --receiver-seeds 2]
 """
 
 from __future__ import annotations
@@ -83,7 +86,8 @@ def noise_of_one(bakes: list[np.ndarray], w: np.ndarray) -> list[float]:
 
 
 def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float,
-            walk_reference_walks: int = 4096, seeds: int = 2, direct_seeds: int | None = None) -> list[dict]:
+            walk_reference_walks: int = 4096, seeds: int = 2, direct_seeds: int | None = None,
+            receiver_spp: int | None = None, receiver_seeds: int = 2) -> list[dict]:
     import cycles_reference as cr
     import demo
     import report
@@ -149,7 +153,15 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
                 row[key]["prt_vs_truth"] = rel(prt.radiosity(m, interreflection=False)[idx], gt, w)
                 row[key]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)
                 row[key]["truth_vs_cycles"] = rel(gt_radiance, cyc[idx], w)
-        if directs:
+        if receiver_spp:
+            # Cycles' direct light at the receivers alone (`bake_receivers`: every sample taken,
+            # a cost that does not grow with the mesh), several seeds for its noise.
+            at_receivers = [cr.bake_receivers(bake_obj, m, receiver_spp, idx, seed=s)[0] for s in range(receiver_seeds)]
+            against = f"{receiver_seeds} x {receiver_spp} spp at the receivers"
+        else:
+            at_receivers = [x[idx] for x in directs]
+            against = f"{len(directs)} seeds"
+        if len(at_receivers) > 1:
             # The in-house walk reference (Cycles' walk through the mesh, no Blender) against the
             # mean of the seeds' bakes of Cycles' direct light at the receivers, per channel, with
             # the noise of both taken out: the bakes' noise at these receivers, from the seeds
@@ -159,15 +171,16 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
             t0 = time.perf_counter()
             ref, d = translucent.reference_radiance(scene, m, walks=walk_reference_walks, receivers=idx.tolist(),
                                                     details=True)
-            mean_direct = np.mean([x[idx] for x in directs], axis=0)
+            mean_direct = np.mean(at_receivers, axis=0)
             measured = np.array(rel_channels(ref, mean_direct, w))
             # The seeds' mean is sqrt(seeds) less noisy than one bake.
-            mean_noise = np.array(noise_of_one([x[idx] for x in directs], w)) / np.sqrt(len(directs))
+            mean_noise = np.array(noise_of_one(at_receivers, w)) / np.sqrt(len(at_receivers))
             beyond = np.sqrt(np.maximum(measured ** 2 - mean_noise ** 2 - np.array(d["noise"]) ** 2, 0.0))
             row["walk_reference"] = dict(vs_direct=float(measured.max()), vs_direct_channels=measured.tolist(),
                                          ratio=ratio(ref, mean_direct, w), noise=max(d["noise"]),
                                          direct_noise=float(mean_noise.max()), walks=walk_reference_walks,
-                                         seconds=time.perf_counter() - t0, beyond_noise=float(beyond.max()))
+                                         seconds=time.perf_counter() - t0, beyond_noise=float(beyond.max()),
+                                         against=against)
         rows.append(row)
         print(json.dumps(row), flush=True)
     return rows
@@ -186,13 +199,14 @@ def table(rows: list[dict]) -> str:
     for r in rows:
         c, h, d = r["cycles"], r["halfspace"], r["dipole"]
         wr = r.get("walk_reference", dict(vs_direct=nan, beyond_noise=nan))
+        against = f" [{wr['against']}]" if "against" in wr else ""
         seeds = r.get("seeds", 1)
         w = c.get("walks") or {}
         lines.append(
             f"| {r['model']} | {r['material']} | **{pct(c['vs_cycles'])}** | "
             f"{pct(c.get('vs_cycles_mean', nan)) if seeds > 1 else '—'} ({pct(c.get('beyond_noise', nan))}) | "
             f"{', '.join(f'{x:.3f}' for x in c['ratio'])} | {pct(h['vs_cycles'])} | {pct(d['vs_cycles'])} | "
-            f"{pct(r['noise'])} ({seeds}) | {pct(wr['vs_direct'])} ({pct(wr['beyond_noise'])}) | "
+            f"{pct(r['noise'])} ({seeds}) | {pct(wr['vs_direct'])} ({pct(wr['beyond_noise'])}){against} | "
             f"{pct(r['interreflection_rms'])} | {w.get('walks_per_vertex', 0)} x {w.get('walked_vertices', 0)} | "
             f"{c['precompute_s']:.1f} |")
     return "\n".join(lines)
@@ -211,13 +225,19 @@ def main(argv=None) -> int:
                          "their mean as well as against the seed-0 bake")
     ap.add_argument("--direct-seeds", type=int, default=None,
                     help="seeds of the direct-light bakes (the walk reference's comparison; default --seeds)")
+    ap.add_argument("--receiver-spp", type=int, default=None,
+                    help="compare the walk reference with Cycles' direct light baked at the receivers alone "
+                         "(bake_receivers: SPP samples, every one taken) instead of direct-light vertex bakes")
+    ap.add_argument("--receiver-seeds", type=int, default=2, help="seeds of those receiver bakes")
     ap.add_argument("--one-bake", action="store_true",
-                    help="only the seed-0 bake: the preview's distances, no noise, direct-light or walk-reference columns")
+                    help="only the seed-0 bake: the preview's distances, no noise or direct-light columns (the "
+                         "walk reference only with --receiver-spp)")
     args = ap.parse_args(argv)
     rows = []
     for model in args.models:
         rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol,
-                        seeds=1 if args.one_bake else args.seeds, direct_seeds=args.direct_seeds)
+                        seeds=1 if args.one_bake else args.seeds, direct_seeds=args.direct_seeds,
+                        receiver_spp=args.receiver_spp, receiver_seeds=args.receiver_seeds)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "gap.json").write_text(json.dumps(rows, indent=1))

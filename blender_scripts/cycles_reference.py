@@ -3,6 +3,8 @@
 - `bake_vertices`: Cycles' per-vertex bake of the diffuse passes (direct + indirect + colour:
   subsurface scattering lands there; specular reflection does not), with the material mapped
   to a Principled BSDF random walk by `translucent.cycles`.
+- `bake_receivers`: the same at a few vertices only, at a cost that does not grow with the
+  mesh (selected-to-active onto the corners' sample points), every sample taken.
 - `render_image`: a camera render with Cycles or EEVEE (linear float RGBA).
 
 Each result is cached under out/cache/cycles/<key>.npz, the key hashing the evaluated
@@ -128,6 +130,105 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
                 s.material = m
             bpy.data.materials.remove(mat)
         return px.reshape(-1, 4)[:, :3]
+
+    return _cached(key, compute)
+
+
+def bake_receivers(obj: bpy.types.Object, material: translucent.Material, samples: int, receivers,
+                   direct_only: bool = True, seed: int = 0) -> tuple[np.ndarray, float]:
+    """Cycles' diffuse radiance at a few vertices of `obj` (a triangle mesh with no modifiers),
+    (len(receivers), 3), as `bake_vertices` gives it there, and the bake's wall time [s]; at
+    `samples` per sample point without adaptive sampling (every sample is taken).
+
+    A vertex bake shades every corner of the mesh; this one only the receivers' corners, so its
+    cost does not grow with the mesh (the horse: 60 of 48,485 vertices). Blender bakes a vertex
+    as the mean over its corners of Cycles' answer at the vertex moved towards the corner
+    triangle's centroid by min(that distance, 1e-4 max(1, max |P|)) (Cycles'
+    `bake_offset_towards_center`). Here each receiver corner becomes a lone triangle of a
+    separate object whose first vertex is that point, in the corner triangle's plane, baked
+    "selected to active" onto `obj`: Blender casts a ray at each of its vertices onto `obj` and
+    Cycles shades `obj` at the hit, the same point (not a vertex, so Cycles does not move it
+    again). The receivers' corners sample the same points as the vertex bake; the lone
+    triangles' other vertices are discarded. The helper object is invisible to every ray."""
+    receivers = np.asarray(receivers, np.int64)
+    extra = (direct_only, seed, hashlib.sha256(receivers.tobytes()).hexdigest())
+    key = hashlib.sha256(repr(("receivers", _scene_digest([obj]), *_material_key(material)[:4], samples, *extra,
+                               *_material_key(material)[4:])).encode()).hexdigest()[:24]
+
+    def compute():
+        mesh = obj.data
+        if any(len(p.vertices) != 3 for p in mesh.polygons):
+            raise ValueError("bake_receivers needs a triangle mesh")
+        if receivers.size == 0 or receivers.min() < 0 or receivers.max() >= len(mesh.vertices):
+            raise ValueError("receivers must be vertex indices of the mesh")
+        tri = np.empty(len(mesh.polygons) * 3, np.int64)
+        mesh.polygons.foreach_get("vertices", tri)
+        tri = tri.reshape(-1, 3)
+        co = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", co)
+        m = np.array(obj.matrix_world, np.float64)
+        # Cycles applies the object's transform to a non-instanced mesh: the offset is in world space.
+        world = co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+        slot = np.full(len(mesh.vertices), -1)
+        slot[receivers] = np.arange(len(receivers))
+        corners = [(t, c) for t in tri for c in range(3) if slot[t[c]] >= 0]
+        points, owner = [], []
+        for t, c in corners:
+            v, a, b = world[t[c]], world[t[(c + 1) % 3]], world[t[(c + 2) % 3]]
+            to_centre = (v + a + b) / 3.0 - v
+            length = np.linalg.norm(to_centre)
+            points += [v + to_centre / length * min(length, max(np.abs(v).max(), 1.0) * 1e-4), a, b]
+            owner.append(slot[t[c]])
+        size = float(np.ptp(world, axis=0).max())
+        helper_mesh = bpy.data.meshes.new("Translucent receivers")
+        helper_mesh.from_pydata(points, [], np.arange(len(points)).reshape(-1, 3).tolist())
+        helper_mesh.uv_layers.new(name="UVMap")  # selected-to-active needs UV maps on both (Blender 5.0 crashes)
+        helper = bpy.data.objects.new("Translucent receivers", helper_mesh)
+        bpy.context.scene.collection.objects.link(helper)
+        for flag in ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission",
+                     "visible_volume_scatter", "visible_shadow"):
+            setattr(helper, flag, False)
+        added_uv = not mesh.uv_layers
+        if added_uv:
+            mesh.uv_layers.new(name="Translucent bake")
+        scene = bpy.context.scene
+        scene.render.engine = "CYCLES"
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = samples
+        scene.cycles.use_denoising = False
+        scene.cycles.seed = seed
+        adaptive = scene.cycles.use_adaptive_sampling
+        scene.cycles.use_adaptive_sampling = False
+        mat = principled_material(material)
+        old = _with_material(obj, mat)
+        helper_mesh.materials.append(mat)
+        attr = helper_mesh.color_attributes.new("cycles_bake", "FLOAT_COLOR", "POINT")
+        try:
+            helper_mesh.color_attributes.active_color = attr
+            bpy.ops.object.select_all(action="DESELECT")
+            obj.select_set(True)
+            helper.select_set(True)
+            bpy.context.view_layer.objects.active = helper
+            passes = {"DIRECT", "COLOR"} if direct_only else {"DIRECT", "INDIRECT", "COLOR"}
+            # A ray from 1e-4 of the mesh's size above each point, back along the normal onto `obj`.
+            bpy.ops.object.bake(type="DIFFUSE", pass_filter=passes, target="VERTEX_COLORS",
+                                use_selected_to_active=True, cage_extrusion=1e-4 * size,
+                                max_ray_distance=3e-4 * size)
+            px = np.empty(len(points) * 4, np.float32)
+            attr.data.foreach_get("color", px)
+        finally:
+            scene.cycles.use_adaptive_sampling = adaptive
+            bpy.data.objects.remove(helper)
+            bpy.data.meshes.remove(helper_mesh)
+            if added_uv:
+                mesh.uv_layers.remove(mesh.uv_layers["Translucent bake"])
+            for s, mm in zip(obj.material_slots, old):
+                s.material = mm
+            bpy.data.materials.remove(mat)
+        first = px.reshape(-1, 3, 4)[:, 0, :3].astype(np.float64)
+        values = np.zeros((len(receivers), 3))
+        np.add.at(values, np.array(owner), first)
+        return (values / np.bincount(owner, minlength=len(receivers))[:, None]).astype(np.float32)
 
     return _cached(key, compute)
 
