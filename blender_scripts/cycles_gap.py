@@ -22,7 +22,7 @@ rendered is cached (out/cache), so a second run only recomputes PRT.
 
 Run: .venv/bin/python blender_scripts/cycles_gap.py [--models suzanne suzanne-backlit stanford-bunny.obj]
      [--materials marble skin1 ketchup aniso08] [--spp 1024] [--seeds 2] [--receivers 60] [--out out/gap]
-     [--one-bake] [--receiver-spp 4096 --receiver-seeds 2]
+     [--one-bake] [--receiver-spp 4096 --receiver-seeds 2] [--reference-walks 4096]
 """
 
 from __future__ import annotations
@@ -200,6 +200,8 @@ def table(rows: list[dict]) -> str:
         c, h, d = r["cycles"], r["halfspace"], r["dipole"]
         wr = r.get("walk_reference", dict(vs_direct=nan, beyond_noise=nan))
         against = f" [{wr['against']}]" if "against" in wr else ""
+        if wr.get("walks", 4096) != 4096:
+            against += f" [{wr['walks']} walks]"
         seeds = r.get("seeds", 1)
         w = c.get("walks") or {}
         lines.append(
@@ -229,6 +231,7 @@ def main(argv=None) -> int:
                     help="compare the walk reference with Cycles' direct light baked at the receivers alone "
                          "(bake_receivers: SPP samples, every one taken) instead of direct-light vertex bakes")
     ap.add_argument("--receiver-seeds", type=int, default=2, help="seeds of those receiver bakes")
+    ap.add_argument("--reference-walks", type=int, default=4096, help="the walk reference's walks per receiver")
     ap.add_argument("--one-bake", action="store_true",
                     help="only the seed-0 bake: the preview's distances, no noise or direct-light columns (the "
                          "walk reference only with --receiver-spp)")
@@ -236,6 +239,7 @@ def main(argv=None) -> int:
     rows = []
     for model in args.models:
         rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol,
+                        walk_reference_walks=args.reference_walks,
                         seeds=1 if args.one_bake else args.seeds, direct_seeds=args.direct_seeds,
                         receiver_spp=args.receiver_spp, receiver_seeds=args.receiver_seeds)
     out = pathlib.Path(args.out)
