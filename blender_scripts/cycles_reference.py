@@ -95,22 +95,40 @@ def _with_material(obj, mat):
     return old
 
 
+def _use_cycles(samples: int, seed: int = 0) -> bpy.types.Scene:
+    """Cycles on the CPU at `samples` with `seed`, no denoising (the others as the scene has them:
+    Blender's default adaptive sampling)."""
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.cycles.use_denoising = False
+    scene.cycles.seed = seed
+    return scene
+
+
+def _diffuse_passes(direct_only: bool) -> set[str]:
+    """The diffuse bake's passes: light times colour, with or without indirect light."""
+    return {"DIRECT", "COLOR"} if direct_only else {"DIRECT", "INDIRECT", "COLOR"}
+
+
 def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples: int, direct_only: bool = False,
-                  seed: int = 0) -> tuple[np.ndarray, float]:
+                  seed: int = 0, adaptive: bool = True) -> tuple[np.ndarray, float]:
     """Cycles' diffuse radiance (direct + indirect + colour) per vertex of `obj` (a mesh with
     no modifiers), (N, 3), and the bake's wall time [s]. `direct_only` leaves out indirect
-    light (the object's own interreflection); `seed` is Cycles' sampling seed."""
+    light (the object's own interreflection); `seed` is Cycles' sampling seed. `adaptive`:
+    Blender's default adaptive sampling (noise threshold 0.01), where `samples` is the most a
+    point gets; without it every point gets them all."""
     extra = () if not direct_only and seed == 0 else (direct_only, seed)
+    if not adaptive:
+        extra += ("every sample",)
     key = hashlib.sha256(repr(("bake", _scene_digest([obj]), *_material_key(material)[:4], samples, *extra,
                                *_material_key(material)[4:])).encode()).hexdigest()[:24]
 
     def compute():
-        scene = bpy.context.scene
-        scene.render.engine = "CYCLES"
-        scene.cycles.device = "CPU"
-        scene.cycles.samples = samples
-        scene.cycles.use_denoising = False
-        scene.cycles.seed = seed
+        scene = _use_cycles(samples, seed)
+        was_adaptive = scene.cycles.use_adaptive_sampling
+        scene.cycles.use_adaptive_sampling = adaptive
         mat = principled_material(material)
         old = _with_material(obj, mat)
         mesh = obj.data
@@ -120,11 +138,11 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
             bpy.ops.object.select_all(action="DESELECT")
             obj.select_set(True)
             bpy.context.view_layer.objects.active = obj
-            passes = {"DIRECT", "COLOR"} if direct_only else {"DIRECT", "INDIRECT", "COLOR"}
-            bpy.ops.object.bake(type="DIFFUSE", pass_filter=passes, target="VERTEX_COLORS")
+            bpy.ops.object.bake(type="DIFFUSE", pass_filter=_diffuse_passes(direct_only), target="VERTEX_COLORS")
             px = np.empty(len(mesh.vertices) * 4, np.float32)
             attr.data.foreach_get("color", px)
         finally:
+            scene.cycles.use_adaptive_sampling = was_adaptive
             mesh.color_attributes.remove(mesh.color_attributes["cycles_bake"])
             for s, m in zip(obj.material_slots, old):
                 s.material = m
@@ -191,13 +209,8 @@ def bake_receivers(obj: bpy.types.Object, material: translucent.Material, sample
         added_uv = not mesh.uv_layers
         if added_uv:
             mesh.uv_layers.new(name="Translucent bake")
-        scene = bpy.context.scene
-        scene.render.engine = "CYCLES"
-        scene.cycles.device = "CPU"
-        scene.cycles.samples = samples
-        scene.cycles.use_denoising = False
-        scene.cycles.seed = seed
-        adaptive = scene.cycles.use_adaptive_sampling
+        scene = _use_cycles(samples, seed)
+        was_adaptive = scene.cycles.use_adaptive_sampling
         scene.cycles.use_adaptive_sampling = False
         mat = principled_material(material)
         old = _with_material(obj, mat)
@@ -209,15 +222,14 @@ def bake_receivers(obj: bpy.types.Object, material: translucent.Material, sample
             obj.select_set(True)
             helper.select_set(True)
             bpy.context.view_layer.objects.active = helper
-            passes = {"DIRECT", "COLOR"} if direct_only else {"DIRECT", "INDIRECT", "COLOR"}
             # A ray from 1e-4 of the mesh's size above each point, back along the normal onto `obj`.
-            bpy.ops.object.bake(type="DIFFUSE", pass_filter=passes, target="VERTEX_COLORS",
+            bpy.ops.object.bake(type="DIFFUSE", pass_filter=_diffuse_passes(direct_only), target="VERTEX_COLORS",
                                 use_selected_to_active=True, cage_extrusion=1e-4 * size,
                                 max_ray_distance=3e-4 * size)
             px = np.empty(len(points) * 4, np.float32)
             attr.data.foreach_get("color", px)
         finally:
-            scene.cycles.use_adaptive_sampling = adaptive
+            scene.cycles.use_adaptive_sampling = was_adaptive
             bpy.data.objects.remove(helper)
             bpy.data.meshes.remove(helper_mesh)
             if added_uv:
@@ -244,10 +256,7 @@ def render_image(obj: bpy.types.Object, material: translucent.Material, samples:
     def compute():
         scene = bpy.context.scene
         if engine == "CYCLES":
-            scene.render.engine = "CYCLES"
-            scene.cycles.device = "CPU"
-            scene.cycles.samples = samples
-            scene.cycles.use_denoising = False
+            _use_cycles(samples)
         else:
             names = [e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items]
             eevee = next((n for n in ("BLENDER_EEVEE", "BLENDER_EEVEE_NEXT") if n in names), None)
