@@ -22,7 +22,7 @@ rendered is cached (out/cache), so a second run only recomputes PRT.
 
 Run: .venv/bin/python blender_scripts/cycles_gap.py [--models suzanne suzanne-backlit stanford-bunny.obj]
      [--materials marble skin1 ketchup aniso08] [--spp 1024] [--seeds 2] [--receivers 60] [--out out/gap]
-     [--one-bake] [--receiver-spp 4096 --receiver-seeds 2] [--reference-walks 4096]
+     [--one-bake] [--every-sample] [--receiver-spp 4096 --receiver-seeds 2] [--reference-walks 4096]
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ def noise_of_one(bakes: list[np.ndarray], w: np.ndarray) -> list[float]:
 
 def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float,
             walk_reference_walks: int = 4096, seeds: int = 2, direct_seeds: int | None = None,
-            receiver_spp: int | None = None, receiver_seeds: int = 2) -> list[dict]:
+            receiver_spp: int | None = None, receiver_seeds: int = 2, adaptive: bool = True) -> list[dict]:
     import cycles_reference as cr
     import demo
     import report
@@ -105,14 +105,15 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
     rows = []
     for name in names:
         m = material(name)
-        cyc, cyc_s = cr.bake_vertices(bake_obj, m, spp)
+        cyc, cyc_s = cr.bake_vertices(bake_obj, m, spp, adaptive=adaptive)
         row = dict(model=model, material=name, vertices=scene.vertex_count, spp=spp, bake_s=cyc_s, seeds=seeds,
+                   adaptive=adaptive,
                    direct_seeds=0 if seeds < 2 else max(2, direct_seeds or seeds),
                    noise=float("nan"), interreflection_rms=float("nan"), interreflection_share=[float("nan")] * 3)
         fulls, directs = [cyc], []
         if seeds > 1:
-            fulls += [cr.bake_vertices(bake_obj, m, spp, seed=s)[0] for s in range(1, seeds)]
-            directs = [cr.bake_vertices(bake_obj, m, spp, direct_only=True, seed=s)[0]
+            fulls += [cr.bake_vertices(bake_obj, m, spp, seed=s, adaptive=adaptive)[0] for s in range(1, seeds)]
+            directs = [cr.bake_vertices(bake_obj, m, spp, direct_only=True, seed=s, adaptive=adaptive)[0]
                        for s in range(max(2, direct_seeds or seeds))]
             mean_direct_all = np.mean(directs, axis=0)
             row.update(noise=max(noise_of_one(fulls, w_all)), interreflection_rms=rel(mean_direct_all, cyc, w_all),
@@ -205,7 +206,8 @@ def table(rows: list[dict]) -> str:
         seeds = r.get("seeds", 1)
         w = c.get("walks") or {}
         lines.append(
-            f"| {r['model']} | {r['material']} | **{pct(c['vs_cycles'])}** | "
+            f"| {r['model']} | {r['material']}{'' if r.get('adaptive', True) else ' (bakes: every sample)'} | "
+            f"**{pct(c['vs_cycles'])}** | "
             f"{pct(c.get('vs_cycles_mean', nan)) if seeds > 1 else '—'} ({pct(c.get('beyond_noise', nan))}) | "
             f"{', '.join(f'{x:.3f}' for x in c['ratio'])} | {pct(h['vs_cycles'])} | {pct(d['vs_cycles'])} | "
             f"{pct(r['noise'])} ({seeds}) | {pct(wr['vs_direct'])} ({pct(wr['beyond_noise'])}){against} | "
@@ -232,6 +234,9 @@ def main(argv=None) -> int:
                          "(bake_receivers: SPP samples, every one taken) instead of direct-light vertex bakes")
     ap.add_argument("--receiver-seeds", type=int, default=2, help="seeds of those receiver bakes")
     ap.add_argument("--reference-walks", type=int, default=4096, help="the walk reference's walks per receiver")
+    ap.add_argument("--every-sample", action="store_true",
+                    help="vertex bakes that take all --spp samples at every point (Blender's default is adaptive "
+                         "sampling, noise threshold 0.01, where --spp is the most a point gets)")
     ap.add_argument("--one-bake", action="store_true",
                     help="only the seed-0 bake: the preview's distances, no noise or direct-light columns (the "
                          "walk reference only with --receiver-spp)")
@@ -241,7 +246,8 @@ def main(argv=None) -> int:
         rows += measure(model, args.materials, args.spp, args.receivers, args.rel_tol,
                         walk_reference_walks=args.reference_walks,
                         seeds=1 if args.one_bake else args.seeds, direct_seeds=args.direct_seeds,
-                        receiver_spp=args.receiver_spp, receiver_seeds=args.receiver_seeds)
+                        receiver_spp=args.receiver_spp, receiver_seeds=args.receiver_seeds,
+                        adaptive=not args.every_sample)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "gap.json").write_text(json.dumps(rows, indent=1))
