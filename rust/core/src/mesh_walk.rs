@@ -77,6 +77,11 @@ pub struct MeshWalkSettings {
     /// triangle at 10 cm scale, the walks spread evenly over them) instead of at the vertex
     /// itself: what a vertex bake records.
     pub at_bake_points: bool,
+    /// Follow Cycles past an exit inside another part of the mesh (`Walker::tunnel`). That
+    /// light reaches the receiver after the exit's bounce, so Cycles files it as indirect
+    /// light: off, the walks give Cycles' direct light alone (what a direct-light bake holds),
+    /// such an exit bringing nothing.
+    pub tunnel: bool,
 }
 
 impl Default for MeshWalkSettings {
@@ -86,6 +91,7 @@ impl Default for MeshWalkSettings {
             seed: 0x6d65_7368_7761_6c6b,
             max_bounces: MAX_BOUNCES,
             at_bake_points: true,
+            tunnel: true,
         }
     }
 }
@@ -160,6 +166,8 @@ struct Walker<'a> {
     placement: Vec<Placement>,
     /// Where the walks of a vertex enter: Cycles' bake sample points, or (None) the vertex.
     bake_points: Option<BakePoints>,
+    /// `MeshWalkSettings::tunnel`.
+    tunnel: bool,
 }
 
 /// Where a triangle lies against the other parts of the mesh.
@@ -311,6 +319,7 @@ pub fn walk_radiosity_lit(
         max_bounces: settings.max_bounces,
         placement: placements(mesh, tracer),
         bake_points: settings.at_bake_points.then(|| BakePoints::new(mesh)),
+        tunnel: settings.tunnel,
     };
     let active: Vec<usize> = (0..CHANNELS).filter(|&c| media[c].scale > 0.0).collect();
     // The control variate's known mean: the half-space twin's total per channel.
@@ -660,6 +669,8 @@ impl Walker<'_> {
                         let y = inside.pos + dir * s;
                         match self.exit(h.triangle, y, dir, c) {
                             Exit::Lit(e) => score += left * e,
+                            // Without the tunnel that share's light is dark (Cycles' indirect).
+                            Exit::Inside if !self.tunnel => {}
                             Exit::Inside => {
                                 // Leave (and tunnel) with the leaving share's probability, or
                                 // stay with the whole weight: the expected value of both.
@@ -1003,6 +1014,7 @@ mod tests {
                 max_bounces: MAX_BOUNCES,
                 placement: vec![Placement::Outside],
                 bake_points: None,
+                tunnel: true,
             })
             .collect();
         let own: Vec<f64> = walkers.iter().map(|w| w.plane_total(&m)).collect();

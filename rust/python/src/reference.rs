@@ -138,10 +138,14 @@ pub fn relative_error<'py>(
 /// standard error per receiver, the walks' own noise (area-weighted relative RMS per channel),
 /// walks, rays and seconds. `at="bake"` enters where Cycles' vertex bake samples (each corner,
 /// 1e-4 max(1, |P|) towards its centroid: `bake_points`), `at="vertex"` at the vertex itself.
+/// `tunnel=False` leaves out the light Cycles files as indirect although no other surface
+/// reflects it: a walk that leaves through a surface inside another part of the mesh (an
+/// eyeball sunk into a head) goes on past that part (`mesh_walk`'s tunnel) after the exit's
+/// bounce; for comparison with a bake of Cycles' direct light.
 #[pyfunction]
 #[pyo3(signature = (scene, material, profile = "cycles", walks = 256, receivers = None,
     seed = 0, world_samples = 64, area_samples = 16, progress = None, details = false,
-    at = "bake"))]
+    at = "bake", tunnel = true))]
 #[allow(clippy::too_many_arguments)]
 #[pyo3(name = "reference_radiance")]
 pub fn reference_radiance_py<'py>(
@@ -157,6 +161,7 @@ pub fn reference_radiance_py<'py>(
     progress: Option<Py<PyAny>>,
     details: bool,
     at: &str,
+    tunnel: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let at_bake_points = match at {
         "bake" => true,
@@ -189,6 +194,7 @@ pub fn reference_radiance_py<'py>(
         walks,
         seed: MeshWalkSettings::default().seed ^ seed,
         at_bake_points,
+        tunnel,
         ..MeshWalkSettings::default()
     };
     let tracer = scene.tracer();

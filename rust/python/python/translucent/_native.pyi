@@ -354,6 +354,7 @@ def reference_radiance(
     progress: Progress | None = None,
     details: Literal[False] = False,
     at: Literal["bake", "vertex"] = "bake",
+    tunnel: bool = True,
 ) -> npt.NDArray[np.float32]:
     """Cycles' answer without Blender: radiance along each receiver's normal (as a vertex bake
     records it) from Cycles 5.0's random walk traced inside the mesh, `walks` per vertex and
@@ -361,7 +362,10 @@ def reference_radiance(
     (the standard error is that of the corrected mean). `at="bake"` enters where Blender's
     vertex bake samples (each corner's point 1e-4 * max(1, largest |coordinate|) towards the
     corner triangle's centroid, the walks spread evenly over them), `at="vertex"` at the
-    vertex. Releases the GIL."""
+    vertex. `tunnel=False` leaves out what Cycles files as indirect light although no other
+    surface reflects it: a walk leaving through a surface inside another part of the mesh (an
+    eyeball sunk into a head) goes on past that part after the exit's bounce. Compare with a
+    direct-light bake with `tunnel=False`. Releases the GIL."""
 @overload
 def reference_radiance(
     scene: Scene,
@@ -376,6 +380,7 @@ def reference_radiance(
     *,
     details: Literal[True],
     at: Literal["bake", "vertex"] = "bake",
+    tunnel: bool = True,
 ) -> tuple[npt.NDArray[np.float32], dict[str, object]]: ...
 @overload
 def reference_single_scattering(
