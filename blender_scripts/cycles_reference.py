@@ -190,6 +190,8 @@ def bake_receivers(obj: bpy.types.Object, material: translucent.Material, sample
         slot = np.full(len(mesh.vertices), -1)
         slot[receivers] = np.arange(len(receivers))
         corners = [(t, c) for t in tri for c in range(3) if slot[t[c]] >= 0]
+        if len({int(t[c]) for t, c in corners}) < len(set(receivers.tolist())):
+            raise ValueError("every receiver must be a corner of a triangle (a vertex bake has nothing for it)")
         points, owner = [], []
         for t, c in corners:
             v, a, b = world[t[c]], world[t[(c + 1) % 3]], world[t[(c + 2) % 3]]
