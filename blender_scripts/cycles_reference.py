@@ -189,11 +189,12 @@ def bake_receivers(obj: bpy.types.Object, material: translucent.Material, sample
         world = co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
         slot = np.full(len(mesh.vertices), -1)
         slot[receivers] = np.arange(len(receivers))
-        corners = [(t, c) for t in tri for c in range(3) if slot[t[c]] >= 0]
-        if len({int(t[c]) for t, c in corners}) < len(set(receivers.tolist())):
+        # The receivers' corners (triangle, corner), in triangle order.
+        at, corner = np.nonzero(slot[tri] >= 0)
+        if len(np.unique(tri[at, corner])) < len(np.unique(receivers)):
             raise ValueError("every receiver must be a corner of a triangle (a vertex bake has nothing for it)")
         points, owner = [], []
-        for t, c in corners:
+        for t, c in zip(tri[at], corner):
             v, a, b = world[t[c]], world[t[(c + 1) % 3]], world[t[(c + 2) % 3]]
             to_centre = (v + a + b) / 3.0 - v
             length = np.linalg.norm(to_centre)
