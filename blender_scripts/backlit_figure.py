@@ -19,22 +19,17 @@ import numpy as np
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "blender_scripts"))
 
-import bpy  # noqa: E402
+import bpy  # noqa: E402,F401
 
 import translucent  # noqa: E402
 from addon import export, writeback  # noqa: E402
-
-MM_PER_UNIT = 1000.0
+from blender_scripts.lib import cycles_reference as cr  # noqa: E402
+from blender_scripts.lib import figures, scenes  # noqa: E402
+from blender_scripts.lib.metrics import rel  # noqa: E402
 
 
 def main(argv=None) -> int:
-    import cycles_gap
-    import cycles_reference as cr
-    import demo
-    import report
-
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--material", default="skin1")
     ap.add_argument("--cycles-samples", type=int, default=256)
@@ -42,11 +37,11 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(REPO / "docs" / "backlit_ears.png"))
     args = ap.parse_args(argv)
 
-    suzanne, cam = report.build_scene("suzanne-backlit")
+    suzanne, cam = scenes.build_scene("suzanne-backlit")
     scene, _ = export.export_scene([suzanne])
-    m = cycles_gap.material(args.material)
-    preview = demo.preview_object(suzanne)
-    bake_obj = demo.preview_object(suzanne)
+    m = scenes.material(args.material)
+    preview = scenes.preview_object(suzanne)
+    bake_obj = scenes.preview_object(suzanne)
     bake_obj.data.materials.clear()
     bake_obj.hide_render = True
     cyc, _ = cr.bake_vertices(bake_obj, m, args.bake_spp)
@@ -58,17 +53,17 @@ def main(argv=None) -> int:
     for label, kwargs in (("dipole", dict(profile="dipole", single_scattering=False)), ("half-space table", dict(walks=0)),
                           ("walks through the mesh", dict())):
         prt = translucent.Prt(scene, m, backend="cpu", **kwargs)
-        dist = cycles_gap.rel(prt.radiance(m), cyc, w)
+        dist = rel(prt.radiance(m), cyc, w)
         print(f"{label:24s} vs Cycles {args.bake_spp} spp bake: {100 * dist:.1f} % "
               f"(precompute {prt.report['seconds']:.1f} s)")
         writeback.write_colors(preview.data, prt.radiance(m, eye))
         preview.data.color_attributes.active_color_name = writeback.ATTRIBUTE
         path = tmp / f"{label.replace(' ', '_')}.png"
-        demo.render(path)
+        figures.render_preview(path)
         panels.append(path)
     bake_obj.hide_render = True
     cycles_path = tmp / "cycles.png"
-    demo.render_cycles(suzanne, preview, m, args.cycles_samples, cycles_path)
+    cr.render_beside(suzanne, preview, m, args.cycles_samples, cycles_path)
     panels.append(cycles_path)
 
     import matplotlib.image as mpimg

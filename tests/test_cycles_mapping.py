@@ -69,15 +69,14 @@ def test_low_single_scattering_albedo_is_flagged_inexact():
 def ortho_cycles(bpy, ortho_scale, samples):
     """An orthographic camera `ortho_scale` wide as the scene's, Cycles on the CPU at
     `samples` spp, no denoising, 16 x 16 pixels, linear EXR out."""
+    from blender_scripts.lib.cycles_reference import use_cycles
+
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
     cam.data.type, cam.data.ortho_scale = "ORTHO", ortho_scale
     scene = bpy.context.scene
     scene.collection.objects.link(cam)
     scene.camera = cam
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
-    scene.cycles.use_denoising = False
+    use_cycles(samples)
     scene.render.resolution_x = scene.render.resolution_y = 16
     scene.view_settings.view_transform = "Standard"
     scene.render.image_settings.file_format = "OPEN_EXR"

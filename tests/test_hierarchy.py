@@ -3,16 +3,11 @@ bunny, the modes against each other, and bad input. Expected values come from
 `reference_radiosity` (brute-force integration) or from a fresh evaluation, never from the
 hierarchy's own earlier output."""
 
-import sys
-
 import numpy as np
 import pytest
 
 import translucent
-from conftest import REPO
-
-sys.path.insert(0, str(REPO / "blender_scripts"))
-import models  # noqa: E402
+from blender_scripts.lib import models
 
 BUNNY = models.MODELS / "stanford-bunny.obj"
 

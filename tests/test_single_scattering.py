@@ -4,17 +4,12 @@ scattering. Expected values come from the brute-force integral of eq. 5
 no basis) or from the multiple-scattering-only precompute, never from PRT's own single
 scattering. The plane limit in closed form is `cargo test --test single_scattering`."""
 
-import sys
-
 import numpy as np
 import pytest
 
 import translucent
-from conftest import REPO
+from blender_scripts.lib import models
 from test_api import plane
-
-sys.path.insert(0, str(REPO / "blender_scripts"))
-import models  # noqa: E402
 
 MARBLE = translucent.Material.preset("marble", mm_per_unit=1000.0)
 SKIN = translucent.Material.preset("skin1", mm_per_unit=1000.0)
