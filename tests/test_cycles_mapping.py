@@ -150,9 +150,9 @@ def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(emp
     the medium, and a shallow walk loses less), against what the specular layer leaves, which
     falls: the view factor (`slab_reflectance` at the view cosine, the walks simulated in a
     half-space, independent of this render) predicts it within 3 % per channel, and
-    tests/test_profiles.py keeps these renders' figures."""
+    tests/helpers.py keeps these renders' figures."""
     import translucent
-    from test_profiles import CYCLES_VIEW_KETCHUP
+    from helpers import CYCLES_VIEW_KETCHUP
 
     bpy = empty_blend
     m = translucent.Material.preset("ketchup")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import translucent
-from test_api import plane
+from helpers import plane
 
 
 def lit_plane():

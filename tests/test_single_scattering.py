@@ -9,7 +9,7 @@ import pytest
 
 import translucent
 from blender_scripts.lib import models
-from test_api import plane
+from helpers import plane, sun_plane as lit_plane
 
 MARBLE = translucent.Material.preset("marble", mm_per_unit=1000.0)
 SKIN = translucent.Material.preset("skin1", mm_per_unit=1000.0)
@@ -20,10 +20,7 @@ def with_g(m, g):
 
 
 def sun_plane(n=21, size=0.05):
-    p, t = plane(n, size)
-    s = translucent.Scene(p, t)
-    s.add_sun(direction=(0.3, 0.0, -1.0), irradiance=2.0)
-    return s
+    return lit_plane(n, size, direction=(0.3, 0.0, -1.0), strength=2.0)[1]
 
 
 def rel_rms(got, want):
