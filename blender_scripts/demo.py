@@ -7,7 +7,8 @@ evaluates three of Jensen's measured materials, measures each against the ground
 writes the radiance into the add-on's colour attribute, renders it headless as the viewport
 shows it (Workbench, flat, colour by attribute: <preset>.png) and renders the same scene with
 Cycles' random walk in the mapped Principled BSDF (<preset>_cycles.png), side by side in
-<preset>_vs_cycles.png. Prints a table of error and time.
+<preset>_vs_cycles.png, every preset in preview_vs_cycles.png (a row each, the columns and
+rows named). Prints a table of error and time.
 
 Run: .venv/bin/python blender_scripts/demo.py [--out out/demo] [--presets marble skin1 ketchup]
      [--cycles-samples 64]
@@ -96,8 +97,12 @@ def main() -> int:
 
     import matplotlib.image as mpimg
 
-    pairs = [mpimg.imread(out / f"{name}_vs_cycles.png")[..., :3] for name in materials]
-    mpimg.imsave(out / "preview_vs_cycles.png", np.concatenate(pairs, axis=0))
+    pairs = [[mpimg.imread(out / f"{name}{kind}.png") for kind in ("", "_cycles")] for name in materials]
+    figures.labelled_grid(
+        pairs, out / "preview_vs_cycles.png",
+        columns=["preview: PRT, Cycles' profile\n(vertex colours, as in the viewport)",
+                 f"Cycles random walk, same material\n{args.cycles_samples} spp, denoised"],
+        rows=list(materials))
     print(f"\n{'step':58s} {'seconds':>9s}  error against ground truth (R/G/B)")
     for step, sec, note in rows:
         print(f"{step:58s} {sec:9.4f}  {note}")

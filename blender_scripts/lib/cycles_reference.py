@@ -99,18 +99,16 @@ def _with_material(obj, mat):
     return old
 
 
-def use_cycles(samples: int, seed: int | None = 0, denoising: bool | None = False) -> bpy.types.Scene:
-    """Cycles on the CPU at `samples` with `seed`, denoising on or off; None leaves that setting
-    as the scene has it (the others too: Blender's default adaptive sampling). The references
-    take the defaults: seed 0, no denoising."""
+def use_cycles(samples: int, seed: int = 0, denoising: bool = False) -> bpy.types.Scene:
+    """Cycles on the CPU at `samples` with `seed`, the denoiser on or off (the other settings as
+    the scene has them: Blender's default adaptive sampling). References take the defaults, no
+    denoising: a denoised answer is not Cycles' estimate."""
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = samples
-    if denoising is not None:
-        scene.cycles.use_denoising = denoising
-    if seed is not None:
-        scene.cycles.seed = seed
+    scene.cycles.use_denoising = denoising
+    scene.cycles.seed = seed
     return scene
 
 
@@ -300,13 +298,13 @@ def render_beside(source: bpy.types.Object, preview: bpy.types.Object, material:
                   samples: int, path: pathlib.Path) -> None:
     """The scene's camera view in Cycles, written to `path` (PNG, 256 px, not cached): the
     source object (modifiers and all) in the Principled BSDF random walk mapped from `material`
-    (`principled_material`), the preview object hidden meanwhile. Seed and denoising stay as the
-    scene has them (a new file denoises; after a bake here, which turns it off, it does not)."""
+    (`principled_material`), the preview object hidden meanwhile. Seed 0 and Blender's denoiser
+    on, as a new file has them: a picture to look at beside the preview, not a reference."""
     mat = principled_material(material, "Cycles " + path.stem)
     source.data.materials.clear()
     source.data.materials.append(mat)
     source.hide_render, preview.hide_render = False, True
-    scene = use_cycles(samples, seed=None, denoising=None)
+    scene = use_cycles(samples, seed=0, denoising=True)
     scene.render.resolution_x = scene.render.resolution_y = 256
     scene.view_settings.view_transform = "Standard"
     scene.render.image_settings.file_format = "PNG"
