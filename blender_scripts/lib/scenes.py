@@ -133,6 +133,7 @@ def sheet(n: int, size: float, origin: float) -> bpy.types.Object:
     bpy.context.scene.collection.objects.link(bpy.data.objects.new("sun", sun))
     world = bpy.data.worlds.new("black")
     bpy.context.scene.world = world
-    world.use_nodes = True
+    if world.node_tree is None:  # Blender < 5.0 (5.0 always has nodes; use_nodes is deprecated)
+        world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     return obj
