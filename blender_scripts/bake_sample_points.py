@@ -21,42 +21,16 @@ import numpy as np
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "blender_scripts"))
 
 import bpy  # noqa: E402
 
 import translucent  # noqa: E402
+from blender_scripts.lib import cycles_reference, scenes  # noqa: E402
 
-SIZE = 0.1  # the sheet's side [m]
-
-
-def sheet(n: int, size: float, origin: float) -> bpy.types.Object:
-    """An open square sheet of n x n vertices at z = 0, its edge at x = origin, under a sun."""
-    h = size / (n - 1)
-    p = [(origin + i * h, j * h, 0.0) for j in range(n) for i in range(n)]
-    t = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a, b, c, d = j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i
-            t += [(a, b, c), (a, c, d)]
-    mesh = bpy.data.meshes.new("sheet")
-    mesh.from_pydata(p, [], t)
-    mesh.shade_smooth()
-    obj = bpy.data.objects.new("sheet", mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    sun = bpy.data.lights.new("sun", "SUN")
-    sun.energy, sun.angle = 1.0, 0.0
-    bpy.context.scene.collection.objects.link(bpy.data.objects.new("sun", sun))
-    world = bpy.data.worlds.new("black")
-    bpy.context.scene.world = world
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
-    return obj
+SIZE = scenes.SHEET_SIZE  # the sheet's side [m]
 
 
 def main(argv=None) -> int:
-    import cycles_gap
-    import cycles_reference
     from addon import export
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -66,9 +40,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     n = args.vertices
-    obj = sheet(n, SIZE, args.origin)
+    obj = scenes.sheet(n, SIZE, args.origin)
     scene, _ = export.export_scene([obj])
-    m = cycles_gap.material(args.material)
+    m = scenes.material(args.material)
     row = [n // 2 * n + i for i in range(6)]
     cyc, seconds = cycles_reference.bake_vertices(obj, m, 1024)
     ref = translucent.reference_radiance(scene, m, walks=4096, receivers=row)

@@ -23,9 +23,9 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(__file__))
-import models  # noqa: E402
-from bench_prt import machine  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from blender_scripts.lib import models  # noqa: E402
+from blender_scripts.lib.machine import describe as machine  # noqa: E402
 
 import translucent  # noqa: E402
 

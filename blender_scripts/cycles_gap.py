@@ -37,7 +37,6 @@ import numpy as np
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "blender_scripts"))
 
 try:
     import bpy  # noqa: E402,F401
@@ -46,65 +45,28 @@ except ImportError:  # the table alone needs no Blender
 
 import translucent  # noqa: E402
 from addon import export  # noqa: E402
-
-MM_PER_UNIT = 1000.0
-
-
-def material(name: str) -> translucent.Material:
-    """Jensen's measured presets at 1 mm = 1/1000 unit, mapped to Principled inputs (with
-    Blender's default Roughness 0.5), or a Principled material with Subsurface Anisotropy 0.8."""
-    if name == "aniso08":
-        return translucent.Material.from_principled(
-            base_color=(0.85, 0.65, 0.5), radius=(1.0, 0.45, 0.25), scale=0.005, anisotropy=0.8, ior=1.45,
-            roughness=0.5)
-    return translucent.Material.preset(name, MM_PER_UNIT)
-
-
-def rel(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> float:
-    """Area-weighted relative RMS of a against b, worst channel."""
-    return float(max(translucent.relative_error(a, b, w)["rms"]))
-
-
-def rel_channels(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
-    return [float(x) for x in translucent.relative_error(a, b, w)["rms"]]
-
-
-def ratio(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> list[float]:
-    """Area-weighted mean ratio sum(w a) / sum(w b) per channel."""
-    return [float((w * a[:, c]).sum() / max((w * b[:, c]).sum(), 1e-30)) for c in range(3)]
-
-
-def noise_of_one(bakes: list[np.ndarray], w: np.ndarray) -> list[float]:
-    """One bake's own noise per channel, from several seeds' bakes of the same thing: the
-    area-weighted relative RMS of a bake about the seeds' mean, sqrt(sum_i w_i s_i^2 /
-    sum_i w_i mean_i^2) with s_i^2 the seeds' unbiased variance at vertex i."""
-    a = np.stack([np.asarray(b, np.float64) for b in bakes])
-    mean = a.mean(0)
-    var = ((a - mean) ** 2).sum(0) / (len(a) - 1)
-    w = np.asarray(w, np.float64)[:, None]
-    return np.sqrt((w * var).sum(0) / np.maximum((w * mean ** 2).sum(0), 1e-300)).tolist()
+from blender_scripts.lib.metrics import noise_of_one, ratio, rel, rel_channels  # noqa: E402
 
 
 def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: float,
             walk_reference_walks: int = 4096, seeds: int = 2, direct_seeds: int | None = None,
             receiver_spp: int | None = None, receiver_seeds: int = 2, adaptive: bool = True) -> list[dict]:
-    import cycles_reference as cr
-    import demo
-    import report
+    from blender_scripts.lib import cycles_reference as cr
+    from blender_scripts.lib import ground_truth, scenes
 
-    obj, _ = report.build_scene(model)
+    obj, _ = scenes.build_scene(model)
     scene, info = export.export_scene([obj])
-    bake_obj = demo.preview_object(obj)
+    bake_obj = scenes.preview_object(obj)
     bake_obj.data.materials.clear()
     w_all = scene.vertex_areas[:, 0]
     rng = np.random.default_rng(1)
     idx = np.sort(rng.choice(scene.vertex_count, size=min(receivers, scene.vertex_count), replace=False))
     w = w_all[idx]
-    scene_key = report.digest(model, scene.vertex_count, scene.triangle_count, np.asarray(scene.vertex_areas),
+    scene_key = ground_truth.digest(model, scene.vertex_count, scene.triangle_count, np.asarray(scene.vertex_areas),
                               info.lights, info.world)
     rows = []
     for name in names:
-        m = material(name)
+        m = scenes.material(name)
         cyc, cyc_s = cr.bake_vertices(bake_obj, m, spp, adaptive=adaptive)
         row = dict(model=model, material=name, vertices=scene.vertex_count, spp=spp, bake_s=cyc_s, seeds=seeds,
                    adaptive=adaptive,
@@ -145,11 +107,10 @@ def measure(model: str, names: list[str], spp: int, receivers: int, rel_tol: flo
                 row[key]["beyond_noise"] = float(np.sqrt(np.maximum(
                     np.array(row[key]["vs_cycles_mean_channels"]) ** 2 - noise ** 2 / seeds, 0.0)).max())
             if direct is not None and (key == "halfspace" or (key == "dipole" and m.g == 0.0)):
-                gt = report.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
+                gt = ground_truth.ground_truth(scene_key, scene, m, idx, rel_tol, profile)[0]
                 # The ground truth is the direct-light model: PRT without the bounce against it.
                 # Along the normal, as the bake looks: L = W(1) B / pi.
-                exit_weight = (translucent.layer_weight(m.roughness, 1.0, m.eta) if profile == "cycles"
-                               else report.fresnel_t(m.eta))
+                exit_weight = ground_truth.exit_weight(m, profile)
                 gt_radiance = gt * exit_weight / np.pi
                 row[key]["prt_vs_truth"] = rel(prt.radiosity(m, interreflection=False)[idx], gt, w)
                 row[key]["truth_vs_direct"] = rel(gt_radiance, direct[idx], w)

@@ -8,8 +8,9 @@ subsurface render is the peer an artist would otherwise use.
 
 Outputs in --out (default out/report): report.csv, report.png (log-log), report.md.
 Ground truth and Cycles results are cached under out/cache, so a second run re-renders
-nothing. Error metric (DESIGN.md): area-weighted relative RMS over the receiver vertices and
-max relative error, worst channel; for images, relative RMSE over the object's pixels.
+nothing. Error metric (docs/design.md, "Error metric"): area-weighted relative RMS over the
+receiver vertices and max relative error, worst channel; for images, relative RMSE over the
+object's pixels.
 
 Run: .venv/bin/python blender_scripts/report.py [--materials marble skin1 ketchup]
      [--receivers 100] [--model suzanne | stanford-bunny.obj ...] [--no-cycles] [--no-eevee]
@@ -19,8 +20,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
-import json
 import pathlib
 import sys
 import time
@@ -30,15 +29,16 @@ import numpy as np
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "blender_scripts"))
 
-import bpy  # noqa: E402
+import bpy  # noqa: E402,F401
 
 import translucent  # noqa: E402
 from addon import export  # noqa: E402
-
-MM_PER_UNIT = 1000.0  # Blender units are metres
-CACHE = REPO / "out" / "cache"
+from blender_scripts.lib import cycles_reference as cr  # noqa: E402
+from blender_scripts.lib import scenes  # noqa: E402
+from blender_scripts.lib.ground_truth import digest, exit_weight, ground_truth  # noqa: E402
+from blender_scripts.lib.machine import cpu_and_cores  # noqa: E402
+from blender_scripts.lib.metrics import image_error, worst  # noqa: E402
 
 # PRT settings swept: (basis size, degree, fit tolerance or None).
 PRT_SETTINGS = [(8, 1, None), (16, 1, None), (32, 1, None), (64, 1, None), (16, 2, None), (32, 2, None),
@@ -71,40 +71,6 @@ def progress(i: int, n: int, what: str) -> None:
     print(f"\r[{'#' * done}{'.' * (width - done)}] {i}/{n} {what[:60]:60s}", end="", file=sys.stderr, flush=True)
     if i == n:
         print(file=sys.stderr)
-
-
-def digest(*parts) -> str:
-    h = hashlib.sha256()
-    for p in parts:
-        h.update(p.tobytes() if isinstance(p, np.ndarray) else repr(p).encode())
-    return h.hexdigest()[:24]
-
-
-def ground_truth(scene_key: str, scene, material, receivers: np.ndarray, rel_tol: float,
-                 profile: str = "cycles") -> tuple[np.ndarray, float, dict]:
-    """The reference radiosity of `profile` at `receivers`, cached on disk by scene, material
-    and settings."""
-    layers = (material.roughness, material.subsurface_weight, material.metallic, material.transmission,
-              material.base_color)
-    key = digest(scene_key, material.sigma_a, material.sigma_s, material.g, material.eta, receivers, rel_tol,
-                 *((profile, layers) if profile != "dipole" else ()))
-    path = CACHE / "reference" / f"{key}.npz"
-    if path.exists():
-        z = np.load(path, allow_pickle=False)
-        return z["values"], float(z["seconds"]), json.loads(str(z["info"]))
-    t0 = time.perf_counter()
-    values, info = translucent.reference_radiosity(
-        scene, material, rel_tol=rel_tol, receivers=receivers.tolist(), details=True, profile=profile
-    )
-    seconds = time.perf_counter() - t0
-    info = {k: (v if isinstance(v, (int, float, bool, str)) else str(v)) for k, v in info.items()}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, values=values, seconds=seconds, info=json.dumps(info))
-    return values, seconds, info
-
-
-def worst(err: dict) -> tuple[float, float]:
-    return float(max(err["rms"])), float(max(err["max"]))
 
 
 # Ray budgets of the walks through the mesh in the report (0: the half-space table alone; 20 M is
@@ -233,31 +199,8 @@ def hierarchy_rows(scene, material, name, truth, receivers, weights, cycles=None
     return rows
 
 
-def machine() -> str:
-    """The CPU model and core count, for the report's title."""
-    import os
-
-    model = "unknown CPU"
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{model}, {os.cpu_count()} cores"
-
-
-def fresnel_t(eta: float) -> float:
-    """F_t at normal incidence, 1 - ((eta - 1) / (eta + 1))^2: radiance along the normal is
-    F_t B / pi (Xu 2007 eq. 2), what a vertex bake sees."""
-    return 1.0 - ((eta - 1.0) / (eta + 1.0)) ** 2
-
-
 def cycles_rows(obj, material, name, spp_list, reference_spp, receivers, weights):
     """Cycles vertex bakes at each sample count against the high-sample bake."""
-    import cycles_reference as cr
-
     ref, ref_s = cr.bake_vertices(obj, material, reference_spp)
     label = f"Cycles {reference_spp} spp"
     rows = []
@@ -271,48 +214,18 @@ def cycles_rows(obj, material, name, spp_list, reference_spp, receivers, weights
 
 def eevee_rows(obj, material, name, samples_list, reference_spp):
     """EEVEE's own subsurface scattering against a high-sample Cycles render of the camera view."""
-    import cycles_reference as cr
-
     try:
         truth, _ = cr.render_image(obj, material, reference_spp, "CYCLES")
         rows = []
         for samples in samples_list:
             img, seconds = cr.render_image(obj, material, samples, "EEVEE")
-            rms, mx = cr.image_error(img, truth)
+            rms, mx = image_error(img, truth)
             rows.append(Row("EEVEE", f"{samples} samples", name, f"Cycles {reference_spp} spp image", rms, mx,
                             seconds, 0.0, notes="128 px render, object pixels"))
         return rows
     except RuntimeError as e:
         print(f"EEVEE skipped: {e}", file=sys.stderr)
         return []
-
-
-# Behind Suzanne's head (she faces -Y), a little above her ears.
-BACKLIGHT = (0.0, 0.14, 0.06)
-
-
-def build_scene(model: str):
-    """The demo's scene (Suzanne with Subdivision, point light, dim world), the same lit from
-    behind ("suzanne-backlit": the light behind the head, its ears between it and the camera),
-    or a shared model at 10 cm under the demo's light."""
-    import demo
-
-    suzanne, cam = demo.build_scene()
-    if model == "suzanne-backlit":
-        bpy.data.objects["Key"].location = BACKLIGHT
-        return suzanne, cam
-    if model != "suzanne":
-        import models
-
-        p, t = models.load(model, diagonal=0.1)
-        mesh = bpy.data.meshes.new(model)
-        mesh.from_pydata(p.tolist(), [], t.tolist())
-        mesh.shade_smooth()
-        obj = bpy.data.objects.new(model, mesh)
-        bpy.context.scene.collection.objects.link(obj)
-        bpy.data.objects.remove(suzanne)
-        return obj, cam
-    return suzanne, cam
 
 
 def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
@@ -396,13 +309,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
 
-    obj, cam = build_scene(args.model)
+    obj, cam = scenes.build_scene(args.model)
     scene, info = export.export_scene([obj])
     bake_obj = None
     if not (args.no_cycles and args.no_eevee):
-        import demo
-
-        bake_obj = demo.preview_object(obj)  # the evaluated mesh as its own object (same vertices)
+        bake_obj = scenes.preview_object(obj)  # the evaluated mesh as its own object (same vertices)
         bake_obj.data.materials.clear()
     p = np.asarray(scene.vertex_areas)  # part of the cache key via the scene digest below
     scene_key = digest(args.model, scene.vertex_count, scene.triangle_count, p, info.lights, info.world)
@@ -412,7 +323,7 @@ def main(argv=None) -> int:
     rows: list[Row] = []
     steps = len(args.materials)
     for i, name in enumerate(args.materials):
-        m = translucent.Material.preset(name, MM_PER_UNIT)
+        m = translucent.Material.preset(name, scenes.MM_PER_UNIT)
         cyc = None
         if not args.no_cycles:
             progress(i, steps, f"{name}: Cycles bakes")
@@ -424,7 +335,7 @@ def main(argv=None) -> int:
             truth, ref_s, ref_info = ground_truth(scene_key, scene, m, receivers, args.rel_tol, profile)
             if cyc is not None:
                 # The model itself (direct light, integrated exactly) against Cycles, along the normal.
-                w = translucent.layer_weight(m.roughness, 1.0, m.eta) if profile == "cycles" else fresnel_t(m.eta)
+                w = exit_weight(m, profile)
                 rms, mx = worst(translucent.relative_error(truth * (w / np.pi), cyc["values"], weights))
                 rows.append(Row(f"{profile.capitalize()} ground truth", "direct light, exact integral", name,
                                 cyc["label"], rms, mx, ref_s, 0.0,
@@ -442,7 +353,7 @@ def main(argv=None) -> int:
             rows += eevee_rows(bake_obj, m, name, args.eevee_samples, args.reference_spp)
     progress(steps, steps, "done")
     title = (f"{args.model}: {scene.vertex_count} vertices, {len(receivers)} receivers; "
-             f"{machine()}; PRT edits on the CPU, median of 5")
+             f"{cpu_and_cores()}; PRT edits on the CPU, median of 5")
     write_outputs(rows, out, title)
     print((out / "report.md").read_text())
     print(f"CSV, PNG and Markdown in {out}")

@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(__file__))
-import models  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from blender_scripts.lib import models  # noqa: E402
 
 import translucent  # noqa: E402
 

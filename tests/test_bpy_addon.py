@@ -5,7 +5,7 @@ cancelling, save and reload; the user's data stays untouched."""
 import numpy as np
 import pytest
 
-from test_bpy_export import mesh_hash
+from helpers import mesh_hash
 
 pytestmark = pytest.mark.bpy
 

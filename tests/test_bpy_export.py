@@ -1,30 +1,13 @@
 """The add-on's exporter and write-back, in a real (headless) Blender."""
 
-import hashlib
 import math
 
 import numpy as np
 import pytest
 
+from helpers import mesh_hash
+
 pytestmark = pytest.mark.bpy
-
-
-def mesh_hash(mesh) -> str:
-    """Hash of everything a user owns in a mesh: positions, polygons, other attributes."""
-    h = hashlib.sha256()
-    co = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    h.update(co.tobytes())
-    loops = np.empty(len(mesh.loops), np.int32)
-    mesh.loops.foreach_get("vertex_index", loops)
-    h.update(loops.tobytes())
-    for a in mesh.attributes:
-        if a.name == "translucent_preview":
-            continue
-        h.update(a.name.encode())
-        h.update(a.domain.encode())
-        h.update(str(len(a.data)).encode())
-    return h.hexdigest()
 
 
 def test_export_applies_modifiers_in_world_space(empty_blend):

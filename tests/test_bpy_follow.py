@@ -18,8 +18,8 @@ import pathlib
 import numpy as np
 import pytest
 
+from helpers import mesh_hash
 from test_bpy_addon import read_preview
-from test_bpy_export import mesh_hash
 
 pytestmark = pytest.mark.bpy
 

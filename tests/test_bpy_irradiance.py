@@ -46,10 +46,9 @@ def build(bpy):
 
 def bake_direct_diffuse(bpy, obj, samples: int) -> np.ndarray:
     """Cycles' direct diffuse light without the albedo (E / pi) at each vertex."""
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
+    from blender_scripts.lib.cycles_reference import use_cycles
+
+    use_cycles(samples)
     mesh = obj.data
     attr = mesh.color_attributes.new("bake", "FLOAT_COLOR", "POINT")
     mesh.color_attributes.active_color = attr

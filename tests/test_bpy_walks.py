@@ -4,23 +4,17 @@ half-space profile cannot see; `reference_radiance` traces the same walk without
 Measured (1024-spp bakes, 4096 walks per vertex): 3.45 % with Cycles' noise 2.0 % and the
 walks' 1.35 % (2.4 % beyond both); the half-space profile 25.6 %."""
 
-import pathlib
-import sys
-
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.bpy
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "blender_scripts"))
 
 
 def test_walks_through_a_small_sphere_match_a_cycles_bake(empty_blend, tmp_path, monkeypatch):
     bpy = empty_blend
-    import cycles_reference as cr
-
     import translucent
     from addon import export
+    from blender_scripts.lib import cycles_reference as cr
 
     monkeypatch.setattr(cr, "CACHE", tmp_path)
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.005, segments=24, ring_count=12)
@@ -59,18 +53,16 @@ def test_at_an_open_edge_the_reference_samples_where_the_bake_does(empty_blend, 
     1024 spp): bake 0.179 / 0.132 / 0.106; the walk reference entering at the bake points
     0.178 / 0.132 / 0.104 (within 1.6 %), entering at the vertex 0.164 / 0.104 / 0.071 (blue
     33 % low)."""
-    import bake_sample_points
-    import cycles_gap
-    import cycles_reference as cr
-
     import translucent
     from addon import export
+    from blender_scripts.lib import cycles_reference as cr
+    from blender_scripts.lib import scenes
 
     monkeypatch.setattr(cr, "CACHE", tmp_path)
     n = 21
-    obj = bake_sample_points.sheet(n, bake_sample_points.SIZE, 0.0)
+    obj = scenes.sheet(n, scenes.SHEET_SIZE, 0.0)
     scene, _ = export.export_scene([obj])
-    m = cycles_gap.material("aniso08")
+    m = scenes.material("aniso08")
     i, j = np.divmod(np.arange(n * n), n)
     # The edges' vertices less the four corners.
     edge = np.flatnonzero(((i == 0) | (i == n - 1) | (j == 0) | (j == n - 1))
@@ -113,11 +105,10 @@ def test_the_objects_own_light_is_cycles_indirect_light(empty_blend, tmp_path, m
     import math
 
     bpy = empty_blend
-    import cycles_gap
-    import cycles_reference as cr
-
     import translucent
     from addon import export
+    from blender_scripts.lib import cycles_reference as cr
+    from blender_scripts.lib import scenes
 
     monkeypatch.setattr(cr, "CACHE", tmp_path)
     bpy.ops.mesh.primitive_torus_add(major_radius=0.03, minor_radius=0.01, major_segments=48, minor_segments=24)
@@ -160,7 +151,7 @@ def test_the_objects_own_light_is_cycles_indirect_light(empty_blend, tmp_path, m
     centre = (np.abs(p[:, 1]) < 0.008) & (np.abs(p[:, 2]) < 0.008)
     back = centre & (np.abs(p[:, 0] - thick / 2) < 1e-6)
     facing = centre & (np.abs(p[:, 0] - 0.01) < 1e-6)  # the cube's face towards the wall
-    m = cycles_gap.material("skin1")
+    m = scenes.material("skin1")
     bake, _ = cr.bake_vertices(obj, m, 1024)
     scene, _ = export.export_scene([obj])
     assert scene.irradiance()[facing].max() == 0.0  # in the wall's shadow
@@ -185,10 +176,10 @@ def test_without_the_tunnel_the_walks_are_cycles_direct_light_by_a_sunk_ball(emp
     0.052."""
     bpy = empty_blend
     import bmesh
-    import cycles_reference as cr
 
     import translucent
     from addon import export
+    from blender_scripts.lib import cycles_reference as cr
 
     monkeypatch.setattr(cr, "CACHE", tmp_path)
     # A 6 mm ball with a 2.5 mm ball half sunk into its top: one mesh, two shells.

@@ -6,18 +6,15 @@ import sys
 
 import pytest
 
+from blender_scripts.lib import accuracy, models
 from conftest import REPO
-
-sys.path.insert(0, str(REPO / "blender_scripts"))
-import accuracy_prt  # noqa: E402
-import models  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.mark.skipif(not (models.MODELS / "stanford-bunny.obj").exists(), reason="../shared/models is not beside the repo")
 def test_prt_within_one_percent_of_ground_truth_on_the_bunny():
-    rows = accuracy_prt.evaluate("stanford-bunny.obj", receivers=60, coefficients=32, rel_tol=1e-3)
+    rows = accuracy.evaluate("stanford-bunny.obj", receivers=60, coefficients=32, rel_tol=1e-3)
     for r in rows:
         assert max(r["rms"]) < 0.01, r
         # The ground truth states its own uncertainty (difference of its last two levels;

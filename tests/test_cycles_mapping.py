@@ -69,15 +69,14 @@ def test_low_single_scattering_albedo_is_flagged_inexact():
 def ortho_cycles(bpy, ortho_scale, samples):
     """An orthographic camera `ortho_scale` wide as the scene's, Cycles on the CPU at
     `samples` spp, no denoising, 16 x 16 pixels, linear EXR out."""
+    from blender_scripts.lib.cycles_reference import use_cycles
+
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
     cam.data.type, cam.data.ortho_scale = "ORTHO", ortho_scale
     scene = bpy.context.scene
     scene.collection.objects.link(cam)
     scene.camera = cam
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
-    scene.cycles.use_denoising = False
+    use_cycles(samples)
     scene.render.resolution_x = scene.render.resolution_y = 16
     scene.view_settings.view_transform = "Standard"
     scene.render.image_settings.file_format = "OPEN_EXR"
@@ -151,9 +150,9 @@ def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(emp
     the medium, and a shallow walk loses less), against what the specular layer leaves, which
     falls: the view factor (`slab_reflectance` at the view cosine, the walks simulated in a
     half-space, independent of this render) predicts it within 3 % per channel, and
-    tests/test_profiles.py keeps these renders' figures."""
+    tests/helpers.py keeps these renders' figures."""
     import translucent
-    from test_profiles import CYCLES_VIEW_KETCHUP
+    from helpers import CYCLES_VIEW_KETCHUP
 
     bpy = empty_blend
     m = translucent.Material.preset("ketchup")

@@ -2,19 +2,15 @@
 a second request returns the stored result without rendering; any change of input renders
 again. Values are finite, non-negative, one per vertex."""
 
-import pathlib
-import sys
-
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.bpy
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "blender_scripts"))
 
 
 def test_bakes_are_cached_and_keyed_by_their_inputs(empty_blend, tmp_path, monkeypatch):
     bpy = empty_blend
-    import cycles_reference as cr
+    from blender_scripts.lib import cycles_reference as cr
 
     import translucent
 
@@ -44,10 +40,10 @@ def test_bakes_are_cached_and_keyed_by_their_inputs(empty_blend, tmp_path, monke
 
 
 def test_one_bakes_noise_is_read_from_several_seeds():
-    """`cycles_gap.noise_of_one`: bakes that scatter about the truth by a known 10 % (Gaussian,
+    """`metrics.noise_of_one`: bakes that scatter about the truth by a known 10 % (Gaussian,
     per vertex and channel; 5 % in green) read as 10 % (5 %) noisy whatever the number of
     seeds, not the seeds' biased spread (8 seeds: 7 % low) and not their mean's."""
-    import cycles_gap
+    from blender_scripts.lib import metrics
 
     rng = np.random.default_rng(7)
     truth = rng.uniform(0.1, 2.0, (3000, 3))
@@ -56,7 +52,7 @@ def test_one_bakes_noise_is_read_from_several_seeds():
     for seeds in (2, 8):
         bakes = [truth * (1 + sigma * rng.standard_normal(truth.shape)) for _ in range(seeds)]
         # Relative RMS about the mean: sqrt(sum w sigma^2 t^2 / sum w mean^2) = sigma (to 1/sqrt(N)).
-        np.testing.assert_allclose(cycles_gap.noise_of_one(bakes, area), sigma, rtol=0.04)
+        np.testing.assert_allclose(metrics.noise_of_one(bakes, area), sigma, rtol=0.04)
 
 
 def test_a_bake_at_a_few_vertices_is_the_vertex_bake_there(empty_blend, tmp_path, monkeypatch):
@@ -67,8 +63,8 @@ def test_a_bake_at_a_few_vertices_is_the_vertex_bake_there(empty_blend, tmp_path
     noises). Without the move into the corner (a ray cast at the vertex itself) half the bunny's
     receivers read 0 or a grey, uncoloured value. The object comes back as it was."""
     bpy = empty_blend
-    import cycles_gap
-    import cycles_reference as cr
+    from blender_scripts.lib import cycles_reference as cr
+    from blender_scripts.lib import metrics
 
     import translucent
 
@@ -89,8 +85,8 @@ def test_a_bake_at_a_few_vertices_is_the_vertex_bake_there(empty_blend, tmp_path
     assert all(s.material is None for s in obj.material_slots)
     full = [cr.bake_vertices(obj, m, 1024, direct_only=True, seed=s)[0][receivers] for s in range(2)]
     w = np.ones(12)
-    noise = np.hypot(np.array(cycles_gap.noise_of_one(at, w)), np.array(cycles_gap.noise_of_one(full, w))) / np.sqrt(2)
-    apart = np.array(cycles_gap.rel_channels(np.mean(at, 0), np.mean(full, 0), w))
+    noise = np.hypot(np.array(metrics.noise_of_one(at, w)), np.array(metrics.noise_of_one(full, w))) / np.sqrt(2)
+    apart = np.array(metrics.rel_channels(np.mean(at, 0), np.mean(full, 0), w))
     print(f"receivers vs vertex bake {100 * apart} %, noise {100 * noise} %")
     assert np.all(apart < 3 * noise + 0.005), (apart, noise)
     # Lit and unlit receivers alike: none reads far from the vertex bake (the failure read ~0).

@@ -23,7 +23,7 @@ import pytest
 
 import translucent
 from conftest import REPO
-from test_api import plane
+from helpers import disc_integral, plane, sphere
 
 TEAPOT = REPO.parent / "shared" / "models" / "teapot.obj"
 
@@ -132,8 +132,6 @@ def test_teapot_duplicate_positions_differ_only_through_their_normals():
     closed-form inner disc times their irradiance difference, c M(near_radius) (I_i - I_j) (the
     vertex's own irradiance enters through that disc only; c is the share of the disc the
     surface covers, 1/2 on the rims of the teapot's holes), to 1e-5 of the largest B."""
-    from test_stability import disc_integral
-
     p, t = teapot()
     scene = lit(p, t)
     m = translucent.Material.preset("skin1", mm_per_unit=100.0)
@@ -203,8 +201,6 @@ def test_teapot_with_holes_agrees_with_the_reference():
 def test_sphere_with_a_hole_agrees_with_the_reference_at_the_rim(scale):
     """A UV sphere with its top cap removed (an open rim of 24 vertices), lit from above
     into the hole: at the rim, inside and on the outside, within 1 % of the reference."""
-    from test_stability import sphere
-
     p, t = sphere(12, scale)
     keep = np.all(t != 0, axis=1)  # drop the triangles around the north pole
     t = t[keep]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import translucent
-from test_api import plane
+from helpers import plane
 
 
 def lit_plane():
@@ -23,7 +23,7 @@ def test_gpu_and_cpu_edits_agree():
     try:
         message = prt.set_backend("gpu")
     except RuntimeError as e:
-        pytest.skip(f"no wgpu adapter here (CI installs Mesa's lavapipe): {e}")
+        pytest.skip(f"no Vulkan adapter: CI installs Mesa's lavapipe ({e})")
     assert prt.backend == "gpu" and message.startswith("GPU")
     for m in (skin, translucent.Material.preset("ketchup"), translucent.Material(0.0, 5e4, g=0.9)):
         gpu = prt.radiosity(m)
@@ -42,7 +42,7 @@ def test_f16_transport_states_its_error_and_keeps_within_it():
     try:
         prt.set_backend("gpu", half=True)
     except RuntimeError as e:
-        pytest.skip(f"no wgpu adapter here: {e}")
+        pytest.skip(f"no Vulkan adapter: {e}")
     half = prt.radiosity(m)
     bound = prt.last_eval["transport_f16_error"]
     assert 0 < bound < 1e-3

@@ -3,42 +3,14 @@ bunny, the modes against each other, and bad input. Expected values come from
 `reference_radiosity` (brute-force integration) or from a fresh evaluation, never from the
 hierarchy's own earlier output."""
 
-import sys
-
 import numpy as np
 import pytest
 
 import translucent
-from conftest import REPO
-
-sys.path.insert(0, str(REPO / "blender_scripts"))
-import models  # noqa: E402
+from blender_scripts.lib import models
+from helpers import sphere
 
 BUNNY = models.MODELS / "stanford-bunny.obj"
-
-
-def sphere(rings: int = 16, segments: int = 32, radius: float = 0.01):
-    """A closed UV sphere of `radius` (10 mm in metres), outward normals."""
-    p = [(0.0, 0.0, radius)]
-    for i in range(1, rings):
-        th = np.pi * i / rings
-        for s in range(segments):
-            ph = 2 * np.pi * s / segments
-            p.append((radius * np.sin(th) * np.cos(ph), radius * np.sin(th) * np.sin(ph), radius * np.cos(th)))
-    p.append((0.0, 0.0, -radius))
-    last = len(p) - 1
-
-    def ring(i, s):
-        return 1 + (i - 1) * segments + s % segments
-
-    t = []
-    for s in range(segments):
-        t.append((0, ring(1, s), ring(1, s + 1)))
-        t.append((last, ring(rings - 1, s + 1), ring(rings - 1, s)))
-        for i in range(1, rings - 1):
-            t.append((ring(i, s), ring(i + 1, s), ring(i + 1, s + 1)))
-            t.append((ring(i, s), ring(i + 1, s + 1), ring(i, s + 1)))
-    return np.array(p, dtype=np.float32), np.array(t, dtype=np.int64)
 
 
 def lit(p, t, light=(0.03, -0.02, 0.04)):
@@ -116,7 +88,7 @@ def test_vertices_on_the_rims_of_the_bunny_holes_match_the_ground_truth(profile)
 
 
 def test_render_mode_after_a_light_move_equals_on_the_fly():
-    p, t = sphere()
+    p, t = sphere(16, 0.01)
     m = translucent.Material.preset("skin1", mm_per_unit=1000.0)
     h = translucent.Hierarchy(lit(p, t), m, profile="dipole", mode="render")
     before = h.radiosity(m)
@@ -132,7 +104,7 @@ def test_render_mode_after_a_light_move_equals_on_the_fly():
 
 @pytest.mark.parametrize("mode", ["incremental", "on_the_fly", "render"])
 def test_update_positions_after_a_deformation_equals_a_fresh_build(mode):
-    p, t = sphere()
+    p, t = sphere(16, 0.01)
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)
     h = translucent.Hierarchy(lit(p, t), m, profile="dipole", mode=mode)
     before = h.radiosity(m)
@@ -150,7 +122,7 @@ def test_update_positions_after_a_deformation_equals_a_fresh_build(mode):
 
 
 def test_radiance_is_exit_weight_over_pi_times_radiosity_and_report_says_what_was_done():
-    p, t = sphere(8, 16)
+    p, t = sphere(8, 0.01)
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)
     h = translucent.Hierarchy(lit(p, t), m, profile="dipole")
     b = h.radiosity(m)
@@ -168,7 +140,7 @@ def test_radiance_is_exit_weight_over_pi_times_radiosity_and_report_says_what_wa
 
 
 def test_bad_input_raises_value_error_naming_it():
-    p, t = sphere(6, 12)
+    p, t = sphere(6, 0.01)
     scene = lit(p, t)
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)
     with pytest.raises(ValueError, match="profile"):
@@ -201,7 +173,7 @@ def test_the_world_by_nine_coefficients_or_shadowed_on_request():
     """Point 4: the world by its nine SH coefficients, unshadowed (Mertens §5.3: no rays),
     or traced with shadows on request; on a convex sphere, which shadows nothing, the two
     agree to the traced world's noise."""
-    p, t = sphere()
+    p, t = sphere(16, 0.01)
     s = translucent.Scene(p, t)
     s.set_world(color=(0.8, 0.9, 1.0), strength=1.0)
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)

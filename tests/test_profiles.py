@@ -10,26 +10,11 @@ import numpy as np
 import pytest
 
 import translucent
-from test_api import centre_index, plane
+from helpers import CYCLES_SLAB, CYCLES_VIEW, centre_index, plane, slab_material, sphere, sun_plane
 
-# Blender 5.0.1, 128 spp: a 1 x 1 x 0.5 m slab under a white world seen from above, sigma_a
-# (2, 6, 20) and sigma_s 60 per metre, g 0, Roughness 0.5, Specular IOR Level 0 (no specular
-# layer; the walk enters through IOR 1.01): tests/test_cycles_mapping.py renders it.
-CYCLES_SLAB = (0.604, 0.433, 0.244)
 # Cycles 5.0's estimate of the Principled specular layer's albedo (its ggx_gen_schlick_ior_s,
 # ggx_E, ggx_Eavg tables), IOR 1.5, Roughness 0.5, at view cosine 1 and 0.5.
 CYCLES_E_SPEC = {1.0: 0.0374, 0.5: 0.0692}
-
-
-def slab_material():
-    return translucent.Material((2.0, 6.0, 20.0), 60.0, g=0.0, eta=1.01).with_layers(roughness=0.5)
-
-
-def sun_plane(n=81, size=1.0, theta=0.0, strength=1.0):
-    p, t = plane(n, size)
-    s = translucent.Scene(p, t)
-    s.add_sun((math.sin(theta), 0.0, -math.cos(theta)), irradiance=strength)
-    return p, s
 
 
 def test_the_cycles_profile_is_the_default_and_the_dipole_stays_selectable():
@@ -80,18 +65,6 @@ def test_radiance_carries_what_the_specular_layer_leaves():
             * translucent.layer_weight(0.5, 1.0, 1.5) / translucent.layer_weight(0.5, cos, 1.5))
     assert np.all(view > 1.0) and np.all(view < 1.05)  # marble: albedo 0.999, little to gain
     np.testing.assert_allclose(at_60[v], b[v] * (1 - CYCLES_E_SPEC[0.5]) * view / math.pi, rtol=5e-3)
-
-
-# Blender 5.0.1, 256 spp: a 40 cm block of ketchup (the preset at 1 mm = 1/1000 unit, Roughness
-# 0.5, IOR 1.3) under a sun along its normal, seen orthographically at 60 and 75 degrees, over
-# the same seen along the normal; the specular layer's own reflection taken off (the same render
-# with Base Color black and Subsurface Weight 0): what the subsurface lobe sends
-# (tests/test_bpy_walks.py renders it).
-CYCLES_VIEW_KETCHUP = {60: (1.143, 1.207, 1.204), 75: (1.188, 1.314, 1.317)}
-# The same for skin1 and marble (out/diag/view_dep.py at this project's 24th stop).
-CYCLES_VIEW = {"ketchup": CYCLES_VIEW_KETCHUP,
-               "skin1": {60: (1.061, 1.120, 1.155), 75: (1.052, 1.144, 1.207)},
-               "marble": {60: (0.999, 0.999, 1.004), 75: (0.960, 0.962, 0.968)}}
 
 
 @pytest.mark.parametrize("name", ["ketchup", "skin1", "marble"])
@@ -202,8 +175,6 @@ def test_the_far_side_of_a_sun_lit_marble_sphere_is_within_one_percent(profile):
     thousandth of the lit side's B. Before: 5.7-6.7 % (dipole) and 15-30 % (Cycles' profile)
     from the ground truth there, from the area-weighted fit leaving the tail to chance and the
     support radius cutting it. Measured now: 0.3 % and 0.4-0.6 %; the lit side 0.02 %."""
-    from test_stability import sphere
-
     p, t = sphere(32, 10.0)  # millimetres
     s = translucent.Scene(p, t)
     sun = np.array([0.3, 0.2, -1.0]) / np.linalg.norm([0.3, 0.2, -1.0])
@@ -234,8 +205,6 @@ def test_the_objects_own_light_adds_where_it_can_fall_back_and_nowhere_else():
     """Interreflection (on by default with Cycles' profile, three bounces): a convex sphere
     cannot light itself, so B is unchanged to the bit; two faces of a V under a sun light each
     other, so each vertex of the V gains, by at most the series of what its partner sends."""
-    from test_stability import sphere
-
     p, t = sphere(12, 0.05)
     s = translucent.Scene(p, t)
     s.add_sun((0.2, 0.1, -1.0), 2.0)

@@ -4,17 +4,12 @@ scattering. Expected values come from the brute-force integral of eq. 5
 no basis) or from the multiple-scattering-only precompute, never from PRT's own single
 scattering. The plane limit in closed form is `cargo test --test single_scattering`."""
 
-import sys
-
 import numpy as np
 import pytest
 
 import translucent
-from conftest import REPO
-from test_api import plane
-
-sys.path.insert(0, str(REPO / "blender_scripts"))
-import models  # noqa: E402
+from blender_scripts.lib import models
+from helpers import plane, sun_plane as lit_plane
 
 MARBLE = translucent.Material.preset("marble", mm_per_unit=1000.0)
 SKIN = translucent.Material.preset("skin1", mm_per_unit=1000.0)
@@ -25,10 +20,7 @@ def with_g(m, g):
 
 
 def sun_plane(n=21, size=0.05):
-    p, t = plane(n, size)
-    s = translucent.Scene(p, t)
-    s.add_sun(direction=(0.3, 0.0, -1.0), irradiance=2.0)
-    return s
+    return lit_plane(n, size, direction=(0.3, 0.0, -1.0), strength=2.0)[1]
 
 
 def rel_rms(got, want):
@@ -97,7 +89,7 @@ def test_gpu_and_cpu_agree_on_multiple_plus_single_scattering():
     try:
         prt.set_backend("gpu")
     except RuntimeError as e:
-        pytest.skip(f"no wgpu adapter here (CI installs Mesa's lavapipe): {e}")
+        pytest.skip(f"no Vulkan adapter: CI installs Mesa's lavapipe ({e})")
     assert prt.report["single"]["on_gpu"] is True
     for (m, ph, e), (want, want_l1) in zip(cases, cpu):
         got = prt.radiance(m, eye=e, phase=ph)
@@ -183,16 +175,16 @@ def test_eddington_and_hg_agree_at_g_zero_only():
     assert not np.allclose(hg[c], ed[c], rtol=0.05)
 
 
-@pytest.mark.skipif(not BUNNY.exists(), reason="../shared/models is not beside the repo")
-@pytest.mark.parametrize("kind", ["world", "area"])
-def test_spread_light_by_legendre_moments_against_brute_force(kind):
-    """Point 2: the world and area lights as Y_lm moments of the light's directions, HG met by
-    the addition theorem at an order chosen from the representatives' g (order 6 for 0.3);
-    beyond that order the error estimate grows with g and covers what is measured."""
+@pytest.fixture(scope="module", params=["world", "area"])
+def spread(request):
+    """The bunny under the world or an area light, MS + SS precomputed for g = 0.3: the scene,
+    the positions, the Prt (on the CPU) and an eye."""
+    if not BUNNY.exists():
+        pytest.skip("../shared/models is not beside the repo")
     p, t = models.load("stanford-bunny.obj")
     s = translucent.Scene(p, t)
     d = float(np.linalg.norm(p.max(0) - p.min(0)))
-    if kind == "world":
+    if request.param == "world":
         s.set_world(color=(1.0, 0.9, 0.8), strength=1.0)
     else:
         c = p.mean(0)
@@ -202,9 +194,17 @@ def test_spread_light_by_legendre_moments_against_brute_force(kind):
     reps = [with_g(MARBLE, 0.3), with_g(SKIN, 0.3)]
     prt = translucent.Prt(s, reps, profile="dipole", single_scattering=True, coefficients=16,
                           backend="cpu", samples=20_000)
+    eye = p.mean(axis=0) + np.array([0.05, -0.25, 0.1])
+    return s, p, prt, eye
+
+
+def test_spread_light_by_legendre_moments_against_brute_force(spread):
+    """Point 2: the world and area lights as Y_lm moments of the light's directions, HG met by
+    the addition theorem at an order chosen from the representatives' g (order 6 for 0.3);
+    beyond that order the error estimate grows with g and covers what is measured."""
+    s, p, prt, eye = spread
     single = prt.report["single"]
     assert single["spread_groups"] == 1 and single["legendre_order"] == 6
-    eye = p.mean(axis=0) + np.array([0.05, -0.25, 0.1])
     receivers = np.arange(0, len(p), len(p) // 40)
     for g, bar in ((0.3, 0.03), (0.6, None)):
         m = with_g(MARBLE, g)
@@ -218,12 +218,19 @@ def test_spread_light_by_legendre_moments_against_brute_force(kind):
         else:
             # Beyond the stored order: the residual of HG's series says so.
             assert estimate > 0.3 and estimate >= err, (estimate, err)
-    # The GPU kernel takes the moments too, and agrees with the CPU.
+
+
+def test_the_gpu_kernel_takes_the_spread_lights_moments_too(spread):
+    """The GPU kernel takes the moments too, and agrees with the CPU to 1e-5 relative."""
+    _, _, prt, eye = spread
     cpu = prt.radiance(with_g(MARBLE, 0.3), eye=eye)
     try:
         prt.set_backend("gpu")
-    except RuntimeError:
-        return
-    assert prt.report["single"]["on_gpu"] is True
-    np.testing.assert_allclose(prt.radiance(with_g(MARBLE, 0.3), eye=eye), cpu, rtol=1e-5,
-                               atol=1e-5 * float(cpu.max()))
+    except RuntimeError as e:
+        pytest.skip(f"no Vulkan adapter: {e}")
+    try:
+        assert prt.report["single"]["on_gpu"] is True
+        np.testing.assert_allclose(prt.radiance(with_g(MARBLE, 0.3), eye=eye), cpu, rtol=1e-5,
+                                   atol=1e-5 * float(cpu.max()))
+    finally:
+        prt.set_backend("cpu")

@@ -5,7 +5,7 @@ set-up (how many lights can reach the mesh, how many shadow rays a point light c
 import numpy as np
 
 import translucent
-from test_api import plane
+from helpers import plane
 
 MARBLE = translucent.Material.preset("marble", mm_per_unit=1000.0)
 

@@ -17,27 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import translucent
-from test_api import centre_index, fresnel_t, plane
-
-
-def sphere(n: int = 12, radius: float = 1.0):
-    """A closed UV sphere: (n+1) rings x 2n segments, poles shared."""
-    verts = [(0.0, 0.0, radius)]
-    for i in range(1, n):
-        th = math.pi * i / n
-        for j in range(2 * n):
-            ph = math.pi * j / n
-            verts.append((radius * math.sin(th) * math.cos(ph), radius * math.sin(th) * math.sin(ph), radius * math.cos(th)))
-    verts.append((0.0, 0.0, -radius))
-    seg, last = 2 * n, len(verts) - 1
-    ring = lambda i, j: 1 + (i - 1) * seg + (j % seg)  # noqa: E731
-    tris = [(0, ring(1, j), ring(1, j + 1)) for j in range(seg)]
-    for i in range(1, n - 1):
-        for j in range(seg):
-            a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j), ring(i + 1, j + 1)
-            tris += [(a, c, d), (a, d, b)]
-    tris += [(last, ring(n - 1, j + 1), ring(n - 1, j)) for j in range(seg)]
-    return np.array(verts, np.float32), np.array(tris, np.int64)
+from helpers import boundary_a, centre_index, disc_integral, entering, plane, rd_total, sphere
 
 
 coefficient = st.one_of(st.just(0.0), st.floats(1e-3, 1e4))
@@ -129,22 +109,6 @@ def material_of(p) -> translucent.Material:
     return translucent.Material(p["sigma_a"], ss, g=p["g"], eta=p["eta"])
 
 
-def boundary_a(eta: float) -> tuple[float, float]:
-    """A = (1 + F_dr)/(1 - F_dr) and dA/d eta, F_dr the Egan-Hilgeman fit (Jensen 2001)."""
-    f = -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
-    df = 2.880 / eta**3 - 0.710 / eta**2 + 0.0636
-    return (1 + f) / (1 - f), 2 * df / (1 - f) ** 2
-
-
-def jensen_total(sigma_a: float, sigma_s_prime: float, eta: float) -> float:
-    """R_d,total = a'/2 (1 + e^{-4/3 A s}) e^{-s}, s = sqrt(3 sigma_a / sigma_t') (no 1 - a')."""
-    if sigma_s_prime <= 0.0:
-        return 0.0
-    st_ = sigma_a + sigma_s_prime
-    s = math.sqrt(3.0 * sigma_a / st_)
-    return sigma_s_prime / st_ / 2 * (1 + math.exp(-4 / 3 * boundary_a(eta)[0] * s)) * math.exp(-s)
-
-
 @settings(max_examples=3000, deadline=None, derandomize=True)
 @given(p=materials)
 def test_total_reflectance_is_finite_at_most_one_and_jensen_closed_form(p):
@@ -152,7 +116,7 @@ def test_total_reflectance_is_finite_at_most_one_and_jensen_closed_form(p):
     for c, total in enumerate(m.total_diffuse_reflectance):
         assert math.isfinite(total) and 0.0 <= total <= 1.0
         sp = (1.0 - m.g) * m.sigma_s[c]
-        assert abs(total - jensen_total(m.sigma_a[c], sp, m.eta)) <= 1e-12
+        assert abs(total - rd_total(m.sigma_a[c], sp, m.eta)) <= 1e-12
 
 
 @settings(max_examples=2000, deadline=None, derandomize=True)
@@ -303,30 +267,11 @@ def test_sun_on_a_plane_gives_the_closed_form_bracket_at_the_centre(p, scale, th
     scene = translucent.Scene(pos, tri)
     scene.add_sun((math.sin(theta), 0.0, -math.cos(theta)), irradiance=1.0)
     b = translucent.Prt(scene, m, samples=40_000, backend="cpu", profile="dipole").radiosity(m)[centre_index(pos)]
-    i = fresnel_t(m.eta, math.cos(theta)) * math.cos(theta)
+    i = entering(m.eta, math.cos(theta))
     for c in range(3):
         hi = i * disc_integral(m, c, scale / math.sqrt(2))
         lo = i * (disc_integral(m, c, scale / 2) - 1e-3 * m.total_diffuse_reflectance[c])
         assert 0.99 * lo - 1e-30 <= b[c] <= 1.01 * hi + 1e-30, (c, lo, b[c], hi)
-
-
-def disc_integral(m: translucent.Material, c: int, rho: float) -> float:
-    """M(rho) = 2 pi int_0^rho R_d r dr = a'/2 sum_z (e^{-sigma_tr z} - z e^{-sigma_tr d}/d),
-    d = sqrt(rho^2 + z^2) (Jensen's dipole in closed form), written out apart from the core."""
-    sa, sp = m.sigma_a[c], (1 - m.g) * m.sigma_s[c]
-    if sp <= 0:
-        return 0.0
-    st_ = sa + sp
-    zr = 1 / st_
-    zv = zr * (1 + 4 * boundary_a(m.eta)[0] / 3)
-    tr = math.sqrt(3 * sa * st_)
-    total = 0.0
-    for z in (zr, zv):
-        # e^{-tr z} (1 - (z/d) e^{-tr (d - z)}), d - z = rho^2 / (d + z): no cancellation for
-        # rho << z (an optically thin plane).
-        dz = rho * rho / (math.hypot(rho, z) + z)
-        total += math.exp(-tr * z) * -math.expm1(-math.log1p(dz / z) - tr * dz)
-    return 0.5 * sp / st_ * total
 
 
 @settings(max_examples=24, deadline=None, derandomize=True)

@@ -9,9 +9,7 @@ import numpy as np
 import pytest
 
 import translucent
-from test_api import centre_index, plane
-from test_profiles import CYCLES_SLAB, slab_material, sun_plane
-from test_stability import sphere
+from helpers import CYCLES_SLAB, centre_index, slab_material, sphere, sun_plane
 
 
 def test_walks_through_an_open_plane_give_the_cycles_slab_render():

@@ -6,6 +6,10 @@
 - `bake_receivers`: the same at a few vertices only, at a cost that does not grow with the
   mesh (selected-to-active onto the corners' sample points), every sample taken.
 - `render_image`: a camera render with Cycles or EEVEE (linear float RGBA).
+- `render_beside`: the demo's camera render of the source object in the mapped material
+  (PNG, not cached), beside the preview object it hides meanwhile.
+- `use_cycles`: the one place the scripts and tests set Cycles up (engine, device, samples,
+  seed, denoising).
 
 Each result is cached under out/cache/cycles/<key>.npz, the key hashing the evaluated
 geometry, the lights, the material and the settings; the wall time of the original render is
@@ -25,7 +29,7 @@ import numpy as np
 import translucent
 from translucent import cycles
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 CACHE = REPO / "out" / "cache" / "cycles"
 
 
@@ -95,14 +99,15 @@ def _with_material(obj, mat):
     return old
 
 
-def _use_cycles(samples: int, seed: int = 0) -> bpy.types.Scene:
-    """Cycles on the CPU at `samples` with `seed`, no denoising (the others as the scene has them:
-    Blender's default adaptive sampling)."""
+def use_cycles(samples: int, seed: int = 0, denoising: bool = False) -> bpy.types.Scene:
+    """Cycles on the CPU at `samples` with `seed`, the denoiser on or off (the other settings as
+    the scene has them: Blender's default adaptive sampling). References take the defaults, no
+    denoising: a denoised answer is not Cycles' estimate."""
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = samples
-    scene.cycles.use_denoising = False
+    scene.cycles.use_denoising = denoising
     scene.cycles.seed = seed
     return scene
 
@@ -126,7 +131,7 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
                                *_material_key(material)[4:])).encode()).hexdigest()[:24]
 
     def compute():
-        scene = _use_cycles(samples, seed)
+        scene = use_cycles(samples, seed)
         was_adaptive = scene.cycles.use_adaptive_sampling
         scene.cycles.use_adaptive_sampling = adaptive
         mat = principled_material(material)
@@ -212,7 +217,7 @@ def bake_receivers(obj: bpy.types.Object, material: translucent.Material, sample
         added_uv = not mesh.uv_layers
         if added_uv:
             mesh.uv_layers.new(name="Translucent bake")
-        scene = _use_cycles(samples, seed)
+        scene = use_cycles(samples, seed)
         was_adaptive = scene.cycles.use_adaptive_sampling
         scene.cycles.use_adaptive_sampling = False
         mat = principled_material(material)
@@ -259,7 +264,7 @@ def render_image(obj: bpy.types.Object, material: translucent.Material, samples:
     def compute():
         scene = bpy.context.scene
         if engine == "CYCLES":
-            _use_cycles(samples)
+            use_cycles(samples)
         else:
             names = [e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items]
             eevee = next((n for n in ("BLENDER_EEVEE", "BLENDER_EEVEE_NEXT") if n in names), None)
@@ -289,11 +294,20 @@ def render_image(obj: bpy.types.Object, material: translucent.Material, samples:
     return _cached(key, compute)
 
 
-def image_error(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
-    """Relative RMSE and max relative error over the object's pixels (truth alpha > 0.99),
-    worst channel (DESIGN.md's image metric)."""
-    mask = truth[..., 3] > 0.99
-    e, t = estimate[mask][:, :3].astype(np.float64), truth[mask][:, :3].astype(np.float64)
-    rms = np.sqrt(((e - t) ** 2).mean(axis=0) / np.maximum((t**2).mean(axis=0), 1e-30))
-    mx = (np.abs(e - t) / np.maximum(t, 1e-3 * t.max())).max(axis=0)
-    return float(rms.max()), float(mx.max())
+def render_beside(source: bpy.types.Object, preview: bpy.types.Object, material: translucent.Material,
+                  samples: int, path: pathlib.Path) -> None:
+    """The scene's camera view in Cycles, written to `path` (PNG, 256 px, not cached): the
+    source object (modifiers and all) in the Principled BSDF random walk mapped from `material`
+    (`principled_material`), the preview object hidden meanwhile. Seed 0 and Blender's denoiser
+    on, as a new file has them: a picture to look at beside the preview, not a reference."""
+    mat = principled_material(material, "Cycles " + path.stem)
+    source.data.materials.clear()
+    source.data.materials.append(mat)
+    source.hide_render, preview.hide_render = False, True
+    scene = use_cycles(samples, seed=0, denoising=True)
+    scene.render.resolution_x = scene.render.resolution_y = 256
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    source.hide_render, preview.hide_render = True, False

@@ -10,7 +10,7 @@ import numpy as np
 
 import translucent
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 # TRANSLUCENT_MODELS points elsewhere (the device machine, where ../shared does not travel).
 MODELS = pathlib.Path(os.environ.get("TRANSLUCENT_MODELS", REPO.parent / "shared" / "models"))
 

@@ -1,0 +1,163 @@
+"""What the Python tests judge by and build with, written once and apart from the code under
+test: closed forms (Fresnel, Jensen 2001's total diffuse reflectance and its disc integral,
+the plane limit), figures measured in Cycles, and the meshes several tests light (a plane, a
+UV sphere). Nothing here calls the code under test for an expected value."""
+
+import hashlib
+import math
+
+import numpy as np
+
+# ---------------------------------------------------------------- closed forms
+
+
+def fresnel_t(eta: float, cos_i: float) -> float:
+    """Unpolarised dielectric Fresnel transmittance, written out independently."""
+    sin_t = math.sqrt(max(0.0, 1 - cos_i**2)) / eta
+    cos_t = math.sqrt(1 - sin_t**2)
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    return 1 - 0.5 * (rs**2 + rp**2)
+
+
+def boundary_a(eta: float) -> tuple[float, float]:
+    """A = (1 + F_dr)/(1 - F_dr) and dA/d eta, F_dr the Egan-Hilgeman fit (Jensen 2001)."""
+    f = -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
+    df = 2.880 / eta**3 - 0.710 / eta**2 + 0.0636
+    return (1 + f) / (1 - f), 2 * df / (1 - f) ** 2
+
+
+def rd_total(sigma_a: float, sigma_s_prime: float, eta: float) -> float:
+    """Jensen 2001's R_d,total = a'/2 (1 + e^{-4/3 A s}) e^{-s}, s = sqrt(3 sigma_a / sigma_t')
+    (= sqrt(3 (1 - a')), written without the 1 - a' that cancels for a' near 1)."""
+    if sigma_s_prime <= 0.0:
+        return 0.0
+    st_ = sigma_a + sigma_s_prime
+    s = math.sqrt(3.0 * sigma_a / st_)
+    return sigma_s_prime / st_ / 2 * (1 + math.exp(-4 / 3 * boundary_a(eta)[0] * s)) * math.exp(-s)
+
+
+def disc_integral(m, c: int, rho: float) -> float:
+    """M(rho) = 2 pi int_0^rho R_d r dr = a'/2 sum_z (e^{-sigma_tr z} - z e^{-sigma_tr d}/d),
+    d = sqrt(rho^2 + z^2) (Jensen's dipole in closed form), written out apart from the core;
+    channel `c` of the material `m`."""
+    sa, sp = m.sigma_a[c], (1 - m.g) * m.sigma_s[c]
+    if sp <= 0:
+        return 0.0
+    st_ = sa + sp
+    zr = 1 / st_
+    zv = zr * (1 + 4 * boundary_a(m.eta)[0] / 3)
+    tr = math.sqrt(3 * sa * st_)
+    total = 0.0
+    for z in (zr, zv):
+        # e^{-tr z} (1 - (z/d) e^{-tr (d - z)}), d - z = rho^2 / (d + z): no cancellation for
+        # rho << z (an optically thin plane).
+        dz = rho * rho / (math.hypot(rho, z) + z)
+        total += math.exp(-tr * z) * -math.expm1(-math.log1p(dz / z) - tr * dz)
+    return 0.5 * sp / st_ * total
+
+
+def entering(eta: float, cos_i: float, irradiance: float = 1.0) -> float:
+    """The irradiance a sun of `irradiance` at cos_i from the normal sends into the medium:
+    F_t(cos_i) E cos_i."""
+    return fresnel_t(eta, cos_i) * irradiance * cos_i
+
+
+def plane_limit(sigma_a: float, sigma_s_prime: float, eta: float, cos_i: float, irradiance: float) -> float:
+    """B far inside an infinite sun-lit plane (the dipole): F_t(cos_i) E cos_i R_d,total."""
+    return entering(eta, cos_i, irradiance) * rd_total(sigma_a, sigma_s_prime, eta)
+
+
+# ---------------------------------------------------------------- measured in Cycles
+
+# Blender 5.0.1, 128 spp: a 1 x 1 x 0.5 m slab under a white world seen from above, sigma_a
+# (2, 6, 20) and sigma_s 60 per metre, g 0, Roughness 0.5, Specular IOR Level 0 (no specular
+# layer; the walk enters through IOR 1.01): tests/test_cycles_mapping.py renders it.
+CYCLES_SLAB = (0.604, 0.433, 0.244)
+
+# Blender 5.0.1, 256 spp: a 40 cm block of ketchup (the preset at 1 mm = 1/1000 unit, Roughness
+# 0.5, IOR 1.3) under a sun along its normal, seen orthographically at 60 and 75 degrees, over
+# the same seen along the normal; the specular layer's own reflection taken off (the same render
+# with Base Color black and Subsurface Weight 0): what the subsurface lobe sends
+# (tests/test_cycles_mapping.py renders it).
+CYCLES_VIEW_KETCHUP = {60: (1.143, 1.207, 1.204), 75: (1.188, 1.314, 1.317)}
+# The same renders for skin1 and marble.
+CYCLES_VIEW = {"ketchup": CYCLES_VIEW_KETCHUP,
+               "skin1": {60: (1.061, 1.120, 1.155), 75: (1.052, 1.144, 1.207)},
+               "marble": {60: (0.999, 0.999, 1.004), 75: (0.960, 0.962, 0.968)}}
+
+
+def slab_material():
+    """The medium of CYCLES_SLAB."""
+    import translucent
+
+    return translucent.Material((2.0, 6.0, 20.0), 60.0, g=0.0, eta=1.01).with_layers(roughness=0.5)
+
+
+# ---------------------------------------------------------------- meshes
+
+
+def plane(n: int = 41, size: float = 0.2):
+    """A flat square grid in z = 0 (metres), n x n vertices, normal +Z."""
+    xs = np.linspace(-size / 2, size / 2, n, dtype=np.float32)
+    x, y = np.meshgrid(xs, xs)
+    p = np.stack([x.ravel(), y.ravel(), np.zeros(n * n, np.float32)], axis=1)
+    i = np.arange(n - 1)
+    a = (i[None, :] + n * i[:, None]).ravel()
+    t = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    return p, t
+
+
+def centre_index(p: np.ndarray) -> int:
+    """The vertex nearest the origin (the centre of `plane`)."""
+    return int(np.argmin(np.linalg.norm(p, axis=1)))
+
+
+def sun_plane(n: int = 81, size: float = 1.0, theta: float = 0.0, strength: float = 1.0, direction=None):
+    """`plane(n, size)` under a sun of irradiance `strength`, `theta` from the normal in the
+    xz plane (or travelling along `direction`): the positions and the scene."""
+    import translucent
+
+    p, t = plane(n, size)
+    s = translucent.Scene(p, t)
+    s.add_sun((math.sin(theta), 0.0, -math.cos(theta)) if direction is None else direction, irradiance=strength)
+    return p, s
+
+
+def sphere(n: int = 12, radius: float = 1.0):
+    """A closed UV sphere: (n+1) rings x 2n segments, poles shared, outward normals."""
+    verts = [(0.0, 0.0, radius)]
+    for i in range(1, n):
+        th = math.pi * i / n
+        for j in range(2 * n):
+            ph = math.pi * j / n
+            verts.append((radius * math.sin(th) * math.cos(ph), radius * math.sin(th) * math.sin(ph), radius * math.cos(th)))
+    verts.append((0.0, 0.0, -radius))
+    seg, last = 2 * n, len(verts) - 1
+    ring = lambda i, j: 1 + (i - 1) * seg + (j % seg)  # noqa: E731
+    tris = [(0, ring(1, j), ring(1, j + 1)) for j in range(seg)]
+    for i in range(1, n - 1):
+        for j in range(seg):
+            a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j), ring(i + 1, j + 1)
+            tris += [(a, c, d), (a, d, b)]
+    tris += [(last, ring(n - 1, j + 1), ring(n - 1, j)) for j in range(seg)]
+    return np.array(verts, np.float32), np.array(tris, np.int64)
+
+
+def mesh_hash(mesh) -> str:
+    """Hash of everything a user owns in a Blender mesh: positions, polygons, other attributes
+    (the add-on's own `translucent_preview` left out)."""
+    h = hashlib.sha256()
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    h.update(co.tobytes())
+    loops = np.empty(len(mesh.loops), np.int32)
+    mesh.loops.foreach_get("vertex_index", loops)
+    h.update(loops.tobytes())
+    for a in mesh.attributes:
+        if a.name == "translucent_preview":
+            continue
+        h.update(a.name.encode())
+        h.update(a.domain.encode())
+        h.update(str(len(a.data)).encode())
+    return h.hexdigest()
