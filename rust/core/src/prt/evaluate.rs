@@ -1,0 +1,328 @@
+//! An edit (Xu 2007 §5, eq. 9): the material's profile fitted on the basis, one dot product
+//! per vertex, the walks' term and the object's own light rescaled, radiance from radiosity.
+
+use super::knots::error_estimate;
+use super::own_light::{sent_on, totals};
+use super::{single, Prt};
+use crate::error::{Error, Result};
+use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
+use crate::optics::Material;
+use crate::profiles::{Model, Profile, RadialProfile};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// An edit whose estimated error exceeds this, or `REFRESH_FACTOR` times what the
+/// representatives had, is outside what the knots and samples were chosen for.
+pub const REFRESH_FLOOR: f64 = 0.01;
+pub const REFRESH_FACTOR: f64 = 3.0;
+
+/// A material projected on the basis: the dot-product coefficients per channel and the fit's
+/// quality.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coefficients {
+    /// Per channel: [M(near_radius), c_0 .. c_{n-1}].
+    pub vectors: [Vec<f32>; 3],
+    /// Per channel: the profile's point mass (light returned where it entered: Cycles'
+    /// diffuse lobe), added as point_mass x I(x_o) after the dot product.
+    pub point_mass: [f64; 3],
+    /// Relative L2 error of the fitted profile over the basis domain (Xu eq. 18).
+    pub fit_error: [f64; 3],
+    /// Estimated relative error of B (see `Evaluation::error_estimate`).
+    pub error_estimate: [f64; 3],
+}
+
+/// What only PRT reports of one evaluation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrtDetails {
+    /// Relative L2 error of the fitted profile over the basis domain, per channel (Xu eq. 18).
+    pub fit_error: [f64; 3],
+    pub fit_seconds: f64,
+    /// The whole dot product, GPU transfers included.
+    pub dot_seconds: f64,
+    /// Upload, dispatch and readback when the GPU ran it.
+    pub gpu: Option<crate::gpu::GpuTimings>,
+}
+
+/// One material evaluated by PRT (`evaluation::Evaluation`): B or L per vertex; the error
+/// estimate per channel is the fit error weighted by the share of the profile's total the
+/// basis carries, plus the tail beyond the support radius and the walks' noise.
+pub type Evaluation = crate::evaluation::Evaluation<PrtDetails>;
+
+impl Prt {
+    /// Fits the material's profile R on the basis (Xu 2007 eq. 8, 18) and returns, per
+    /// channel, the coefficient vector of the dot product: [M(near_radius), c_0 .. c_{n-1}],
+    /// M the profile's disc integral, and the profile's point mass.
+    pub fn coefficients(&self, material: &Material) -> Result<Coefficients> {
+        self.check_eta(material)?;
+        self.coefficients_of(&self.model.profiles(material)?)
+    }
+
+    /// The material's index of refraction is the one the irradiance was computed for.
+    fn check_eta(&self, material: &Material) -> Result<()> {
+        let eta = self.model.irradiance_eta(material);
+        if (eta - self.eta).abs() > 1e-9 {
+            return Err(Error::InvalidArgument(format!(
+                "this transport was precomputed for eta = {}, the material has eta = {}: \
+                 precompute again for the new index of refraction",
+                self.eta, eta
+            )));
+        }
+        Ok(())
+    }
+
+    /// `coefficients` for the material's three profiles.
+    fn coefficients_of(&self, profiles: &[Profile; 3]) -> Result<Coefficients> {
+        let (lo, hi) = self.basis().domain();
+        let mut fit_error = [0.0; 3];
+        let mut estimate = [0.0; 3];
+        let coeffs = std::array::from_fn(|c| {
+            let p = &profiles[c];
+            let fit = self.fitter.fit(&|r| p.value(r));
+            fit_error[c] = fit.rel_l2_error;
+            estimate[c] = error_estimate(&fit, p, lo, hi, self.whole_mesh);
+            let near = p.disc_integral(self.near_radius);
+            std::iter::once(near as f32)
+                .chain(crate::basis::edit_coefficients(&fit.coefficients))
+                .collect()
+        });
+        Ok(Coefficients {
+            vectors: coeffs,
+            point_mass: std::array::from_fn(|c| profiles[c].point_mass()),
+            fit_error,
+            error_estimate: estimate,
+        })
+    }
+
+    /// Whether an evaluation's estimated error says the material has left the range the knots
+    /// and samples were chosen for: above `REFRESH_FLOOR` and above `REFRESH_FACTOR` times the
+    /// representatives' own error. A new precompute with this material among the
+    /// representatives brings it back.
+    pub fn refresh_advised(&self, error_estimate: &[f64; 3]) -> bool {
+        let worst = error_estimate.iter().copied().fold(0.0, f64::max);
+        // The walks' own noise is there at the representatives too: part of the baseline.
+        let noise = self
+            .report
+            .geometry
+            .as_ref()
+            .map_or(0.0, |g| g.noise.iter().copied().fold(0.0, f64::max));
+        worst > REFRESH_FLOOR.max(REFRESH_FACTOR * (self.report.representative_error + noise))
+    }
+
+    /// Multiple-scattering radiosity B = sum_j c_j T_j per vertex and channel (Xu 2007 eq. 9
+    /// without the F_t/pi factor).
+    pub fn radiosity(&self, material: &Material) -> Result<Evaluation> {
+        self.radiosity_with(material, true)
+    }
+
+    /// As `radiosity`; `bounce` false leaves out the object's own light even where it was
+    /// precomputed (direct light only: what the ground truth integrates).
+    pub fn radiosity_with(&self, material: &Material, bounce: bool) -> Result<Evaluation> {
+        self.radiosity_parts(material, bounce, true)
+    }
+
+    /// As `radiosity_with`; `walks` false also leaves out the walks' geometry term: the
+    /// half-space profile alone, what `reference` integrates.
+    pub fn radiosity_parts(
+        &self,
+        material: &Material,
+        bounce: bool,
+        walks: bool,
+    ) -> Result<Evaluation> {
+        self.radiosity_inner(material, bounce, walks, None)
+            .map(|(e, _)| e)
+    }
+
+    /// As `radiosity_parts`; with `single` (on the GPU only) single scattering's kernel runs
+    /// in the same submission and its L^(1) comes back beside B.
+    fn radiosity_inner(
+        &self,
+        material: &Material,
+        bounce: bool,
+        walks: bool,
+        single: Option<&crate::gpu::SingleEdit>,
+    ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
+        let t0 = Instant::now();
+        self.check_eta(material)?;
+        // The material's profiles, once: the fit, the walks' term and the bounce all read them.
+        let profiles = self.model.profiles(material)?;
+        let c = self.coefficients_of(&profiles)?;
+        let fit_seconds = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let (mut radiosity, l1, gpu) = match &self.gpu {
+            Some(gpu) => {
+                let (b, l1, t) =
+                    gpu.evaluate(&self.transport.scaled(&c.vectors).concat(), single)?;
+                (b, l1, Some(t))
+            }
+            None => (self.transport.dot(&c.vectors), None, None),
+        };
+        if c.point_mass.iter().any(|&m| m > 0.0) {
+            let k = c.point_mass.map(|m| m as f32);
+            radiosity
+                .par_iter_mut()
+                .zip(self.vertex_irradiance.par_iter())
+                .for_each(|(b, i)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * i[ch]));
+        }
+        let mut error_estimate = c.error_estimate;
+        if let Some(g) = self.geometry.as_ref().filter(|_| walks) {
+            let added = g.add_to(&mut radiosity, &profiles);
+            for (e, a) in error_estimate.iter_mut().zip(added) {
+                *e += a;
+            }
+        }
+        if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
+            let receiving = totals(&profiles);
+            let albedo = sent_on(self.model, material, &profiles, 1.0);
+            // How much more or less light the edited material sends out than the source did.
+            let ratio: [f64; 3] = std::array::from_fn(|ch| {
+                if bounce.source_albedo[ch] > 0.0 {
+                    albedo[ch] / bounce.source_albedo[ch]
+                } else {
+                    0.0
+                }
+            });
+            let k: [f32; 3] = std::array::from_fn(|ch| (receiving[ch] * ratio[ch]) as f32);
+            radiosity
+                .par_iter_mut()
+                .zip(bounce.irradiance.par_iter())
+                .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
+            if let Some(g) = bounce.walked.as_ref().filter(|_| walks) {
+                // Its noise is relative to the indirect light, a share of B.
+                let share = self.report.interreflection_share;
+                let added = g.add_scaled_to(&mut radiosity, &profiles, ratio.map(|r| r as f32));
+                for (e, a) in error_estimate.iter_mut().zip(added) {
+                    *e += if a >= 1.0 { a } else { a * share };
+                }
+            }
+        }
+        let dot_seconds = t1.elapsed().as_secs_f64();
+        Ok((
+            Evaluation {
+                values: radiosity,
+                quantity: Quantity::Radiosity,
+                error_estimate: Some(error_estimate),
+                seconds: fit_seconds + dot_seconds,
+                skipped: self.skipped(bounce, walks),
+                details: PrtDetails {
+                    fit_error: c.fit_error,
+                    fit_seconds,
+                    dot_seconds,
+                    gpu,
+                },
+            },
+            l1,
+        ))
+    }
+
+    /// What an evaluation leaves out: the object's own light and the walks through the mesh,
+    /// when they were not precomputed or the caller left them out.
+    fn skipped(&self, bounce: bool, walks: bool) -> Vec<Skipped> {
+        let mut out = Vec::new();
+        match (&self.bounce, bounce) {
+            (None, _) => out.push(Skipped::new(
+                "the object's own light",
+                "not precomputed (interreflection off)",
+            )),
+            (Some(_), false) => out.push(Skipped::new(
+                "the object's own light",
+                "left out by the caller (direct light only)",
+            )),
+            _ => {}
+        }
+        match (&self.geometry, walks) {
+            (None, _) => out.push(Skipped::new(
+                "walks through the mesh",
+                match self.model {
+                    Model::Dipole => "the dipole's model is the half-space profile",
+                    Model::Cycles => "not precomputed (walks off)",
+                },
+            )),
+            (Some(_), false) => out.push(Skipped::new(
+                "walks through the mesh",
+                "left out by the caller (the half-space profile alone)",
+            )),
+            _ => {}
+        }
+        out
+    }
+
+    /// L_d + L^(1) toward `eye` (Xu 2007 eq. 1): `radiance` plus single scattering with the
+    /// phase function `phase`, when it was attached; also returns L^(1)'s own evaluation.
+    pub fn radiance_with(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        phase: crate::single_scattering::Phase,
+    ) -> Result<(Evaluation, Option<single::SingleEvaluation>)> {
+        let Some(s) = &self.single else {
+            return Ok((self.radiance(material, eye)?, None));
+        };
+        if self.gpu.as_ref().is_some_and(|g| g.has_single()) {
+            // Both kernels in one GPU submission; L^(1)'s dot time is inside `dot_seconds`.
+            let (edit, error_estimate, fit_seconds) = s.gpu_edit(material, eye, phase)?;
+            let (mut e, l1) = self.radiance_inner(material, eye, Some(&edit))?;
+            let l1 = l1.ok_or_else(|| {
+                Error::GpuUnavailable("the GPU returned no single scattering".into())
+            })?;
+            let t = Instant::now();
+            e.values
+                .par_iter_mut()
+                .zip(l1.par_iter())
+                .for_each(|(l, a)| *l = std::array::from_fn(|c| l[c] + a[c]));
+            e.details.dot_seconds += t.elapsed().as_secs_f64();
+            e.details.fit_seconds += fit_seconds;
+            e.seconds = e.details.fit_seconds + e.details.dot_seconds;
+            return Ok((
+                e,
+                Some(single::SingleEvaluation {
+                    radiance: l1,
+                    error_estimate,
+                    fit_seconds,
+                    dot_seconds: 0.0,
+                }),
+            ));
+        }
+        // CPU: B, then one pass that turns it into F_t B / pi (the dipole's exit weight, as
+        // `radiance`) and adds L^(1).
+        let (mut e, _) = self.radiosity_inner(material, true, true, None)?;
+        let l1 = s.radiance_joined(material, eye, phase, &mut e.values)?;
+        e.quantity = Quantity::Radiance;
+        e.details.fit_seconds += l1.fit_seconds;
+        e.details.dot_seconds += l1.dot_seconds;
+        e.seconds = e.details.fit_seconds + e.details.dot_seconds;
+        Ok((e, Some(l1)))
+    }
+
+    /// Multiple-scattering radiance toward `eye`: L_d = W(w_o) B / pi, W the model's exit
+    /// weight (`Model::exit_weight`: F_t(eta, w_o) for the dipole, Xu 2007 eq. 2; what
+    /// Cycles' specular layer lets through for its walk). Vertices facing away from the eye get
+    /// 0. Without an eye, the radiance leaving along each vertex normal (what a bake sees).
+    pub fn radiance(&self, material: &Material, eye: Option<Vec3>) -> Result<Evaluation> {
+        self.radiance_inner(material, eye, None).map(|(e, _)| e)
+    }
+
+    /// As `radiance`, with `single` as `radiosity_inner`.
+    fn radiance_inner(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        single: Option<&crate::gpu::SingleEdit>,
+    ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
+        crate::evaluation::check_eye(eye)?;
+        let (mut e, l1) = self.radiosity_inner(material, true, true, single)?;
+        let t = Instant::now();
+        let profiles = self.model.profiles(material)?;
+        radiance_from_radiosity(
+            &mut e.values,
+            &self.positions,
+            &self.normals,
+            eye,
+            &|cos_o| self.model.exit_weights(material, &profiles, cos_o),
+        );
+        e.quantity = Quantity::Radiance;
+        e.details.dot_seconds += t.elapsed().as_secs_f64();
+        e.seconds = e.details.fit_seconds + e.details.dot_seconds;
+        Ok((e, l1))
+    }
+}

@@ -1,0 +1,421 @@
+//! The precompute, step by step: samples and their irradiance, the sample tree, the
+//! receiver's disc, the knots, the transport rows, then the walks and the object's own light.
+
+use super::geometry::{GeometrySettings, GeometryTerm};
+use super::knots::{default_spacing, Knots};
+use super::own_light::{self, sent_on, totals, Bounce, INDIRECT_WALK_SHARE};
+use super::rows::{transport_rows, within, FarField};
+use super::settings::check_settings;
+use super::tree::{SampleTree, WeightedSample};
+use super::{Density, IrradianceFn, ProgressFn, Prt, PrtReport, PrtSettings};
+use crate::error::{Error, Result};
+use crate::mesh::{Mesh, SurfaceSample};
+use crate::mesh_walk::ExitLight;
+use crate::optics::Material;
+use crate::profiles::Profile;
+use crate::raytrace::Tracer;
+use crate::shadow_edges::ShadowEdges;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+impl Prt {
+    /// Precomputes the transport for `mesh` lit as `irradiance` says, with a basis chosen for
+    /// the `representatives` (every channel of each). Errors on bad settings, and
+    /// `Error::Cancelled` when `progress` returns false.
+    pub fn precompute(
+        mesh: &Mesh,
+        representatives: &[Material],
+        settings: &PrtSettings,
+        irradiance: &IrradianceFn,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Prt> {
+        let start = Instant::now();
+        check_settings(representatives, settings)?;
+        let tick = |f: f32| match progress {
+            Some(p) if !p(f) => Err(Error::Cancelled),
+            _ => Ok(()),
+        };
+        tick(0.0)?;
+        let mut report = PrtReport {
+            vertices: mesh.vertex_count(),
+            model: settings.model.name(),
+            ..Default::default()
+        };
+        let profiles: Vec<Profile> = representatives
+            .iter()
+            .map(|m| settings.model.profiles(m))
+            .collect::<Result<Vec<_>>>()?
+            .into_iter()
+            .flatten()
+            .collect();
+
+        let lit = SampledLight::new(mesh, &profiles, settings, irradiance)?;
+        report.samples = lit.samples.len();
+        report.sample_spacing = f64::from(lit.spacing);
+        report.seconds_irradiance = start.elapsed().as_secs_f64();
+        tick(0.1)?;
+
+        let colour = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
+        let t_tree = Instant::now();
+        let tree = lit.tree(&colour);
+        report.seconds_tree = t_tree.elapsed().as_secs_f64();
+
+        let disc = ReceiverDisc::new(mesh, &tree, lit.spacing);
+        report.near_radius = disc.near_radius;
+        let knots = Knots::choose(mesh, &profiles, disc.near_radius, settings)?;
+        report.support_radius = knots.support;
+        report.basis_size_by_tolerance = settings.fit_tolerance.is_some();
+        report.representative_error = knots.representative_error;
+        report.knots = knots.basis.knots().to_vec();
+        tick(0.15)?;
+
+        // Transport T_j per vertex (Xu 2007 eq. 10). With walks through the mesh, it is the
+        // first 60 % of the progress bar.
+        let t_transport = Instant::now();
+        let far = FarField::new(settings.far_field);
+        report.far_field_distance_bound = far.distance_bound();
+        let transport_end = if settings.geometry.is_some() {
+            0.6
+        } else {
+            1.0
+        };
+        let (transport, counters) = transport_rows(
+            mesh,
+            &tree,
+            &knots.basis,
+            &far,
+            &disc,
+            &colour,
+            &lit.vertex_irradiance,
+            &|f| tick(0.15 + (transport_end - 0.15) * f),
+        )?;
+        report.exact_samples = counters.exact;
+        report.far_clusters = counters.far;
+        report.skipped_beyond_support = counters.beyond;
+        report.skipped_dark = counters.dark;
+        report.transport_bytes = transport.bytes();
+        report.stored_channels = colour.channels;
+        report.seconds_transport = t_transport.elapsed().as_secs_f64();
+        report.seconds_total = start.elapsed().as_secs_f64();
+        let mut prt = Prt {
+            fitter: knots.fitter,
+            transport,
+            gpu: None,
+            positions: mesh.positions().to_vec(),
+            normals: mesh.normals().to_vec(),
+            vertex_irradiance: lit.vertex_irradiance,
+            near_radius: disc.near_radius,
+            whole_mesh: knots.whole_mesh,
+            eta: settings.eta,
+            model: settings.model,
+            bounce: None,
+            geometry: None,
+            single: None,
+            report,
+        };
+        // One BVH for the walks and the object's own light, built only if either runs.
+        let bounce_strata = settings.interreflection.filter(|&s| s > 0);
+        let tracer = (settings.geometry.is_some() || bounce_strata.is_some())
+            .then(|| crate::raytrace::Tracer::new(mesh));
+        // The first representative's half-space B (no walks, no own light): what the walks
+        // correct, and the part of B the own light sends under the view factor.
+        let halfspace = match &tracer {
+            Some(_) => {
+                prt.radiosity_parts(&representatives[0], false, false)?
+                    .values
+            }
+            None => Vec::new(),
+        };
+        let rep = &representatives[0];
+        if let (Some(g), Some(tracer)) = (&settings.geometry, &tracer) {
+            let end = if bounce_strata.is_some() { 0.85 } else { 0.95 };
+            let walk_progress = progress.map(|p| move |f: f32| p(0.6 + (end - 0.6) * f));
+            prt.add_walks(
+                mesh,
+                tracer,
+                rep,
+                &halfspace,
+                g,
+                irradiance,
+                walk_progress.as_ref().map(|f| f as _),
+            )?;
+            prt.report.seconds_total = start.elapsed().as_secs_f64();
+        }
+        if let (Some(strata), Some(tracer)) = (bounce_strata, &tracer) {
+            let walk_progress = progress.map(|p| move |f: f32| p(0.85 + 0.14 * f));
+            prt.add_own_light(
+                mesh,
+                tracer,
+                rep,
+                &halfspace,
+                strata,
+                settings,
+                walk_progress.as_ref().map(|f| f as _),
+            )?;
+            prt.report.seconds_total = start.elapsed().as_secs_f64();
+        }
+        tick(1.0)?;
+        Ok(prt)
+    }
+
+    /// The walks through the mesh for the direct light (`GeometryTerm`): what they add to the
+    /// half-space B of the first representative. Their exits read the light finer where a
+    /// shadow's edge crosses a triangle.
+    #[allow(clippy::too_many_arguments)]
+    fn add_walks(
+        &mut self,
+        mesh: &Mesh,
+        tracer: &Tracer,
+        rep: &Material,
+        halfspace: &[[f32; 3]],
+        g: &GeometrySettings,
+        irradiance: &IrradianceFn,
+        progress: Option<&ProgressFn>,
+    ) -> Result<()> {
+        let t_edges = Instant::now();
+        let edges = ShadowEdges::new(mesh, &self.vertex_irradiance, &|p, n| {
+            irradiance(p, n, Density::Receivers)
+        })?;
+        self.report.shadow_edge_triangles = edges.len();
+        self.report.shadow_edge_points = edges.points();
+        self.report.seconds_shadow_edges = t_edges.elapsed().as_secs_f64();
+        let lit = ExitLight {
+            vertices: &self.vertex_irradiance,
+            edges: &edges,
+        };
+        let term = GeometryTerm::compute(mesh, tracer, rep, &lit, halfspace, g, progress)?;
+        self.report.geometry = Some(term.report.clone());
+        self.geometry = Some(term);
+        Ok(())
+    }
+
+    /// The object's own light (`own_light`): the indirect irradiance its direct B (the walks'
+    /// term included) casts back on it, and, with the walks, what walks through the mesh make
+    /// of that light beyond its local conversion.
+    #[allow(clippy::too_many_arguments)]
+    fn add_own_light(
+        &mut self,
+        mesh: &Mesh,
+        tracer: &Tracer,
+        rep: &Material,
+        halfspace: &[[f32; 3]],
+        strata: usize,
+        settings: &PrtSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<()> {
+        let t_bounce = Instant::now();
+        // B's half-space part and what the walks through the mesh add to it (thin parts'
+        // transmitted glow), sent under different view factors (`own_light::cast`).
+        let direct = self.radiosity(rep)?.values;
+        let walked_part = self.geometry.as_ref().map(|_| {
+            direct
+                .iter()
+                .zip(halfspace)
+                .map(|(b, h)| std::array::from_fn(|c| b[c] - h[c]))
+                .collect::<Vec<[f32; 3]>>()
+        });
+        let model = settings.model;
+        let rep_profiles = model.profiles(rep)?;
+        let receiving = totals(&rep_profiles);
+        let source_albedo = sent_on(model, rep, &rep_profiles, 1.0);
+        let cast = own_light::cast(
+            mesh,
+            tracer,
+            model,
+            rep,
+            &rep_profiles,
+            own_light::Sent {
+                halfspace,
+                irradiance: &self.vertex_irradiance,
+                walked: walked_part.as_deref(),
+            },
+            strata,
+        );
+        self.report.interreflection_share =
+            own_light::share(&cast.irradiance, &direct, mesh.vertex_areas(), &receiving);
+        self.report.interreflection_rays = cast.rays;
+        self.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();
+        let irradiance = cast.irradiance;
+        // The indirect light enters through the real geometry too (what falls on the
+        // front of an ear comes out at its back): walks gather E_ind against its local
+        // conversion (R_total + point mass) E_ind, on a share of the walks' budget (E_ind
+        // is a few per cent of the light, so is the noise that share leaves).
+        let walked = match &settings.geometry {
+            Some(g) => {
+                let local: Vec<[f32; 3]> = irradiance
+                    .iter()
+                    .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
+                    .collect();
+                let shared = GeometrySettings {
+                    rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
+                    vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
+                    refine: false,
+                    ..g.clone()
+                };
+                let lit = ExitLight {
+                    vertices: &irradiance,
+                    edges: &ShadowEdges::none(),
+                };
+                let term =
+                    GeometryTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)?;
+                self.report.geometry_indirect = Some(term.report.clone());
+                Some(term)
+            }
+            None => None,
+        };
+        self.bounce = Some(Bounce {
+            irradiance,
+            source_albedo,
+            walked,
+        });
+        Ok(())
+    }
+}
+
+/// Samples and their irradiance (Xu 2007 §6.1), and the irradiance at the receivers.
+struct SampledLight {
+    spacing: f32,
+    samples: Vec<SurfaceSample>,
+    sample_irradiance: Vec<[f32; 3]>,
+    vertex_irradiance: Vec<[f32; 3]>,
+}
+
+impl SampledLight {
+    fn new(
+        mesh: &Mesh,
+        profiles: &[Profile],
+        settings: &PrtSettings,
+        irradiance: &IrradianceFn,
+    ) -> Result<Self> {
+        let spacing = match settings.samples {
+            Some(count) => mesh.spacing_for_sample_count(count),
+            None => default_spacing(mesh, profiles),
+        };
+        let samples = mesh.surface_samples(spacing)?;
+        let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
+        let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
+        let sample_irradiance = irradiance(&points, &normals, Density::Dense)?;
+        let vertex_irradiance = irradiance(mesh.positions(), mesh.normals(), Density::Receivers)?;
+        check_irradiance(&sample_irradiance, points.len())?;
+        check_irradiance(&vertex_irradiance, mesh.vertex_count())?;
+        Ok(Self {
+            spacing,
+            samples,
+            sample_irradiance,
+            vertex_irradiance,
+        })
+    }
+
+    /// The samples weighted by their projected irradiance times their area, in a moment tree.
+    fn tree(&self, colour: &Projection) -> SampleTree {
+        let weighted: Vec<WeightedSample> = self
+            .samples
+            .iter()
+            .zip(&self.sample_irradiance)
+            .map(|(s, i)| WeightedSample {
+                position: s.position,
+                area: s.area,
+                weight: colour.project(i).map(|x| x * s.area),
+            })
+            .collect();
+        SampleTree::build(weighted, colour.channels)
+    }
+}
+
+/// Leave out what the lighting does not need: white light needs one transport, not three.
+pub(super) struct Projection {
+    colour: Option<[f32; 3]>,
+    pub(super) channels: usize,
+    pub(super) scale: [f32; 3],
+}
+
+impl Projection {
+    fn of(samples: &[[f32; 3]], vertices: &[[f32; 3]]) -> Self {
+        let colour = common_colour(samples, vertices);
+        Self {
+            colour,
+            channels: if colour.is_some() { 1 } else { 3 },
+            scale: colour.unwrap_or([1.0; 3]),
+        }
+    }
+
+    pub(super) fn project(&self, i: &[f32; 3]) -> [f32; 3] {
+        match self.colour {
+            // The brightest channel carries the intensity; the others are its multiples.
+            Some(c) => [i[max_index(&c)] / c[max_index(&c)], 0.0, 0.0],
+            None => *i,
+        }
+    }
+}
+
+/// The receiver's own disc: samples within `exclusion` of a vertex are replaced by a disc of
+/// equal area. Its inner part, radius `near_radius`, is integrated in closed form at edit time
+/// with the irradiance at the vertex (the diffuse-BRDF limit of a stiff material lives there);
+/// the ring out to the equal-area radius goes through the basis with the mean irradiance of
+/// the samples it replaces (right across shadow edges).
+pub(super) struct ReceiverDisc {
+    pub(super) exclusion: f64,
+    pub(super) near_radius: f64,
+    /// Per vertex: the area and weighted irradiance of the samples within `exclusion`.
+    pub(super) excluded: Vec<(f64, [f64; 3])>,
+    pub(super) coverage: Vec<f32>,
+}
+
+impl ReceiverDisc {
+    fn new(mesh: &Mesh, tree: &SampleTree, spacing: f32) -> Self {
+        let exclusion = 1.5 * f64::from(spacing);
+        let near_radius = 0.25 * f64::from(spacing);
+        let excluded: Vec<(f64, [f64; 3])> = mesh
+            .positions()
+            .par_iter()
+            .map(|p| within(tree, p.as_dvec3(), exclusion))
+            .collect();
+        Self {
+            exclusion,
+            near_radius,
+            excluded,
+            coverage: mesh.vertex_coverage(),
+        }
+    }
+}
+
+pub(super) fn check_irradiance(values: &[[f32; 3]], expected: usize) -> Result<()> {
+    if values.len() != expected {
+        return Err(Error::InvalidArgument(format!(
+            "the irradiance callback returned {} values for {expected} points",
+            values.len()
+        )));
+    }
+    if values.iter().flatten().any(|x| !x.is_finite() || *x < 0.0) {
+        return Err(Error::InvalidArgument(
+            "the irradiance callback returned a negative or non-finite value".into(),
+        ));
+    }
+    Ok(())
+}
+
+pub(super) fn max_index(c: &[f32; 3]) -> usize {
+    (0..3).fold(0, |best, k| if c[k] > c[best] { k } else { best })
+}
+
+/// If every irradiance value is a multiple of one colour, that colour (brightest channel 1).
+pub(super) fn common_colour(a: &[[f32; 3]], b: &[[f32; 3]]) -> Option<[f32; 3]> {
+    let all = a.iter().chain(b);
+    let brightest = all.clone().fold([0f32; 3], |m, x| {
+        if x.iter().sum::<f32>() > m.iter().sum::<f32>() {
+            *x
+        } else {
+            m
+        }
+    });
+    let k = max_index(&brightest);
+    if brightest[k] <= 0.0 {
+        return Some([1.0; 3]);
+    }
+    let colour = brightest.map(|x| x / brightest[k]);
+    let same = all.clone().all(|x| {
+        (0..3).all(|c| (x[c] - colour[c] * x[k]).abs() <= 1e-5 * x[k].max(f32::MIN_POSITIVE))
+    });
+    same.then_some(colour)
+}

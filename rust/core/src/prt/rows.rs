@@ -1,0 +1,262 @@
+//! One vertex's transport row (Xu 2007 eq. 10): the samples near it one by one, far clusters
+//! by their moments (`FarField`), and the receiver's own disc in closed form.
+
+use super::layout::Transport;
+use super::precompute::{Projection, ReceiverDisc};
+use super::tree::SampleTree;
+use crate::basis::{Basis, Degree};
+use crate::error::Result;
+use crate::mesh::Mesh;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Geometric area of the samples within `radius` of `p`, and the sum of their weights
+/// (irradiance x area) per stored channel.
+pub(super) fn within(tree: &SampleTree, p: DVec3, radius: f64) -> (f64, [f64; 3]) {
+    let ch = tree.channels;
+    let mut area = 0.0;
+    let mut weight = [0.0f64; 3];
+    let mut stack = vec![0usize];
+    while let Some(ni) = stack.pop() {
+        let node = &tree.nodes[ni];
+        let d = (node.center - p).length();
+        if d - node.radius >= radius {
+            continue;
+        }
+        if d + node.radius < radius {
+            area += node.area;
+            for (c, w) in weight.iter_mut().enumerate().take(ch) {
+                *w += tree.moments[ni * ch + c].w;
+            }
+        } else if node.first_child == 0 {
+            for s in &tree.samples[node.start as usize..node.end as usize] {
+                if (s.position.as_dvec3() - p).length() < radius {
+                    area += f64::from(s.area);
+                    for (c, w) in weight.iter_mut().enumerate().take(ch) {
+                        *w += f64::from(s.weight[c]);
+                    }
+                }
+            }
+        } else {
+            stack.push(node.first_child as usize);
+            stack.push(node.first_child as usize + 1);
+        }
+    }
+    (area, weight)
+}
+
+/// The far-field acceptance test and its error bound.
+pub(super) struct FarField {
+    pub(super) theta: f64,
+}
+
+impl FarField {
+    pub(super) fn new(theta: f64) -> Self {
+        Self { theta }
+    }
+
+    /// rho <= theta (d - rho): the cluster subtends a small angle.
+    pub(super) fn accepts(&self, rho: f64, d: f64) -> bool {
+        self.theta > 0.0 && rho <= self.theta * (d - rho)
+    }
+
+    /// Relative error bound of the second-order mean distance at the opening limit:
+    /// |r - (d - u.delta + (|delta|^2 - (u.delta)^2)/(2d))| <= |delta|^3 / (2 (d - |delta|)^2),
+    /// divided by d; with rho = theta (d - rho).
+    pub(super) fn distance_bound(&self) -> f64 {
+        let t = self.theta;
+        if t == 0.0 {
+            return 0.0;
+        }
+        // rho/d = t/(1+t); (d - rho)/d = 1/(1+t).
+        let rho = t / (1.0 + t);
+        let gap = 1.0 / (1.0 + t);
+        rho.powi(3) / (2.0 * gap * gap)
+    }
+}
+
+pub(super) struct Receiver {
+    pub(super) position: DVec3,
+    pub(super) irradiance: [f32; 3],
+    /// Mean irradiance of the samples the receiver's own disc replaces.
+    pub(super) ring_irradiance: [f32; 3],
+    /// Outer radius of the ring [near_radius, ring_outer] and the share of the disc the surface
+    /// covers: inside the surface, the disc of the same area as the excluded samples, share 1;
+    /// on an open boundary, the exclusion radius and the vertex's angle share (`Mesh::
+    /// vertex_coverage`), so a rim vertex sees the half disc that is there, not a whole one.
+    pub(super) ring_outer: f64,
+    pub(super) coverage: f64,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+pub(super) struct Counters {
+    pub(super) exact: u64,
+    pub(super) far: u64,
+    pub(super) beyond: u64,
+    pub(super) dark: u64,
+}
+
+impl Counters {
+    pub(super) fn sum(self, o: Counters) -> Counters {
+        Counters {
+            exact: self.exact + o.exact,
+            far: self.far + o.far,
+            beyond: self.beyond + o.beyond,
+            dark: self.dark + o.dark,
+        }
+    }
+}
+
+/// Fills one vertex's transport row: per stored channel, [I(x_o), T_0 .. T_{n-1}].
+pub(super) fn transport_row(
+    tree: &SampleTree,
+    basis: &Basis,
+    far: &FarField,
+    exclusion: f64,
+    near_radius: f64,
+    rx: &Receiver,
+    row: &mut [f32],
+) -> Counters {
+    let channels = tree.channels;
+    let n = basis.len();
+    let stride = n + 1;
+    let (_, support) = basis.domain();
+    let degree_terms = match basis.degree() {
+        Degree::Linear => 2,
+        Degree::Quadratic => 3,
+    };
+    let mut acc = vec![0f64; channels * n];
+    let add = |c: usize, r: f64, w: f64, acc: &mut [f64]| {
+        let (first, values) = basis.eval(r);
+        for (k, v) in values.iter().take(degree_terms).enumerate() {
+            if first + k < n {
+                acc[c * n + first + k] += w * v;
+            }
+        }
+    };
+    let mut counters = Counters::default();
+    let mut stack = Vec::with_capacity(64);
+    stack.push(0usize);
+    while let Some(ni) = stack.pop() {
+        let node = &tree.nodes[ni];
+        let v = rx.position - node.center;
+        let d = v.length();
+        let gap = d - node.radius;
+        if gap >= support {
+            counters.beyond += 1;
+            continue;
+        }
+        if gap >= exclusion && node.dark {
+            counters.dark += 1;
+            continue;
+        }
+        if node.first_child == 0 {
+            for s in &tree.samples[node.start as usize..node.end as usize] {
+                let r = (s.position.as_dvec3() - rx.position).length();
+                if r < exclusion || r >= support {
+                    continue;
+                }
+                counters.exact += 1;
+                for c in 0..channels {
+                    add(c, r, f64::from(s.weight[c]), &mut acc);
+                }
+            }
+        } else if gap >= exclusion && far.accepts(node.radius, d) {
+            // Two pseudo-samples at mean +- deviation of the cluster's distances reproduce
+            // sum w, sum w r and sum w r^2: exact for any profile quadratic in r over the
+            // cluster's range. sum w r^2 is exact from the moments; sum w r is the Taylor
+            // expansion of |v - delta| to second order (remainder bounded in FarField).
+            counters.far += 1;
+            let u = v / d;
+            for c in 0..channels {
+                let m = &tree.moments[ni * channels + c];
+                if m.w <= 0.0 {
+                    continue;
+                }
+                let m1 = m.w * d - u.dot(m.s) + (m.trace() - m.quadratic(u)) / (2.0 * d);
+                let m2 = m.w * d * d - 2.0 * v.dot(m.s) + m.trace();
+                let mean = m1 / m.w;
+                let sd = (m2 / m.w - mean * mean).max(0.0).sqrt();
+                add(c, mean - sd, 0.5 * m.w, &mut acc);
+                add(c, mean + sd, 0.5 * m.w, &mut acc);
+            }
+        } else {
+            stack.push(node.first_child as usize);
+            stack.push(node.first_child as usize + 1);
+        }
+    }
+    // The receiver's own disc: [0, near_radius] in closed form at edit time (slot 0 holds
+    // I(x_o)); [near_radius, own_disc] through the basis with the ring's mean irradiance.
+    let ring = basis.integrals_2pi_r(near_radius, rx.ring_outer.max(near_radius));
+    for c in 0..channels {
+        let i_ring = rx.coverage * f64::from(rx.ring_irradiance[c]);
+        let out = &mut row[c * stride..(c + 1) * stride];
+        out[0] = (rx.coverage * f64::from(rx.irradiance[c])) as f32;
+        for j in 0..n {
+            out[j + 1] = (acc[c * n + j] + i_ring * ring[j]) as f32;
+        }
+    }
+    counters
+}
+
+/// Every vertex's transport row (Xu 2007 eq. 10), in chunks so progress can be reported
+/// (`tick` in [0, 1]; an error stops the loop), packed into the stored layout.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn transport_rows(
+    mesh: &Mesh,
+    tree: &SampleTree,
+    basis: &Basis,
+    far: &FarField,
+    disc: &ReceiverDisc,
+    colour: &Projection,
+    vertex_irradiance: &[[f32; 3]],
+    tick: &dyn Fn(f32) -> Result<()>,
+) -> Result<(Transport, Counters)> {
+    let (exclusion, near_radius) = (disc.exclusion, disc.near_radius);
+    let channels = colour.channels;
+    let stride = basis.len() + 1;
+    let vcount = mesh.vertex_count();
+    let mut rows = vec![0f32; vcount * channels * stride];
+    let mut counters = Counters::default();
+    let chunk = 2048;
+    for (ci, rows_chunk) in rows.chunks_mut(chunk * channels * stride).enumerate() {
+        let first = ci * chunk;
+        let chunk_counters = rows_chunk
+            .par_chunks_mut(channels * stride)
+            .enumerate()
+            .map(|(k, row)| {
+                let v = first + k;
+                let (area, weight) = disc.excluded[v];
+                let full = std::f64::consts::PI * exclusion * exclusion;
+                let (ring_outer, cover) = match disc.coverage[v] {
+                    // Inside the surface: the disc of the samples' area, whole.
+                    c if c >= 1.0 => ((area / std::f64::consts::PI).sqrt(), 1.0),
+                    // A vertex no triangle uses: the samples around it say whether it
+                    // lies on the surface (whole disc) or off it (none).
+                    c if c <= 0.0 && area >= 0.9 * full => {
+                        ((area / std::f64::consts::PI).sqrt(), 1.0)
+                    }
+                    c if c <= 0.0 => (exclusion, (area / full).min(1.0)),
+                    // On an open boundary: the angle share of the exclusion disc.
+                    c => (exclusion, f64::from(c)),
+                };
+                let receiver = Receiver {
+                    position: mesh.positions()[v].as_dvec3(),
+                    irradiance: colour.project(&vertex_irradiance[v]),
+                    ring_irradiance: if area > 0.0 {
+                        weight.map(|w| (w / area) as f32)
+                    } else {
+                        colour.project(&vertex_irradiance[v])
+                    },
+                    ring_outer,
+                    coverage: cover,
+                };
+                transport_row(tree, basis, far, exclusion, near_radius, &receiver, row)
+            })
+            .reduce(Counters::default, Counters::sum);
+        counters = counters.sum(chunk_counters);
+        tick((first + chunk).min(vcount) as f32 / vcount as f32)?;
+    }
+    let transport = Transport::from_rows(&rows, vcount, channels, stride, colour.scale);
+    Ok((transport, counters))
+}

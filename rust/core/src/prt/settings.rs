@@ -1,0 +1,174 @@
+//! What a precompute is asked to do (`PrtSettings`, checked before any work) and what it did
+//! and left out (`PrtReport`).
+
+use super::geometry::{GeometryReport, GeometrySettings};
+use crate::basis::Degree;
+use crate::error::{Error, Result};
+use crate::optics::Material;
+use crate::profiles::Model;
+
+/// The most samples the default spacing asks for.
+pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
+
+/// How the transport is precomputed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrtSettings {
+    /// Basis size: the length of the per-vertex dot product for each channel (Xu's "coefficients").
+    /// With `fit_tolerance`, the largest size the choice may reach.
+    pub coefficients: usize,
+    /// When set, the basis size is the smallest of `BASIS_SIZES` (up to `coefficients`) whose
+    /// estimated error on every representative is at most this (relative); unset, it is
+    /// `coefficients`.
+    pub fit_tolerance: Option<f64>,
+    pub degree: Degree,
+    /// Surface samples for the irradiance; `None` spaces them half the representatives'
+    /// shortest length (z_r or 1/sigma_tr), between 4 per vertex (at least 20 000) and
+    /// `DEFAULT_MAX_SAMPLES`.
+    pub samples: Option<usize>,
+    /// Fraction of the profile's total that may fall beyond the support radius. 1e-5 by
+    /// default: a receiver lit only from afar (the far side of a sun-lit 20 mm marble sphere,
+    /// B a thousandth of the lit side's) gets its light from that tail; at 1e-3 Cycles' profile
+    /// missed 60 % of it there, at 1e-5 it is within 0.6 %.
+    pub tolerance: f64,
+    /// Opening ratio of the far field: a cluster of radius rho at distance d is summed by its
+    /// moments when rho <= far_field (d - rho). 0 sums every sample exactly (brute force).
+    pub far_field: f64,
+    /// Relative index of refraction the irradiance (its Fresnel factor) was computed for:
+    /// `Model::irradiance_eta` of the materials (1 for Cycles' index-matched walk).
+    pub eta: f64,
+    /// The radial profile the basis is chosen for and edits are fitted to.
+    pub model: Model,
+    /// The object's own light falling back on it (`interreflection`): `strata` x `strata`
+    /// rays per vertex, or None for direct light only.
+    pub interreflection: Option<usize>,
+    /// Cycles' walk through the mesh (`geometry`): the mesh's own shape (thin and curved
+    /// parts) in the transport, Cycles' model only; None for the half-space profile alone.
+    pub geometry: Option<GeometrySettings>,
+}
+
+impl Default for PrtSettings {
+    fn default() -> Self {
+        Self {
+            coefficients: 32,
+            fit_tolerance: None,
+            degree: Degree::Linear,
+            samples: None,
+            tolerance: 1e-5,
+            far_field: 0.25,
+            eta: 1.3,
+            model: Model::Dipole,
+            interreflection: None,
+            geometry: None,
+        }
+    }
+}
+
+/// What the precompute did and left out, and how long each step took.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PrtReport {
+    pub vertices: usize,
+    pub samples: usize,
+    pub sample_spacing: f64,
+    /// Radius of the receiver's own disc, integrated in closed form [unit].
+    pub near_radius: f64,
+    /// Support radius: samples beyond it are not visited [unit].
+    pub support_radius: f64,
+    pub knots: Vec<f64>,
+    /// The radial profile ("dipole" or "cycles").
+    pub model: &'static str,
+    /// Whether the basis size was chosen by `fit_tolerance` (else fixed by `coefficients`).
+    pub basis_size_by_tolerance: bool,
+    /// The largest estimated relative error of B over the representatives' channels with the
+    /// chosen basis and support: what an edit is compared with to advise a refresh.
+    pub representative_error: f64,
+    /// 1 when every sample's irradiance has the same colour (one transport serves all three
+    /// channels), else 3.
+    pub stored_channels: usize,
+    pub transport_bytes: usize,
+    /// Samples summed one by one, clusters summed by their moments, clusters skipped because
+    /// they lie beyond the support radius or receive no light.
+    pub exact_samples: u64,
+    pub far_clusters: u64,
+    pub skipped_beyond_support: u64,
+    pub skipped_dark: u64,
+    /// Bound on the relative error of one cluster's mean distance, rho^3 / (2 (d - rho)^2 d),
+    /// at the chosen opening ratio (Taylor remainder of |x_o - x| about the cluster centre).
+    pub far_field_distance_bound: f64,
+    pub seconds_irradiance: f64,
+    /// Rays cast for the object's own light (0 when interreflection is off), and the share of
+    /// the representative's B it adds (area-weighted mean over the vertices, worst channel).
+    pub interreflection_rays: u64,
+    pub interreflection_share: f64,
+    pub seconds_interreflection: f64,
+    pub seconds_tree: f64,
+    pub seconds_transport: f64,
+    pub seconds_total: f64,
+    /// The walks through the mesh, when asked for: for the direct light, and for the object's
+    /// own light (when interreflection is on too).
+    pub geometry: Option<GeometryReport>,
+    pub geometry_indirect: Option<GeometryReport>,
+    /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
+    /// evaluated there, and the time it took.
+    pub shadow_edge_triangles: usize,
+    pub shadow_edge_points: usize,
+    pub seconds_shadow_edges: f64,
+}
+
+pub(super) fn check_settings(representatives: &[Material], s: &PrtSettings) -> Result<()> {
+    if representatives.is_empty() {
+        return Err(Error::InvalidArgument(
+            "give at least one material to choose the basis for".into(),
+        ));
+    }
+    if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
+        return Err(Error::InvalidArgument(format!(
+            "tolerance {} must lie in (0, 1)",
+            s.tolerance
+        )));
+    }
+    if !(s.far_field.is_finite() && (0.0..1.0).contains(&s.far_field)) {
+        return Err(Error::InvalidArgument(format!(
+            "far_field {} must lie in [0, 1)",
+            s.far_field
+        )));
+    }
+    if let Some(t) = s.fit_tolerance {
+        if !(t.is_finite() && t > 0.0 && t < 1.0) {
+            return Err(Error::InvalidArgument(format!(
+                "fit_tolerance {t} must lie in (0, 1)"
+            )));
+        }
+    }
+    if let Some(g) = &s.geometry {
+        if s.model != Model::Cycles {
+            return Err(Error::InvalidArgument(format!(
+                "walks through the mesh are Cycles' random walk: the {} profile has none",
+                s.model.name()
+            )));
+        }
+        if !(1..=1 << 20).contains(&g.walks) || g.vertices == 0 {
+            return Err(Error::InvalidArgument(format!(
+                "walks {} must lie in [1, 2^20] and vertices {} be > 0",
+                g.walks, g.vertices
+            )));
+        }
+    }
+    if let Some(n) = s.samples {
+        if !(100..=50_000_000).contains(&n) {
+            return Err(Error::InvalidArgument(format!(
+                "samples {n} must lie in [100, 50 000 000]"
+            )));
+        }
+    }
+    if let Some(m) = representatives
+        .iter()
+        .find(|m| (s.model.irradiance_eta(m) - s.eta).abs() > 1e-9)
+    {
+        return Err(Error::InvalidArgument(format!(
+            "all materials must share the eta the irradiance is computed for ({}), found {}",
+            s.eta,
+            s.model.irradiance_eta(m)
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,297 @@
+//! PRT against closed forms on a plane, the far field against brute force, the GPU against the
+//! CPU, the basis size, refresh advice, cancelling and bad settings.
+
+use super::*;
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use crate::optics::Material;
+
+use crate::mesh::test_meshes::plane;
+use crate::optics::fresnel_transmittance;
+
+/// Irradiance of a sun of strength `e` at zenith angle `theta` on the +Z plane (Xu eq. 3
+/// for a delta light): F_t(eta, cos) E cos, the same at every point.
+fn sun(
+    e: f32,
+    theta: f64,
+    eta: f64,
+) -> impl Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync {
+    let c = theta.cos();
+    let i = (fresnel_transmittance(eta, c) * c * f64::from(e)) as f32;
+    move |p: &[Vec3], _n: &[Vec3], _d: Density| Ok(vec![[i; 3]; p.len()])
+}
+
+/// Jensen 2001's closed form for R_d,total, written out apart from `optics`.
+fn rd_total(sigma_a: f64, sigma_s_prime: f64, eta: f64) -> f64 {
+    let a = sigma_s_prime / (sigma_a + sigma_s_prime);
+    let f_dr = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
+    let big_a = (1.0 + f_dr) / (1.0 - f_dr);
+    let s = (3.0 * (1.0 - a)).sqrt();
+    0.5 * a * (1.0 + (-4.0 / 3.0 * big_a * s).exp()) * (-s).exp()
+}
+
+fn centre(mesh: &Mesh) -> usize {
+    mesh.positions()
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.length().total_cmp(&b.1.length()))
+        .unwrap()
+        .0
+}
+
+#[allow(clippy::needless_range_loop)]
+fn check_plane(mesh: &Mesh, m: &Material, theta: f64, tol: f64) {
+    let settings = PrtSettings {
+        eta: m.eta,
+        ..Default::default()
+    };
+    let prt = Prt::precompute(mesh, &[*m], &settings, &sun(1.0, theta, m.eta), None).unwrap();
+    let b = prt.radiosity(m).unwrap().values;
+    let v = centre(mesh);
+    let e = fresnel_transmittance(m.eta, theta.cos()) * theta.cos();
+    for c in 0..3 {
+        let expect = e * rd_total(m.sigma_a[c], m.sigma_s_prime()[c], m.eta);
+        let got = f64::from(b[v][c]);
+        eprintln!(
+            "plane: channel {c} B {got:.6e} closed form {expect:.6e} ({:+.3} %)",
+            100.0 * (got / expect - 1.0)
+        );
+        assert!(
+            (got - expect).abs() <= tol * expect,
+            "channel {c}: B = {got}, closed form {expect} ({:.3} %)",
+            100.0 * (got / expect - 1.0)
+        );
+    }
+}
+
+#[test]
+fn sun_on_a_large_plane_gives_ft_e_cos_rd_total_for_marble() {
+    // 200 mm square, 2 mm grid: the marble tail beyond 100 mm is below 1e-5.
+    let mesh = plane(101, 200.0);
+    let marble = Material::preset("marble", 1.0).unwrap();
+    for theta in [0.0, 0.6, 1.2] {
+        check_plane(&mesh, &marble, theta, 0.01);
+    }
+    let ketchup = Material::preset("ketchup", 1.0).unwrap();
+    check_plane(&mesh, &ketchup, 0.3, 0.01);
+}
+
+#[test]
+fn stiff_material_tends_to_the_diffuse_brdf_limit() {
+    // sigma_s' = 1e4 per mm on a millimetre mesh: R_d lives far inside one sample.
+    let mesh = plane(41, 20.0);
+    let stiff = Material::new([1.0, 10.0, 100.0], [1e4; 3], 0.0, 1.3).unwrap();
+    check_plane(&mesh, &stiff, 0.4, 0.01);
+}
+
+#[test]
+fn no_absorption_conserves_energy_on_a_plane() {
+    // sigma_a = 0: R_d,total = 1 and the tail falls as 1/r; 1000 mean free paths of plane
+    // leave (z_r + z_v) / (2 R) < 0.3 % outside.
+    let mesh = plane(161, 100.0);
+    let white = Material::new([0.0; 3], [10.0, 20.0, 40.0], 0.0, 1.3).unwrap();
+    check_plane(&mesh, &white, 0.0, 0.01);
+}
+
+#[test]
+fn clustered_far_field_matches_brute_force_sum() {
+    let mesh = plane(61, 60.0);
+    let m = Material::preset("skin1", 1.0).unwrap();
+    // A spatially varying irradiance so clusters are not uniform.
+    let irr = |p: &[Vec3], _n: &[Vec3], _d: Density| {
+        Ok(p.iter()
+            .map(|x| {
+                let v = 1.0 + 0.5 * (x.x * 0.2).sin() + 0.3 * (x.y * 0.1).cos();
+                [v, 0.5 * v, 0.25 * v]
+            })
+            .collect())
+    };
+    let exact = PrtSettings {
+        far_field: 0.0,
+        ..Default::default()
+    };
+    let fast = PrtSettings::default();
+    let a = Prt::precompute(&mesh, &[m], &exact, &irr, None).unwrap();
+    let b = Prt::precompute(&mesh, &[m], &fast, &irr, None).unwrap();
+    assert!(b.report().far_clusters > 0 && a.report().far_clusters == 0);
+    let ea = a.radiosity(&m).unwrap().values;
+    let eb = b.radiosity(&m).unwrap().values;
+    let s = crate::metrics::relative_error(&eb, &ea, mesh.vertex_areas()).unwrap();
+    eprintln!(
+        "clustered vs brute force: {s:?}; {} far clusters",
+        b.report().far_clusters
+    );
+    assert!(s.worst_rms() < 1e-3, "clustered vs brute force: {s:?}");
+    assert_eq!(
+        b.report().stored_channels,
+        1,
+        "one colour of light needs one transport"
+    );
+}
+
+#[test]
+fn gpu_and_cpu_dot_products_agree() {
+    // Three stored channels (coloured irradiance) exercise the full layout.
+    let mesh = plane(41, 40.0);
+    let irr = |p: &[Vec3], _n: &[Vec3], _d: Density| {
+        Ok(p.iter()
+            .map(|x| [1.0 + 0.02 * x.x, 0.5 + 0.01 * x.y.abs(), 0.3])
+            .collect())
+    };
+    let m = Material::preset("skin1", 1.0).unwrap();
+    let mut prt = Prt::precompute(&mesh, &[m], &PrtSettings::default(), &irr, None).unwrap();
+    assert_eq!(prt.report().stored_channels, 3);
+    let cpu = prt.radiosity(&m).unwrap().values;
+    if let Err(e) = prt.set_backend(Backend::Gpu, true) {
+        // CI installs Mesa's lavapipe; elsewhere a machine may have no Vulkan at all.
+        eprintln!("skipped: {e}");
+        return;
+    }
+    assert_eq!(prt.backend(), Backend::Gpu);
+    let other = Material::preset("ketchup", 1.0).unwrap();
+    for mat in [m, other] {
+        let gpu = prt.radiosity(&mat).unwrap().values;
+        prt.set_backend(Backend::Cpu, true).unwrap();
+        let cpu = prt.radiosity(&mat).unwrap().values;
+        prt.set_backend(Backend::Gpu, true).unwrap();
+        for (g, c) in gpu.iter().zip(&cpu) {
+            for k in 0..3 {
+                assert!(
+                    (g[k] - c[k]).abs() <= 1e-5 * c[k].abs().max(1e-6),
+                    "{g:?} vs {c:?}"
+                );
+            }
+        }
+    }
+    // f16 storage: half the bytes; its stated rounding bound covers what it changes in B.
+    prt.set_backend_with(Backend::Gpu, true, true).unwrap();
+    let bound = prt.gpu_half_error().unwrap();
+    assert!(bound > 0.0 && bound < 1e-3, "f16 rounding bound {bound}");
+    let half = prt.radiosity(&m).unwrap().values;
+    let s = crate::metrics::relative_error(&half, &cpu, mesh.vertex_areas()).unwrap();
+    assert!(
+        s.worst_rms() <= bound.max(1e-6) && s.worst_rms() > 0.0,
+        "{s:?} vs bound {bound}"
+    );
+}
+
+#[test]
+#[allow(clippy::needless_range_loop)]
+fn basis_size_follows_the_fit_tolerance() {
+    // Marble per mm on the 200 mm plane: a looser tolerance needs fewer functions, and
+    // each choice still meets the closed form F_t E R_d,total at the centre within its
+    // tolerance plus the 0.3 % the exact basis-free sum already shows there.
+    let mesh = plane(101, 200.0);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let sizes: Vec<usize> = [3e-2, 3e-3]
+        .iter()
+        .map(|&tol| {
+            let settings = PrtSettings {
+                fit_tolerance: Some(tol),
+                coefficients: 96,
+                samples: Some(200_000),
+                ..Default::default()
+            };
+            let prt = Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
+            assert!(prt.report().basis_size_by_tolerance);
+            assert!(prt.report().representative_error <= tol);
+            let b = prt.radiosity(&m).unwrap().values[centre(&mesh)];
+            let e = fresnel_transmittance(1.3, 1.0);
+            for c in 0..3 {
+                let sp = m.sigma_s[c] * (1.0 - m.g);
+                let expect = e * rd_total(m.sigma_a[c], sp, 1.3);
+                let rel = (f64::from(b[c]) - expect).abs() / expect;
+                assert!(rel < tol + 3e-3, "tol {tol} channel {c}: {rel}");
+            }
+            prt.basis().len()
+        })
+        .collect();
+    assert!(sizes[0] < sizes[1] && sizes[1] <= 96, "{sizes:?}");
+}
+
+#[test]
+fn edits_far_from_the_representatives_advise_a_refresh() {
+    // 200 mm plane, marble per mm (1/sigma_tr ~ 8 mm): room for a support radius that does
+    // not reach across the whole plane.
+    let mesh = plane(41, 200.0);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let settings = PrtSettings {
+        samples: Some(40_000),
+        ..Default::default()
+    };
+    let prt = Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
+    let scaled = |k: f64| {
+        Material::new(
+            m.sigma_a.map(|x| x * k),
+            m.sigma_s.map(|x| x * k),
+            m.g,
+            m.eta,
+        )
+        .unwrap()
+    };
+    let near = prt.radiosity(&m).unwrap();
+    assert!(!prt.refresh_advised(&near.error_estimate.unwrap()));
+    // A profile 3 times wider than the knots were placed for: part of it lies beyond the
+    // support radius and the estimate says so.
+    let wide = prt.radiosity(&scaled(0.3)).unwrap();
+    assert!(
+        prt.refresh_advised(&wide.error_estimate.unwrap()),
+        "{:?}",
+        wide.error_estimate
+    );
+    // A precompute for the new material brings the estimate back under the floor.
+    let again =
+        Prt::precompute(&mesh, &[scaled(0.3)], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
+    let e = again.radiosity(&scaled(0.3)).unwrap();
+    assert!(
+        !again.refresh_advised(&e.error_estimate.unwrap()),
+        "{:?}",
+        e.error_estimate
+    );
+}
+
+#[test]
+fn cancelling_stops_the_precompute() {
+    let mesh = plane(11, 10.0);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let stop = |f: f32| f < 0.5;
+    let r = Prt::precompute(
+        &mesh,
+        &[m],
+        &PrtSettings::default(),
+        &sun(1.0, 0.0, 1.3),
+        Some(&stop),
+    );
+    assert_eq!(r.unwrap_err(), Error::Cancelled);
+}
+
+#[test]
+fn eta_mismatch_and_bad_settings_are_errors() {
+    let mesh = plane(11, 10.0);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let prt = Prt::precompute(
+        &mesh,
+        &[m],
+        &PrtSettings::default(),
+        &sun(1.0, 0.0, 1.3),
+        None,
+    )
+    .unwrap();
+    let other = Material::new(m.sigma_a, m.sigma_s, 0.0, 1.5).unwrap();
+    assert!(prt.radiosity(&other).is_err());
+    let bad = PrtSettings {
+        tolerance: 0.0,
+        ..Default::default()
+    };
+    assert!(Prt::precompute(&mesh, &[m], &bad, &sun(1.0, 0.0, 1.3), None).is_err());
+    assert!(Prt::precompute(
+        &mesh,
+        &[],
+        &PrtSettings::default(),
+        &sun(1.0, 0.0, 1.3),
+        None
+    )
+    .is_err());
+    let nan = |p: &[Vec3], _n: &[Vec3], _d: Density| Ok(vec![[f32::NAN; 3]; p.len()]);
+    assert!(Prt::precompute(&mesh, &[m], &PrtSettings::default(), &nan, None).is_err());
+}
