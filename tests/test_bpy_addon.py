@@ -95,11 +95,11 @@ def test_cancel_leaves_no_transport(addon):
     import bpy
 
     import translucent
-    from addon import session
+    from addon import jobs, session
 
     mat, objs, _ = scene_with_two_spheres(bpy)
     mat.translucent.enabled = True
-    job, *_ = session.start(mat)
+    job, *_ = jobs.start(mat)
     job.cancel = True
     job.run_here()
     assert isinstance(job.error, translucent.Cancelled)
@@ -152,7 +152,7 @@ def test_an_edit_outside_the_basis_range_is_flagged_and_refreshed(addon):
     fresh = session.SESSIONS[mat.name]
     assert fresh is not sess and not fresh.refresh_advised
     assert max(fresh.last_error) < flagged
-    assert fresh.chosen_for == session._params(s)
+    assert fresh.chosen_for == session.params(s)
     assert mat.name not in session.JOBS
 
 
@@ -218,7 +218,7 @@ def test_undo_and_redo_bring_back_settings_and_preview_together(addon):
 def test_only_objects_carrying_the_material_are_exported_and_the_rest_is_reported(addon):
     import bpy
 
-    from addon import session
+    from addon import panel, session
 
     mat, objs, _ = scene_with_two_spheres(bpy)
     bpy.ops.mesh.primitive_cube_add(size=0.05, location=(0.0, 0.0, -0.2))
@@ -232,7 +232,7 @@ def test_only_objects_carrying_the_material_are_exported_and_the_rest_is_reporte
     sess = session.SESSIONS[mat.name]
     assert sess.info.skipped_objects == [other.name]
     assert sess.prt.report["vertices"] == sum(len(o.data.vertices) for o in objs)
-    text = session.summary(sess)
+    text = panel.summary(sess)
     assert "2 object(s) (1 without the material skipped)" in text
     assert "1 light(s) used, 1 dark" in text and "no rays (black)" in text
 
