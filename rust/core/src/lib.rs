@@ -5,6 +5,7 @@
 // Shared: what every method uses.
 pub mod bake_points; // where Cycles' vertex bake samples a vertex (its corners, 0.1 mm in)
 pub mod error; // the one error type
+pub mod evaluation; // the one answer every method gives: values, error estimate, seconds, skips
 pub mod gpu; // one wgpu context and the per-method kernels
 pub mod interreflection; // the object's own light falling back on it (ray cast)
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)

@@ -89,7 +89,7 @@ fn sun_over_a_large_plane_gives_the_closed_form() {
             let dir = Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32);
             scene.lights.push(Light::sun(dir, [2.0; 3]).unwrap());
             let mut h = Hierarchy::new(scene, settings(model, Mode::OnTheFly)).unwrap();
-            let b = h.radiosity(&m).unwrap();
+            let b = h.radiosity(&m).unwrap().values;
             let cos = theta.cos();
             for c in 0..3 {
                 // B = F_t(θ) E cos θ R_total (dipole); Cycles' walk has no Fresnel on the way in.
@@ -146,7 +146,7 @@ fn error_on(
     weights: &[f32],
 ) -> ErrorStats {
     let mut h = Hierarchy::new(scene.clone(), settings(model, Mode::OnTheFly)).unwrap();
-    let b = h.radiosity(m).unwrap();
+    let b = h.radiosity(m).unwrap().values;
     let b: Vec<[f32; 3]> = receivers.iter().map(|&v| b[v as usize]).collect();
     let t = truth(scene, m, model, receivers);
     relative_error(&b, &t, weights).unwrap()
@@ -221,15 +221,15 @@ fn render_mode_after_a_light_move_equals_a_fresh_evaluation() {
     let m = Material::preset("skin1", 1.0).unwrap();
     let scene = lit(mesh, Vec3::new(20.0, -10.0, 30.0));
     let mut render = Hierarchy::new(scene.clone(), settings(Model::Dipole, Mode::Render)).unwrap();
-    let before = render.radiosity(&m).unwrap();
+    let before = render.radiosity(&m).unwrap().values;
     let moved = vec![Light::point(Vec3::new(-25.0, 5.0, -10.0), [4e4; 3]).unwrap()];
     render.set_lights(moved.clone(), World::Black);
-    let after = render.radiosity(&m).unwrap();
+    let after = render.radiosity(&m).unwrap().values;
     assert!(!render.report().relinked, "render mode keeps its links");
     let mut fresh_scene = scene.clone();
     fresh_scene.lights = moved;
     let mut fresh = Hierarchy::new(fresh_scene, settings(Model::Dipole, Mode::OnTheFly)).unwrap();
-    let expect = fresh.radiosity(&m).unwrap();
+    let expect = fresh.radiosity(&m).unwrap().values;
     let w = render.scene().mesh.vertex_areas().to_vec();
     let e = relative_error(&after, &expect, &w).unwrap();
     assert!(e.worst_rms() < 1e-5, "render vs on-the-fly: {e:?}");
@@ -259,7 +259,7 @@ fn incremental_after_a_deformation_equals_a_fresh_build() {
         })
         .collect();
     inc.set_positions(deformed.clone(), None).unwrap();
-    let got = inc.radiosity(&m).unwrap();
+    let got = inc.radiosity(&m).unwrap().values;
     assert!(inc.report().relinked);
     let fresh_mesh = Mesh::new(deformed, mesh.triangles().to_vec(), None).unwrap();
     let mut fresh = Hierarchy::new(
@@ -267,7 +267,7 @@ fn incremental_after_a_deformation_equals_a_fresh_build() {
         settings(Model::Dipole, Mode::OnTheFly),
     )
     .unwrap();
-    let expect = fresh.radiosity(&m).unwrap();
+    let expect = fresh.radiosity(&m).unwrap().values;
     let w = inc.scene().mesh.vertex_areas().to_vec();
     let e = relative_error(&got, &expect, &w).unwrap();
     eprintln!("incremental vs fresh: {e:?}");
@@ -275,8 +275,8 @@ fn incremental_after_a_deformation_equals_a_fresh_build() {
     // A material change re-checks the links too (marble to ketchup: mostly demotions; the
     // links kept are finer than a fresh refinement's) and agrees within the accuracy bar.
     let ketchup = Material::preset("ketchup", 1.0).unwrap();
-    let got = inc.radiosity(&ketchup).unwrap();
-    let expect = fresh.radiosity(&ketchup).unwrap();
+    let got = inc.radiosity(&ketchup).unwrap().values;
+    let expect = fresh.radiosity(&ketchup).unwrap().values;
     let e = relative_error(&got, &expect, &w).unwrap();
     assert!(
         e.worst_rms() < 0.02,

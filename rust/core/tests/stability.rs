@@ -712,10 +712,10 @@ proptest! {
             prop_assert!(c.vectors.iter().flatten().all(|x| x.is_finite()), "{mat:?}: {:?}", c.vectors);
             prop_assert!(c.fit_error.iter().chain(&c.error_estimate).all(|x| x.is_finite() && *x >= 0.0),
                 "{mat:?}: fit {:?} estimate {:?}", c.fit_error, c.error_estimate);
-            let b = prt.radiosity(&mat).unwrap().radiosity;
+            let b = prt.radiosity(&mat).unwrap().values;
             prop_assert!(all_finite_non_negative(&b));
             for eye in [None, Some(eye * (3.0 * s as f32))] {
-                let l = prt.radiance(&mat, eye).unwrap().radiosity;
+                let l = prt.radiance(&mat, eye).unwrap().values;
                 prop_assert!(all_finite_non_negative(&l));
             }
             if mat == m {
@@ -763,7 +763,7 @@ proptest! {
     ) {
         let m = p.material();
         let lit = Lit::sun(mesh(plane_parts(41, s as f32)), sun_at(theta), 1.0, m.eta);
-        let b = lit.prt(&[m], Some(40_000)).unwrap().radiosity(&m).unwrap().radiosity;
+        let b = lit.prt(&[m], Some(40_000)).unwrap().radiosity(&m).unwrap().values;
         let centre = nearest(lit.mesh(), Vec3::ZERO);
         let i = entering(1.0, theta, m.eta);
         for (c, d) in Dipole::all(&m).iter().enumerate() {
@@ -801,7 +801,7 @@ proptest! {
         for k in [1e2, 1e3, 1e4, 1e5] {
             let st = k / s;
             let m = Material::new([(1.0 - albedo) * st; 3], [albedo * st; 3], 0.0, eta).unwrap();
-            let b = lit.prt(&[m], Some(20_000)).unwrap().radiosity(&m).unwrap().radiosity;
+            let b = lit.prt(&[m], Some(20_000)).unwrap().radiosity(&m).unwrap().values;
             let expect = i * jensen_rd_total(m.sigma_a[0], m.sigma_s[0], eta);
             let got = f64::from(b[centre][0]);
             prop_assert!(got.is_finite() && got >= 0.0);
@@ -836,7 +836,7 @@ proptest! {
         let lit = Lit::sun(mesh(scaled(sphere_parts(12, 1.0), s as f32)), sun, 1.0, eta);
         let st = 1e5 / s;
         let m = Material::new([(1.0 - albedo) * st; 3], [albedo * st; 3], 0.0, eta).unwrap();
-        let b = lit.prt(&[m], Some(20_000)).unwrap().radiosity(&m).unwrap().radiosity;
+        let b = lit.prt(&[m], Some(20_000)).unwrap().radiosity(&m).unwrap().values;
         let total = jensen_rd_total(m.sigma_a[0], m.sigma_s[0], eta);
         let mut checked = 0;
         for (v, n) in lit.mesh().normals().iter().enumerate() {
@@ -875,7 +875,7 @@ proptest! {
             let ms = Material::new(m.sigma_a.map(|x| x / s), m.sigma_s.map(|x| x / s), m.g, m.eta).unwrap();
             let lit = Lit::new(mesh(scaled(sphere_parts(8, 1.0), s as f32)),
                 vec![Light::sun(sun, [1.0; 3]).unwrap()], World::uniform([0.2; 3]).unwrap(), m.eta);
-            lit.prt(&[ms], Some(5000)).unwrap().radiosity(&ms).unwrap().radiosity
+            lit.prt(&[ms], Some(5000)).unwrap().radiosity(&ms).unwrap().values
         };
         let (b1, bs) = (run(1.0), run(s));
         prop_assert!(all_finite_non_negative(&bs));
@@ -940,7 +940,7 @@ proptest! {
         let n = 11;
         let (pos, tris) = scaled(plane_parts(n, 1.0), s as f32);
         let clean = Lit::sun(Mesh::new(pos.clone(), tris.clone(), None).unwrap(), sun_at(theta), 1.0, m.eta);
-        let b_clean = clean.prt(&[m], Some(3000)).unwrap().radiosity(&m).unwrap().radiosity;
+        let b_clean = clean.prt(&[m], Some(3000)).unwrap().radiosity(&m).unwrap().values;
 
         // Zero-area triangles inserted anywhere in the list.
         let mut t = tris.clone();
@@ -956,7 +956,7 @@ proptest! {
         let degenerate = Mesh::new(pos.clone(), t, None).unwrap();
         prop_assert_eq!(degenerate.report().degenerate_triangles, extra.len());
         let lit = Lit::sun(degenerate, sun_at(theta), 1.0, m.eta);
-        let b = lit.prt(&[m], Some(3000)).unwrap().radiosity(&m).unwrap().radiosity;
+        let b = lit.prt(&[m], Some(3000)).unwrap().radiosity(&m).unwrap().values;
         prop_assert!(all_finite_non_negative(&b));
         let d = max_rel_diff(&b, &b_clean);
         prop_assert!(d <= 1e-6, "zero-area triangles moved B by {d} of its peak");
@@ -979,7 +979,7 @@ proptest! {
         let seam = Mesh::new(p2, t2, None).unwrap();
         prop_assert_eq!(seam.report().isolated_vertices, 0);
         let lit = Lit::sun(seam, sun_at(theta), 1.0, m.eta);
-        let b = lit.prt(&[m], Some(3000)).unwrap().radiosity(&m).unwrap().radiosity;
+        let b = lit.prt(&[m], Some(3000)).unwrap().radiosity(&m).unwrap().values;
         prop_assert!(all_finite_non_negative(&b));
         let d = max_rel_diff(&b[..n * n], &b_clean);
         prop_assert!(d <= 1e-6, "a seam moved B by {d} of its peak");
@@ -1009,7 +1009,7 @@ proptest! {
         let tri = (vec![a * s as f32, b * s as f32, c * s as f32], vec![[0, 1, 2]]);
         let lit = Lit::sun(mesh(tri), sun_at(theta), 1.0, m.eta);
         let prt = lit.prt(&[m], Some(20_000)).unwrap();
-        let b = prt.radiosity(&m).unwrap().radiosity;
+        let b = prt.radiosity(&m).unwrap().values;
         prop_assert!(all_finite_non_negative(&b));
         let i = entering(1.0, theta, eta);
         let spacing = prt.report().sample_spacing;
@@ -1051,7 +1051,7 @@ proptest! {
         let lit = Lit::sun(Mesh::new(pos, tris, None).unwrap(), sun_at(0.3), 1.0, m.eta);
         prop_assert_eq!(lit.mesh().report().isolated_vertices, 2);
         prop_assert!(isolated.iter().all(|&v| lit.mesh().vertex_areas()[v as usize] == 0.0));
-        let b = lit.prt(&[m], Some(20_000)).unwrap().radiosity(&m).unwrap().radiosity;
+        let b = lit.prt(&[m], Some(20_000)).unwrap().radiosity(&m).unwrap().values;
         prop_assert!(all_finite_non_negative(&b));
         prop_assert_eq!(b[isolated[0] as usize], b[centre as usize]);
         let truth = lit.reference(&m, &[centre, isolated[0], isolated[1]], 1e-3);
@@ -1122,7 +1122,7 @@ fn open_boundaries_get_the_share_of_the_near_disc_that_is_there() {
         .unwrap()
         .radiosity(&m)
         .unwrap()
-        .radiosity;
+        .values;
     let (corner, edge, centre) = (0u32, 10u32, 220u32);
     let truth = lit.reference(&m, &[corner, edge, centre], 1e-3);
     for (k, v) in [corner, edge, centre].into_iter().enumerate() {
@@ -1154,7 +1154,7 @@ fn an_isolated_vertex_off_the_surface_gets_no_radiosity() {
         .unwrap()
         .radiosity(&m)
         .unwrap()
-        .radiosity;
+        .values;
     let truth = lit.reference(&m, &[121, 122], 1e-3);
     for (k, v) in [121usize, 122].into_iter().enumerate() {
         for c in 0..3 {

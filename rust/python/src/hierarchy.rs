@@ -8,12 +8,24 @@ use numpy::PyArray2;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use translucent_core::hierarchy::{Hierarchy, HierarchySettings, Mode};
+use translucent_core::hierarchy::{
+    Evaluation as HierarchyEvaluation, Hierarchy, HierarchySettings, Mode,
+};
 
 /// A face-cluster hierarchy over a scene (a copy: `update` changes it, not the Scene).
 #[pyclass(name = "Hierarchy", module = "translucent")]
 pub struct PyHierarchy {
     inner: Hierarchy,
+    /// The last evaluation (values dropped), for `last_eval`.
+    last: Option<HierarchyEvaluation>,
+}
+
+impl PyHierarchy {
+    /// Keeps an evaluation's estimate, seconds and skips (not its values) for `last_eval`.
+    fn keep(&mut self, mut e: HierarchyEvaluation) {
+        e.values = Vec::new();
+        self.last = Some(e);
+    }
 }
 
 #[pymethods]
@@ -52,16 +64,18 @@ impl PyHierarchy {
         };
         let core_scene = scene.scene.clone();
         let m = material.inner;
-        let inner = py
+        let (inner, e) = py
             .detach(|| {
                 guard(|| {
                     let mut h = Hierarchy::new(core_scene, settings)?;
-                    h.radiosity(&m)?;
-                    Ok(h)
+                    let e = h.radiosity(&m)?;
+                    Ok((h, e))
                 })
             })
             .map_err(|e| e.into_py(None))?;
-        Ok(Self { inner })
+        let mut out = Self { inner, last: None };
+        out.keep(e);
+        Ok(out)
     }
 
     /// Radiosity B per vertex, (N, 3) float32: the quantity `reference_radiosity` integrates
@@ -76,7 +90,9 @@ impl PyHierarchy {
         let b = py
             .detach(|| guard(|| inner.radiosity(&m)))
             .map_err(|e| e.into_py(None))?;
-        Ok(rgb_array(py, &b))
+        let out = rgb_array(py, &b.values);
+        self.keep(b);
+        Ok(out)
     }
 
     /// Radiance toward the point `eye`, L = W(w_o) B / pi, (N, 3) float32; without `eye`,
@@ -94,7 +110,9 @@ impl PyHierarchy {
         let b = py
             .detach(|| guard(|| inner.radiance(&m, eye)))
             .map_err(|e| e.into_py(None))?;
-        Ok(rgb_array(py, &b))
+        let out = rgb_array(py, &b.values);
+        self.keep(b);
+        Ok(out)
     }
 
     /// The scene changed: `positions` (N, 3) of the same mesh deformed (same vertex count and
@@ -189,8 +207,23 @@ impl PyHierarchy {
         d.set_item("seconds_push", r.seconds_push)?;
         d.set_item("seconds_estimate", r.seconds_estimate)?;
         d.set_item("seconds", r.seconds)?;
-        d.set_item("error_estimate", r.error_estimate.to_vec())?;
+        d.set_item("error_estimate", r.error_estimate.map(|x| x.to_vec()))?;
+        d.set_item("method", "hierarchy")?;
+        let skipped = self.last.as_ref().map_or(&[][..], |e| &e.skipped[..]);
+        d.set_item("skipped", crate::evaluation::skipped_list(py, skipped)?)?;
         Ok(d)
+    }
+
+    /// The last evaluation, None before the first: the keys every method shares ("method",
+    /// "quantity", "error_estimate" per channel — None when `estimate_receivers` is 0, no
+    /// estimate computed — "seconds", "skipped" as {"what", "why"}) and "refresh_advised"
+    /// (always False: the hierarchy has no precompute to refresh).
+    #[getter]
+    fn last_eval<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(e) = &self.last else { return Ok(None) };
+        let d = crate::evaluation::evaluation_dict(py, "hierarchy", e)?;
+        d.set_item("refresh_advised", false)?;
+        Ok(Some(d))
     }
 
     fn __repr__(&self) -> String {

@@ -5,6 +5,7 @@
 use pyo3::prelude::*;
 
 mod convert;
+mod evaluation;
 mod hierarchy;
 mod material;
 mod prt;

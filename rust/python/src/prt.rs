@@ -311,8 +311,9 @@ impl PyPrt {
         let e = py
             .detach(|| inner.radiosity_parts(&m, interreflection, walks))
             .map_err(crate::convert::to_py)?;
-        let out = rgb_array(py, &e.radiosity);
+        let out = rgb_array(py, &e.values);
         self.last = Some(e);
+        self.last_single = None;
         Ok(out)
     }
 
@@ -336,7 +337,7 @@ impl PyPrt {
         let (e, l1) = py
             .detach(|| guard(|| inner.radiance_with(&m, eye, phase)))
             .map_err(|e| e.into_py(None))?;
-        let out = rgb_array(py, &e.radiosity);
+        let out = rgb_array(py, &e.values);
         self.last = Some(e);
         self.last_single = l1;
         Ok(out)
@@ -369,35 +370,33 @@ impl PyPrt {
         Ok(out)
     }
 
-    /// Timing and error estimate of the last evaluation: seconds, fit_seconds, dot_seconds,
-    /// fit_error and error_estimate per channel; None before the first.
+    /// The last evaluation, None before the first: the keys every method shares ("method",
+    /// "quantity", "error_estimate" per channel, "seconds", "skipped" as {"what", "why"}) and
+    /// PRT's own: fit_seconds, dot_seconds, fit_error per channel, backend, the GPU's timings,
+    /// single scattering's estimate and seconds, refresh_advised.
     #[getter]
     fn last_eval<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(e) = &self.last else { return Ok(None) };
-        let d = PyDict::new(py);
-        d.set_item("seconds", e.fit_seconds + e.dot_seconds)?;
-        d.set_item("fit_seconds", e.fit_seconds)?;
-        d.set_item("dot_seconds", e.dot_seconds)?;
+        let d = crate::evaluation::evaluation_dict(py, "prt", e)?;
+        let details = &e.details;
+        d.set_item("fit_seconds", details.fit_seconds)?;
+        d.set_item("dot_seconds", details.dot_seconds)?;
         d.set_item("backend", self.backend())?;
         if let Some(e) = self.inner.gpu_half_error() {
             d.set_item("transport_f16_error", e)?;
         }
-        if let Some(g) = e.gpu {
+        if let Some(g) = details.gpu {
             d.set_item("upload_seconds", g.upload)?;
             d.set_item("dispatch_seconds", g.dispatch)?;
             d.set_item("readback_seconds", g.readback)?;
         }
-        d.set_item("fit_error", e.fit_error.to_vec())?;
-        d.set_item("error_estimate", e.error_estimate.to_vec())?;
+        d.set_item("fit_error", details.fit_error.to_vec())?;
         if let Some(l1) = &self.last_single {
             // On the GPU, L^(1)'s dot products run inside the MS dispatch (dispatch_seconds).
             d.set_item("single_error_estimate", l1.error_estimate.to_vec())?;
             d.set_item("single_seconds", l1.fit_seconds + l1.dot_seconds)?;
         }
-        d.set_item(
-            "refresh_advised",
-            self.inner.refresh_advised(&e.error_estimate),
-        )?;
+        d.set_item("refresh_advised", self.refresh_advised())?;
         Ok(Some(d))
     }
 
@@ -406,9 +405,11 @@ impl PyPrt {
     /// estimate): precompute again with this material among `materials`. None before the first.
     #[getter]
     fn refresh_advised(&self) -> Option<bool> {
-        self.last
-            .as_ref()
-            .map(|e| self.inner.refresh_advised(&e.error_estimate))
+        let e = self.last.as_ref()?;
+        Some(
+            e.error_estimate
+                .is_some_and(|x| self.inner.refresh_advised(&x)),
+        )
     }
 
     /// What the precompute did, skipped, and how long each step took.

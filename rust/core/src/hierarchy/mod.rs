@@ -25,6 +25,7 @@ pub mod links;
 pub mod ring;
 
 use crate::error::{Error, Result};
+use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
 use crate::irradiance::{Density, IrradianceSettings, PerSource};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
@@ -133,9 +134,13 @@ pub struct HierarchyReport {
     pub seconds_estimate: f64,
     pub seconds: f64,
     /// Area-weighted relative RMS per channel between the faces' radiosity and the same
-    /// recomputed with ε/4 on `estimate_receivers` faces.
-    pub error_estimate: [f64; 3],
+    /// recomputed with ε/4 on `estimate_receivers` faces; None when `estimate_receivers` is 0
+    /// (no estimate computed, never a made-up zero).
+    pub error_estimate: Option<[f64; 3]>,
 }
+
+/// One material evaluated by the hierarchy (`evaluation::Evaluation`), with its report.
+pub type Evaluation = crate::evaluation::Evaluation<HierarchyReport>;
 
 /// The hierarchy of one scene, with the links and irradiance of its last evaluation.
 pub struct Hierarchy {
@@ -392,8 +397,45 @@ impl Hierarchy {
         }
     }
 
-    /// Radiosity B per vertex (the quantity `reference_radiosity` integrates).
-    pub fn radiosity(&mut self, material: &Material) -> Result<Vec<[f32; 3]>> {
+    /// Radiosity B per vertex (the quantity `reference_radiosity` integrates), with the
+    /// estimate, seconds and skips of the shared evaluation.
+    pub fn radiosity(&mut self, material: &Material) -> Result<Evaluation> {
+        let values = self.radiosity_values(material)?;
+        Ok(Evaluation {
+            values,
+            quantity: Quantity::Radiosity,
+            error_estimate: self.report.error_estimate,
+            seconds: self.report.seconds,
+            skipped: self.skipped(),
+            details: self.report.clone(),
+        })
+    }
+
+    /// What the hierarchy leaves out of every evaluation, and why.
+    fn skipped(&self) -> Vec<Skipped> {
+        let mut out = vec![
+            Skipped::new(
+                "walks through the mesh",
+                "the hierarchy sums the half-space profile (Mertens 2003)",
+            ),
+            Skipped::new(
+                "the object's own light",
+                "the hierarchy gathers the direct light only",
+            ),
+        ];
+        if self.settings.estimate_receivers == 0 {
+            out.push(Skipped::new("error estimate", "estimate_receivers = 0"));
+        }
+        if !self.settings.world_shadows && !self.scene.world.is_black() {
+            out.push(Skipped::new(
+                "the world's shadows",
+                "world_shadows = false: the world lights every face unoccluded",
+            ));
+        }
+        out
+    }
+
+    fn radiosity_values(&mut self, material: &Material) -> Result<Vec<[f32; 3]>> {
         let start = Instant::now();
         let mut report = HierarchyReport {
             mode: self.settings.mode.name(),
@@ -647,10 +689,10 @@ impl Hierarchy {
         lookup: &[LookupProfile; 3],
         rgb: &LookupRgb,
         face_b: &[[f64; 3]],
-    ) -> [f64; 3] {
+    ) -> Option<[f64; 3]> {
         let k = self.settings.estimate_receivers.min(self.faces.len());
         if k == 0 {
-            return [0.0; 3];
+            return None;
         }
         let leaves: Vec<u32> = (0..self.tree.len() as u32)
             .filter(|&r| self.tree.is_leaf(r))
@@ -667,7 +709,7 @@ impl Hierarchy {
                 slot[0].radiosity
             })
             .collect();
-        std::array::from_fn(|c| {
+        Some(std::array::from_fn(|c| {
             let (mut num, mut den) = (0.0, 0.0);
             for (i, &r) in picks.iter().enumerate() {
                 let f = self.tree.face[r as usize] as usize;
@@ -677,34 +719,33 @@ impl Hierarchy {
             }
             if den > 0.0 {
                 (num / den).sqrt()
+            } else if num == 0.0 {
+                0.0 // dark on both: nothing to be wrong about
             } else {
-                0.0
+                f64::INFINITY // lit where the finer answer is dark
             }
-        })
+        }))
     }
 
     /// Radiance toward `eye` (along each vertex normal without one): L = W(cos_o) B / π with
     /// W the profile's exit weight (dipole: F_t, Xu 2007 eq. 2; Cycles: the Principled layers).
-    pub fn radiance(&mut self, material: &Material, eye: Option<Vec3>) -> Result<Vec<[f32; 3]>> {
-        if let Some(eye) = eye.filter(|e| !e.is_finite()) {
-            return Err(Error::InvalidArgument(format!("eye {eye:?} is not finite")));
-        }
-        let mut b = self.radiosity(material)?;
+    pub fn radiance(&mut self, material: &Material, eye: Option<Vec3>) -> Result<Evaluation> {
+        crate::evaluation::check_eye(eye)?;
+        let mut e = self.radiosity(material)?;
+        let t = Instant::now();
         let model = self.settings.model;
         let profiles = model.profiles(material)?;
         let mesh = &self.scene.mesh;
-        b.par_iter_mut()
-            .zip(mesh.positions().par_iter().zip(mesh.normals().par_iter()))
-            .for_each(|(b, (p, n))| {
-                let cos_o = match eye {
-                    Some(eye) => n.dot((eye - *p).normalize_or_zero()),
-                    None => 1.0,
-                };
-                // W(cos_o) V(cos_o) per channel (`Model::exit_weights`).
-                let k = model.exit_weights(material, &profiles, f64::from(cos_o));
-                *b = std::array::from_fn(|c| b[c] * (k[c] / std::f64::consts::PI) as f32);
-            });
-        Ok(b)
+        radiance_from_radiosity(
+            &mut e.values,
+            mesh.positions(),
+            mesh.normals(),
+            eye,
+            &|cos_o| model.exit_weights(material, &profiles, cos_o),
+        );
+        e.quantity = Quantity::Radiance;
+        e.seconds += t.elapsed().as_secs_f64();
+        Ok(e)
     }
 
     /// The links stored per cluster (render and incremental modes), for tests and tools.

@@ -19,6 +19,7 @@ mod tree;
 
 use crate::basis::{Basis, Degree, Fit, Fitter};
 use crate::error::{Error, Result};
+use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
 use crate::interreflection::Source;
 pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
@@ -228,22 +229,22 @@ pub struct Coefficients {
     pub error_estimate: [f64; 3],
 }
 
-/// One material evaluated: per-vertex radiosity, and what it cost and how good the fit was.
+/// What only PRT reports of one evaluation.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Evaluation {
-    /// Multiple-scattering radiosity B per vertex [W/unit^2 ... in the irradiance's units].
-    pub radiosity: Vec<[f32; 3]>,
+pub struct PrtDetails {
     /// Relative L2 error of the fitted profile over the basis domain, per channel (Xu eq. 18).
     pub fit_error: [f64; 3],
-    /// Estimated relative error of B per channel: fit error weighted by the share of the
-    /// profile's total the basis carries, plus the tail beyond the support radius.
-    pub error_estimate: [f64; 3],
     pub fit_seconds: f64,
     /// The whole dot product, GPU transfers included.
     pub dot_seconds: f64,
     /// Upload, dispatch and readback when the GPU ran it.
     pub gpu: Option<crate::gpu::GpuTimings>,
 }
+
+/// One material evaluated by PRT (`evaluation::Evaluation`): B or L per vertex; the error
+/// estimate per channel is the fit error weighted by the share of the profile's total the
+/// basis carries, plus the tail beyond the support radius and the walks' noise.
+pub type Evaluation = crate::evaluation::Evaluation<PrtDetails>;
 
 impl Prt {
     /// Precomputes the transport for `mesh` lit as `irradiance` says, with a basis chosen for
@@ -459,7 +460,7 @@ impl Prt {
         let halfspace = match &tracer {
             Some(_) => {
                 prt.radiosity_parts(&representatives[0], false, false)?
-                    .radiosity
+                    .values
             }
             None => Vec::new(),
         };
@@ -505,7 +506,7 @@ impl Prt {
             // `PATH_RAY_DIFFUSE_ANCESTOR` suggests in Cycles' source).
             // B's half-space part and what the walks through the mesh add to it (thin parts'
             // transmitted glow), sent under different view factors below.
-            let direct = prt.radiosity(rep)?.radiosity;
+            let direct = prt.radiosity(rep)?.values;
             let walked_part = prt.geometry.as_ref().map(|_| {
                 direct
                     .iter()
@@ -858,17 +859,55 @@ impl Prt {
                 }
             }
         }
+        let dot_seconds = t1.elapsed().as_secs_f64();
         Ok((
             Evaluation {
-                radiosity,
-                fit_error: c.fit_error,
-                error_estimate,
-                fit_seconds,
-                dot_seconds: t1.elapsed().as_secs_f64(),
-                gpu,
+                values: radiosity,
+                quantity: Quantity::Radiosity,
+                error_estimate: Some(error_estimate),
+                seconds: fit_seconds + dot_seconds,
+                skipped: self.skipped(bounce, walks),
+                details: PrtDetails {
+                    fit_error: c.fit_error,
+                    fit_seconds,
+                    dot_seconds,
+                    gpu,
+                },
             },
             l1,
         ))
+    }
+
+    /// What an evaluation leaves out: the object's own light and the walks through the mesh,
+    /// when they were not precomputed or the caller left them out.
+    fn skipped(&self, bounce: bool, walks: bool) -> Vec<Skipped> {
+        let mut out = Vec::new();
+        match (&self.bounce, bounce) {
+            (None, _) => out.push(Skipped::new(
+                "the object's own light",
+                "not precomputed (interreflection off)",
+            )),
+            (Some(_), false) => out.push(Skipped::new(
+                "the object's own light",
+                "left out by the caller (direct light only)",
+            )),
+            _ => {}
+        }
+        match (&self.geometry, walks) {
+            (None, _) => out.push(Skipped::new(
+                "walks through the mesh",
+                match self.model {
+                    Model::Dipole => "the dipole's model is the half-space profile",
+                    Model::Cycles => "not precomputed (walks off)",
+                },
+            )),
+            (Some(_), false) => out.push(Skipped::new(
+                "walks through the mesh",
+                "left out by the caller (the half-space profile alone)",
+            )),
+            _ => {}
+        }
+        out
     }
 
     /// Attaches single scattering precomputed for the same mesh (the dipole only: Cycles'
@@ -928,12 +967,13 @@ impl Prt {
                 Error::GpuUnavailable("the GPU returned no single scattering".into())
             })?;
             let t = Instant::now();
-            e.radiosity
+            e.values
                 .par_iter_mut()
                 .zip(l1.par_iter())
                 .for_each(|(l, a)| *l = std::array::from_fn(|c| l[c] + a[c]));
-            e.dot_seconds += t.elapsed().as_secs_f64();
-            e.fit_seconds += fit_seconds;
+            e.details.dot_seconds += t.elapsed().as_secs_f64();
+            e.details.fit_seconds += fit_seconds;
+            e.seconds = e.details.fit_seconds + e.details.dot_seconds;
             return Ok((
                 e,
                 Some(single::SingleEvaluation {
@@ -947,9 +987,11 @@ impl Prt {
         // CPU: B, then one pass that turns it into F_t B / pi (the dipole's exit weight, as
         // `radiance`) and adds L^(1).
         let (mut e, _) = self.radiosity_inner(material, true, true, None)?;
-        let l1 = s.radiance_joined(material, eye, phase, &mut e.radiosity)?;
-        e.fit_seconds += l1.fit_seconds;
-        e.dot_seconds += l1.dot_seconds;
+        let l1 = s.radiance_joined(material, eye, phase, &mut e.values)?;
+        e.quantity = Quantity::Radiance;
+        e.details.fit_seconds += l1.fit_seconds;
+        e.details.dot_seconds += l1.dot_seconds;
+        e.seconds = e.details.fit_seconds + e.details.dot_seconds;
         Ok((e, Some(l1)))
     }
 
@@ -968,29 +1010,20 @@ impl Prt {
         eye: Option<Vec3>,
         single: Option<&crate::gpu::SingleEdit>,
     ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
-        if let Some(eye) = eye.filter(|e| !e.is_finite()) {
-            return Err(Error::InvalidArgument(format!("eye {eye:?} is not finite")));
-        }
+        crate::evaluation::check_eye(eye)?;
         let (mut e, l1) = self.radiosity_inner(material, true, true, single)?;
         let t = Instant::now();
-        match eye {
-            Some(eye) => {
-                let profiles = self.model.profiles(material)?;
-                radiance_from_radiosity(
-                    &mut e.radiosity,
-                    &self.positions,
-                    &self.normals,
-                    eye,
-                    &|cos_o| self.model.exit_weights(material, &profiles, cos_o),
-                )
-            }
-            None => {
-                let w = self.model.exit_weight(material, 1.0);
-                let k = (w / std::f64::consts::PI) as f32;
-                e.radiosity.iter_mut().for_each(|b| *b = b.map(|x| x * k));
-            }
-        }
-        e.dot_seconds += t.elapsed().as_secs_f64();
+        let profiles = self.model.profiles(material)?;
+        radiance_from_radiosity(
+            &mut e.values,
+            &self.positions,
+            &self.normals,
+            eye,
+            &|cos_o| self.model.exit_weights(material, &profiles, cos_o),
+        );
+        e.quantity = Quantity::Radiance;
+        e.details.dot_seconds += t.elapsed().as_secs_f64();
+        e.seconds = e.details.fit_seconds + e.details.dot_seconds;
         Ok((e, l1))
     }
 }
@@ -1010,25 +1043,6 @@ fn sent_on(model: Model, material: &Material, profiles: &[Profile; 3], cos: f64)
     let s = model.specular_reflectance(material, cos);
     let t = totals(profiles);
     std::array::from_fn(|c| w[c] * t[c] + s)
-}
-
-/// Turns radiosity into outgoing radiance toward `eye` in place: L_d = W(cos_o) V(cos_o) B / pi
-/// with `exit_weights` per channel (`Model::exit_weights`).
-pub fn radiance_from_radiosity(
-    values: &mut [[f32; 3]],
-    positions: &[Vec3],
-    normals: &[Vec3],
-    eye: Vec3,
-    exit_weights: &(dyn Fn(f64) -> [f64; 3] + Sync),
-) {
-    values
-        .par_iter_mut()
-        .zip(positions.par_iter().zip(normals.par_iter()))
-        .for_each(|(b, (p, n))| {
-            let cos_o = n.dot((eye - *p).normalize_or_zero());
-            let k = exit_weights(f64::from(cos_o));
-            *b = std::array::from_fn(|c| b[c] * (k[c] / std::f64::consts::PI) as f32);
-        });
 }
 
 /// Half the shortest length over which any representative's profile changes (`LengthScales`:
@@ -1490,7 +1504,7 @@ mod tests {
             ..Default::default()
         };
         let prt = Prt::precompute(mesh, &[*m], &settings, &sun(1.0, theta, m.eta), None).unwrap();
-        let b = prt.radiosity(m).unwrap().radiosity;
+        let b = prt.radiosity(m).unwrap().values;
         let v = centre(mesh);
         let e = fresnel_transmittance(m.eta, theta.cos()) * theta.cos();
         for c in 0..3 {
@@ -1558,8 +1572,8 @@ mod tests {
         let a = Prt::precompute(&mesh, &[m], &exact, &irr, None).unwrap();
         let b = Prt::precompute(&mesh, &[m], &fast, &irr, None).unwrap();
         assert!(b.report().far_clusters > 0 && a.report().far_clusters == 0);
-        let ea = a.radiosity(&m).unwrap().radiosity;
-        let eb = b.radiosity(&m).unwrap().radiosity;
+        let ea = a.radiosity(&m).unwrap().values;
+        let eb = b.radiosity(&m).unwrap().values;
         let s = crate::metrics::relative_error(&eb, &ea, mesh.vertex_areas()).unwrap();
         eprintln!(
             "clustered vs brute force: {s:?}; {} far clusters",
@@ -1585,7 +1599,7 @@ mod tests {
         let m = Material::preset("skin1", 1.0).unwrap();
         let mut prt = Prt::precompute(&mesh, &[m], &PrtSettings::default(), &irr, None).unwrap();
         assert_eq!(prt.report().stored_channels, 3);
-        let cpu = prt.radiosity(&m).unwrap().radiosity;
+        let cpu = prt.radiosity(&m).unwrap().values;
         if let Err(e) = prt.set_backend(Backend::Gpu, true) {
             // CI installs Mesa's lavapipe; elsewhere a machine may have no Vulkan at all.
             eprintln!("skipped: {e}");
@@ -1594,9 +1608,9 @@ mod tests {
         assert_eq!(prt.backend(), Backend::Gpu);
         let other = Material::preset("ketchup", 1.0).unwrap();
         for mat in [m, other] {
-            let gpu = prt.radiosity(&mat).unwrap().radiosity;
+            let gpu = prt.radiosity(&mat).unwrap().values;
             prt.set_backend(Backend::Cpu, true).unwrap();
-            let cpu = prt.radiosity(&mat).unwrap().radiosity;
+            let cpu = prt.radiosity(&mat).unwrap().values;
             prt.set_backend(Backend::Gpu, true).unwrap();
             for (g, c) in gpu.iter().zip(&cpu) {
                 for k in 0..3 {
@@ -1611,7 +1625,7 @@ mod tests {
         prt.set_backend_with(Backend::Gpu, true, true).unwrap();
         let bound = prt.gpu_half_error().unwrap();
         assert!(bound > 0.0 && bound < 1e-3, "f16 rounding bound {bound}");
-        let half = prt.radiosity(&m).unwrap().radiosity;
+        let half = prt.radiosity(&m).unwrap().values;
         let s = crate::metrics::relative_error(&half, &cpu, mesh.vertex_areas()).unwrap();
         assert!(
             s.worst_rms() <= bound.max(1e-6) && s.worst_rms() > 0.0,
@@ -1640,7 +1654,7 @@ mod tests {
                     Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
                 assert!(prt.report().basis_size_by_tolerance);
                 assert!(prt.report().representative_error <= tol);
-                let b = prt.radiosity(&m).unwrap().radiosity[centre(&mesh)];
+                let b = prt.radiosity(&m).unwrap().values[centre(&mesh)];
                 let e = fresnel_transmittance(1.3, 1.0);
                 for c in 0..3 {
                     let sp = m.sigma_s[c] * (1.0 - m.g);
@@ -1675,12 +1689,12 @@ mod tests {
             .unwrap()
         };
         let near = prt.radiosity(&m).unwrap();
-        assert!(!prt.refresh_advised(&near.error_estimate));
+        assert!(!prt.refresh_advised(&near.error_estimate.unwrap()));
         // A profile 3 times wider than the knots were placed for: part of it lies beyond the
         // support radius and the estimate says so.
         let wide = prt.radiosity(&scaled(0.3)).unwrap();
         assert!(
-            prt.refresh_advised(&wide.error_estimate),
+            prt.refresh_advised(&wide.error_estimate.unwrap()),
             "{:?}",
             wide.error_estimate
         );
@@ -1689,7 +1703,7 @@ mod tests {
             Prt::precompute(&mesh, &[scaled(0.3)], &settings, &sun(1.0, 0.0, 1.3), None).unwrap();
         let e = again.radiosity(&scaled(0.3)).unwrap();
         assert!(
-            !again.refresh_advised(&e.error_estimate),
+            !again.refresh_advised(&e.error_estimate.unwrap()),
             "{:?}",
             e.error_estimate
         );

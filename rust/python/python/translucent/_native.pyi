@@ -1,7 +1,7 @@
 """Type stubs of the native module. Units: scene units for lengths, 1/scene unit for
 coefficients, Blender/Cycles light units (W, W/m^2, radiance)."""
 
-from typing import Callable, Literal, Sequence, overload
+from typing import Any, Callable, Literal, Sequence, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -232,10 +232,12 @@ class Prt:
         """(N, 3) single scattering L^(1) alone toward `eye` (Xu 2007 eq. 14); ValueError when
         the precompute left it out."""
     @property
-    def last_eval(self) -> dict[str, float | bool | list[float]] | None:
-        """seconds, fit_seconds, dot_seconds, backend, fit_error and error_estimate (per channel,
-        relative), refresh_advised; GPU timings when the GPU ran it; single_error_estimate and
-        single_seconds when single scattering was evaluated."""
+    def last_eval(self) -> dict[str, Any] | None:
+        """The keys every method shares: method ("prt"), quantity ("radiosity" or "radiance"),
+        error_estimate (per channel, relative), seconds, skipped (a list of {"what", "why"}); then
+        PRT's own: fit_seconds, dot_seconds, backend, fit_error, refresh_advised; GPU timings
+        when the GPU ran it; single_error_estimate and single_seconds when single scattering
+        was evaluated."""
     @property
     def refresh_advised(self) -> bool | None:
         """True when the last evaluation's estimated error says the material left the range the
@@ -306,6 +308,11 @@ class Hierarchy:
     def eps(self) -> tuple[float, float]: ...
     @property
     def vertex_count(self) -> int: ...
+    @property
+    def last_eval(self) -> dict[str, Any] | None:
+        """The last evaluation, with the keys every method shares: method ("hierarchy"), quantity,
+        error_estimate (per channel; None when estimate_receivers is 0: no estimate computed),
+        seconds, skipped (a list of {"what", "why"}); and refresh_advised (always False)."""
     @property
     def report(self) -> dict[str, object]:
         """The last evaluation: links, far_links, near_links, links_per_face, clusters, faces,
