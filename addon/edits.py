@@ -103,17 +103,20 @@ def edit(material: bpy.types.Material) -> None:
     if s.profile == "cycles" and not translucent.profile_ready(m) and not _prepare_tables(material, m):
         return  # the walk tables for a new g, Roughness or IOR are being built; old preview kept
     s.edit_message = ""
-    prt = s.prt
+    transport = s.transport
     # Radiance leaving along each normal (a view-independent viewport colour), or toward the
     # viewport's eye where single scattering makes it depend on the view.
     try:
-        colors = prt.radiance(m, s.eye) if s.eye is not None and view_dependent(s) else prt.radiance(m)
+        colors = transport.radiance(m, s.eye) if s.eye is not None and view_dependent(s) else transport.radiance(m)
     except ValueError as e:
         s.edit_message = f"not shown: {e}"
         return
-    s.last_error = list(prt.last_eval["error_estimate"])
-    s.last_seconds = prt.last_eval["seconds"]
-    s.refresh_advised = bool(prt.last_eval["refresh_advised"])
+    # The method's own evaluation (the keys every method reports), kept as it gave it.
+    s.last_eval = dict(transport.last_eval)
+    estimate = s.last_eval["error_estimate"]
+    s.last_error = None if estimate is None else list(estimate)
+    s.last_seconds = s.last_eval["seconds"]
+    s.refresh_advised = bool(s.last_eval["refresh_advised"])
     s.not_shown = []
     for name, values in writeback.split(colors, s.info).items():
         obj = bpy.data.objects.get(name)
@@ -199,7 +202,7 @@ def refresh(material: bpy.types.Material) -> None:
     if s.chosen_for == params(material.translucent):
         return
     try:
-        job, objects, info, lighting = jobs.start(material)
+        job, objects, info, lighting = jobs.start(material, method=s.method)
     except ValueError as e:
         s.refresh_message = f"refresh failed: {e}"
         return

@@ -45,41 +45,18 @@ class Job:
         return not self._thread.is_alive() and (self.result is not None or self.error is not None)
 
 
-class HierarchyTransport:
-    """A `translucent.Hierarchy` seen through the calls the edit path makes on a `Prt`
-    (`radiance(m)`, `last_eval`, `report`, `profile`)."""
-
-    def __init__(self, hierarchy, profile: str):
-        self.hierarchy = hierarchy
-        self.profile = profile
-        self.backend_message = "hierarchy (Mertens 2003)"
-        self.last_eval = {"error_estimate": [0.0, 0.0, 0.0], "seconds": 0.0, "refresh_advised": False}
-
-    @property
-    def report(self) -> dict:
-        r = dict(getattr(self.hierarchy, "report", None) or {})
-        for key, value in (("world_skipped", False), ("walks", None), ("lights_used", 0), ("lights_skipped_black", 0),
-                           ("lights_unreached", 0), ("samples", 0), ("coefficients", 0), ("support_radius", 0.0),
-                           ("rays", 0), ("seconds", 0.0), ("vertices", 0)):
-            r.setdefault(key, value)
-        return r
-
-    def radiance(self, m):
-        # Along the normals, as the PRT preview shows it: no eye point.
-        colors = self.hierarchy.radiance(m, None)
-        last = getattr(self.hierarchy, "last_eval", None)
-        if last:
-            self.last_eval.update(last)
-        return colors
-
-
 HIERARCHY_EPS = (0.005, 0.5)  # receiver and emitter thresholds (eps1, eps2): translucent.Hierarchy's defaults
+# Receivers the hierarchy checks against its ground truth for its error estimate (its
+# default); 0 computes none, and the panel then says so.
+HIERARCHY_ESTIMATE_RECEIVERS = 32
 
 
 class HierarchyJob(Job):
-    """The hierarchy built (or updated, same topology) on a worker thread; the same polling."""
+    """The hierarchy built (or updated, same topology) on a worker thread; the same polling. Its
+    result is the `translucent.Hierarchy` itself: it answers the edit path's calls as a `Prt`
+    does (`radiance`, `last_eval`, `report`, `profile`), each with its own keys."""
 
-    def __init__(self, scene, material, previous: HierarchyTransport | None = None, positions=None, **kwargs):
+    def __init__(self, scene, material, previous=None, positions=None, **kwargs):
         super().__init__(scene, [material], **kwargs)
         self._material, self._previous, self._positions = material, previous, positions
 
@@ -87,16 +64,15 @@ class HierarchyJob(Job):
         import translucent
 
         try:
-            profile = kwargs.get("profile", "cycles")
             if self._previous is not None:
                 # Same topology: the hierarchy's own update (links promoted or demoted).
-                self._previous.hierarchy.update(positions=self._positions, lights=scene)
+                self._previous.update(positions=self._positions, lights=scene)
                 self.result = self._previous
             else:
                 # The world shadowed by the mesh, as Cycles renders it.
-                h = translucent.Hierarchy(scene, self._material, profile=profile, eps=HIERARCHY_EPS,
-                                          mode="on_the_fly", world_shadows=True)
-                self.result = HierarchyTransport(h, profile)
+                self.result = translucent.Hierarchy(scene, self._material, profile=kwargs["profile"],
+                                                    eps=HIERARCHY_EPS, mode="on_the_fly", world_shadows=True,
+                                                    estimate_receivers=HIERARCHY_ESTIMATE_RECEIVERS)
         except BaseException as e:  # reported by the follow refresh, which falls back to PRT
             self.error = e
 
@@ -146,7 +122,7 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
         if same:
             depsgraph = bpy.context.evaluated_depsgraph_get()
             positions = np.concatenate([export.evaluated_mesh_arrays(o, depsgraph)[0] for o in objects])
-        job = HierarchyJob(scene, s.material(), previous=previous.prt if same else None, positions=positions,
+        job = HierarchyJob(scene, s.material(), previous=previous.transport if same else None, positions=positions,
                            profile=s.profile_name())
     else:
         job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend,

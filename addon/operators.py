@@ -81,7 +81,8 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             return {"CANCELLED"}
         s = edits.finish(mat, job, self._objects, self._info, self._lighting, self._method_message)
         vertices = sum(o.count for o in self._info.objects)
-        self.report({"INFO"}, f"precomputed {vertices} vertices: {panel.summary(s)}; {s.prt.backend_message}")
+        device = f"; {s.transport.backend_message}" if s.method == "prt" else ""
+        self.report({"INFO"}, f"precomputed {vertices} vertices: {panel.summary(s)}{device}")
         return {"FINISHED"}
 
     def execute(self, context):

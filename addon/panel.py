@@ -9,26 +9,41 @@ from . import jobs, principled
 from .session import JOBS, PREPARING, SESSIONS, Session, state
 
 
+# The hierarchy's report keys the summary shows, where its report has them (its own keys, not PRT's).
+HIERARCHY_SHOWN = (("faces", "faces"), ("clusters", "clusters"), ("links", "links"), ("rays", "rays"))
+
+
 def summary(sess: Session) -> str:
-    """What the precompute did and left out, in one line for the status bar and the panel."""
-    r, info = sess.prt.report, sess.info
+    """What the precompute did and left out, in one line for the status bar and the panel: the
+    export's part, then the method's own report as it gives it."""
+    r, info = sess.transport.report, sess.info
+    scene = f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped)"
     if sess.method == "hierarchy":
-        # Its report's keys are the hierarchy's own: shown as it gives them, not as PRT's.
-        own = ", ".join(f"{k} {v}" for k, v in dict(getattr(sess.prt.hierarchy, "report", None) or {}).items())
-        return (f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped), "
-                f"{len(info.lights)} light(s), {len(info.skipped_lights)} dark skipped, world: {info.world}; "
-                f"hierarchy (Mertens 2003){': ' + own if own else ''}")
+        own = ", ".join([f"{r[k]} {label}" for k, label in HIERARCHY_SHOWN if k in r] + [f"{r['seconds']:.2f} s"])
+        return (f"{scene}, {len(info.lights)} light(s), {len(info.skipped_lights)} dark skipped, "
+                f"world: {info.world}; hierarchy (Mertens 2003): {own}")
     world = "world: no rays (black)" if r["world_skipped"] else f"world: {info.world}"
-    w = r.get("walks")
+    w = r["walks"]
     walks = (f"; walks through the mesh: {w['walks_per_vertex']} x {w['walked_vertices']} vertices "
              f"({w['skipped_flat']} flat skipped)" if w else "")
     return (
-        f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped), "
-        f"{r['lights_used']} light(s) used, {r['lights_skipped_black'] + len(info.skipped_lights)} dark "
+        f"{scene}, {r['lights_used']} light(s) used, {r['lights_skipped_black'] + len(info.skipped_lights)} dark "
         f"and {r['lights_unreached']} out of reach skipped, {world}; {r['samples']} samples, "
         f"{r['coefficients']} coefficients, support radius {r['support_radius']:.4g} units, "
         f"{r['rays']} rays{walks}, {r['seconds']:.2f} s"
     )
+
+
+def estimate_line(sess: Session) -> str:
+    """The last edit's time and the method's own error estimate; "not computed" where the method
+    computed none (a number is never made up for it)."""
+    if sess.last_error is None:
+        err = "est. error: not computed"
+    else:
+        # Three significant digits: a small estimate (the hierarchy's on a fine mesh) is not
+        # rounded to zeros.
+        err = f"est. error {', '.join(f'{100 * e:.3g}' for e in sess.last_error)} %"
+    return f"Edit {1e3 * sess.last_seconds:.2f} ms, {err}"
 
 
 def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
@@ -64,9 +79,10 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     if sess.edit_message:
         lines.append((sess.edit_message, "TIME" if mat.name in PREPARING else "ERROR"))
     lines += [(part, "NONE") for part in summary(sess).split("; ")]
-    if sess.last_error:
-        err = ", ".join(f"{100 * e:.2f}" for e in sess.last_error)
-        lines.append((f"Edit {1e3 * sess.last_seconds:.2f} ms, est. error {err} %", "NONE"))
+    if sess.last_eval is not None:
+        lines.append((estimate_line(sess), "NONE"))
+        # What the method's evaluation left out, and why (its own words).
+        lines += [(f"Left out: {k['what']} ({k['why']})", "INFO") for k in sess.last_eval["skipped"]]
         if sess.refresh_advised:
             text = sess.refresh_message if st == "running" or sess.refresh_message.startswith("refresh failed") else (
                 "Material outside the basis' range: precompute again")

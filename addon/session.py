@@ -13,7 +13,7 @@ from . import export
 
 @dataclass
 class Session:
-    prt: object  # translucent.Prt, or the hierarchy's transport (`jobs.HierarchyTransport`)
+    transport: object  # what the method built: a translucent.Prt or a translucent.Hierarchy
     info: export.ExportInfo
     objects: list[str]
     # export.lighting_keys at the precompute: what each light and the world were.
@@ -106,4 +106,4 @@ def state(material: bpy.types.Material) -> str:
 def view_dependent(s: Session) -> bool:
     """Whether the session's transport holds single scattering (the dipole's L^(1)): only then
     does the preview depend on where the viewer is."""
-    return s.method == "prt" and bool(dict(getattr(s.prt, "report", {}) or {}).get("single_scattering"))
+    return s.method == "prt" and bool(s.transport.report["single_scattering"])

@@ -470,7 +470,7 @@ def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):
     assert followed.method == "hierarchy" and session.state(mat) == "ready"
     now = read_preview(obj)
     assert not np.allclose(now, first), "the deformation did not change the preview"
-    np.testing.assert_allclose(now, followed.prt.hierarchy.radiance(s.material(), None), rtol=1e-6)
+    np.testing.assert_allclose(now, followed.transport.radiance(s.material(), None), rtol=1e-6)
     # The hierarchy updated in place against the ground truth of the deformed mesh: no further
     # from it than one built afresh, within a point. (On this coarse sphere, 224 faces of about
     # 1 cm for marble, both are 7-8 % off: the hierarchy gathers at face centroids; the < 2 %
@@ -478,7 +478,7 @@ def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):
     h_new, scene = fresh()
     truth = translucent.reference_radiosity(scene, s.material(), profile=s.profile_name(), rel_tol=2e-3)
     w = scene.vertex_areas[:, 0]
-    updated = max(translucent.relative_error(followed.prt.hierarchy.radiosity(s.material()), truth, w)["rms"])
+    updated = max(translucent.relative_error(followed.transport.radiosity(s.material()), truth, w)["rms"])
     rebuilt = max(translucent.relative_error(h_new.radiosity(s.material()), truth, w)["rms"])
     assert updated < rebuilt + 0.01 and rebuilt < 0.1, (updated, rebuilt)
     assert mesh_hash(obj.data) == user_mesh
@@ -498,12 +498,12 @@ def test_the_preview_follows_the_view_where_single_scattering_makes_it_depend_on
     mat.translucent.profile = "DIPOLE"
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     sess = session.SESSIONS[mat.name]
-    assert sess.prt.report["single_scattering"]
+    assert sess.transport.report["single_scattering"]
     along = read_preview(obj)
     eye = (0.0, -1.0, 0.3)
     assert follow.set_eye(mat, eye)
     toward = read_preview(obj)
-    np.testing.assert_allclose(toward, sess.prt.radiance(mat.translucent.material(), eye), rtol=1e-6)
+    np.testing.assert_allclose(toward, sess.transport.radiance(mat.translucent.material(), eye), rtol=1e-6)
     assert not np.allclose(toward, along)
     assert not follow.set_eye(mat, eye), "the same eye is not drawn again"
     assert follow.set_eye(mat, (1.0, 0.0, 0.2))
@@ -511,12 +511,12 @@ def test_the_preview_follows_the_view_where_single_scattering_makes_it_depend_on
     assert not np.allclose(moved, toward)
     mat.translucent.preset = "SKIN1"
     edits.edit(mat)
-    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material(), (1.0, 0.0, 0.2)),
+    np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material(), (1.0, 0.0, 0.2)),
                                rtol=1e-6)
     # The timer reads the 3D viewport's view (the factory startup has one, headless too).
     eye_view = follow.viewport_eye()
     assert eye_view is not None and follow.follow_view_tick() == follow.VIEW_POLL_S
     assert sess.eye == pytest.approx(eye_view)
-    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material(), eye_view), rtol=1e-6)
+    np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material(), eye_view), rtol=1e-6)
     assert follow.set_eye(mat, None)
-    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material()), rtol=1e-6)
+    np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material()), rtol=1e-6)
