@@ -1,49 +1,66 @@
-"""Operators: precompute (off the UI thread, progress bar, Esc cancels) and stop previewing."""
+"""Operators: precompute (off the UI thread, progress bar, Esc cancels) and clear the preview.
+
+Both take the material by name (`material_name`; the panel passes its own), so a script runs
+them from any context; without a name they take the context's material (the active object's).
+Blender's `poll` cannot see an operator's properties, so it refuses nothing a name could make
+valid: `execute` resolves the material and reports what is wrong, naming it."""
 
 from __future__ import annotations
 
 import bpy
 
-from . import session, viewport, writeback
+from . import edits, jobs, panel, viewport, writeback
+from .session import JOBS, SESSIONS, objects_with
 
 
-def _material(context):
-    return getattr(context, "material", None) or (context.object.active_material if context.object else None)
+def _context_material(context):
+    obj = getattr(context, "object", None)
+    return getattr(context, "material", None) or (obj.active_material if obj is not None else None)
+
+
+def _resolve(op, context, needs_preview: bool):
+    """The operator's material: `op.material_name` looked up in bpy.data.materials, else the
+    context's. None, with an error report naming what is missing, when there is none."""
+    if op.material_name:
+        mat = bpy.data.materials.get(op.material_name)
+        if mat is None:
+            op.report({"ERROR"}, f"material_name: no material named {op.material_name!r} in this file")
+            return None
+    else:
+        mat = _context_material(context)
+        if mat is None:
+            op.report({"ERROR"}, "no material: pass material_name, or make an object with a material active")
+            return None
+    if needs_preview and not mat.translucent.enabled:
+        op.report({"ERROR"}, f"material {mat.name!r}: the preview is off (material.translucent.enabled = True)")
+        return None
+    return mat
 
 
 class TRANSLUCENT_OT_precompute(bpy.types.Operator):
-    """Precompute light transport for the objects using this material (Xu 2007 PRT)"""
+    """Precompute light transport for the objects using this material (Xu 2007 PRT, or the hierarchy)"""
 
     bl_idname = "translucent.precompute"
     bl_label = "Precompute"
     bl_options = {"REGISTER", "UNDO"}
 
-    material_name: bpy.props.StringProperty(options={"HIDDEN", "SKIP_SAVE"})
+    material_name: bpy.props.StringProperty(
+        name="Material", description="The material to precompute (empty: the active object's)",
+        options={"HIDDEN", "SKIP_SAVE"})
 
     _timer = None
 
-    def _target(self, context):
-        if self.material_name:
-            return bpy.data.materials.get(self.material_name)
-        return _material(context)
-
-    @classmethod
-    def poll(cls, context):
-        m = _material(context)
-        # A second press while a job runs does not start a second one.
-        return m is not None and m.translucent.enabled and m.name not in session.JOBS
-
     def _prepare(self, context):
-        mat = self._target(context)
+        mat = _resolve(self, context, needs_preview=True)
         if mat is None:
-            self.report({"ERROR"}, "no material")
             return None
-        if mat.name in session.JOBS:
+        if mat.name in JOBS:
+            # A second press while a job runs does not start a second one.
             self.report({"WARNING"}, f"a precompute for {mat.name} is already running")
             return None
         try:
-            method, self._method_message = session.resolve_method(mat.translucent.method, "precompute")
-            job, objects, info, lighting = session.start(mat, context.scene, method=method)
+            method, self._method_message = jobs.resolve_method(mat.translucent.method, "precompute")
+            job, objects, info, lighting = jobs.start(mat, context.scene, method=method)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return None
@@ -51,7 +68,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
         return job
 
     def _finish(self, context):
-        session.JOBS.pop(self._mat, None)
+        JOBS.pop(self._mat, None)
         mat = bpy.data.materials.get(self._mat)
         job = self._job
         if job.error is not None:
@@ -62,9 +79,10 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
                 return {"CANCELLED"}
             self.report({"ERROR"}, f"precompute failed: {job.error}")
             return {"CANCELLED"}
-        s = session.finish(mat, job, self._objects, self._info, self._lighting, self._method_message)
+        s = edits.finish(mat, job, self._objects, self._info, self._lighting, self._method_message)
         vertices = sum(o.count for o in self._info.objects)
-        self.report({"INFO"}, f"precomputed {vertices} vertices: {session.summary(s)}; {s.prt.backend_message}")
+        device = f"; {s.transport.backend_message}" if s.method == "prt" else ""
+        self.report({"INFO"}, f"precomputed {vertices} vertices: {panel.summary(s)}{device}")
         return {"FINISHED"}
 
     def execute(self, context):
@@ -72,7 +90,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
         job = self._prepare(context)
         if job is None:
             return {"CANCELLED"}
-        session.JOBS[self._mat] = job
+        JOBS[self._mat] = job
         job.run_here()
         return self._finish(context)
 
@@ -82,7 +100,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
         job = self._prepare(context)
         if job is None:
             return {"CANCELLED"}
-        session.JOBS[self._mat] = job
+        JOBS[self._mat] = job
         job.start()
         wm = context.window_manager
         wm.progress_begin(0, 100)
@@ -115,14 +133,16 @@ class TRANSLUCENT_OT_clear(bpy.types.Operator):
     bl_label = "Clear Preview"
     bl_options = {"REGISTER", "UNDO"}
 
-    @classmethod
-    def poll(cls, context):
-        return _material(context) is not None
+    material_name: bpy.props.StringProperty(
+        name="Material", description="The material to clear (empty: the active object's)",
+        options={"HIDDEN", "SKIP_SAVE"})
 
     def execute(self, context):
-        mat = _material(context)
-        session.SESSIONS.pop(mat.name, None)
-        objects = session.objects_with(mat, context.scene)
+        mat = _resolve(self, context, needs_preview=False)
+        if mat is None:
+            return {"CANCELLED"}
+        SESSIONS.pop(mat.name, None)
+        objects = objects_with(mat, context.scene)
         viewport.restore(objects)
         for obj in objects:
             attr = obj.data.color_attributes.get(writeback.ATTRIBUTE)

@@ -12,7 +12,8 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty
 
-from . import session
+from . import edits, follow
+from .principled import principled_inputs, read_from_principled
 
 
 def _preset_items(self, context):
@@ -45,83 +46,30 @@ def _coefficient_edit(self, context):
     """An explicit coefficient edit means custom coefficients from now on."""
     if self.source == "PRINCIPLED":
         self["source"] = 1
-    session.edit(self.id_data)
+    edits.edit(self.id_data)
 
 
 def _live_edit(self, context):
-    session.edit(self.id_data)
-
-
-def principled_node(mat):
-    tree = getattr(mat, "node_tree", None)
-    if tree is None:
-        return None
-    return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
-
-
-def principled_inputs(mat):
-    """The Principled BSDF inputs Cycles' subsurface answer depends on (`cycles.Principled`),
-    or None when the material has no Principled BSDF."""
-    from translucent import cycles
-
-    node = principled_node(mat)
-    return None if node is None else cycles.read_principled(node)
-
-
-def read_from_principled(settings) -> bool:
-    """Start from the material's own Principled BSDF: its subsurface inputs mapped to the
-    medium Cycles would simulate, shown in the coefficient fields; from then on the preview
-    follows the node (`source`). Returns whether it did."""
-    node = principled_node(settings.id_data)
-    if node is None or node.inputs["Subsurface Weight"].default_value <= 0.0:
-        return False
-    try:
-        show_medium(settings, principled_inputs(settings.id_data).material())
-    except ValueError:
-        return False
-    settings["preset"] = 0  # Custom
-    settings["source"] = 0  # Principled BSDF
-    return True
-
-
-def show_medium(settings, m) -> None:
-    """Show the medium `m` (per scene unit) in the coefficient fields (per mm), without
-    triggering their edit callbacks; only what differs is written (no update loops)."""
-    k = settings.mm_per_unit
-    values = {"sigma_a": tuple(x / k for x in m.sigma_a), "sigma_s": tuple(x / k for x in m.sigma_s),
-              "g": m.g, "eta": min(m.eta, 2.5)}
-    for key, v in values.items():
-        old = getattr(settings, key)
-        same = all(abs(a - b) <= 1e-7 * max(abs(b), 1e-12) for a, b in zip(old, v)) if isinstance(v, tuple) else (
-            abs(old - v) <= 1e-7)
-        if not same:
-            settings[key] = v
+    edits.edit(self.id_data)
 
 
 def _toggle(self, context):
     """Turning the preview on the first time starts from the material's Principled BSDF;
     turning it off puts the viewports and active colour attributes back; on again shows the
     transport if there is one."""
-    from . import viewport
-
     mat = self.id_data
     if self.enabled and not self.initialised:
         self["initialised"] = True
         read_from_principled(self)
-    sess = session.SESSIONS.get(mat.name)
-    objects = [o for o in (bpy.data.objects.get(n) for n in sess.objects) if o is not None] if sess else []
-    if self.enabled and sess is not None:
-        session.edit(mat)
-        viewport.show(objects)
-        if self.follow_scene:
-            session.follow_again(mat)  # what changed while the preview was off
-    elif not self.enabled:
-        viewport.restore(objects or session.objects_with(mat))
+    if not self.enabled:
+        edits.preview_off(mat)
+    elif edits.preview_on(mat) and self.follow_scene:
+        follow.follow_again(mat)  # what changed while the preview was off
 
 
 def _follow_toggle(self, context):
     if self.follow_scene and self.enabled:
-        session.follow_again(self.id_data)
+        follow.follow_again(self.id_data)
 
 
 class TranslucentMaterialSettings(bpy.types.PropertyGroup):
@@ -171,11 +119,11 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
     method: EnumProperty(
         name="Method",
         items=[("AUTO", "Auto", "Choose by what changed: PRT for material edits and lights, the hierarchy for "
-                "deforming or animated meshes (PRT while translucent has no hierarchy)"),
+                "deforming or animated meshes"),
                ("PRT", "PRT", "Precomputed radiance transfer (Xu 2007): live material edits; a moved light or a "
                 "deformation precomputes again in the background"),
                ("HIERARCHY", "Hierarchy", "Hierarchical boundary elements (Mertens 2003): deforming scenes, "
-                "nothing precomputed that a deformation invalidates (needs translucent.Hierarchy; PRT until then)")],
+                "nothing precomputed that a deformation invalidates")],
         default="AUTO",
     )
     follow_scene: BoolProperty(

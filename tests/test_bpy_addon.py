@@ -95,11 +95,11 @@ def test_cancel_leaves_no_transport(addon):
     import bpy
 
     import translucent
-    from addon import session
+    from addon import jobs, session
 
     mat, objs, _ = scene_with_two_spheres(bpy)
     mat.translucent.enabled = True
-    job, *_ = session.start(mat)
+    job, *_ = jobs.start(mat)
     job.cancel = True
     job.run_here()
     assert isinstance(job.error, translucent.Cancelled)
@@ -152,7 +152,7 @@ def test_an_edit_outside_the_basis_range_is_flagged_and_refreshed(addon):
     fresh = session.SESSIONS[mat.name]
     assert fresh is not sess and not fresh.refresh_advised
     assert max(fresh.last_error) < flagged
-    assert fresh.chosen_for == session._params(s)
+    assert fresh.chosen_for == session.params(s)
     assert mat.name not in session.JOBS
 
 
@@ -218,7 +218,7 @@ def test_undo_and_redo_bring_back_settings_and_preview_together(addon):
 def test_only_objects_carrying_the_material_are_exported_and_the_rest_is_reported(addon):
     import bpy
 
-    from addon import session
+    from addon import panel, session
 
     mat, objs, _ = scene_with_two_spheres(bpy)
     bpy.ops.mesh.primitive_cube_add(size=0.05, location=(0.0, 0.0, -0.2))
@@ -231,8 +231,8 @@ def test_only_objects_carrying_the_material_are_exported_and_the_rest_is_reporte
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     sess = session.SESSIONS[mat.name]
     assert sess.info.skipped_objects == [other.name]
-    assert sess.prt.report["vertices"] == sum(len(o.data.vertices) for o in objs)
-    text = session.summary(sess)
+    assert sess.transport.report["vertices"] == sum(len(o.data.vertices) for o in objs)
+    text = panel.summary(sess)
     assert "2 object(s) (1 without the material skipped)" in text
     assert "1 light(s) used, 1 dark" in text and "no rays (black)" in text
 
@@ -260,7 +260,7 @@ def test_a_subdivided_object_shows_the_preview_through_its_original_vertices(add
     evaluated, _, _ = export.evaluated_mesh_arrays(objs[1], depsgraph)
     co = np.array([tuple(objs[1].matrix_world @ v.co) for v in objs[1].data.vertices])
     nearest = np.argmin(((co[:, None, :] - evaluated[None, :, :]) ** 2).sum(-1), axis=1)
-    values = sess.prt.radiance(mat.translucent.material())[r.start : r.start + r.count]
+    values = sess.transport.radiance(mat.translucent.material())[r.start : r.start + r.count]
     np.testing.assert_allclose(read_preview(objs[1]), values[nearest], rtol=1e-6)
     assert mesh_hash(objs[1].data) == before
 
@@ -313,7 +313,7 @@ def test_the_preview_follows_the_principled_bsdf_with_cycles_profile(addon):
     assert s.source == "PRINCIPLED" and s.profile == "CYCLES"
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     sess = session.SESSIONS[mat.name]
-    assert sess.prt.profile == "cycles"
+    assert sess.transport.profile == "cycles"
 
     def expected():
         p = (tuple(node.inputs["Base Color"].default_value)[:3], tuple(node.inputs["Subsurface Radius"].default_value),
@@ -324,7 +324,7 @@ def test_the_preview_follows_the_principled_bsdf_with_cycles_profile(addon):
             subsurface_weight=node.inputs["Subsurface Weight"].default_value,
             metallic=node.inputs["Metallic"].default_value,
             transmission=node.inputs["Transmission Weight"].default_value)
-        return sess.prt.radiance(m)[: len(objs[0].data.vertices)]
+        return sess.transport.radiance(m)[: len(objs[0].data.vertices)]
 
     np.testing.assert_allclose(read_preview(objs[0]), expected(), rtol=1e-5, atol=1e-7)
     before = read_preview(objs[0])

@@ -4,12 +4,12 @@ the timeline), a moved light and an object taking the material refresh the previ
 pressing anything; the add-on's own colour writes are not taken for a deformation; a
 topology change rebuilds; with a UI the refresh runs on a worker thread and the old preview
 stays until it is done; the panel's draw evaluates no mesh; the Method selector falls back to
-PRT, saying why, while translucent has no hierarchy; the user's meshes and materials are
+PRT, saying why, in a build without the hierarchy; the user's meshes and materials are
 never written.
 
 Headless Blender runs no timers: the tests let the real depsgraph handlers fire
 (`view_layer.update()`, `frame_set`) and then do what the debounced timer does once the scene
-is still (`session.follow_now`). The expected preview after following is the one pressing
+is still (`follow.follow_now`). The expected preview after following is the one pressing
 Precompute gives for the changed scene."""
 
 import ast
@@ -70,28 +70,28 @@ def precomputed_preview(bpy, mat, obj):
 def test_a_deformed_mesh_refreshes_the_preview_after_the_scene_is_still(addon, monkeypatch):
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, light = lit_sphere(bpy)
     user_mesh, user_nodes = mesh_hash(obj.data), node_inputs(mat)
     first, sess = read_preview(obj), session.SESSIONS[mat.name]
     clock = [100.0]
-    monkeypatch.setattr(session, "_clock", lambda: clock[0])
+    monkeypatch.setattr(follow, "_clock", lambda: clock[0])
     obj.modifiers["Displace"].strength = 0.02  # the sphere grows by 1 cm: nearer the light
     bpy.context.view_layer.update()  # the depsgraph handler notes it, evaluates nothing
-    assert mat.name in session.PENDING and bpy.app.timers.is_registered(session.follow_tick)
+    assert mat.name in follow.PENDING and bpy.app.timers.is_registered(follow.follow_tick)
     # Debounced: while the scene keeps changing, the timer waits and the old preview stays.
-    assert session.follow_tick() == pytest.approx(session.DEBOUNCE_S)
+    assert follow.follow_tick() == pytest.approx(follow.DEBOUNCE_S)
     assert session.SESSIONS[mat.name] is sess
     np.testing.assert_array_equal(read_preview(obj), first)
     clock[0] += 1.0  # still for longer than DEBOUNCE_S
-    session.follow_tick()
+    follow.follow_tick()
     followed = session.SESSIONS[mat.name]
     assert followed is not sess and session.state(mat) == "ready" and not followed.changed
     # What may be left pending is the add-on's own colour write: checked, no second refresh.
     clock[0] += 1.0
-    assert session.follow_tick() is None
-    assert session.SESSIONS[mat.name] is followed and not session.PENDING
+    assert follow.follow_tick() is None
+    assert session.SESSIONS[mat.name] is followed and not follow.PENDING
     now = read_preview(obj)
     assert not np.allclose(now, first), "the deformation did not change the preview"
     np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
@@ -102,7 +102,7 @@ def test_a_deformed_mesh_refreshes_the_preview_after_the_scene_is_still(addon, m
 def test_an_armature_pose_refreshes_the_preview(addon):
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, _ = lit_sphere(bpy)
     arm_data = bpy.data.armatures.new("Rig")
@@ -121,14 +121,14 @@ def test_an_armature_pose_refreshes_the_preview(addon):
     user_mesh, user_nodes = mesh_hash(obj.data), node_inputs(mat)
     # Rig and weights in place, rest pose: the evaluated mesh has not moved.
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     rest = session.SESSIONS[mat.name]
     assert session.state(mat) == "ready" and not rest.deformed
     first = read_preview(obj)
     rig.pose.bones["Bone"].location = (0.0, 0.03, 0.0)  # the upper half slides toward +Y
     bpy.context.view_layer.update()
-    assert mat.name in session.PENDING
-    session.follow_now()
+    assert mat.name in follow.PENDING
+    follow.follow_now()
     assert session.SESSIONS[mat.name] is not rest and session.state(mat) == "ready"
     now = read_preview(obj)
     assert not np.allclose(now, first), "the pose did not change the preview"
@@ -139,7 +139,7 @@ def test_an_armature_pose_refreshes_the_preview(addon):
 def test_a_moved_light_refreshes_the_preview_and_the_panel_says_why_meanwhile(addon):
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, light = lit_sphere(bpy)
     first, user_mesh = read_preview(obj), mesh_hash(obj.data)
@@ -147,7 +147,7 @@ def test_a_moved_light_refreshes_the_preview_and_the_panel_says_why_meanwhile(ad
     bpy.context.view_layer.update()
     assert session.state(mat) == "stale" and session.SESSIONS[mat.name].changed == "light Key changed"
     np.testing.assert_array_equal(read_preview(obj), first)  # kept until the new one is ready
-    session.follow_now()
+    follow.follow_now()
     assert session.state(mat) == "ready"
     now = read_preview(obj)
     assert not np.allclose(now, first)
@@ -156,7 +156,7 @@ def test_a_moved_light_refreshes_the_preview_and_the_panel_says_why_meanwhile(ad
     light.data.energy = 10.0
     bpy.context.view_layer.update()
     assert session.SESSIONS[mat.name].changed == "light Key changed"
-    session.follow_now()
+    follow.follow_now()
     np.testing.assert_allclose(read_preview(obj), 2.0 * now, rtol=1e-4, atol=1e-7)
     assert mesh_hash(obj.data) == user_mesh
 
@@ -164,7 +164,7 @@ def test_a_moved_light_refreshes_the_preview_and_the_panel_says_why_meanwhile(ad
 def test_scrubbing_the_timeline_follows_an_animated_modifier(addon):
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, _ = lit_sphere(bpy)
     displace = obj.modifiers["Displace"]
@@ -172,12 +172,12 @@ def test_scrubbing_the_timeline_follows_an_animated_modifier(addon):
     displace.strength = 0.02
     displace.keyframe_insert("strength", frame=10)
     bpy.context.scene.frame_set(1)
-    session.follow_now()
+    follow.follow_now()
     assert session.state(mat) == "ready"
     first = read_preview(obj)
     bpy.context.scene.frame_set(10)  # frame_change_post
-    assert mat.name in session.PENDING
-    session.follow_now()
+    assert mat.name in follow.PENDING
+    follow.follow_now()
     now = read_preview(obj)
     assert not np.allclose(now, first)
     np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
@@ -188,7 +188,7 @@ def test_the_addons_own_colour_writes_are_not_a_deformation(addon):
     check tells them apart by the evaluated positions, so an edit never starts a refresh."""
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, _ = lit_sphere(bpy)
     sess = session.SESSIONS[mat.name]
@@ -197,21 +197,21 @@ def test_the_addons_own_colour_writes_are_not_a_deformation(addon):
     mat.translucent.sigma_a = tuple(2.0 * x for x in mat.translucent.sigma_a)  # a slider edit: a colour write
     assert not np.allclose(read_preview(obj), first)
     bpy.context.view_layer.update()
-    assert mat.name in session.PENDING, "the write tagged the mesh"
-    session.follow_now()
+    assert mat.name in follow.PENDING, "the write tagged the mesh"
+    follow.follow_now()
     assert session.SESSIONS[mat.name] is sess and session.state(mat) == "ready" and not sess.deformed
 
 
 def test_a_topology_change_rebuilds_and_shows_through_the_original_vertices(addon):
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, _ = lit_sphere(bpy)
     n = len(obj.data.vertices)
     obj.modifiers.new("Subdivision", "SUBSURF").levels = 1
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     sess = session.SESSIONS[mat.name]
     assert sess.info.objects[0].count > n, "rebuilt for the subdivided mesh"
     assert sess.not_shown == [] and len(read_preview(obj)) == n
@@ -221,27 +221,27 @@ def test_a_topology_change_rebuilds_and_shows_through_the_original_vertices(addo
 def test_without_following_the_panel_says_stale_and_nothing_refreshes(addon):
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, light = lit_sphere(bpy)
     mat.translucent.follow_scene = False
     sess = session.SESSIONS[mat.name]
     obj.modifiers["Displace"].strength = 0.02
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     assert session.SESSIONS[mat.name] is sess
     assert session.state(mat) == "stale" and sess.changed == f"{obj.name} deformed"
     obj.modifiers["Displace"].strength = 0.0  # back as it was: current again
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     assert session.state(mat) == "ready"
     # Switched back on, it catches up with what changed while it was off.
     light.location.z += 0.05
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     assert session.SESSIONS[mat.name] is sess and session.state(mat) == "stale"
     mat.translucent.follow_scene = True
-    session.follow_now()
+    follow.follow_now()
     assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
 
 
@@ -265,14 +265,14 @@ def draw_panel(addon, mat):
     from types import SimpleNamespace
 
     labels = []
-    addon.TRANSLUCENT_PT_material.draw(SimpleNamespace(layout=Layout(labels)), SimpleNamespace(material=mat))
+    addon.panel.TRANSLUCENT_PT_material.draw(SimpleNamespace(layout=Layout(labels)), SimpleNamespace(material=mat))
     return labels
 
 
 def test_the_panel_draw_evaluates_no_mesh(addon, monkeypatch):
     import bpy
 
-    from addon import export
+    from addon import export, follow
 
     # The add-on evaluates meshes in one function only (checked here from its source), so
     # counting that function's calls counts every evaluation.
@@ -302,9 +302,7 @@ def test_the_panel_draw_evaluates_no_mesh(addon, monkeypatch):
     assert "Changed: light Key changed (refreshing)" in labels
     # The counting is live: the follow check evaluates, and the panel then shows what it found.
     mat.translucent.follow_scene = False
-    from addon import session
-
-    session.follow_now()
+    follow.follow_now()
     assert calls == [obj.name]
     calls.clear()
     assert f"Changed: {obj.name} deformed, light Key changed" in draw_panel(addon, mat)
@@ -315,43 +313,43 @@ def test_the_hierarchy_method_falls_back_to_prt_saying_why(addon, monkeypatch):
     import bpy
 
     import translucent
-    from addon import session
+    from addon import follow, jobs, session
 
     monkeypatch.delattr(translucent, "Hierarchy", raising=False)
     mat, obj, light = lit_sphere(bpy, method="HIERARCHY")
     sess = session.SESSIONS[mat.name]
-    assert sess.method == "prt" and sess.method_message == session.HIERARCHY_MISSING
-    assert session.HIERARCHY_MISSING in draw_panel(addon, mat)
+    assert sess.method == "prt" and sess.method_message == jobs.HIERARCHY_MISSING
+    assert jobs.HIERARCHY_MISSING in draw_panel(addon, mat)
     mat.translucent.method = "AUTO"
     obj.modifiers["Displace"].strength = 0.02
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     sess = session.SESSIONS[mat.name]
-    assert sess.method == "prt" and sess.method_message == session.HIERARCHY_MISSING
+    assert sess.method == "prt" and sess.method_message == jobs.HIERARCHY_MISSING
     assert session.state(mat) == "ready"
 
 
 def test_auto_picks_the_method_by_what_changed(addon, monkeypatch):
     import translucent
-    from addon import session
+    from addon import jobs
 
     monkeypatch.setattr(translucent, "Hierarchy", object, raising=False)
-    assert session.resolve_method("AUTO", "precompute") == ("prt", "")
-    assert session.resolve_method("AUTO", "light", "prt") == ("prt", "")
-    assert session.resolve_method("AUTO", "deformation") == ("hierarchy", "")
-    assert session.resolve_method("AUTO", "light", "hierarchy") == ("hierarchy", "")
-    assert session.resolve_method("PRT", "deformation") == ("prt", "")
-    assert session.resolve_method("HIERARCHY", "precompute") == ("hierarchy", "")
+    assert jobs.resolve_method("AUTO", "precompute") == ("prt", "")
+    assert jobs.resolve_method("AUTO", "light", "prt") == ("prt", "")
+    assert jobs.resolve_method("AUTO", "deformation") == ("hierarchy", "")
+    assert jobs.resolve_method("AUTO", "light", "hierarchy") == ("hierarchy", "")
+    assert jobs.resolve_method("PRT", "deformation") == ("prt", "")
+    assert jobs.resolve_method("HIERARCHY", "precompute") == ("hierarchy", "")
     monkeypatch.delattr(translucent, "Hierarchy")
-    assert session.resolve_method("HIERARCHY", "precompute") == ("prt", session.HIERARCHY_MISSING)
-    assert session.resolve_method("AUTO", "deformation") == ("prt", session.HIERARCHY_MISSING)
+    assert jobs.resolve_method("HIERARCHY", "precompute") == ("prt", jobs.HIERARCHY_MISSING)
+    assert jobs.resolve_method("AUTO", "deformation") == ("prt", jobs.HIERARCHY_MISSING)
 
 
 def test_a_shape_key_and_edit_mode_edits_are_followed(addon):
     import bmesh
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, _ = lit_sphere(bpy)
     obj.shape_key_add(name="Basis")
@@ -360,12 +358,12 @@ def test_a_shape_key_and_edit_mode_edits_are_followed(addon):
         point.co *= 1.25
     grow.value = 0.0
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     assert session.state(mat) == "ready"
     first = read_preview(obj)
     grow.value = 1.0
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     shaped = read_preview(obj)
     assert not np.allclose(shaped, first), "the shape key did not change the preview"
     np.testing.assert_allclose(shaped, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
@@ -380,11 +378,11 @@ def test_a_shape_key_and_edit_mode_edits_are_followed(addon):
     bmesh.update_edit_mesh(obj.data)
     bpy.context.view_layer.update()
     sess = session.SESSIONS[mat.name]
-    session.follow_now()
+    follow.follow_now()
     assert session.SESSIONS[mat.name] is sess and "Edit Mode" in sess.follow_message
     bpy.ops.object.mode_set(mode="OBJECT")
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
     edited = read_preview(obj)
     assert not np.allclose(edited, shaped)
@@ -394,17 +392,17 @@ def test_a_shape_key_and_edit_mode_edits_are_followed(addon):
 def test_an_object_taking_the_material_is_followed(addon):
     import bpy
 
-    from addon import session
+    from addon import follow, session
 
     mat, obj, _ = lit_sphere(bpy)
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.03, location=(0.1, 0.0, 0.0), segments=12, ring_count=6)
     other = bpy.context.active_object
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     assert session.state(mat) == "ready" and session.SESSIONS[mat.name].objects == [obj.name]
     other.data.materials.append(mat)
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     sess = session.SESSIONS[mat.name]
     assert sorted(sess.objects) == sorted([obj.name, other.name]) and session.state(mat) == "ready"
     assert read_preview(other).max() > 0
@@ -416,17 +414,17 @@ def test_with_a_ui_the_refresh_runs_on_a_worker_and_the_old_preview_stays_until_
     poll finds the job done."""
     import bpy
 
-    from addon import session
+    from addon import follow, jobs, session
 
     mat, obj, light = lit_sphere(bpy)
     first, sess = read_preview(obj), session.SESSIONS[mat.name]
     timers = []
-    monkeypatch.setattr(session, "_headless", lambda: False)
+    monkeypatch.setattr(jobs, "headless", lambda: False)
     monkeypatch.setattr(bpy.app.timers, "register", lambda fn, first_interval=0.0, persistent=False: timers.append(fn))
     monkeypatch.setattr(bpy.app.timers, "is_registered", lambda fn: fn in timers)
     light.location.x += 0.1
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     job = session.JOBS[mat.name]
     assert session.state(mat) == "running" and job._thread.ident is not None, "started on a worker thread"
     assert job.background and "Refreshing in the background" in " ".join(draw_panel(addon, mat))
@@ -449,7 +447,7 @@ def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):
     import bpy
 
     import translucent
-    from addon import export, session
+    from addon import export, follow, jobs, session
 
     mat, obj, light = lit_sphere(bpy, method="HIERARCHY")
     sess = session.SESSIONS[mat.name]
@@ -458,7 +456,7 @@ def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):
 
     def fresh():
         scene, _ = export.export_scene([obj])
-        h = translucent.Hierarchy(scene, s.material(), profile=s.profile_name(), eps=session.HIERARCHY_EPS)
+        h = translucent.Hierarchy(scene, s.material(), profile=s.profile_name(), eps=jobs.HIERARCHY_EPS)
         return h, scene
 
     h, _ = fresh()
@@ -467,12 +465,12 @@ def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):
     user_mesh = mesh_hash(obj.data)
     obj.modifiers["Displace"].strength = 0.02
     bpy.context.view_layer.update()
-    session.follow_now()
+    follow.follow_now()
     followed = session.SESSIONS[mat.name]
     assert followed.method == "hierarchy" and session.state(mat) == "ready"
     now = read_preview(obj)
     assert not np.allclose(now, first), "the deformation did not change the preview"
-    np.testing.assert_allclose(now, followed.prt.hierarchy.radiance(s.material(), None), rtol=1e-6)
+    np.testing.assert_allclose(now, followed.transport.radiance(s.material(), None), rtol=1e-6)
     # The hierarchy updated in place against the ground truth of the deformed mesh: no further
     # from it than one built afresh, within a point. (On this coarse sphere, 224 faces of about
     # 1 cm for marble, both are 7-8 % off: the hierarchy gathers at face centroids; the < 2 %
@@ -480,7 +478,7 @@ def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):
     h_new, scene = fresh()
     truth = translucent.reference_radiosity(scene, s.material(), profile=s.profile_name(), rel_tol=2e-3)
     w = scene.vertex_areas[:, 0]
-    updated = max(translucent.relative_error(followed.prt.hierarchy.radiosity(s.material()), truth, w)["rms"])
+    updated = max(translucent.relative_error(followed.transport.radiosity(s.material()), truth, w)["rms"])
     rebuilt = max(translucent.relative_error(h_new.radiosity(s.material()), truth, w)["rms"])
     assert updated < rebuilt + 0.01 and rebuilt < 0.1, (updated, rebuilt)
     assert mesh_hash(obj.data) == user_mesh
@@ -493,32 +491,32 @@ def test_the_preview_follows_the_view_where_single_scattering_makes_it_depend_on
     timer draws toward the 3D viewport's eye."""
     import bpy
 
-    from addon import session
+    from addon import edits, follow, session
 
     mat, obj, light = lit_sphere(bpy)
-    assert not session.set_eye(mat, (0.0, -1.0, 0.3)), "Cycles' profile holds no view dependence"
+    assert not follow.set_eye(mat, (0.0, -1.0, 0.3)), "Cycles' profile holds no view dependence"
     mat.translucent.profile = "DIPOLE"
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     sess = session.SESSIONS[mat.name]
-    assert sess.prt.report["single_scattering"]
+    assert sess.transport.report["single_scattering"]
     along = read_preview(obj)
     eye = (0.0, -1.0, 0.3)
-    assert session.set_eye(mat, eye)
+    assert follow.set_eye(mat, eye)
     toward = read_preview(obj)
-    np.testing.assert_allclose(toward, sess.prt.radiance(mat.translucent.material(), eye), rtol=1e-6)
+    np.testing.assert_allclose(toward, sess.transport.radiance(mat.translucent.material(), eye), rtol=1e-6)
     assert not np.allclose(toward, along)
-    assert not session.set_eye(mat, eye), "the same eye is not drawn again"
-    assert session.set_eye(mat, (1.0, 0.0, 0.2))
+    assert not follow.set_eye(mat, eye), "the same eye is not drawn again"
+    assert follow.set_eye(mat, (1.0, 0.0, 0.2))
     moved = read_preview(obj)
     assert not np.allclose(moved, toward)
     mat.translucent.preset = "SKIN1"
-    session.edit(mat)
-    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material(), (1.0, 0.0, 0.2)),
+    edits.edit(mat)
+    np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material(), (1.0, 0.0, 0.2)),
                                rtol=1e-6)
     # The timer reads the 3D viewport's view (the factory startup has one, headless too).
-    eye_view = session.viewport_eye()
-    assert eye_view is not None and session.follow_view_tick() == session.VIEW_POLL_S
+    eye_view = follow.viewport_eye()
+    assert eye_view is not None and follow.follow_view_tick() == follow.VIEW_POLL_S
     assert sess.eye == pytest.approx(eye_view)
-    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material(), eye_view), rtol=1e-6)
-    assert session.set_eye(mat, None)
-    np.testing.assert_allclose(read_preview(obj), sess.prt.radiance(mat.translucent.material()), rtol=1e-6)
+    np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material(), eye_view), rtol=1e-6)
+    assert follow.set_eye(mat, None)
+    np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material()), rtol=1e-6)

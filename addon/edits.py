@@ -1,0 +1,216 @@
+"""Material edits: a finished job's transport shown, and each edit (a slider, a Principled
+input) refitted, evaluated and written back; a refresh when it leaves the basis' range."""
+
+from __future__ import annotations
+
+import threading
+
+import bpy
+import numpy as np
+
+from . import export, jobs, viewport, writeback
+from .principled import principled_key, show_medium
+from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, params, view_dependent
+
+
+def nearest_original_vertices(objects: list[str], info: export.ExportInfo) -> dict[str, np.ndarray]:
+    """For each object whose evaluated mesh has a different vertex count from its own mesh (a
+    Subdivision Surface, a Decimate...), the index of the evaluated vertex nearest to each of
+    its original vertices (world space, Blender's own kd-tree). Writing those values on the
+    original vertices lets the modifier stack interpolate the preview for display."""
+    from mathutils import Matrix, kdtree
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    out = {}
+    for r in info.objects:
+        obj = bpy.data.objects.get(r.name)
+        if obj is None or r.name not in objects or len(obj.data.vertices) == r.count:
+            continue
+        evaluated, _, _ = export.evaluated_mesh_arrays(obj, depsgraph)
+        tree = kdtree.KDTree(len(evaluated))
+        for i, p in enumerate(evaluated):
+            tree.insert(p.tolist(), i)
+        tree.balance()
+        co = np.empty(len(obj.data.vertices) * 3, np.float32)
+        obj.data.vertices.foreach_get("co", co)
+        m = np.array(Matrix(obj.matrix_world), dtype=np.float64)
+        world = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+        out[r.name] = np.array([tree.find(p.tolist())[1] for p in world], dtype=np.int64)
+    return out
+
+
+def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting, method_message: str = "") -> Session:
+    """The finished job's transport becomes the material's session (the old one, still shown
+    until now, is dropped) and the preview is written from it."""
+    session = Session(job.result, info, objects, lighting, material.translucent.eta, profile=job.profile)
+    session.chosen_for = job.chosen_for
+    session.method = getattr(job, "method", "prt")
+    session.method_message = method_message
+    session.remap = nearest_original_vertices(objects, info)
+    SESSIONS[material.name] = session
+    edit(material)
+    viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
+    return session
+
+
+def in_background(name: str, job: jobs.Job, objects, info, lighting, failed, method_message: str = "") -> None:
+    """`job` run off the UI thread (`jobs.in_background`); its transport is shown when done."""
+    jobs.in_background(name, job, lambda mat: finish(mat, job, objects, info, lighting, method_message), failed)
+
+
+def _previewed(material: bpy.types.Material) -> list[bpy.types.Object]:
+    sess = SESSIONS.get(material.name)
+    return [o for o in (bpy.data.objects.get(n) for n in sess.objects) if o is not None] if sess else []
+
+
+def preview_on(material: bpy.types.Material) -> bool:
+    """The preview turned on again: the transport, if there is one, shown (returns whether)."""
+    if material.name not in SESSIONS:
+        return False
+    edit(material)
+    viewport.show(_previewed(material))
+    return True
+
+
+def preview_off(material: bpy.types.Material) -> None:
+    """The preview turned off: the viewports and active colour attributes put back."""
+    viewport.restore(_previewed(material) or objects_with(material))
+
+
+def edit(material: bpy.types.Material) -> None:
+    """Refit and re-evaluate the material, and write every object's preview attribute."""
+    import translucent
+
+    s = SESSIONS.get(material.name)
+    if s is None or not material.translucent.enabled:
+        return
+    if s.method == "hierarchy" and material.name in JOBS:
+        return  # the hierarchy is being updated in place on a worker thread: shown when done
+    settings = material.translucent
+    if settings.source == "PRINCIPLED":
+        s.principled_key = principled_key(material)
+    try:
+        m = settings.material()
+    except ValueError as e:
+        s.edit_message = f"not shown: {e}"
+        return
+    if settings.source == "PRINCIPLED":
+        show_medium(settings, m)
+    if s.profile != settings.profile_name():
+        return  # another profile needs a new precompute; the panel says so
+    if s.profile == "dipole" and abs(s.eta - m.eta) > 1e-9:
+        return  # the dipole's irradiance holds the IOR's Fresnel factor: precompute again
+    if s.profile == "cycles" and not translucent.profile_ready(m) and not _prepare_tables(material, m):
+        return  # the walk tables for a new g, Roughness or IOR are being built; old preview kept
+    s.edit_message = ""
+    transport = s.transport
+    # Radiance leaving along each normal (a view-independent viewport colour), or toward the
+    # viewport's eye where single scattering makes it depend on the view.
+    try:
+        colors = transport.radiance(m, s.eye) if s.eye is not None and view_dependent(s) else transport.radiance(m)
+    except ValueError as e:
+        s.edit_message = f"not shown: {e}"
+        return
+    # The method's own evaluation (the keys every method reports), kept as it gave it.
+    s.last_eval = dict(transport.last_eval)
+    estimate = s.last_eval["error_estimate"]
+    s.last_error = None if estimate is None else list(estimate)
+    s.last_seconds = s.last_eval["seconds"]
+    s.refresh_advised = bool(s.last_eval["refresh_advised"])
+    s.not_shown = []
+    for name, values in writeback.split(colors, s.info).items():
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            continue
+        if len(obj.data.vertices) == len(values):
+            writeback.write_colors(obj.data, values)
+        elif name in s.remap and len(s.remap[name]) == len(obj.data.vertices):
+            writeback.write_colors(obj.data, values[s.remap[name]])
+        else:
+            # The mesh changed since the precompute: the attribute cannot hold the values.
+            s.not_shown.append(name)
+    if s.refresh_advised:
+        refresh(material)
+
+
+def _prepare_tables(material: bpy.types.Material, m) -> bool:
+    """Cycles' walk tables for `m` (new g, Roughness or IOR): built at once headless (returns
+    True), else on a worker thread that never touches bpy, the edit running again when they are
+    ready (returns False; the old preview stays up meanwhile)."""
+    import translucent
+
+    name = material.name
+    if bpy.app.background:
+        translucent.prepare_profile(m)
+        return True
+    s = SESSIONS[name]
+    if name in PREPARING:
+        return False
+    s.edit_message = f"building Cycles' walk table (g {m.g:.2f}, Roughness {m.roughness:.2f}, IOR {m.eta:.2f})"
+    errors = []
+
+    def work():
+        try:
+            translucent.prepare_profile(m)
+        except Exception as e:  # reported by the timer below, on the main thread
+            errors.append(e)
+
+    thread = threading.Thread(target=work, daemon=True)
+    PREPARING[name] = thread
+    thread.start()
+
+    def poll():
+        if thread.is_alive():
+            return 0.2
+        PREPARING.pop(name, None)
+        mat = bpy.data.materials.get(name)
+        if mat is not None:
+            if errors:
+                cur = SESSIONS.get(name)
+                if cur is not None:
+                    cur.edit_message = f"not shown: {errors[0]}"
+            else:
+                edit(mat)
+            jobs.redraw()
+        return None
+
+    bpy.app.timers.register(poll, first_interval=0.2)
+    return False
+
+
+@bpy.app.handlers.persistent
+def follow_principled(*_args) -> None:
+    """depsgraph_update_post: a previewed material that follows its Principled BSDF is shown
+    again when any input it reads has changed (cheap when none did)."""
+    for name, s in list(SESSIONS.items()):
+        mat = bpy.data.materials.get(name)
+        if mat is None or not mat.translucent.enabled or mat.translucent.source != "PRINCIPLED":
+            continue
+        if principled_key(mat) != s.principled_key:
+            edit(mat)
+
+
+def refresh(material: bpy.types.Material) -> None:
+    """The edit left the range the basis and samples were chosen for (the error estimate says
+    so): precompute again for the current material in the background and swap the transport
+    in when it is done; the preview keeps showing, flagged by the panel, meanwhile. Headless,
+    it runs at once. Nothing happens while a job runs, or when the transport was already chosen
+    for these very settings (no loop)."""
+    s = SESSIONS.get(material.name)
+    if s is None or material.name in JOBS or not material.translucent.auto_refresh:
+        return
+    if s.chosen_for == params(material.translucent):
+        return
+    try:
+        job, objects, info, lighting = jobs.start(material, method=s.method)
+    except ValueError as e:
+        s.refresh_message = f"refresh failed: {e}"
+        return
+    s.refresh_message = "refreshing the basis for the new material"
+
+    def failed(error):
+        cur = SESSIONS.get(material.name)
+        if cur is not None:
+            cur.refresh_message = f"refresh failed: {error}"
+
+    in_background(material.name, job, objects, info, lighting, failed)

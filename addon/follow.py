@@ -1,0 +1,253 @@
+"""Following the scene and the view: a depsgraph handler notes a previewed object deforming or a
+light or the world changing; a debounced timer checks and refreshes the transport in the background.
+
+The handler only takes notes (which previewed objects' geometry or transform was tagged; a
+changed light or world is compared at once, it is cheap); a timer runs once the scene has been
+still for DEBOUNCE_S, evaluates the tagged objects to tell a deformation from the add-on's own
+colour writes (those tag the mesh too), and refreshes in the background."""
+
+from __future__ import annotations
+
+import time
+
+import bpy
+
+from . import edits, export, jobs
+from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, view_dependent
+
+DEBOUNCE_S = 0.3
+# material name -> (clock at the last change noticed, objects whose geometry may have changed)
+PENDING: dict[str, tuple[float, set]] = {}
+_clock = time.monotonic  # tests may replace it
+
+
+def _lighting_difference(old: dict, new: dict) -> str:
+    """What differs between two `export.lighting_keys`, in words ("" when nothing)."""
+    parts = []
+    for key in sorted(set(old) | set(new)):
+        if key not in new:
+            parts.append(f"{key} removed")
+        elif key not in old:
+            parts.append(f"{key} added")
+        elif old[key] != new[key]:
+            parts.append(f"{key} changed")
+    return ", ".join(parts)
+
+
+def _describe(s: Session, lighting: str) -> str:
+    parts = [f"{name} {'changed topology' if what == 'topology' else what}" for name, what in sorted(s.deformed.items())]
+    if s.members_changed:
+        parts.append(s.members_changed)
+    if lighting:
+        parts.append(lighting)
+    return ", ".join(parts)
+
+
+def _note(name: str, objects=()) -> None:
+    _, suspects = PENDING.get(name, (0.0, set()))
+    PENDING[name] = (_clock(), suspects | set(objects))
+    if not bpy.app.timers.is_registered(follow_tick):
+        bpy.app.timers.register(follow_tick, first_interval=DEBOUNCE_S)
+
+
+def _is_lighting(id_) -> bool:
+    return (isinstance(id_, (bpy.types.Light, bpy.types.World, bpy.types.Scene))
+            or (isinstance(id_, bpy.types.Object) and id_.type == "LIGHT")
+            or (isinstance(id_, bpy.types.NodeTree) and id_.bl_idname == "ShaderNodeTree"))
+
+
+@bpy.app.handlers.persistent
+def follow_scene(scene, depsgraph) -> None:
+    """depsgraph_update_post: notes which previewed objects deformed or moved (geometry or
+    transform tagged: armature, shape keys, modifiers, edit mode) and whether a light or the
+    world changed, and schedules the debounced check. Evaluates no mesh."""
+    if not SESSIONS:
+        return
+    tagged, lighting, linked = set(), False, False
+    for u in depsgraph.updates:
+        id_ = u.id.original
+        if isinstance(id_, bpy.types.Object) and id_.type == "MESH" and (u.is_updated_geometry or u.is_updated_transform):
+            tagged.add(id_.name)
+        elif _is_lighting(id_):
+            lighting = True
+        # Objects linked, unlinked or given a material: which objects carry it may differ.
+        linked = linked or isinstance(id_, (bpy.types.Scene, bpy.types.Collection))
+    _follow(scene, tagged, lighting, linked)
+
+
+@bpy.app.handlers.persistent
+def follow_frame(scene, depsgraph=None) -> None:
+    """frame_change_post (timeline scrub, playback): anything may be animated, so every
+    previewed object is checked once the timeline is still."""
+    if SESSIONS:
+        _follow(scene, None, True)
+
+
+def _follow(scene, tagged: set | None, lighting: bool, linked: bool = True) -> None:
+    keys = export.lighting_keys(scene) if lighting else None
+    for name, s in list(SESSIONS.items()):
+        if bpy.data.materials.get(name) is None:
+            continue
+        moved = set(s.objects) if tagged is None else tagged & set(s.objects)
+        others = linked or (tagged is not None and bool(tagged - moved))
+        lit = ""
+        if keys is not None:
+            lit = _lighting_difference(s.lighting, keys)
+            s.changed = _describe(s, lit)  # the panel says "stale" at once; geometry after the check
+        if moved or lit or others:
+            _note(name, moved)
+
+
+def follow_again(material: bpy.types.Material) -> None:
+    """Following was switched on (or the preview on again): check every previewed object and
+    the lights once the timer runs, and refresh what changed meanwhile."""
+    s = SESSIONS.get(material.name)
+    if s is not None:
+        _note(material.name, s.objects)
+
+
+def follow_tick() -> float | None:
+    """The timer: once a material's scene has been still for DEBOUNCE_S, `follow_now` for it.
+    Returns when to run again (None: nothing pending)."""
+    now = _clock()
+    due = [n for n, (t, _) in PENDING.items() if now - t >= DEBOUNCE_S]
+    follow_now(due)
+    if not PENDING:
+        return None
+    return max(0.05, min(DEBOUNCE_S - (now - t) for t, _ in PENDING.values()))
+
+
+def follow_now(names=None) -> None:
+    """Checks what the handler noted (all pending materials, or `names`) and refreshes the
+    transport of those that changed, in the background: PRT again, or the hierarchy (see
+    `jobs.resolve_method`). A material whose job still runs stays pending: checked when it is done."""
+    for name in list(PENDING if names is None else names):
+        if name not in PENDING or name in JOBS or name in PREPARING:
+            continue
+        _, suspects = PENDING.pop(name)
+        s, mat = SESSIONS.get(name), bpy.data.materials.get(name)
+        if s is None or mat is None:
+            continue
+        objects = [bpy.data.objects.get(n) for n in s.objects]
+        if any(o is not None and o.mode == "EDIT" for o in objects):
+            # The preview attribute written now would be lost when Edit Mode writes its mesh
+            # back: leaving Edit Mode tags the geometry again, and the preview follows then.
+            s.follow_message = "in Edit Mode: the preview follows when you leave it"
+            continue
+        _check(s, mat, suspects, bpy.context.scene)
+        settings = mat.translucent
+        if s.changed and settings.enabled and settings.follow_scene:
+            _follow_refresh(mat, s)
+
+
+def _check(s: Session, mat: bpy.types.Material, suspects: set, bl_scene) -> None:
+    """Compares the tagged objects' evaluated geometry, which objects carry the material, and
+    the lights and world with what the transport was built from, and keeps the result on the
+    session (`deformed`, `members_changed`, `changed`)."""
+    members = {o.name for o in objects_with(mat, bl_scene)}
+    gained, lost = sorted(members - set(s.objects)), sorted(set(s.objects) - members)
+    s.members_changed = ", ".join([f"{n} took the material" for n in gained] + [f"{n} lost it" for n in lost])
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for r in s.info.objects:
+        if r.name not in suspects:
+            continue
+        obj = bpy.data.objects.get(r.name)
+        if obj is None:
+            s.deformed[r.name] = "removed"
+            continue
+        key = export.object_geometry_key(obj, depsgraph)
+        if key == r.geometry_key:
+            s.deformed.pop(r.name, None)  # the add-on's own colour write, or moved back
+        elif key.split(":")[0] != str(r.count):
+            s.deformed[r.name] = "topology"
+        else:
+            s.deformed[r.name] = "deformed"
+    s.changed = _describe(s, _lighting_difference(s.lighting, export.lighting_keys(bl_scene)))
+
+
+def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
+    """Builds the transport again for the scene as it is now, in the background; the old
+    preview stays up until the new one is written. A topology change always starts from
+    scratch; the hierarchy updates itself in place otherwise."""
+    change = "deformation" if s.deformed else "light"
+    method, message = jobs.resolve_method(mat.translucent.method, change, s.method)
+    topology = any(v != "deformed" for v in s.deformed.values()) or bool(s.members_changed)
+    name = mat.name
+    try:
+        job, objects, info, lighting = jobs.start(mat, method=method, previous=None if topology else s)
+    except ValueError as e:
+        s.follow_message = f"following the scene failed: {e}"
+        return
+    s.follow_message = f"refreshing ({'PRT' if method == 'prt' else 'hierarchy'}): {s.changed}"
+
+    def failed(error):
+        cur = SESSIONS.get(name)
+        if cur is not None:
+            cur.follow_message = f"following the scene failed: {error}"
+
+    def hierarchy_failed(error):
+        # When the hierarchy fails, PRT keeps the preview following, saying why.
+        material = bpy.data.materials.get(name)
+        if material is None:
+            return
+        why = f"hierarchy failed ({error}), PRT used"
+        try:
+            job2, objects2, info2, lighting2 = jobs.start(material, method="prt")
+        except ValueError as e:
+            failed(e)
+            return
+        edits.in_background(name, job2, objects2, info2, lighting2, failed, why)
+
+    edits.in_background(name, job, objects, info, lighting, hierarchy_failed if method == "hierarchy" else failed,
+                        message)
+
+
+# ----------------------------------------------------------------------- following the view
+#
+# How far the eye must move, relative to its distance from the origin plus 1 unit, before the
+# view-dependent preview is drawn again; and how often the viewport's view is looked at [s].
+EYE_TOLERANCE = 1e-3
+VIEW_POLL_S = 0.2
+
+
+def viewport_eye() -> tuple | None:
+    """The eye point of the first 3D viewport (world space), or None without one (headless)."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in getattr(wm, "windows", []):
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                r3d = area.spaces.active.region_3d
+                if r3d is not None:
+                    return tuple(r3d.view_matrix.inverted().translation)
+    return None
+
+
+def set_eye(material: bpy.types.Material, eye) -> bool:
+    """Draws the material's preview toward `eye` (world space; None: along the normals) when
+    it depends on the view; returns whether it was drawn again."""
+    s = SESSIONS.get(material.name)
+    if s is None or not view_dependent(s):
+        return False
+    if eye is not None:
+        eye = tuple(float(x) for x in eye)
+        if s.eye is not None:
+            moved = sum((a - b) ** 2 for a, b in zip(eye, s.eye)) ** 0.5
+            if moved <= EYE_TOLERANCE * (1.0 + sum(a * a for a in eye) ** 0.5):
+                return False
+    elif s.eye is None:
+        return False
+    s.eye = eye
+    edits.edit(material)
+    return True
+
+
+def follow_view_tick() -> float:
+    """Timer: the viewport's view moved, so the view-dependent previews are drawn toward it
+    (sliders stay live: an edit draws toward the last eye)."""
+    eye = viewport_eye()
+    if eye is not None:
+        for name in list(SESSIONS):
+            mat = bpy.data.materials.get(name)
+            if mat is not None and name not in JOBS:
+                set_eye(mat, eye)
+    return VIEW_POLL_S

@@ -1,0 +1,179 @@
+"""Background jobs: a material's transport built on a worker thread that never touches bpy, by
+the method `resolve_method` picks (PRT, Xu 2007, or the hierarchy, Mertens 2003)."""
+
+from __future__ import annotations
+
+import threading
+
+import bpy
+import numpy as np
+
+from . import export
+from .session import JOBS, objects_with, params
+
+
+class Job:
+    """A precompute on a worker thread that never touches bpy; the operator polls it."""
+
+    def __init__(self, scene, materials, **kwargs):
+        self.progress = 0.0
+        self.cancel = False
+        self.result = None
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(scene, materials, kwargs), daemon=True)
+
+    def _tick(self, f: float) -> bool:
+        self.progress = f
+        return not self.cancel
+
+    def _run(self, scene, materials, kwargs):
+        import translucent
+
+        try:
+            self.result = translucent.Prt(scene, materials, progress=self._tick, **kwargs)
+        except BaseException as e:  # reported to the user by the operator
+            self.error = e
+
+    def start(self):
+        self._thread.start()
+
+    def run_here(self):
+        self._thread.run()
+
+    @property
+    def done(self) -> bool:
+        return not self._thread.is_alive() and (self.result is not None or self.error is not None)
+
+
+HIERARCHY_EPS = (0.005, 0.5)  # receiver and emitter thresholds (eps1, eps2): translucent.Hierarchy's defaults
+# Receivers the hierarchy checks against its ground truth for its error estimate (its
+# default); 0 computes none, and the panel then says so.
+HIERARCHY_ESTIMATE_RECEIVERS = 32
+
+
+class HierarchyJob(Job):
+    """The hierarchy built (or updated, same topology) on a worker thread; the same polling. Its
+    result is the `translucent.Hierarchy` itself: it answers the edit path's calls as a `Prt`
+    does (`radiance`, `last_eval`, `report`, `profile`), each with its own keys."""
+
+    def __init__(self, scene, material, previous=None, positions=None, **kwargs):
+        super().__init__(scene, [material], **kwargs)
+        self._material, self._previous, self._positions = material, previous, positions
+
+    def _run(self, scene, materials, kwargs):
+        import translucent
+
+        try:
+            if self._previous is not None:
+                # Same topology: the hierarchy's own update (links promoted or demoted).
+                self._previous.update(positions=self._positions, lights=scene)
+                self.result = self._previous
+            else:
+                # The world shadowed by the mesh, as Cycles renders it.
+                self.result = translucent.Hierarchy(scene, self._material, profile=kwargs["profile"],
+                                                    eps=HIERARCHY_EPS, mode="on_the_fly", world_shadows=True,
+                                                    estimate_receivers=HIERARCHY_ESTIMATE_RECEIVERS)
+        except BaseException as e:  # reported by the follow refresh, which falls back to PRT
+            self.error = e
+
+
+def hierarchy_available() -> bool:
+    import translucent
+
+    return hasattr(translucent, "Hierarchy")
+
+
+HIERARCHY_MISSING = "Hierarchy: not in this build of translucent (no translucent.Hierarchy), PRT used"
+
+
+def resolve_method(setting: str, change: str, current: str = "prt") -> tuple[str, str]:
+    """The method ("prt" or "hierarchy") that builds the transport for a `change` ("precompute",
+    "deformation", "light") under the panel's `setting` ("PRT", "HIERARCHY", "AUTO"), and why it
+    is not the one asked for ("" when it is). Auto: the hierarchy for a deformation, and for a
+    light when the hierarchy already holds the transport (its render mode); PRT otherwise (the
+    button, material editing: PRT's edits are dot products)."""
+    if setting == "PRT":
+        return "prt", ""
+    wants = setting == "HIERARCHY" or change == "deformation" or (change == "light" and current == "hierarchy")
+    if not wants:
+        return "prt", ""
+    if not hierarchy_available():
+        return "prt", HIERARCHY_MISSING
+    return "hierarchy", ""
+
+
+def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
+          previous=None) -> tuple[Job, list[str], export.ExportInfo, dict]:
+    """Exports what the material needs and creates (but does not start) the job that builds its
+    transport: PRT's precompute, or the hierarchy (updated in place from the `previous` session
+    when the topology is the same). Returns the job, the objects, the export info and the
+    lighting keys."""
+    bl_scene = bl_scene or bpy.context.scene
+    objects = objects_with(material, bl_scene)
+    if not objects:
+        raise ValueError(f"no mesh object uses material {material.name!r}")
+    scene, info = export.export_scene(objects, bl_scene=bl_scene)
+    info.skipped_objects = [o.name for o in bl_scene.objects if o.type == "MESH" and o not in objects]
+    s = material.translucent
+    if method == "hierarchy":
+        same = (previous is not None and previous.method == "hierarchy"
+                and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
+        positions = None
+        if same:
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            positions = np.concatenate([export.evaluated_mesh_arrays(o, depsgraph)[0] for o in objects])
+        job = HierarchyJob(scene, s.material(), previous=previous.transport if same else None, positions=positions,
+                           profile=s.profile_name())
+    else:
+        job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend,
+                  profile=s.profile_name())
+    job.method = method
+    job.chosen_for = params(s)
+    job.profile = s.profile_name()
+    return job, [o.name for o in objects], info, export.lighting_keys(bl_scene)
+
+
+def in_background(name: str, job: Job, done, failed) -> None:
+    """Runs `job` for material `name` off the UI thread (headless: here, at once); when it is
+    done, `done(material)` swaps its transport in (until then the old preview stays up), or
+    `failed(error)` reports its error."""
+    JOBS[name] = job
+    job.background = True  # the panel: no Esc to cancel it (no modal operator runs it)
+
+    def complete() -> None:
+        JOBS.pop(name, None)
+        mat = bpy.data.materials.get(name)
+        if mat is None:
+            return
+        if job.error is not None:
+            failed(job.error)
+            return
+        done(mat)
+
+    if headless():
+        job.run_here()
+        complete()
+        return
+
+    def poll():
+        if not job.done:
+            return 0.2
+        complete()
+        redraw()
+        return None
+
+    job.start()
+    bpy.app.timers.register(poll, first_interval=0.2)
+
+
+def headless() -> bool:
+    """No UI to keep responsive (tests may pretend there is one)."""
+    return bpy.app.background
+
+
+def redraw() -> None:
+    """Every area of every window drawn again (what a job or the follow check left changed)."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in wm.windows if wm is not None else ():
+        for area in window.screen.areas:
+            area.tag_redraw()
