@@ -328,81 +328,38 @@ impl Estimator<'_> {
         !self.tracer.occluded(o, dir, dist)
     }
 
-    /// Radiance arriving from a point source of intensity `intensity` [W/sr] at `pos`:
-    /// E = F_t I cos / d^2 (inverse square law). No ray when the light is behind the surface.
-    fn point_source(&mut self, pos: Vec3, intensity: [f32; 3]) -> [f32; 3] {
-        let v = pos - self.p;
-        let d2 = v.length_squared();
-        if d2 <= 0.0 {
-            return [0.0; 3];
-        }
-        let d = d2.sqrt();
-        let l = v / d;
-        let cos = self.n.dot(l);
-        if cos <= 0.0 || !self.visible(l, d * (1.0 - 1e-5)) {
-            return [0.0; 3];
-        }
-        scaled(&intensity, self.fresnel(cos) * cos / d2)
-    }
-
+    /// What one light gives the point: E = mean over its samples of F_t cos times what
+    /// `Light::incident` says arrives (the one sampler every light goes through: suns, points
+    /// and spots are one sample, an area light `area_samples` stratified points). No ray when
+    /// the light is behind the surface.
     fn light(&mut self, light: &Light, area_samples: u32) -> [f32; 3] {
-        match light {
-            // Sun Strength is the irradiance on a surface facing it: E = F_t S cos.
-            Light::Sun {
-                direction,
-                irradiance,
-            } => {
-                let l = -*direction;
-                let cos = self.n.dot(l);
-                if cos <= 0.0 || !self.visible(l, f32::INFINITY) {
-                    return [0.0; 3];
+        let k = match light {
+            Light::Area { .. } => (area_samples as f32).sqrt().ceil() as u32,
+            _ => 1,
+        };
+        let mut sum = [0.0f32; 3];
+        for a in 0..k {
+            for b in 0..k {
+                // Only an area light reads the sample (and draws it: the world's stream of
+                // random numbers stays as it was for the other lights).
+                let u = match light {
+                    Light::Area { .. } => [
+                        (a as f32 + self.rng.next()) / k as f32,
+                        (b as f32 + self.rng.next()) / k as f32,
+                    ],
+                    _ => [0.5; 2],
+                };
+                let Some(inc) = light.incident(self.p, u) else {
+                    continue;
+                };
+                let cos = self.n.dot(inc.direction);
+                if cos <= 0.0 || !self.visible(inc.direction, inc.distance * (1.0 - 1e-5)) {
+                    continue;
                 }
-                scaled(irradiance, self.fresnel(cos) * cos)
-            }
-            // Blender Power P [W] of a point light is radiant intensity P / (4 pi) [W/sr].
-            Light::Point { position, power } => {
-                self.point_source(*position, scaled(power, 1.0 / (4.0 * PI)))
-            }
-            // A spot is a point light masked by a cone (Cycles' spot_light_attenuation:
-            // smoothstep over the blend fraction of the cone's cosine range, no extra cosine).
-            Light::Spot {
-                position,
-                direction,
-                power,
-                spot_size,
-                blend,
-            } => {
-                let to_point = (self.p - *position).normalize_or_zero();
-                let mask = crate::lights::spot_mask(to_point.dot(*direction), *spot_size, *blend);
-                if mask <= 0.0 {
-                    return [0.0; 3];
-                }
-                self.point_source(*position, scaled(power, mask / (4.0 * PI)))
-            }
-            // A Lambertian rectangle of power P and area A has radiance P / (pi A) (Cycles):
-            // E = mean over stratified points of F_t cos times what `Light::incident` gives
-            // for the point, L cos_l A / d^2.
-            Light::Area { .. } => {
-                let k = (area_samples as f32).sqrt().ceil() as u32;
-                let count = k * k;
-                let mut sum = [0.0f32; 3];
-                for a in 0..k {
-                    for b in 0..k {
-                        let su = (a as f32 + self.rng.next()) / k as f32;
-                        let sv = (b as f32 + self.rng.next()) / k as f32;
-                        let Some(inc) = light.incident(self.p, [su, sv]) else {
-                            continue;
-                        };
-                        let cos = self.n.dot(inc.direction);
-                        if cos <= 0.0 || !self.visible(inc.direction, inc.distance * (1.0 - 1e-5)) {
-                            continue;
-                        }
-                        add(&mut sum, scaled(&inc.value, self.fresnel(cos) * cos));
-                    }
-                }
-                scaled(&sum, 1.0 / count as f32)
+                add(&mut sum, scaled(&inc.value, self.fresnel(cos) * cos));
             }
         }
+        scaled(&sum, 1.0 / (k * k) as f32)
     }
 
     /// Cosine-weighted hemisphere sampling: E ~ (pi / N) sum F_t L V.
