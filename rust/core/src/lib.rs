@@ -10,7 +10,6 @@ pub mod interreflection; // the object's own light falling back on it (ray cast)
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
 pub mod lights; // Blender/Cycles lights and the world
 pub mod mesh; // validated triangle meshes, surface samples, vertex areas
-pub mod mesh_walk; // Cycles' random walk traced inside the mesh (with its half-space twin as control variate)
 pub mod metrics; // area-weighted relative error
 pub mod optics; // material, Fresnel, measured data, Principled layers
 pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated
@@ -21,6 +20,7 @@ pub mod shadow_edges; // the irradiance on a finer grid where a shadow's edge cr
 pub mod single_scattering; // Xu 2007 eq. 5's path model, phase functions, brute force
 pub mod spherical_harmonics; // real Y_lm and HG's Legendre series (addition theorem)
 pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)
+pub mod walks; // Cycles' walk traced inside the mesh, its half-space twin, the walk term
 
 // Shared by the PRT method, kept apart so other methods may use it.
 pub mod basis; // Xu 2007 §5 piecewise polynomial basis and its constrained fit

@@ -12,7 +12,6 @@
 //! The radial profile is any of `profiles` (the dipole of the paper, or Cycles' random walk):
 //! the transport holds geometry and light only, and the profile enters through the fit.
 
-pub mod geometry;
 mod layout;
 pub mod single;
 mod tree;
@@ -22,11 +21,10 @@ use crate::error::{Error, Result};
 use crate::interreflection::Source;
 pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
-use crate::mesh_walk::ExitLight;
+use crate::walks::{ExitLight, WalkTerm, WalkTermReport, WalkTermSettings};
 use crate::optics::Material;
 use crate::profiles::{Model, Profile, RadialProfile};
 use crate::shadow_edges::ShadowEdges;
-use geometry::{GeometryReport, GeometrySettings, GeometryTerm};
 use glam::{DVec3, Vec3};
 use layout::Transport;
 use rayon::prelude::*;
@@ -89,7 +87,7 @@ pub struct PrtSettings {
     pub interreflection: Option<usize>,
     /// Cycles' walk through the mesh (`geometry`): the mesh's own shape (thin and curved
     /// parts) in the transport, Cycles' model only; None for the half-space profile alone.
-    pub geometry: Option<GeometrySettings>,
+    pub geometry: Option<WalkTermSettings>,
 }
 
 impl Default for PrtSettings {
@@ -151,8 +149,8 @@ pub struct PrtReport {
     pub seconds_total: f64,
     /// The walks through the mesh, when asked for: for the direct light, and for the object's
     /// own light (when interreflection is on too).
-    pub geometry: Option<GeometryReport>,
-    pub geometry_indirect: Option<GeometryReport>,
+    pub geometry: Option<WalkTermReport>,
+    pub geometry_indirect: Option<WalkTermReport>,
     /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
     /// evaluated there, and the time it took.
     pub shadow_edge_triangles: usize,
@@ -191,7 +189,7 @@ pub struct Prt {
     /// with (see `Bounce`).
     bounce: Option<Bounce>,
     /// What the walks through the mesh add to the half-space profile (`geometry`).
-    geometry: Option<GeometryTerm>,
+    geometry: Option<WalkTerm>,
     /// Single scattering (Xu 2007 eqs. 12-15), when attached (`set_single_scattering`).
     single: Option<single::SingleScattering>,
     report: PrtReport,
@@ -210,7 +208,7 @@ struct Bounce {
     irradiance: Vec<[f32; 3]>,
     source_albedo: [f64; 3],
     /// What the walks through the mesh make of E_ind beyond its local conversion.
-    walked: Option<GeometryTerm>,
+    walked: Option<WalkTerm>,
 }
 
 /// A material projected on the basis: the dot-product coefficients per channel and the fit's
@@ -478,7 +476,7 @@ impl Prt {
                 vertices: &prt.vertex_irradiance,
                 edges: &edges,
             };
-            let term = GeometryTerm::compute(
+            let term = WalkTerm::compute(
                 mesh,
                 tracer,
                 rep,
@@ -597,13 +595,13 @@ impl Prt {
             let walked = match &settings.geometry {
                 Some(g) => {
                     let local = returned(&irradiance);
-                    let shared = GeometrySettings {
+                    let shared = WalkTermSettings {
                         rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
                         vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
                         refine: false,
                         ..g.clone()
                     };
-                    let term = GeometryTerm::compute(
+                    let term = WalkTerm::compute(
                         mesh,
                         tracer,
                         rep,

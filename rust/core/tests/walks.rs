@@ -9,7 +9,7 @@
 mod common;
 
 use translucent_core::mesh::Mesh;
-use translucent_core::mesh_walk::{walk_radiosity, MeshWalkSettings};
+use translucent_core::walks::{walk_radiosity, MeshWalkSettings};
 use translucent_core::optics::{Layers, Material};
 use translucent_core::profiles::{Model, RadialProfile};
 use translucent_core::raytrace::Tracer;

@@ -1,8 +1,8 @@
-//! The mesh's geometry in PRT's transport: what Cycles' walk through the actual mesh adds to,
+//! The walk term in PRT's transport (the mesh's own shape): what Cycles' walk through the actual mesh adds to,
 //! or takes from, the half-space profile (light through ears and noses, out of the inside of a
 //! curve, lost through a thin part's far side).
 //!
-//! At the precompute, walks (`mesh_walk`) enter at a well-spread subset of the vertices (each
+//! At the precompute, walks (`walks`) enter at a well-spread subset of the vertices (each
 //! side of a thin part its own, `SPREAD_FACING`) and
 //! the difference D = B_walk - B_halfspace is taken there for the first representative, per
 //! channel. D is smooth on the scale of the diffusion length, so it is carried to every vertex
@@ -35,7 +35,7 @@
 use crate::bake_points::sharp_vertices;
 use crate::error::Result;
 use crate::mesh::Mesh;
-use crate::mesh_walk::{
+use super::walker::{
     relative_noise, walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings,
 };
 use crate::optics::{Material, CHANNELS};
@@ -47,7 +47,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 /// How far (as a factor on the diffusion length) an edit may go beyond the walked channels
-/// before the geometry term is called stale.
+/// before the walk term is called stale.
 pub const LENGTH_MARGIN: f64 = 1.5;
 /// Flat enough to skip the walks: every walked vertex within reach lies within this many
 /// diffusion lengths of the tangent plane.
@@ -55,7 +55,7 @@ pub const FLAT_TOLERANCE: f64 = 0.02;
 /// Kernel radius in units of the walked vertices' spacing.
 const KERNEL_SPACINGS: f32 = 2.0;
 /// Walks per vertex the ray budget aims at when it chooses how many vertices to walk. With
-/// the walks' control variate (`mesh_walk`) 32 walks leave a vertex's B within a few per cent,
+/// the walks' control variate (`walks`) 32 walks leave a vertex's B within a few per cent,
 /// and the budget is better spent on more vertices: measured against 1024-spp Cycles bakes on
 /// Suzanne and the bunny, 256 -> 64 -> 32 took skin1 on Suzanne from 6.1 to 5.2 to 4.9 % (16:
 /// no better), the back of an ear getting its own walks instead of a kernel over 4 mm.
@@ -91,9 +91,9 @@ const SPREAD_KERNEL: f32 = 2.0;
 /// D per channel and its variance, at one walked vertex.
 type Diff = ([f32; 3], [f32; 3]);
 
-/// How the geometry term is computed.
+/// How the walk term is computed.
 #[derive(Debug, Clone, PartialEq)]
-pub struct GeometrySettings {
+pub struct WalkTermSettings {
     /// Walks per walked vertex and channel in the first pass; more follow, up to `rays`.
     pub walks: usize,
     /// Rays the walks may cast in all (one per flight): short-reaching materials get many
@@ -110,7 +110,7 @@ pub struct GeometrySettings {
     pub refine: bool,
 }
 
-impl Default for GeometrySettings {
+impl Default for WalkTermSettings {
     fn default() -> Self {
         Self {
             walks: 16,
@@ -123,9 +123,9 @@ impl Default for GeometrySettings {
     }
 }
 
-/// What the geometry term cost and what it left out.
+/// What the walk term cost and what it left out.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct GeometryReport {
+pub struct WalkTermReport {
     /// Vertices the walks entered at.
     pub walked_vertices: usize,
     /// Candidate vertices found flat: no walks.
@@ -155,13 +155,13 @@ pub struct GeometryReport {
 
 /// D / A per vertex and channel at the three walked diffusion lengths.
 #[derive(Debug, Clone)]
-pub struct GeometryTerm {
+pub struct WalkTerm {
     per_albedo: Vec<[f32; 3]>,
     /// ln L of the walked channels, with the channel index, sorted.
     lengths: Vec<(f64, usize)>,
     /// Relative noise per channel (added to the error estimate).
     noise: [f64; 3],
-    pub report: GeometryReport,
+    pub report: WalkTermReport,
 }
 
 /// Diffusion length 1 / sigma_tr of each channel's profile (capped at a large multiple of the
@@ -179,7 +179,7 @@ fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
     (l, std::array::from_fn(|c| p[c].total()))
 }
 
-impl GeometryTerm {
+impl WalkTerm {
     /// Walks `mesh` for `material` (Cycles' model), lit by `irradiance` (per vertex, finer across
     /// shadow edges), against
     /// `halfspace` (B of the half-space profile per vertex, direct light, point mass included).
@@ -190,9 +190,9 @@ impl GeometryTerm {
         material: &Material,
         irradiance: &ExitLight,
         halfspace: &[[f32; 3]],
-        settings: &GeometrySettings,
+        settings: &WalkTermSettings,
         progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
-    ) -> Result<GeometryTerm> {
+    ) -> Result<WalkTerm> {
         let start = Instant::now();
         let (lengths, albedo) = lengths_and_albedos(&Model::Cycles.profiles(material)?);
         let shortest = lengths.iter().copied().fold(f64::INFINITY, f64::min);
@@ -485,11 +485,11 @@ impl GeometryTerm {
             .map(|c| (lengths[c].ln(), c))
             .collect();
         sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
-        Ok(GeometryTerm {
+        Ok(WalkTerm {
             per_albedo,
             lengths: sorted,
             noise,
-            report: GeometryReport {
+            report: WalkTermReport {
                 walked_vertices: walked.len(),
                 skipped_flat: candidates.len() - walked.len(),
                 walks_per_vertex,

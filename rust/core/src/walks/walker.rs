@@ -46,7 +46,7 @@
 //! Deterministic: each (vertex, channel) has its own seeded generator. (The half-space table
 //! draws its first numbers from a Kronecker sequence; here that drifted every vertex's exits
 //! by about a mean free path in one direction, which a radial table never sees: measured on a
-//! half-lit plane, `tests/mesh_walk.rs`. Plain pseudo-random numbers have no such bias.)
+//! half-lit plane, `tests/walks.rs`. Plain pseudo-random numbers have no such bias.)
 
 use crate::bake_points::BakePoints;
 use crate::error::{Error, Result};
@@ -749,7 +749,7 @@ impl Walker<'_> {
         (score, plane, rays)
     }
 
-    /// `plane_total`, kept for the process per medium (the geometry term walks the same
+    /// `plane_total`, kept for the process per medium (the walk term walks the same
     /// material up to three times; marble's 2^16 half-space walks take 0.8 s on 2 cores).
     fn plane_total_cached(&self, m: &Medium) -> f64 {
         static TOTALS: Mutex<Vec<([u64; 9], f64)>> = Mutex::new(Vec::new());

@@ -1,0 +1,10 @@
+//! Cycles' random walk traced inside the mesh (with its half-space twin as control variate),
+//! and the walk term: what those walks add to PRT's half-space profile, carried to every vertex.
+
+mod term;
+mod walker;
+
+pub use term::{WalkTerm, WalkTermReport, WalkTermSettings, FLAT_TOLERANCE, LENGTH_MARGIN};
+pub use walker::{
+    walk_radiosity, walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings,
+};
