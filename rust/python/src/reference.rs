@@ -8,12 +8,12 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
-use translucent_core::walks::{walk_radiosity_lit, ExitLight, MeshWalkSettings};
 use translucent_core::metrics;
 use translucent_core::profiles::Model;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::shadow_edges::ShadowEdges;
 use translucent_core::single_scattering::{reference_single, PathSettings, Phase};
+use translucent_core::walks::{walk_radiosity_lit, ExitLight, MeshWalkSettings};
 use translucent_core::Vec3;
 
 /// Ground-truth radiosity by direct integration over the mesh (no basis, no clusters) of the

@@ -1,11 +1,5 @@
-//! Cycles 5.0's subsurface random walk traced inside the actual mesh (not a half-space): what
-//! Cycles renders at a vertex, without Blender, and where the half-space profiles'
-//! flat-surface assumption stops holding (ears, noses, thin and curved parts).
-//!
-//! A vertex's walks enter where Blender's vertex bake samples it (`bake_points`: each corner,
-//! 0.1 mm towards the corner triangle's centroid at 10 cm scale, with the smooth normal there),
-//! spread evenly over its corners, so that a vertex means what a vertex bake means (at a
-//! spike's apex or an open rim the radiance changes within that 0.1 mm).
+//! One walk of Cycles 5.0's subsurface random walk traced inside the actual mesh (not a
+//! half-space), beside its half-space twin on the same random numbers (`twin`).
 //!
 //! The walk is the one `profiles::walk` simulates in a half-space (intern/cycles/kernel/
 //! integrator/subsurface_random_walk.h): entry along the (smooth) normal refracted by 1/IOR
@@ -13,10 +7,7 @@
 //! Greenstein(g) for collisions 1..9, from collision 10 on the similarity-transformed
 //! isotropic medium (sigma_t* = sigma_t (1 - alpha g), alpha* = alpha (1 - g) / (1 - alpha g)),
 //! at most 256 flights, exit at the first surface crossed (index-matched, any surface of the
-//! mesh), a Lambertian exit gathering the irradiance there. By reciprocity the radiosity at
-//! the entry vertex is B(x_o) = w E[throughput E(x_exit)] + point mass E(x_o), w the
-//! subsurface lobe's weight (and Cycles' alpha / 0.2 below albedo 0.2), so that L = W(mu_o)
-//! B / pi as for every profile.
+//! mesh), a Lambertian exit gathering the irradiance there.
 //!
 //! An exit through a surface that lies inside another part of the mesh (an eyeball sunk into
 //! a head) is where Cycles' light tunnels: no light reaches that exit, but the exit's
@@ -30,71 +21,19 @@
 //! exponential) and weight (1 - e^(-sigma s)). Unbiased, one ray per flight, and it removes
 //! most of the noise of thin parts. The exit's irradiance is interpolated from the vertices',
 //! and from a finer grid where a shadow's edge crosses the triangle (`shadow_edges`).
-//!
-//! Every walk runs beside a twin in the entry vertex's tangent half-space on the same random
-//! numbers (the same directions; flight lengths differ only where the two surfaces are at
-//! different distances), and the twin's exits are scored with the irradiance's tangent-plane
-//! linearisation E(v) + grad E . (y - v). The twin's mean is known without rays: E(v) times the
-//! half-space walk's total (`PLANE_WALKS` ray-free walks, once per medium and process; the
-//! gradient term averages to 0 by the half-space's symmetry about the normal). It is
-//! subtracted as a control variate (Glasserman, Monte Carlo Methods in Financial Engineering,
-//! §4.1; the coefficient fitted to the walks, in [0, 1]), so only what the mesh and the
-//! irradiance's curvature change is sampled. Measured on Suzanne in skin1 (7,958 vertices, 256 walks): the walks' noise
-//! 1.6 / 1.3 / 1.1 % of B per channel instead of 3.4 / 4.8 / 6.1 %, for 15 % more time, and
-//! the mean unchanged (1,024 walks each way: ratio 0.999-1.000, per-vertex z-scores of the
-//! difference mean 0.0, spread 1.0).
-//! Deterministic: each (vertex, channel) has its own seeded generator. (The half-space table
-//! draws its first numbers from a Kronecker sequence; here that drifted every vertex's exits
-//! by about a mean free path in one direction, which a radial table never sees: measured on a
-//! half-lit plane, `tests/walks.rs`. Plain pseudo-random numbers have no such bias.)
 
+use super::twin::PlaneScore;
 use crate::bake_points::BakePoints;
 use crate::error::{Error, Result};
 use crate::mesh::{barycentric, Mesh};
 use crate::optics::{principled, Material, CHANNELS};
 use crate::profiles::table::{throughput_scale, MAX_ALBEDO, MIN_ALBEDO};
-use crate::profiles::walk::{
-    entry_direction, henyey_greenstein, uniform, ANISOTROPIC_BOUNCES, MAX_BOUNCES,
-};
+use crate::profiles::walk::{entry_direction, henyey_greenstein, uniform, ANISOTROPIC_BOUNCES};
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
 use glam::{DVec3, Vec3};
 use rand_core::SeedableRng;
 use rand_pcg::Pcg64Mcg;
-use rayon::prelude::*;
-use std::sync::Mutex;
-use std::time::Instant;
-
-/// How many walks, from which seed.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MeshWalkSettings {
-    /// Walks per vertex and channel.
-    pub walks: usize,
-    pub seed: u64,
-    /// 256 in Cycles.
-    pub max_bounces: usize,
-    /// Enter at Cycles' vertex-bake sample points (`bake_points`: 0.1 mm into each corner
-    /// triangle at 10 cm scale, the walks spread evenly over them) instead of at the vertex
-    /// itself: what a vertex bake records.
-    pub at_bake_points: bool,
-    /// Follow Cycles past an exit inside another part of the mesh (`Walker::tunnel`). That
-    /// light reaches the receiver after the exit's bounce, so Cycles files it as indirect
-    /// light: off, the walks give Cycles' direct light alone (what a direct-light bake holds),
-    /// such an exit bringing nothing.
-    pub tunnel: bool,
-}
-
-impl Default for MeshWalkSettings {
-    fn default() -> Self {
-        Self {
-            walks: 256,
-            seed: 0x6d65_7368_7761_6c6b,
-            max_bounces: MAX_BOUNCES,
-            at_bake_points: true,
-            tunnel: true,
-        }
-    }
-}
 
 /// A walk whose weight falls below this goes on with probability weight / RR_WEIGHT at
 /// weight RR_WEIGHT (Russian roulette, unbiased).
@@ -103,76 +42,44 @@ const RR_WEIGHT: f64 = 0.05;
 /// How far (in mean free paths) a flight's ray looks for the surface: e^-12 = 6e-6.
 const REACH_OPTICAL: f64 = 12.0;
 
-/// Walks of the half-space twin alone that fix the control variate's mean, in chunks of
-/// `PLANE_CHUNK` for the threads: within 0.3 % of the half-space table's total (the plane
-/// test), and 0.8 s for marble on 2 cores (2^18: 3.1 s), once per medium and process.
-const PLANE_WALKS: usize = 1 << 16;
-const PLANE_CHUNK: usize = 1 << 12;
-const PLANE_SEED: u64 = 0x706c_616e_6500_0001;
 /// Salt of the tunnels' random stream (`Walker::tunnel`).
 const TUNNEL_SALT: u64 = 0x7475_6e6e_656c_0001;
-/// Half-space totals kept (media, most recent).
-const PLANE_CACHE: usize = 64;
-
-/// Vertices per progress tick.
-const TICK: usize = 512;
-
-/// The walks' answer per receiver vertex.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MeshWalkResult {
-    /// B per receiver (the walks' exits and the diffuse lobe's point mass), in the
-    /// irradiance's units.
-    pub radiosity: Vec<[f32; 3]>,
-    /// Standard error of B per receiver, from the spread of its walks.
-    pub std_error: Vec<[f32; 3]>,
-    /// Area-weighted relative RMS of the standard error over the receivers, per channel:
-    /// the walks' own noise.
-    pub noise: [f64; 3],
-    pub walks: u64,
-    /// Rays cast (one per flight).
-    pub rays: u64,
-    /// Rays cast per receiver (all channels): what its walks cost.
-    pub receiver_rays: Vec<u64>,
-    /// Channels that carry no subsurface light (zero weight or no scattering): no walks.
-    pub channels_skipped: usize,
-    pub seconds: f64,
-}
 
 /// One channel's medium as Cycles walks it.
 #[derive(Debug, Clone, Copy)]
-struct Medium {
-    sigma_t: f64,
-    alpha: f64,
-    sigma_t_star: f64,
-    alpha_star: f64,
+pub(super) struct Medium {
+    pub(super) sigma_t: f64,
+    pub(super) alpha: f64,
+    pub(super) sigma_t_star: f64,
+    pub(super) alpha_star: f64,
     /// Lobe weight times Cycles' throughput scaling below albedo 0.2.
-    scale: f64,
+    pub(super) scale: f64,
     /// Diffuse lobe returned where the light enters.
-    point_mass: f64,
+    pub(super) point_mass: f64,
 }
 
 /// What every walk of one material shares.
-struct Walker<'a> {
-    mesh: &'a Mesh,
-    tracer: &'a Tracer,
-    irradiance: &'a [[f32; 3]],
-    edges: &'a ShadowEdges,
-    g: f64,
-    entry_alpha: f64,
-    inv_ior: f64,
-    max_bounces: usize,
+pub(super) struct Walker<'a> {
+    pub(super) mesh: &'a Mesh,
+    pub(super) tracer: &'a Tracer,
+    pub(super) irradiance: &'a [[f32; 3]],
+    pub(super) edges: &'a ShadowEdges,
+    pub(super) g: f64,
+    pub(super) entry_alpha: f64,
+    pub(super) inv_ior: f64,
+    pub(super) max_bounces: usize,
     /// Per triangle: where it lies against the other parts of the mesh (a head's triangles
     /// beneath a sunk eyeball are inside it, those at the eyeball's rim cross its surface).
-    placement: Vec<Placement>,
+    pub(super) placement: Vec<Placement>,
     /// Where the walks of a vertex enter: Cycles' bake sample points, or (None) the vertex.
-    bake_points: Option<BakePoints>,
+    pub(super) bake_points: Option<BakePoints>,
     /// `MeshWalkSettings::tunnel`.
-    tunnel: bool,
+    pub(super) tunnel: bool,
 }
 
 /// Where a triangle lies against the other parts of the mesh.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Placement {
+pub(super) enum Placement {
     Outside,
     /// Its corners lie on both sides of another part's surface: exits on it are tested.
     Crossed,
@@ -189,7 +96,7 @@ enum Exit {
 }
 
 /// Checks the inputs and returns the per-channel media.
-fn media(material: &Material) -> Result<[Medium; CHANNELS]> {
+pub(super) fn media(material: &Material) -> Result<[Medium; CHANNELS]> {
     Material::new(material.sigma_a, material.sigma_s, material.g, material.eta)?
         .with_layers(material.layers)?;
     if !(0.0..=0.9).contains(&material.g) {
@@ -223,192 +130,6 @@ fn media(material: &Material) -> Result<[Medium; CHANNELS]> {
     }))
 }
 
-/// Radiosity at the `receivers` (all vertices when None) from walks inside `mesh`, lit by
-/// `irradiance` per vertex (the plain irradiance E: Cycles' exit has no Fresnel). `progress`
-/// in [0, 1]; false cancels.
-pub fn walk_radiosity(
-    mesh: &Mesh,
-    tracer: &Tracer,
-    material: &Material,
-    irradiance: &[[f32; 3]],
-    receivers: Option<&[u32]>,
-    settings: &MeshWalkSettings,
-    progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
-) -> Result<MeshWalkResult> {
-    let light = ExitLight {
-        vertices: irradiance,
-        edges: &ShadowEdges::none(),
-    };
-    walk_radiosity_lit(
-        mesh, tracer, material, &light, receivers, settings, progress,
-    )
-}
-
-/// The light the walks' exits read: per vertex, and finer where a shadow's edge crosses a
-/// triangle (`shadow_edges`).
-#[derive(Debug, Clone, Copy)]
-pub struct ExitLight<'a> {
-    pub vertices: &'a [[f32; 3]],
-    pub edges: &'a ShadowEdges,
-}
-
-/// As `walk_radiosity`, the exits reading `light`.
-pub fn walk_radiosity_lit(
-    mesh: &Mesh,
-    tracer: &Tracer,
-    material: &Material,
-    light: &ExitLight,
-    receivers: Option<&[u32]>,
-    settings: &MeshWalkSettings,
-    progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
-) -> Result<MeshWalkResult> {
-    let start = Instant::now();
-    let irradiance = light.vertices;
-    let n = mesh.vertex_count();
-    if irradiance.len() != n {
-        return Err(Error::InvalidArgument(format!(
-            "{} irradiance values for {n} vertices",
-            irradiance.len()
-        )));
-    }
-    if irradiance
-        .iter()
-        .flatten()
-        .any(|e| !e.is_finite() || *e < 0.0)
-    {
-        return Err(Error::InvalidArgument(
-            "irradiance must be finite and >= 0".into(),
-        ));
-    }
-    if !(1..=1 << 24).contains(&settings.walks) {
-        return Err(Error::InvalidArgument(format!(
-            "walks = {} must lie in [1, 2^24]",
-            settings.walks
-        )));
-    }
-    if !(ANISOTROPIC_BOUNCES + 1..=1_000_000).contains(&settings.max_bounces) {
-        return Err(Error::InvalidArgument(format!(
-            "max_bounces = {} must lie in [11, 10^6]",
-            settings.max_bounces
-        )));
-    }
-    let all: Vec<u32>;
-    let receivers = match receivers {
-        Some(r) => {
-            if let Some(bad) = r.iter().find(|&&v| v as usize >= n) {
-                return Err(Error::InvalidArgument(format!(
-                    "receiver index {bad} out of range for {n} vertices"
-                )));
-            }
-            r
-        }
-        None => {
-            all = (0..n as u32).collect();
-            &all
-        }
-    };
-    let media = media(material)?;
-    let walker = Walker {
-        mesh,
-        tracer,
-        irradiance,
-        edges: light.edges,
-        g: material.g,
-        entry_alpha: material.layers.roughness * material.layers.roughness,
-        inv_ior: 1.0 / material.eta.clamp(1.01, 3.8),
-        max_bounces: settings.max_bounces,
-        placement: placements(mesh, tracer),
-        bake_points: settings.at_bake_points.then(|| BakePoints::new(mesh)),
-        tunnel: settings.tunnel,
-    };
-    let active: Vec<usize> = (0..CHANNELS).filter(|&c| media[c].scale > 0.0).collect();
-    // The control variate's known mean: the half-space twin's total per channel.
-    let mut plane = [0f64; CHANNELS];
-    for &c in &active {
-        plane[c] = walker.plane_total_cached(&media[c]);
-    }
-    let gradients = tangent_gradients(mesh, irradiance);
-    let mut radiosity = Vec::with_capacity(receivers.len());
-    let mut std_error = Vec::with_capacity(receivers.len());
-    let mut receiver_rays = Vec::with_capacity(receivers.len());
-    let mut rays = 0u64;
-    for (k, chunk) in receivers.chunks(TICK).enumerate() {
-        let part: Vec<([f32; 3], [f32; 3], u64)> = chunk
-            .par_iter()
-            .map(|&v| {
-                let e = irradiance[v as usize];
-                let mut b = std::array::from_fn(|c| (media[c].point_mass * f64::from(e[c])) as f32);
-                let mut se = [0f32; 3];
-                let mut rays = 0;
-                for &c in &active {
-                    let grad =
-                        Vec3::from_array(std::array::from_fn(|k| gradients[v as usize][k][c]));
-                    let (mean, err, r) = walker.vertex(v, c, &media[c], settings, plane[c], grad);
-                    b[c] += (media[c].scale * mean) as f32;
-                    se[c] = (media[c].scale * err) as f32;
-                    rays += r;
-                }
-                (b, se, rays)
-            })
-            .collect();
-        for (b, se, r) in part {
-            radiosity.push(b);
-            std_error.push(se);
-            receiver_rays.push(r);
-            rays += r;
-        }
-        if let Some(p) = progress {
-            if !p(((k + 1) * TICK).min(receivers.len()) as f32 / receivers.len().max(1) as f32) {
-                return Err(Error::Cancelled);
-            }
-        }
-    }
-    let noise = relative_noise(mesh, receivers, &radiosity, &std_error);
-    Ok(MeshWalkResult {
-        radiosity,
-        std_error,
-        noise,
-        walks: (receivers.len() * active.len() * settings.walks) as u64,
-        rays,
-        receiver_rays,
-        channels_skipped: CHANNELS - active.len(),
-        seconds: start.elapsed().as_secs_f64(),
-    })
-}
-
-/// The walks' own noise: the area-weighted relative RMS of the standard errors over the
-/// receivers, per channel.
-pub(crate) fn relative_noise(
-    mesh: &Mesh,
-    receivers: &[u32],
-    radiosity: &[[f32; 3]],
-    std_error: &[[f32; 3]],
-) -> [f64; 3] {
-    let areas = mesh.vertex_areas();
-    std::array::from_fn(|c| {
-        let (mut num, mut den) = (0.0f64, 0.0f64);
-        for ((&v, b), se) in receivers.iter().zip(radiosity).zip(std_error) {
-            let a = f64::from(areas[v as usize]);
-            num += a * f64::from(se[c]).powi(2);
-            den += a * f64::from(b[c]).powi(2);
-        }
-        if den > 0.0 {
-            (num / den).sqrt()
-        } else {
-            0.0
-        }
-    })
-}
-
-/// Per-walk sums of the tangent half-space walk that runs beside a mesh walk on the same
-/// random numbers (the control variate): its unit-irradiance exit weight, and that weight
-/// times the exit's offset in the tangent plane.
-#[derive(Debug, Clone, Copy, Default)]
-struct PlaneScore {
-    total: f64,
-    offset: DVec3,
-}
-
 /// The random numbers one flight uses, drawn whether or not a walk needs them, so that the
 /// mesh walk and its half-space twin stay on the same numbers whatever each one does.
 struct FlightNumbers {
@@ -429,13 +150,13 @@ impl FlightNumbers {
 
 /// A walk's random numbers: the flights' (shared by the walk and its twin) and the tunnels'
 /// (the mesh walk's alone, so the two stay on the same flight numbers).
-struct Streams {
+pub(super) struct Streams {
     flights: Pcg64Mcg,
     tunnels: Pcg64Mcg,
 }
 
 impl Streams {
-    fn new(key: u64) -> Self {
+    pub(super) fn new(key: u64) -> Self {
         Self {
             flights: Pcg64Mcg::seed_from_u64(key),
             tunnels: Pcg64Mcg::seed_from_u64(key ^ TUNNEL_SALT),
@@ -500,93 +221,20 @@ fn fly(
 }
 
 impl Walker<'_> {
-    /// The mean of `walks` walks entering at vertex `v` in channel `c`, its standard error,
-    /// and the rays cast. Each walk runs beside a twin in the vertex's tangent half-space on
-    /// the same random numbers, scored with the irradiance's tangent-plane linearisation
-    /// E(v) + grad E . (y - v): its mean is known, E(v) times the half-space total `plane`
-    /// (the half-space walk is symmetric about the normal, so the gradient term's mean is 0),
-    /// and it is subtracted as a control variate with the coefficient fitted to the walks
-    /// (in [0, 1]). Where the mesh is flat the two walks are the same walk and only the
-    /// irradiance's curvature is left to sample.
-    fn vertex(
-        &self,
-        v: u32,
-        c: usize,
-        m: &Medium,
-        s: &MeshWalkSettings,
-        plane: f64,
-        gradient: Vec3,
-    ) -> (f64, f64, u64) {
-        let n = self.mesh.normals()[v as usize];
-        if n == Vec3::ZERO {
-            return (0.0, 0.0, 0);
-        }
-        let p = self.mesh.positions()[v as usize];
-        let e = f64::from(self.irradiance[v as usize][c]);
-        let g = gradient.as_dvec3();
-        let key = s.seed
-            ^ (u64::from(v) * CHANNELS as u64 + c as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        let mut streams = Streams::new(key);
-        // Where the walks enter: Cycles' bake points, walk i at point (r + i) mod k from a
-        // rotation r drawn from the key, so each walk's point is uniform over the corners (the
-        // mean is the bake's mean over corners) and their counts differ by at most one.
-        let starts: Vec<(Vec3, Vec3, Option<DVec3>)> = match &self.bake_points {
-            Some(b) if !b.of(v).is_empty() => b
-                .of(v)
-                .iter()
-                .map(|q| (q.position, q.normal, Some(q.face_normal.as_dvec3())))
-                .collect(),
-            _ => vec![(p, n, None)],
-        };
-        let rotation = (key >> 17) as usize % starts.len();
-        // Sums of x (mesh), y (control, less its known mean), x^2, y^2, xy.
-        let mut sums = [0f64; 5];
-        let mut rays = 0;
-        for i in 0..s.walks {
-            let (q, nq, ng) = starts[(rotation + i) % starts.len()];
-            // The control's irradiance, linear about the vertex, at the entry point.
-            let eq = e + g.dot((q - p).as_dvec3());
-            let (x, twin, r) = self.walk(q, nq, ng, c, m, &mut streams, true);
-            let y = eq * twin.total + g.dot(twin.offset) - eq * plane;
-            sums[0] += x;
-            sums[1] += y;
-            sums[2] += x * x;
-            sums[3] += y * y;
-            sums[4] += x * y;
-            rays += r;
-        }
-        let k = s.walks as f64;
-        let (mx, my) = (sums[0] / k, sums[1] / k);
-        let (vx, vy, cxy) = (
-            (sums[2] / k - mx * mx).max(0.0),
-            (sums[3] / k - my * my).max(0.0),
-            sums[4] / k - mx * my,
-        );
-        let beta = if vy > 0.0 {
-            (cxy / vy).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        // B >= 0: the control can take a few walks' mean below it (a nearly transparent
-        // medium, 8 walks: -2e-4 where B is 0.3).
-        let mean = (mx - beta * my).max(0.0);
-        let var = (vx - 2.0 * beta * cxy + beta * beta * vy).max(0.0);
-        let se = if s.walks > 1 {
-            (var / (k - 1.0)).sqrt()
-        } else {
-            0.0
-        };
-        (mean, se, rays)
-    }
-
     /// One walk entering at `p` with (smooth) normal `n`: its throughput times the irradiance
     /// at its exits (scored by expected value), its half-space twin's sums, and the rays cast.
     /// `face`: the entry triangle's normal Ng where the walk enters on a triangle (a bake
     /// point): it starts just beneath that triangle, and an entry direction that does not go
     /// into it ends the mesh walk as Cycles does (`dot(-Ng, D) <= 0`). With `mesh` false only
     /// the twin walks (`p` on an unbounded plane) and no rays are cast.
+    ///
+    /// Long (about 170 lines) on purpose: the flight loop is the precompute's innermost loop,
+    /// and it steps the mesh walk and its twin on the same random numbers flight by flight,
+    /// their state (position, weight, direction, a tunnel's divergence) shared within one
+    /// flight; split into calls it would pass all of it back and forth. It reads as Cycles'
+    /// kernel (subsurface_random_walk.h) does, one flight after another.
     #[allow(clippy::too_many_arguments)]
-    fn walk(
+    pub(super) fn walk(
         &self,
         p: Vec3,
         n: Vec3,
@@ -749,61 +397,6 @@ impl Walker<'_> {
         (score, plane, rays)
     }
 
-    /// `plane_total`, kept for the process per medium (the walk term walks the same
-    /// material up to three times; marble's 2^16 half-space walks take 0.8 s on 2 cores).
-    fn plane_total_cached(&self, m: &Medium) -> f64 {
-        static TOTALS: Mutex<Vec<([u64; 9], f64)>> = Mutex::new(Vec::new());
-        // The twin starts the tracer's epsilon beneath the surface (`walk`), which scales with
-        // the mesh: part of the key, so a second mesh never reads the first one's total.
-        let key = [
-            m.sigma_t,
-            m.alpha,
-            m.sigma_t_star,
-            m.alpha_star,
-            self.g,
-            self.entry_alpha,
-            self.inv_ior,
-            self.max_bounces as f64,
-            f64::from(self.tracer.epsilon()),
-        ]
-        .map(f64::to_bits);
-        let lock = || TOTALS.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((_, t)) = lock().iter().find(|(k, _)| *k == key) {
-            return *t;
-        }
-        let total = self.plane_total(m);
-        let mut totals = lock();
-        if totals.len() >= PLANE_CACHE {
-            totals.remove(0);
-        }
-        totals.push((key, total));
-        total
-    }
-
-    /// The mean unit-irradiance exit weight of a walk in a half-space (the control variate's
-    /// mean), from `PLANE_WALKS` walks of the twin alone: a function of the medium and of the
-    /// depth the twin starts at (the tracer's epsilon) only (seeded by `PLANE_SEED` and the
-    /// chunk, not by channel or call), so a cached total is the same whichever call computed
-    /// it.
-    fn plane_total(&self, m: &Medium) -> f64 {
-        let chunks = PLANE_WALKS / PLANE_CHUNK;
-        let sums: Vec<f64> = (0..chunks)
-            .into_par_iter()
-            .map(|k| {
-                let key = PLANE_SEED ^ (k as u64 + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-                let mut streams = Streams::new(key);
-                (0..PLANE_CHUNK)
-                    .map(|_| {
-                        self.walk(Vec3::ZERO, Vec3::Z, None, 0, m, &mut streams, false)
-                            .1
-                            .total
-                    })
-                    .sum()
-            })
-            .collect();
-        sums.iter().sum::<f64>() / PLANE_WALKS as f64
-    }
-
     /// The exit at `y` on `triangle`, crossed along `dir`: the irradiance there, interpolated
     /// from its corners, or `Exit::Inside` where `y` lies inside another part of the mesh (a
     /// walk in a sunk eyeball leaving through the head's surface inside it: no light reaches
@@ -913,63 +506,8 @@ impl Walker<'_> {
     }
 }
 
-/// Per vertex, per axis and channel: the gradient of the irradiance's linear interpolant,
-/// averaged over the vertex's faces by area and taken into its tangent plane. (The control
-/// variate's linear model of the irradiance around the vertex.)
-fn tangent_gradients(mesh: &Mesh, irradiance: &[[f32; 3]]) -> Vec<[[f32; 3]; 3]> {
-    let p = mesh.positions();
-    let mut acc = vec![([[0f32; 3]; 3], 0f32); mesh.vertex_count()];
-    for tri in mesh.triangles() {
-        let x = tri.map(|i| p[i as usize]);
-        let cross = (x[1] - x[0]).cross(x[2] - x[0]);
-        let twice_area = cross.length();
-        if twice_area <= 0.0 || !twice_area.is_finite() {
-            continue;
-        }
-        let normal = cross / twice_area;
-        // grad lambda_i = n x (x_{i+2} - x_{i+1}) / (2 A).
-        let grads: [Vec3; 3] =
-            std::array::from_fn(|i| normal.cross(x[(i + 2) % 3] - x[(i + 1) % 3]) / twice_area);
-        let mut g = [[0f32; 3]; 3];
-        for (i, gi) in grads.iter().enumerate() {
-            let e = irradiance[tri[i] as usize];
-            for (k, axis) in gi.to_array().iter().enumerate() {
-                for c in 0..3 {
-                    g[k][c] += axis * e[c];
-                }
-            }
-        }
-        for &v in tri {
-            let (sum, w) = &mut acc[v as usize];
-            for k in 0..3 {
-                for c in 0..3 {
-                    sum[k][c] += twice_area * g[k][c];
-                }
-            }
-            *w += twice_area;
-        }
-    }
-    acc.iter()
-        .zip(mesh.normals())
-        .map(|((sum, w), n)| {
-            if *w <= 0.0 {
-                return [[0f32; 3]; 3];
-            }
-            let mut out = [[0f32; 3]; 3];
-            for c in 0..3 {
-                let g = Vec3::new(sum[0][c], sum[1][c], sum[2][c]) / *w;
-                let t = g - n * g.dot(*n);
-                for k in 0..3 {
-                    out[k][c] = t[k];
-                }
-            }
-            out
-        })
-        .collect()
-}
-
 /// Per triangle: where its corners lie by `Tracer::embedded_vertices`.
-fn placements(mesh: &Mesh, tracer: &Tracer) -> Vec<Placement> {
+pub(super) fn placements(mesh: &Mesh, tracer: &Tracer) -> Vec<Placement> {
     let embedded = tracer.embedded_vertices(mesh);
     mesh.triangles()
         .iter()
@@ -979,51 +517,4 @@ fn placements(mesh: &Mesh, tracer: &Tracer) -> Vec<Placement> {
             _ => Placement::Crossed,
         })
         .collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn triangle(scale: f32) -> Mesh {
-        let p = vec![Vec3::ZERO, Vec3::X * scale, Vec3::Y * scale];
-        Mesh::new(p, vec![[0, 1, 2]], None).unwrap()
-    }
-
-    #[test]
-    fn the_half_space_total_is_cached_per_start_depth() {
-        // The twin starts the tracer's epsilon deep, 1e-5 of the mesh's size: on a 1000-unit
-        // mesh 0.014 mean free paths of this medium, on a 1-unit one 1.4e-5. The totals
-        // differ, and each mesh's cached total is its own whichever mesh asked first (a
-        // process that previewed Suzanne first read Suzanne's total for the bunny).
-        let material = Material::new([0.1; 3], [0.9; 3], 0.0, 1.4).unwrap();
-        let m = media(&material).unwrap()[0];
-        let edges = ShadowEdges::none();
-        let meshes = [triangle(1.0), triangle(1000.0)];
-        let tracers = [Tracer::new(&meshes[0]), Tracer::new(&meshes[1])];
-        let irradiance = [[1f32; 3]; 3];
-        let walkers: Vec<Walker> = (0..2)
-            .map(|i| Walker {
-                mesh: &meshes[i],
-                tracer: &tracers[i],
-                irradiance: &irradiance,
-                edges: &edges,
-                g: material.g,
-                entry_alpha: material.layers.roughness * material.layers.roughness,
-                inv_ior: 1.0 / material.eta,
-                max_bounces: MAX_BOUNCES,
-                placement: vec![Placement::Outside],
-                bake_points: None,
-                tunnel: true,
-            })
-            .collect();
-        let own: Vec<f64> = walkers.iter().map(|w| w.plane_total(&m)).collect();
-        assert!(
-            (own[0] - own[1]).abs() > 1e-4 * own[0],
-            "start depth should matter: {own:?}"
-        );
-        for (w, own) in walkers.iter().zip(&own) {
-            assert_eq!(w.plane_total_cached(&m), *own);
-        }
-    }
 }
