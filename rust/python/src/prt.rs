@@ -8,9 +8,9 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Mutex;
-use translucent_core::basis::Degree;
 use translucent_core::irradiance::{irradiance, Density, IrradianceReport, IrradianceSettings};
 use translucent_core::optics::Material;
+use translucent_core::prt::basis::Degree;
 use translucent_core::walks::WalkTermSettings;
 
 /// The walks' default ray budget: 20 M rays (8-9 s on 2 cores for the 10 cm bunny), at least

@@ -12,20 +12,22 @@
 //! The radial profile is any of `profiles` (the dipole of the paper, or Cycles' random walk):
 //! the transport holds geometry and light only, and the profile enters through the fit.
 
+pub mod basis;
+mod interreflection;
 mod layout;
 pub mod single;
 mod tree;
 
-use crate::basis::{Basis, Degree, Fit, Fitter};
 use crate::error::{Error, Result};
-use crate::interreflection::Source;
 pub use crate::irradiance::Density;
 use crate::mesh::Mesh;
 use crate::optics::Material;
 use crate::profiles::{Model, Profile, RadialProfile};
 use crate::shadow_edges::ShadowEdges;
 use crate::walks::{ExitLight, WalkTerm, WalkTermReport, WalkTermSettings};
+use basis::{Basis, Degree, Fit, Fitter};
 use glam::{DVec3, Vec3};
+use interreflection::Source;
 use layout::Transport;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -551,14 +553,14 @@ impl Prt {
                     weight: &exit_plain,
                 });
             }
-            let first = crate::interreflection::indirect_irradiance(mesh, tracer, &sources, strata);
+            let first = interreflection::indirect_irradiance(mesh, tracer, &sources, strata);
             // The later passes send E_ind on: its lobes' share W (R_total + point mass) and the
             // specular layer's.
             let onward = |cos: f64| sent_on(model, rep, &rep_profiles, cos);
             let later = (strata * LATER_BOUNCE_STRATA.0 / LATER_BOUNCE_STRATA.1).max(1);
             let mut irradiance = first.clone();
             for _ in 1..INTERREFLECTION_BOUNCES {
-                let more = crate::interreflection::indirect_irradiance(
+                let more = interreflection::indirect_irradiance(
                     mesh,
                     tracer,
                     &[Source {
@@ -743,7 +745,7 @@ impl Prt {
             estimate[c] = error_estimate(&fit, p, lo, hi, self.whole_mesh);
             let near = p.disc_integral(self.near_radius);
             std::iter::once(near as f32)
-                .chain(crate::basis::edit_coefficients(&fit.coefficients))
+                .chain(basis::edit_coefficients(&fit.coefficients))
                 .collect()
         });
         Ok(Coefficients {

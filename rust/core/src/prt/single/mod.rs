@@ -18,7 +18,7 @@
 //! direction is coarsest, is kept instead as Y_lm moments of its directions and meets HG by
 //! the addition theorem (`spherical_harmonics`; `SingleSettings::legendre_tolerance`).
 
-use crate::basis::{Basis, Degree, Fitter};
+use super::basis::{Basis, Degree, Fitter};
 use crate::error::{Error, Result};
 use crate::optics::Material;
 use crate::raytrace::Tracer;
@@ -415,7 +415,7 @@ impl SingleScattering {
         let edit = crate::gpu::SingleEdit {
             coefficients: coeffs
                 .iter()
-                .flat_map(|c| crate::basis::edit_coefficients(c))
+                .flat_map(|c| super::basis::edit_coefficients(c))
                 .collect(),
             g: material.g as f32,
             eta: self.eta as f32,
@@ -469,7 +469,7 @@ impl SingleScattering {
         let (coeffs, error_estimate) = self.prepare(material, eye, phase)?;
         let padded = n_padded(self.basis().len());
         let coeffs: [Vec<f32>; 3] = coeffs.map(|c| {
-            let mut v = crate::basis::edit_coefficients(&c);
+            let mut v = super::basis::edit_coefficients(&c);
             v.resize(padded, 0.0);
             v
         });
