@@ -1,6 +1,7 @@
-//! The non-uniform piecewise polynomial basis of Xu et al. 2007 §5 for radial profiles:
-//! knots by dynamic programming ("Interval Partition"), projection by constrained least
-//! squares (eqs. 16–19), evaluation and integrals for the transport precompute.
+//! Xu et al. 2007 §5's non-uniform piecewise polynomial basis for radial profiles: knots by
+//! dynamic programming (`knots`), the constrained least-squares fit (eqs. 16–19, `fit`).
+//!
+//! Evaluation and integrals of the basis functions are here, for the transport precompute.
 //!
 //! Xu eqs. 16–17 write P with per-interval monomials r^i, and eqs. 18–19 minimise the fit error
 //! under continuity constraints at the knots (read as C^(n-2): C0 linear, C1 quadratic; see

@@ -1,8 +1,10 @@
-//! PRT single scattering (Xu 2007 eqs. 12–15): the attenuation E(r) = exp(-sigma_t r) fitted
-//! on its own piecewise-linear basis (knots by DP on a representative E, Xu §5), the vector
-//! transport S_j (eq. 15) per vertex and light group precomputed along the path below each
+//! PRT single scattering (Xu 2007 eqs. 12–15): the vector transport S_j per vertex and light
+//! group (`transport`), stored in 16 bits (`quantized`), and an edit a dot product (`edit`).
+//!
+//! The attenuation E(r) = exp(-sigma_t r) is fitted on its own piecewise-linear basis (knots by
+//! DP on a representative E, Xu §5), S_j (eq. 15) is precomputed along the path below each
 //! vertex (`single_scattering`: 32 deterministic steps of density e^(-s/length), eq. 7's
-//! refracted distance, Fresnel in, visibility, the far side), and an edit a dot product
+//! refracted distance, Fresnel in, visibility, the far side), and an edit is a dot product
 //! (eq. 14).
 //!
 //! What departs from the paper: S_j is kept per light group (each light, the world), so the
