@@ -8,7 +8,7 @@
 //! triangles face 60-90 degrees away from the vertex normal) the bake is not the radiance at
 //! the vertex: measured on the horse's spike apex (vertex 11890, ketchup, 4,096 walks), the
 //! walk entering at the vertex gives 0.02 of the mean blue, the mean over its five bake
-//! points 48.8, the 1024-spp bake 52.3. The walks through the mesh (`mesh_walk`) enter at these
+//! points 48.8, the 1024-spp bake 52.3. The walks through the mesh (`walks`) enter at these
 //! points so that a vertex means what a vertex bake means.
 
 use crate::mesh::{barycentric, interpolated_normal, Mesh};

@@ -7,11 +7,9 @@ pub mod bake_points; // where Cycles' vertex bake samples a vertex (its corners,
 pub mod error; // the one error type
 pub mod evaluation; // the one answer every method gives: values, error estimate, seconds, skips
 pub mod gpu; // one wgpu context and the per-method kernels
-pub mod interreflection; // the object's own light falling back on it (ray cast)
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
 pub mod lights; // Blender/Cycles lights and the world
 pub mod mesh; // validated triangle meshes, surface samples, vertex areas
-pub mod mesh_walk; // Cycles' random walk traced inside the mesh (with its half-space twin as control variate)
 pub mod metrics; // area-weighted relative error
 pub mod optics; // material, Fresnel, measured data, Principled layers
 pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated
@@ -22,9 +20,7 @@ pub mod shadow_edges; // the irradiance on a finer grid where a shadow's edge cr
 pub mod single_scattering; // Xu 2007 eq. 5's path model, phase functions, brute force
 pub mod spherical_harmonics; // real Y_lm and HG's Legendre series (addition theorem)
 pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)
-
-// Shared by the PRT method, kept apart so other methods may use it.
-pub mod basis; // Xu 2007 §5 piecewise polynomial basis and its constrained fit
+pub mod walks; // Cycles' walk traced inside the mesh, its half-space twin, the walk term
 
 // Methods.
 pub mod hierarchy; // Mertens et al. 2003: face clusters and links, deformation and moving lights

@@ -701,7 +701,7 @@ proptest! {
         let settings = PrtSettings {
             samples: Some(2000),
             eta: m.eta,
-            degree: if degree_two { translucent_core::basis::Degree::Quadratic } else { translucent_core::basis::Degree::Linear },
+            degree: if degree_two { translucent_core::prt::basis::Degree::Quadratic } else { translucent_core::prt::basis::Degree::Linear },
             ..Default::default()
         };
         let prt = Prt::precompute(lit.mesh(), &[m], &settings,

@@ -8,10 +8,10 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Mutex;
-use translucent_core::basis::Degree;
 use translucent_core::irradiance::{irradiance, Density, IrradianceReport, IrradianceSettings};
 use translucent_core::optics::Material;
-use translucent_core::prt::geometry::GeometrySettings;
+use translucent_core::prt::basis::Degree;
+use translucent_core::walks::WalkTermSettings;
 
 /// The walks' default ray budget: 20 M rays (8-9 s on 2 cores for the 10 cm bunny), at least
 /// 600 per vertex (a larger mesh gets the bunny's walks per vertex, so the same noise per
@@ -151,17 +151,17 @@ impl PyPrt {
         let geometry = match walks {
             Some(w) => {
                 let w: usize = non_negative("walks", w)?;
-                (w > 0).then(|| GeometrySettings {
+                (w > 0).then(|| WalkTermSettings {
                     walks: w,
                     rays: 0,
                     vertices: walk_vertices,
-                    ..GeometrySettings::default()
+                    ..WalkTermSettings::default()
                 })
             }
-            None if model == translucent_core::profiles::Model::Cycles => Some(GeometrySettings {
+            None if model == translucent_core::profiles::Model::Cycles => Some(WalkTermSettings {
                 rays: walk_rays,
                 vertices: walk_vertices,
-                ..GeometrySettings::default()
+                ..WalkTermSettings::default()
             }),
             None => None,
         };

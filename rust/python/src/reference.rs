@@ -8,12 +8,12 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
-use translucent_core::mesh_walk::{walk_radiosity_lit, ExitLight, MeshWalkSettings};
 use translucent_core::metrics;
 use translucent_core::profiles::Model;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::shadow_edges::ShadowEdges;
 use translucent_core::single_scattering::{reference_single, PathSettings, Phase};
+use translucent_core::walks::{walk_radiosity_lit, ExitLight, MeshWalkSettings};
 use translucent_core::Vec3;
 
 /// Ground-truth radiosity by direct integration over the mesh (no basis, no clusters) of the
@@ -132,7 +132,7 @@ pub fn relative_error<'py>(
 
 /// Cycles' answer per vertex without Blender: the radiance leaving each receiver along its
 /// normal (as a vertex bake records it, L = W(1) B / pi) from Cycles 5.0's random walk traced
-/// inside the mesh (`mesh_walk`), `walks` per vertex and channel, lit by the scene's direct
+/// inside the mesh (`walks`), `walks` per vertex and channel, lit by the scene's direct
 /// light. Only `profile="cycles"`: the dipole is not a walk. Returns (K, 3) float32 for the
 /// `receivers` (all vertices by default); with `details=True` (radiance, dict) with its
 /// standard error per receiver, the walks' own noise (area-weighted relative RMS per channel),
@@ -140,7 +140,7 @@ pub fn relative_error<'py>(
 /// 1e-4 max(1, |P|) towards its centroid: `bake_points`), `at="vertex"` at the vertex itself.
 /// `tunnel=False` leaves out the light Cycles files as indirect although no other surface
 /// reflects it: a walk that leaves through a surface inside another part of the mesh (an
-/// eyeball sunk into a head) goes on past that part (`mesh_walk`'s tunnel) after the exit's
+/// eyeball sunk into a head) goes on past that part (`walks`' tunnel) after the exit's
 /// bounce; for comparison with a bake of Cycles' direct light.
 #[pyfunction]
 #[pyo3(signature = (scene, material, profile = "cycles", walks = 256, receivers = None,

@@ -28,7 +28,7 @@ pub struct GpuTimings {
     pub readback: f64,
 }
 
-/// Single scattering's transport as the GPU takes it (see prt/single.rs `Quantized`).
+/// Single scattering's transport as the GPU takes it (see prt/single/quantized.rs `Quantized`).
 #[derive(Debug, Clone, Copy)]
 pub struct SingleTransport<'a> {
     /// [vertex][group][q][run] u16 values, two per word (the first in the low half).
@@ -44,7 +44,7 @@ pub struct SingleTransport<'a> {
     /// u16 values per (vertex, group, q) run: n rounded up to even.
     pub run: usize,
     /// Spread light (area lights, the world): [vertex][group][moment][run] u16 values, S_j,0
-    /// then the Y_lm moments up to `order` (prt/single.rs `Quantized`).
+    /// then the Y_lm moments up to `order` (prt/single/quantized.rs `Quantized`).
     pub spread_words: &'a [u32],
     /// [vertex][spread group]
     pub spread_scales: &'a [f32],

@@ -83,7 +83,7 @@ impl Prt {
             estimate[c] = error_estimate(&fit, p, lo, hi, self.whole_mesh);
             let near = p.disc_integral(self.near_radius);
             std::iter::once(near as f32)
-                .chain(crate::basis::edit_coefficients(&fit.coefficients))
+                .chain(super::basis::edit_coefficients(&fit.coefficients))
                 .collect()
         });
         Ok(Coefficients {

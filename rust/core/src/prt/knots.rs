@@ -1,8 +1,8 @@
 //! The basis of an edit's fit (Xu 2007 §5): knots by dynamic programming on the
 //! representatives, the sample spacing, and the error estimate an edit reports.
 
+use super::basis::{Basis, Degree, Fit, Fitter};
 use super::{PrtSettings, DEFAULT_MAX_SAMPLES};
-use crate::basis::{Basis, Degree, Fit, Fitter};
 use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::profiles::{Profile, RadialProfile};

@@ -18,8 +18,9 @@
 //! `evaluate` (an edit: fit and dot product), `backend` (CPU or GPU), `layout` and `tree`.
 
 mod backend;
+pub mod basis;
 mod evaluate;
-pub mod geometry;
+mod interreflection;
 mod knots;
 mod layout;
 mod own_light;
@@ -31,9 +32,9 @@ pub mod single;
 mod tests;
 mod tree;
 
-use crate::basis::{Basis, Fitter};
 use crate::profiles::Model;
-use geometry::GeometryTerm;
+use crate::walks::WalkTerm;
+use basis::{Basis, Fitter};
 use glam::Vec3;
 use layout::Transport;
 use own_light::Bounce;
@@ -68,7 +69,7 @@ pub struct Prt {
     /// with (see `Bounce`).
     bounce: Option<Bounce>,
     /// What the walks through the mesh add to the half-space profile (`geometry`).
-    geometry: Option<GeometryTerm>,
+    geometry: Option<WalkTerm>,
     /// Single scattering (Xu 2007 eqs. 12-15), when attached (`set_single_scattering`).
     single: Option<single::SingleScattering>,
     report: PrtReport,

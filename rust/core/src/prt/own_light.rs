@@ -1,12 +1,12 @@
 //! The object's own light falling back on it (`interreflection`): what it adds per vertex,
 //! carried to any edit by the ratio of the slab albedos the material sends on.
 
-use super::geometry::GeometryTerm;
-use crate::interreflection::{indirect_irradiance, Source};
+use super::interreflection::{indirect_irradiance, Source};
 use crate::mesh::Mesh;
 use crate::optics::Material;
 use crate::profiles::{Model, Profile, RadialProfile};
 use crate::raytrace::Tracer;
+use crate::walks::WalkTerm;
 
 /// Bounces of the object's own light: each returns a fraction (albedo x the view factor of
 /// what a point sees of the object, 0.2-0.3 in a concave character) of the one before, so
@@ -31,7 +31,7 @@ pub(super) struct Bounce {
     pub(super) irradiance: Vec<[f32; 3]>,
     pub(super) source_albedo: [f64; 3],
     /// What the walks through the mesh make of E_ind beyond its local conversion.
-    pub(super) walked: Option<GeometryTerm>,
+    pub(super) walked: Option<WalkTerm>,
 }
 
 /// What a thick slab returns per unit irradiance under the three profiles at hand, profile

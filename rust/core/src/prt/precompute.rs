@@ -1,7 +1,6 @@
 //! The precompute, step by step: samples and their irradiance, the sample tree, the
 //! receiver's disc, the knots, the transport rows, then the walks and the object's own light.
 
-use super::geometry::{GeometrySettings, GeometryTerm};
 use super::knots::{default_spacing, Knots};
 use super::own_light::{self, sent_on, totals, Bounce, INDIRECT_WALK_SHARE};
 use super::rows::{transport_rows, within, FarField};
@@ -10,11 +9,12 @@ use super::tree::{SampleTree, WeightedSample};
 use super::{Density, IrradianceFn, ProgressFn, Prt, PrtReport, PrtSettings};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, SurfaceSample};
-use crate::mesh_walk::ExitLight;
 use crate::optics::Material;
 use crate::profiles::Profile;
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
+use crate::walks::ExitLight;
+use crate::walks::{WalkTerm, WalkTermSettings};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -159,7 +159,7 @@ impl Prt {
         Ok(prt)
     }
 
-    /// The walks through the mesh for the direct light (`GeometryTerm`): what they add to the
+    /// The walks through the mesh for the direct light (`WalkTerm`): what they add to the
     /// half-space B of the first representative. Their exits read the light finer where a
     /// shadow's edge crosses a triangle.
     #[allow(clippy::too_many_arguments)]
@@ -169,7 +169,7 @@ impl Prt {
         tracer: &Tracer,
         rep: &Material,
         halfspace: &[[f32; 3]],
-        g: &GeometrySettings,
+        g: &WalkTermSettings,
         irradiance: &IrradianceFn,
         progress: Option<&ProgressFn>,
     ) -> Result<()> {
@@ -184,7 +184,7 @@ impl Prt {
             vertices: &self.vertex_irradiance,
             edges: &edges,
         };
-        let term = GeometryTerm::compute(mesh, tracer, rep, &lit, halfspace, g, progress)?;
+        let term = WalkTerm::compute(mesh, tracer, rep, &lit, halfspace, g, progress)?;
         self.report.geometry = Some(term.report.clone());
         self.geometry = Some(term);
         Ok(())
@@ -247,7 +247,7 @@ impl Prt {
                     .iter()
                     .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
                     .collect();
-                let shared = GeometrySettings {
+                let shared = WalkTermSettings {
                     rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
                     vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
                     refine: false,
@@ -257,8 +257,7 @@ impl Prt {
                     vertices: &irradiance,
                     edges: &ShadowEdges::none(),
                 };
-                let term =
-                    GeometryTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)?;
+                let term = WalkTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)?;
                 self.report.geometry_indirect = Some(term.report.clone());
                 Some(term)
             }

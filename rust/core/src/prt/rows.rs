@@ -1,10 +1,10 @@
 //! One vertex's transport row (Xu 2007 eq. 10): the samples near it one by one, far clusters
 //! by their moments (`FarField`), and the receiver's own disc in closed form.
 
+use super::basis::{Basis, Degree};
 use super::layout::Transport;
 use super::precompute::{Projection, ReceiverDisc};
 use super::tree::SampleTree;
-use crate::basis::{Basis, Degree};
 use crate::error::Result;
 use crate::mesh::Mesh;
 use glam::DVec3;

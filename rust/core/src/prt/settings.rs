@@ -1,11 +1,11 @@
 //! What a precompute is asked to do (`PrtSettings`, checked before any work) and what it did
 //! and left out (`PrtReport`).
 
-use super::geometry::{GeometryReport, GeometrySettings};
-use crate::basis::Degree;
+use super::basis::Degree;
 use crate::error::{Error, Result};
 use crate::optics::Material;
 use crate::profiles::Model;
+use crate::walks::{WalkTermReport, WalkTermSettings};
 
 /// The most samples the default spacing asks for.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
@@ -43,7 +43,7 @@ pub struct PrtSettings {
     pub interreflection: Option<usize>,
     /// Cycles' walk through the mesh (`geometry`): the mesh's own shape (thin and curved
     /// parts) in the transport, Cycles' model only; None for the half-space profile alone.
-    pub geometry: Option<GeometrySettings>,
+    pub geometry: Option<WalkTermSettings>,
 }
 
 impl Default for PrtSettings {
@@ -105,8 +105,8 @@ pub struct PrtReport {
     pub seconds_total: f64,
     /// The walks through the mesh, when asked for: for the direct light, and for the object's
     /// own light (when interreflection is on too).
-    pub geometry: Option<GeometryReport>,
-    pub geometry_indirect: Option<GeometryReport>,
+    pub geometry: Option<WalkTermReport>,
+    pub geometry_indirect: Option<WalkTermReport>,
     /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
     /// evaluated there, and the time it took.
     pub shadow_edge_triangles: usize,

@@ -9,10 +9,10 @@
 mod common;
 
 use translucent_core::mesh::Mesh;
-use translucent_core::mesh_walk::{walk_radiosity, MeshWalkSettings};
 use translucent_core::optics::{Layers, Material};
 use translucent_core::profiles::{Model, RadialProfile};
 use translucent_core::raytrace::Tracer;
+use translucent_core::walks::{walk_radiosity, MeshWalkSettings};
 use translucent_core::Vec3;
 
 /// A closed box [-w/2, w/2]^2 x [-depth, 0] whose top face is an n x n grid (the other faces

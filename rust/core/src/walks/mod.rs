@@ -1,0 +1,15 @@
+//! Cycles' random walk traced inside the mesh (with its half-space twin as control variate),
+//! and the walk term: what those walks add to PRT's half-space profile, carried to every vertex.
+
+mod allocation;
+mod grid;
+mod passes;
+mod radiosity;
+mod term;
+mod twin;
+mod walker;
+
+pub use radiosity::{
+    walk_radiosity, walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings,
+};
+pub use term::{WalkTerm, WalkTermReport, WalkTermSettings, FLAT_TOLERANCE, LENGTH_MARGIN};
