@@ -50,12 +50,14 @@
 
 use crate::bake_points::BakePoints;
 use crate::error::{Error, Result};
+use crate::limits;
 use crate::mesh::{barycentric, Mesh};
 use crate::optics::{principled, Material, CHANNELS};
 use crate::profiles::table::{throughput_scale, MAX_ALBEDO, MIN_ALBEDO};
 use crate::profiles::walk::{
     entry_direction, henyey_greenstein, uniform, ANISOTROPIC_BOUNCES, MAX_BOUNCES,
 };
+use crate::progress::Ticker;
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
 use glam::{DVec3, Vec3};
@@ -114,8 +116,11 @@ const TUNNEL_SALT: u64 = 0x7475_6e6e_656c_0001;
 /// Half-space totals kept (media, most recent).
 const PLANE_CACHE: usize = 64;
 
-/// Vertices per progress tick.
+/// Vertices per cancel check between chunks.
 const TICK: usize = 512;
+/// Walks per progress tick within a vertex (~1-10 ms of work): a vertex with 2^24 walks
+/// ticks too.
+const WALK_TICK: usize = 256;
 
 /// The walks' answer per receiver vertex.
 #[derive(Debug, Clone, PartialEq)]
@@ -280,12 +285,10 @@ pub fn walk_radiosity_lit(
             "irradiance must be finite and >= 0".into(),
         ));
     }
-    if !(1..=1 << 24).contains(&settings.walks) {
-        return Err(Error::InvalidArgument(format!(
-            "walks = {} must lie in [1, 2^24]",
-            settings.walks
-        )));
+    if settings.walks == 0 {
+        return Err(Error::InvalidArgument("walks = 0 must be >= 1".into()));
     }
+    limits::WALKS_PER_VERTEX.at_most("walks", settings.walks as f64)?;
     if !(ANISOTROPIC_BOUNCES + 1..=1_000_000).contains(&settings.max_bounces) {
         return Err(Error::InvalidArgument(format!(
             "max_bounces = {} must lie in [11, 10^6]",
@@ -322,17 +325,21 @@ pub fn walk_radiosity_lit(
         tunnel: settings.tunnel,
     };
     let active: Vec<usize> = (0..CHANNELS).filter(|&c| media[c].scale > 0.0).collect();
+    let total = (receivers.len() * active.len()) as f64 * settings.walks as f64;
+    limits::TOTAL_WALKS.at_most("walks x receivers x channels", total)?;
+    let ticker = Ticker::new(progress, total as u64);
     // The control variate's known mean: the half-space twin's total per channel.
     let mut plane = [0f64; CHANNELS];
     for &c in &active {
-        plane[c] = walker.plane_total_cached(&media[c]);
+        plane[c] = walker.plane_total_cached(&media[c], &ticker);
+        ticker.check()?;
     }
     let gradients = tangent_gradients(mesh, irradiance);
     let mut radiosity = Vec::with_capacity(receivers.len());
     let mut std_error = Vec::with_capacity(receivers.len());
     let mut receiver_rays = Vec::with_capacity(receivers.len());
     let mut rays = 0u64;
-    for (k, chunk) in receivers.chunks(TICK).enumerate() {
+    for chunk in receivers.chunks(TICK) {
         let part: Vec<([f32; 3], [f32; 3], u64)> = chunk
             .par_iter()
             .map(|&v| {
@@ -343,7 +350,8 @@ pub fn walk_radiosity_lit(
                 for &c in &active {
                     let grad =
                         Vec3::from_array(std::array::from_fn(|k| gradients[v as usize][k][c]));
-                    let (mean, err, r) = walker.vertex(v, c, &media[c], settings, plane[c], grad);
+                    let (mean, err, r) =
+                        walker.vertex(v, c, &media[c], settings, plane[c], grad, &ticker);
                     b[c] += (media[c].scale * mean) as f32;
                     se[c] = (media[c].scale * err) as f32;
                     rays += r;
@@ -357,11 +365,7 @@ pub fn walk_radiosity_lit(
             receiver_rays.push(r);
             rays += r;
         }
-        if let Some(p) = progress {
-            if !p(((k + 1) * TICK).min(receivers.len()) as f32 / receivers.len().max(1) as f32) {
-                return Err(Error::Cancelled);
-            }
-        }
+        ticker.check()?;
     }
     let noise = relative_noise(mesh, receivers, &radiosity, &std_error);
     Ok(MeshWalkResult {
@@ -508,6 +512,7 @@ impl Walker<'_> {
     /// and it is subtracted as a control variate with the coefficient fitted to the walks
     /// (in [0, 1]). Where the mesh is flat the two walks are the same walk and only the
     /// irradiance's curvature is left to sample.
+    #[allow(clippy::too_many_arguments)]
     fn vertex(
         &self,
         v: u32,
@@ -516,9 +521,10 @@ impl Walker<'_> {
         s: &MeshWalkSettings,
         plane: f64,
         gradient: Vec3,
+        ticker: &Ticker,
     ) -> (f64, f64, u64) {
         let n = self.mesh.normals()[v as usize];
-        if n == Vec3::ZERO {
+        if n == Vec3::ZERO || ticker.stopped() {
             return (0.0, 0.0, 0);
         }
         let p = self.mesh.positions()[v as usize];
@@ -554,7 +560,11 @@ impl Walker<'_> {
             sums[3] += y * y;
             sums[4] += x * y;
             rays += r;
+            if (i + 1) % WALK_TICK == 0 && !ticker.add(WALK_TICK as u64) {
+                break; // cancelled: the call returns Cancelled
+            }
         }
+        ticker.add((s.walks % WALK_TICK) as u64);
         let k = s.walks as f64;
         let (mx, my) = (sums[0] / k, sums[1] / k);
         let (vx, vy, cxy) = (
@@ -751,7 +761,7 @@ impl Walker<'_> {
 
     /// `plane_total`, kept for the process per medium (the geometry term walks the same
     /// material up to three times; marble's 2^16 half-space walks take 0.8 s on 2 cores).
-    fn plane_total_cached(&self, m: &Medium) -> f64 {
+    fn plane_total_cached(&self, m: &Medium, ticker: &Ticker) -> f64 {
         static TOTALS: Mutex<Vec<([u64; 9], f64)>> = Mutex::new(Vec::new());
         // The twin starts the tracer's epsilon beneath the surface (`walk`), which scales with
         // the mesh: part of the key, so a second mesh never reads the first one's total.
@@ -771,7 +781,10 @@ impl Walker<'_> {
         if let Some((_, t)) = lock().iter().find(|(k, _)| *k == key) {
             return *t;
         }
-        let total = self.plane_total(m);
+        let total = self.plane_total(m, ticker);
+        if ticker.stopped() {
+            return total; // cut short: not kept
+        }
         let mut totals = lock();
         if totals.len() >= PLANE_CACHE {
             totals.remove(0);
@@ -785,11 +798,15 @@ impl Walker<'_> {
     /// depth the twin starts at (the tracer's epsilon) only (seeded by `PLANE_SEED` and the
     /// chunk, not by channel or call), so a cached total is the same whichever call computed
     /// it.
-    fn plane_total(&self, m: &Medium) -> f64 {
+    fn plane_total(&self, m: &Medium, ticker: &Ticker) -> f64 {
         let chunks = PLANE_WALKS / PLANE_CHUNK;
         let sums: Vec<f64> = (0..chunks)
             .into_par_iter()
             .map(|k| {
+                // No share of the bar (a few seconds at most), but a cancel stops it.
+                if !ticker.add(0) {
+                    return 0.0;
+                }
                 let key = PLANE_SEED ^ (k as u64 + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9);
                 let mut streams = Streams::new(key);
                 (0..PLANE_CHUNK)
@@ -1017,13 +1034,14 @@ mod tests {
                 tunnel: true,
             })
             .collect();
-        let own: Vec<f64> = walkers.iter().map(|w| w.plane_total(&m)).collect();
+        let t = Ticker::new(None, 0);
+        let own: Vec<f64> = walkers.iter().map(|w| w.plane_total(&m, &t)).collect();
         assert!(
             (own[0] - own[1]).abs() > 1e-4 * own[0],
             "start depth should matter: {own:?}"
         );
         for (w, own) in walkers.iter().zip(&own) {
-            assert_eq!(w.plane_total_cached(&m), *own);
+            assert_eq!(w.plane_total_cached(&m, &t), *own);
         }
     }
 }
