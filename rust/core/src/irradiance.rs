@@ -170,18 +170,8 @@ fn estimate(
     }
     let (reaching, counts) = lights_at_work(lights, world, bounds);
     let world = (!world.is_black()).then_some(world);
-    // The limits, and the rays asked for as the ticks count them.
-    limits::WORLD_SAMPLES.at_most("world_samples", f64::from(settings.world_samples))?;
-    limits::AREA_SAMPLES.at_most("area_samples", f64::from(settings.area_samples))?;
-    let traced_world = world.is_some() && !settings.world_unshadowed;
-    let per_point = reaching.len() as f64 * f64::from(settings.area_samples.max(1))
-        + if traced_world {
-            f64::from(settings.world_samples.max(1))
-        } else {
-            0.0
-        };
-    limits::IRRADIANCE_RAYS.at_most("points x samples", points.len() as f64 * per_point)?;
-    let ticker = Ticker::new(progress, (points.len() as f64 * per_point) as u64);
+    let rays = asked_rays(reaching.len(), world.is_some(), points.len(), settings)?;
+    let ticker = Ticker::new(progress, rays as u64);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
     let world_sh = world.filter(|_| settings.world_unshadowed).map(|w| {
         let l = sh::project(2, 32, &|d| w.radiance(d.as_vec3()).map(f64::from));
@@ -238,6 +228,29 @@ fn estimate(
         ..counts
     };
     Ok((results.into_iter().map(|r| r.0).collect(), report))
+}
+
+/// The shadow rays `points` points ask for (as the ticks count them), within the limits
+/// (`limits::WORLD_SAMPLES`, `AREA_SAMPLES`, `IRRADIANCE_RAYS`) or refused naming them.
+fn asked_rays(lights: usize, world: bool, points: usize, s: &IrradianceSettings) -> Result<f64> {
+    limits::WORLD_SAMPLES.at_most("world_samples", f64::from(s.world_samples))?;
+    limits::AREA_SAMPLES.at_most("area_samples", f64::from(s.area_samples))?;
+    let traced_world = world && !s.world_unshadowed;
+    let world_rays = if traced_world {
+        f64::from(s.world_samples.max(1))
+    } else {
+        0.0
+    };
+    let rays = points as f64 * (lights as f64 * f64::from(s.area_samples.max(1)) + world_rays);
+    limits::IRRADIANCE_RAYS.at_most("points x samples", rays)?;
+    Ok(rays)
+}
+
+/// Whether an estimate at `points` points of `scene` keeps to the limits: what a caller checks
+/// before building a ray tracer for it.
+pub fn check_request(scene: &Scene, points: usize, settings: &IrradianceSettings) -> Result<()> {
+    let (reaching, _) = lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds());
+    asked_rays(reaching.len(), !scene.world.is_black(), points, settings).map(|_| ())
 }
 
 /// The lights that emit and can reach the mesh's box `bounds`, and the report's counts of
