@@ -4,7 +4,9 @@
 
 use crate::error::{Error, Result};
 use crate::lights::{Light, World};
+use crate::limits;
 use crate::optics::fresnel_transmittance;
+use crate::progress::Ticker;
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use crate::spherical_harmonics as sh;
@@ -17,8 +19,7 @@ use std::f32::consts::PI;
 /// points are summed many at a time (samples, patches) or used alone (vertices). Shared by the
 /// methods and the ground truth, so that none depends on another's types.
 pub type IrradianceFn<'a> = dyn Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync + 'a;
-/// Progress in [0, 1]; returning false cancels.
-pub type ProgressFn<'a> = dyn Fn(f32) -> bool + Sync + 'a;
+pub use crate::progress::ProgressFn;
 
 /// How irradiance is estimated.
 #[derive(Debug, Clone, PartialEq)]
@@ -107,14 +108,23 @@ pub fn irradiance(
     normals: &[Vec3],
     settings: &IrradianceSettings,
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
-    irradiance_of(
-        scene.mesh.bounds(),
-        &scene.lights,
-        &scene.world,
-        tracer,
-        points,
-        normals,
-        settings,
+    irradiance_with_progress(scene, tracer, points, normals, settings, None)
+}
+
+/// `irradiance` reporting `progress` (false cancels: `Error::Cancelled` within a world row's
+/// rays), for a call that may be long (many points, many world samples).
+pub fn irradiance_with_progress(
+    scene: &Scene,
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+    progress: Option<&ProgressFn>,
+) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+    let (lights, world) = (&scene.lights, &scene.world);
+    let bounds = scene.mesh.bounds();
+    estimate(
+        bounds, lights, world, tracer, points, normals, settings, progress,
     )
 }
 
@@ -128,6 +138,22 @@ pub fn irradiance_of(
     points: &[Vec3],
     normals: &[Vec3],
     settings: &IrradianceSettings,
+) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+    estimate(
+        bounds, lights, world, tracer, points, normals, settings, None,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn estimate(
+    bounds: (Vec3, Vec3),
+    lights: &[Light],
+    world: &World,
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+    progress: Option<&ProgressFn>,
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
     if points.len() != normals.len() {
         return Err(Error::InvalidArgument(format!(
@@ -144,6 +170,8 @@ pub fn irradiance_of(
     }
     let (reaching, counts) = lights_at_work(lights, world, bounds);
     let world = (!world.is_black()).then_some(world);
+    let rays = asked_rays(reaching.len(), world.is_some(), points.len(), settings)?;
+    let ticker = Ticker::new(progress, rays as u64);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
     let world_sh = world.filter(|_| settings.world_unshadowed).map(|w| {
         let l = sh::project(2, 32, &|d| w.radiance(d.as_vec3()).map(f64::from));
@@ -166,13 +194,15 @@ pub fn irradiance_of(
                 n: *n,
                 rays: 0,
                 rng: Rng::new(settings.seed, i as u64),
+                ticker: &ticker,
             };
-            if !(n.is_finite() && n.length_squared() > 0.0) {
+            if !(n.is_finite() && n.length_squared() > 0.0) || ticker.stopped() {
                 return ([0.0; 3], 0);
             }
             let mut sum = [0.0f32; 3];
             for l in &reaching {
                 add(&mut sum, est.light(l, settings.area_samples.max(1)));
+                ticker.add(u64::from(settings.area_samples.max(1)));
             }
             if let Some(coefficients) = &world_sh {
                 let mut y = [0.0f64; 9];
@@ -192,11 +222,35 @@ pub fn irradiance_of(
             (sum, est.rays)
         })
         .collect();
+    ticker.check()?;
     let report = IrradianceReport {
         rays: results.iter().map(|r| r.1).sum(),
         ..counts
     };
     Ok((results.into_iter().map(|r| r.0).collect(), report))
+}
+
+/// The shadow rays `points` points ask for (as the ticks count them), within the limits
+/// (`limits::WORLD_SAMPLES`, `AREA_SAMPLES`, `IRRADIANCE_RAYS`) or refused naming them.
+fn asked_rays(lights: usize, world: bool, points: usize, s: &IrradianceSettings) -> Result<f64> {
+    limits::WORLD_SAMPLES.at_most("world_samples", f64::from(s.world_samples))?;
+    limits::AREA_SAMPLES.at_most("area_samples", f64::from(s.area_samples))?;
+    let traced_world = world && !s.world_unshadowed;
+    let world_rays = if traced_world {
+        f64::from(s.world_samples.max(1))
+    } else {
+        0.0
+    };
+    let rays = points as f64 * (lights as f64 * f64::from(s.area_samples.max(1)) + world_rays);
+    limits::IRRADIANCE_RAYS.at_most("points x samples", rays)?;
+    Ok(rays)
+}
+
+/// Whether an estimate at `points` points of `scene` keeps to the limits: what a caller checks
+/// before building a ray tracer for it.
+pub fn check_request(scene: &Scene, points: usize, settings: &IrradianceSettings) -> Result<()> {
+    let (reaching, _) = lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds());
+    asked_rays(reaching.len(), !scene.world.is_black(), points, settings).map(|_| ())
 }
 
 /// The lights that emit and can reach the mesh's box `bounds`, and the report's counts of
@@ -314,6 +368,7 @@ struct Estimator<'a> {
     n: Vec3,
     rays: u64,
     rng: Rng,
+    ticker: &'a Ticker<'a>,
 }
 
 impl Estimator<'_> {
@@ -369,6 +424,10 @@ impl Estimator<'_> {
         let count = k * k;
         let mut sum = [0.0f32; 3];
         for a in 0..k {
+            // A row of the grid per tick: 1024 rays at the limit (`limits::WORLD_SAMPLES`).
+            if !self.ticker.add(u64::from(k)) {
+                break; // cancelled: the call returns Cancelled
+            }
             for c in 0..k {
                 // Stratified over the unit square, mapped to a cosine-weighted direction.
                 let u1 = (a as f32 + self.rng.next()) / k as f32;

@@ -9,10 +9,12 @@ pub mod evaluation; // the one answer every method gives: values, error estimate
 pub mod gpu; // one wgpu context and the per-method kernels
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
 pub mod lights; // Blender/Cycles lights and the world
+pub mod limits; // the stated limits on request sizes, refused up front
 pub mod mesh; // validated triangle meshes, surface samples, vertex areas
 pub mod metrics; // area-weighted relative error
 pub mod optics; // material, Fresnel, measured data, Principled layers
 pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated
+pub mod progress; // progress and cancelling of long loops (a Ticker over an atomic counter)
 pub mod quadrature; // Gauss–Legendre and Simpson rules
 pub mod raytrace; // BVH, shadow rays, rays from inside a part, the inside test (obvhs)
 pub mod scene; // a mesh with its lights

@@ -10,9 +10,11 @@
 //! sub-triangle of the receiver, tends to R_total I(x_o) as the model says.
 
 use crate::error::{Error, Result};
+use crate::limits;
 use crate::mesh::{interpolated_normal, Mesh};
 use crate::optics::Material;
 use crate::profiles::{Model, Profile, RadialProfile};
+use crate::progress::Ticker;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -253,6 +255,8 @@ pub fn reference_radiosity(
             settings.rel_tol
         )));
     }
+    limits::REL_TOL_MIN.at_least("rel_tol", settings.rel_tol)?;
+    limits::REFERENCE_NODES.at_most("max_nodes", settings.max_nodes as f64)?;
     let n = mesh.vertex_count();
     let receivers: Vec<u32> = match receivers {
         Some(r) => {
@@ -322,12 +326,21 @@ pub fn reference_radiosity(
         let mut values = vec![[0.0f64; 3]; receivers.len()];
         let mut skipped = 0u64;
         let chunk = 256;
+        // A tick per receiver (at the node cap, tens of ms each).
+        let (from, to) = (
+            level as f32 / levels as f32,
+            (level + 1) as f32 / levels as f32,
+        );
+        let ticker = Ticker::span(progress, receivers.len() as u64, from, to);
         for (ci, out) in values.chunks_mut(chunk).enumerate() {
             let part = &receivers[ci * chunk..(ci * chunk + out.len())];
             skipped += out
                 .par_iter_mut()
                 .zip(part.par_iter())
                 .map(|(o, &v)| {
+                    if !ticker.add(1) {
+                        return 0; // cancelled: checked below
+                    }
                     let (b, s) = radiosity_at(
                         mesh.positions()[v as usize].as_dvec3(),
                         &lv,
@@ -338,8 +351,7 @@ pub fn reference_radiosity(
                     s
                 })
                 .sum::<u64>();
-            let done = (ci * chunk + out.len()) as f32 / receivers.len().max(1) as f32;
-            tick((level as f32 + done) / levels as f32)?;
+            ticker.check()?;
         }
         result.level = level;
         result.nodes = lv.subs.len();

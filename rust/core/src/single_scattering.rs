@@ -14,7 +14,8 @@
 use crate::error::{Error, Result};
 use crate::lights::{Light, World};
 use crate::mesh::{barycentric, interpolated_normal, Mesh};
-use crate::optics::{fresnel_transmittance, Material};
+use crate::optics::{fresnel_transmittance, Material, CHANNELS};
+use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
@@ -395,6 +396,29 @@ pub fn brute_force(
     steps: usize,
     rays: &mut u64,
 ) -> [f64; 3] {
+    let ticker = Ticker::new(None, 0);
+    brute_force_ticked(
+        paths, material, phase, position, normal, eye, steps, rays, &ticker,
+    )
+}
+
+/// Steps per tick of the brute force (each casts a shadow ray per light and world direction).
+const STEP_TICK: usize = 256;
+
+/// `brute_force` counting its steps on `ticker`; stops early (a partial sum the caller
+/// discards) once the ticker is cancelled.
+#[allow(clippy::too_many_arguments)]
+fn brute_force_ticked(
+    paths: &SinglePaths,
+    material: &Material,
+    phase: Phase,
+    position: Vec3,
+    normal: Vec3,
+    eye: Option<Vec3>,
+    steps: usize,
+    rays: &mut u64,
+    ticker: &Ticker,
+) -> [f64; 3] {
     let eta = paths.eta();
     let Some((out, ft_o)) = outgoing(eta, position, normal, eye) else {
         return [0.0; 3];
@@ -411,6 +435,9 @@ pub fn brute_force(
             .into_iter()
             .enumerate()
         {
+            if (k + 1) % STEP_TICK == 0 && !ticker.add(STEP_TICK as u64) {
+                break;
+            }
             let x = position - normal * s as f32;
             paths.arrivals(x, k as u64, rays, &mut |a| {
                 let p = phase.value(material.g, a.travel.dot(out));
@@ -439,16 +466,18 @@ pub fn reference_single(
     receivers: Option<&[usize]>,
     steps: usize,
     settings: &PathSettings,
+    progress: Option<&ProgressFn>,
 ) -> Result<(Vec<[f32; 3]>, u64)> {
     use rayon::prelude::*;
     if let Some(e) = eye.filter(|e| !e.is_finite()) {
         return Err(Error::InvalidArgument(format!("eye {e:?} is not finite")));
     }
-    if !(16..=1 << 20).contains(&steps) {
+    if steps < 16 {
         return Err(Error::InvalidArgument(format!(
-            "steps {steps} must lie in [16, 2^20]"
+            "steps {steps} must be >= 16"
         )));
     }
+    crate::limits::SINGLE_STEPS.at_most("steps", steps as f64)?;
     let n = scene.mesh.vertex_count();
     let all: Vec<usize>;
     let receivers = match receivers {
@@ -466,19 +495,23 @@ pub fn reference_single(
         }
     };
     let paths = SinglePaths::new(scene, tracer, settings)?;
+    let ticker = Ticker::new(progress, (receivers.len() * CHANNELS * steps) as u64);
     let out: Vec<([f32; 3], u64)> = receivers
         .par_iter()
         .map(|&v| {
             let mut rays = 0;
             let p = scene.mesh.positions()[v];
             let nrm = scene.mesh.normals()[v];
-            if nrm.length_squared() == 0.0 {
+            if nrm.length_squared() == 0.0 || ticker.stopped() {
                 return ([0.0; 3], 0);
             }
-            let l = brute_force(&paths, material, phase, p, nrm, eye, steps, &mut rays);
+            let l = brute_force_ticked(
+                &paths, material, phase, p, nrm, eye, steps, &mut rays, &ticker,
+            );
             (l.map(|x| x as f32), rays)
         })
         .collect();
+    ticker.check()?;
     let rays = out.iter().map(|o| o.1).sum();
     Ok((out.into_iter().map(|o| o.0).collect(), rays))
 }

@@ -34,20 +34,6 @@ pub enum GuardError {
     Panic(String),
 }
 
-impl GuardError {
-    pub fn into_py(self, progress: Option<&Progress>) -> PyErr {
-        match self {
-            GuardError::Core(e) => match progress {
-                Some(p) => p.to_py(e),
-                None => to_py(e),
-            },
-            GuardError::Panic(m) => PyRuntimeError::new_err(format!(
-                "internal error in translucent (please report): {m}"
-            )),
-        }
-    }
-}
-
 /// Every user-caused core error is a ValueError naming what was wrong; cancelling is `Cancelled`.
 pub fn to_py(err: Error) -> PyErr {
     match err {
@@ -188,45 +174,4 @@ pub fn rgb_array<'py>(py: Python<'py>, values: &[[f32; 3]]) -> Bound<'py, PyArra
     numpy::ndarray::Array2::from_shape_vec((values.len(), 3), flat)
         .map(|a| PyArray2::from_owned_array(py, a))
         .expect("shape matches length")
-}
-
-/// Wraps a Python progress callable for the core: called with a fraction in [0, 1]; returning
-/// False (or raising) cancels. A raised exception is kept so it can be re-raised.
-pub struct Progress {
-    callback: Option<Py<PyAny>>,
-    error: std::sync::Mutex<Option<PyErr>>,
-}
-
-impl Progress {
-    pub fn new(callback: Option<Py<PyAny>>) -> Self {
-        Self {
-            callback,
-            error: std::sync::Mutex::new(None),
-        }
-    }
-
-    pub fn call(&self, fraction: f32) -> bool {
-        let Some(cb) = &self.callback else {
-            return true;
-        };
-        Python::attach(|py| match cb.call1(py, (fraction,)) {
-            Ok(r) => !matches!(r.extract::<bool>(py), Ok(false)) || r.is_none(py),
-            Err(e) => {
-                *self.error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
-                false
-            }
-        })
-    }
-
-    pub fn is_set(&self) -> bool {
-        self.callback.is_some()
-    }
-
-    /// The exception to raise for a core error: the callback's own, if it raised.
-    pub fn to_py(&self, err: Error) -> PyErr {
-        if let Some(e) = self.error.lock().unwrap_or_else(|p| p.into_inner()).take() {
-            return e;
-        }
-        to_py(err)
-    }
 }

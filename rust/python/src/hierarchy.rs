@@ -1,30 +1,48 @@
 //! `translucent.Hierarchy`: hierarchical boundary elements (Mertens 2003) for scenes whose
 //! geometry, lights and material all change.
 
-use crate::convert::{guard, non_negative, rgb_array, vec3, vec3_array};
+use crate::call::{busy, run};
+use crate::convert::{non_negative, rgb_array, vec3, vec3_array};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::sync::{Mutex, MutexGuard};
 use translucent_core::hierarchy::{
     Evaluation as HierarchyEvaluation, Hierarchy, HierarchySettings, Mode,
 };
 
 /// A face-cluster hierarchy over a scene (a copy: `update` changes it, not the Scene).
-#[pyclass(name = "Hierarchy", module = "translucent")]
+/// Shared between threads: every evaluation changes its links, so one runs at a time (the
+/// next waits, off the GIL); what reads it meanwhile is told it is busy.
+#[pyclass(name = "Hierarchy", module = "translucent", frozen)]
 pub struct PyHierarchy {
-    inner: Hierarchy,
+    inner: Mutex<Hierarchy>,
     /// The last evaluation (values dropped), for `last_eval`.
-    last: Option<HierarchyEvaluation>,
+    last: Mutex<Option<HierarchyEvaluation>>,
 }
 
 impl PyHierarchy {
+    /// The hierarchy for a quick read with the GIL held, or `busy`.
+    fn read(&self) -> PyResult<MutexGuard<'_, Hierarchy>> {
+        match self.inner.try_lock() {
+            Ok(g) => Ok(g),
+            Err(std::sync::TryLockError::Poisoned(e)) => Ok(e.into_inner()),
+            Err(std::sync::TryLockError::WouldBlock) => Err(busy("Hierarchy")),
+        }
+    }
+
     /// Keeps an evaluation's estimate, seconds and skips (not its values) for `last_eval`.
-    fn keep(&mut self, mut e: HierarchyEvaluation) {
+    fn keep(&self, mut e: HierarchyEvaluation) {
         e.values = Vec::new();
-        self.last = Some(e);
+        *self.last.lock().unwrap_or_else(|e| e.into_inner()) = Some(e);
+    }
+
+    /// The hierarchy for work off the GIL: waits for another thread's call to end.
+    fn lock(&self) -> MutexGuard<'_, Hierarchy> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
@@ -64,16 +82,15 @@ impl PyHierarchy {
         };
         let core_scene = scene.scene.clone();
         let m = material.inner;
-        let (inner, e) = py
-            .detach(|| {
-                guard(|| {
-                    let mut h = Hierarchy::new(core_scene, settings)?;
-                    let e = h.radiosity(&m)?;
-                    Ok((h, e))
-                })
-            })
-            .map_err(|e| e.into_py(None))?;
-        let mut out = Self { inner, last: None };
+        let (inner, e) = run(py, None, |_| {
+            let mut h = Hierarchy::new(core_scene, settings)?;
+            let e = h.radiosity(&m)?;
+            Ok((h, e))
+        })?;
+        let out = Self {
+            inner: Mutex::new(inner),
+            last: Mutex::new(None),
+        };
         out.keep(e);
         Ok(out)
     }
@@ -81,15 +98,12 @@ impl PyHierarchy {
     /// Radiosity B per vertex, (N, 3) float32: the quantity `reference_radiosity` integrates
     /// (the profile over the direct irradiance, plus Cycles' diffuse lobe). Releases the GIL.
     fn radiosity<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let inner = &mut self.inner;
-        let b = py
-            .detach(|| guard(|| inner.radiosity(&m)))
-            .map_err(|e| e.into_py(None))?;
+        let b = run(py, None, |_| self.lock().radiosity(&m))?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
         Ok(out)
@@ -99,17 +113,14 @@ impl PyHierarchy {
     /// along each vertex normal (what a Cycles bake records).
     #[pyo3(signature = (material, eye = None))]
     fn radiance<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         eye: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = eye.map(|e| vec3("eye", e)).transpose()?;
-        let inner = &mut self.inner;
-        let b = py
-            .detach(|| guard(|| inner.radiance(&m, eye)))
-            .map_err(|e| e.into_py(None))?;
+        let b = run(py, None, |_| self.lock().radiance(&m, eye))?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
         Ok(out)
@@ -122,7 +133,7 @@ impl PyHierarchy {
     /// new Hierarchy.
     #[pyo3(signature = (positions = None, lights = None, normals = None))]
     fn update(
-        &mut self,
+        &self,
         py: Python<'_>,
         positions: Option<&Bound<'_, PyAny>>,
         lights: Option<PyRef<'_, PyScene>>,
@@ -131,49 +142,51 @@ impl PyHierarchy {
         if normals.is_some() && positions.is_none() {
             return Err(PyValueError::new_err("normals need positions"));
         }
-        if let Some(p) = positions {
-            let p = vec3_array("positions", p)?;
-            let n = normals.map(|n| vec3_array("normals", n)).transpose()?;
-            let inner = &mut self.inner;
-            py.detach(|| guard(|| inner.set_positions(p, n)))
-                .map_err(|e| e.into_py(None))?;
-        }
-        if let Some(s) = lights {
-            self.inner
-                .set_lights(s.scene.lights.clone(), s.scene.world.clone());
-        }
-        Ok(())
+        let p = positions.map(|p| vec3_array("positions", p)).transpose()?;
+        let n = normals.map(|n| vec3_array("normals", n)).transpose()?;
+        let lights = lights.map(|s| (s.scene.lights.clone(), s.scene.world.clone()));
+        run(py, None, |_| {
+            let mut inner = self.lock();
+            if let Some(p) = p {
+                inner.set_positions(p, n)?;
+            }
+            if let Some((l, w)) = lights {
+                inner.set_lights(l, w);
+            }
+            Ok(())
+        })
     }
 
     /// "on_the_fly", "incremental" or "render" (Mertens §5.5); settable.
     #[getter]
-    fn mode(&self) -> &'static str {
-        self.inner.settings().mode.name()
+    fn mode(&self) -> PyResult<&'static str> {
+        Ok(self.read()?.settings().mode.name())
     }
 
     #[setter]
-    fn set_mode(&mut self, mode: &str) -> PyResult<()> {
-        self.inner
-            .set_mode(Mode::parse(mode).map_err(crate::convert::to_py)?);
+    fn set_mode(&self, mode: &str) -> PyResult<()> {
+        let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
+        self.read()?.set_mode(mode);
         Ok(())
     }
 
     /// "cycles" or "dipole".
     #[getter]
-    fn profile(&self) -> &'static str {
-        self.inner.settings().model.name()
+    fn profile(&self) -> PyResult<&'static str> {
+        Ok(self.read()?.settings().model.name())
     }
 
     /// (ε₁, ε₂) [sr].
     #[getter]
-    fn eps(&self) -> (f64, f64) {
-        let s = self.inner.settings();
-        (s.eps_receiver, s.eps_emitter)
+    fn eps(&self) -> PyResult<(f64, f64)> {
+        let h = self.read()?;
+        let s = h.settings();
+        Ok((s.eps_receiver, s.eps_emitter))
     }
 
     #[getter]
-    fn vertex_count(&self) -> usize {
-        self.inner.scene().mesh.vertex_count()
+    fn vertex_count(&self) -> PyResult<usize> {
+        Ok(self.read()?.scene().mesh.vertex_count())
     }
 
     /// The last evaluation: links (far, near, total), clusters, faces, depth, oracle tests,
@@ -181,10 +194,11 @@ impl PyHierarchy {
     /// (area-weighted relative RMS against the same faces recomputed with ε/4).
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let r = self.inner.report();
+        let h = self.read()?;
+        let r = h.report();
         let d = PyDict::new(py);
         d.set_item("mode", r.mode)?;
-        d.set_item("profile", self.inner.settings().model.name())?;
+        d.set_item("profile", h.settings().model.name())?;
         d.set_item("faces", r.faces)?;
         d.set_item("clusters", r.clusters)?;
         d.set_item("depth", r.depth)?;
@@ -209,7 +223,8 @@ impl PyHierarchy {
         d.set_item("seconds", r.seconds)?;
         d.set_item("error_estimate", r.error_estimate.map(|x| x.to_vec()))?;
         d.set_item("method", "hierarchy")?;
-        let skipped = self.last.as_ref().map_or(&[][..], |e| &e.skipped[..]);
+        let last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let skipped = last.as_ref().map_or(&[][..], |e| &e.skipped[..]);
         d.set_item("skipped", crate::evaluation::skipped_list(py, skipped)?)?;
         Ok(d)
     }
@@ -220,21 +235,25 @@ impl PyHierarchy {
     /// (always False: the hierarchy has no precompute to refresh).
     #[getter]
     fn last_eval<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let Some(e) = &self.last else { return Ok(None) };
+        let last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let Some(e) = last.as_ref() else {
+            return Ok(None);
+        };
         let d = crate::evaluation::evaluation_dict(py, "hierarchy", e)?;
         d.set_item("refresh_advised", false)?;
         Ok(Some(d))
     }
 
-    fn __repr__(&self) -> String {
-        let r = self.inner.report();
-        format!(
+    fn __repr__(&self) -> PyResult<String> {
+        let h = self.read()?;
+        let r = h.report();
+        Ok(format!(
             "Hierarchy({} faces, {} clusters, {} links, {}, {:.1} ms)",
             r.faces,
             r.clusters,
             r.far_links + r.near_links,
             r.mode,
             1e3 * r.seconds
-        )
+        ))
     }
 }

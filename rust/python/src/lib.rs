@@ -4,6 +4,7 @@
 
 use pyo3::prelude::*;
 
+mod call;
 mod convert;
 mod evaluation;
 mod hierarchy;
@@ -17,6 +18,16 @@ mod scene;
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("Cancelled", m.py().get_type::<convert::Cancelled>())?;
+    // The stated limits on request sizes (docs/api.md, "Limits"), by name.
+    let limits = pyo3::types::PyDict::new(m.py());
+    for l in translucent_core::limits::ALL {
+        if l.value.fract() == 0.0 {
+            limits.set_item(l.name, l.value as u64)?;
+        } else {
+            limits.set_item(l.name, l.value)?;
+        }
+    }
+    m.add("LIMITS", limits)?;
     m.add_class::<material::PyMaterial>()?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<prt::PyPrt>()?;

@@ -1,6 +1,7 @@
 //! `translucent.Material`, its Principled BSDF constructor, and the walk tables' cache.
 
-use crate::convert::{guard, rgb, to_py, Progress};
+use crate::call::run;
+use crate::convert::{rgb, to_py};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use translucent_core::optics::principled::{self, PrincipledInputs};
@@ -180,9 +181,7 @@ impl PyMaterial {
             )));
         }
         let m = self.inner;
-        let profiles = py
-            .detach(|| guard(|| model.profiles(&m)))
-            .map_err(|e| e.into_py(None))?;
+        let profiles = run(py, None, |_| model.profiles(&m))?;
         let w = model.exit_weights(&m, &profiles, cos_view);
         let r = |c: usize| w[c] * (profiles[c].total() + profiles[c].point_mass());
         Ok((r(0), r(1), r(2)))
@@ -218,27 +217,19 @@ pub fn prepare_profile(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<f64> {
     let m = material.inner;
-    let progress = Progress::new(progress);
-    py.detach(|| {
-        guard(|| {
-            let start = std::time::Instant::now();
-            let keys = table::TableKey::of(&m).map_err(|e| match e {
-                translucent_core::Error::InvalidArgument(s) => {
-                    translucent_core::Error::InvalidMaterial(s)
-                }
-                other => other,
-            })?;
-            let tick = |f: f32| progress.call(f);
-            for (key, _) in keys {
-                table::walk_table_with_progress(
-                    &key,
-                    if progress.is_set() { Some(&tick) } else { None },
-                )?;
+    run(py, progress, |tick| {
+        let start = std::time::Instant::now();
+        let keys = table::TableKey::of(&m).map_err(|e| match e {
+            translucent_core::Error::InvalidArgument(s) => {
+                translucent_core::Error::InvalidMaterial(s)
             }
-            Ok(start.elapsed().as_secs_f64())
-        })
+            other => other,
+        })?;
+        for (key, _) in keys {
+            table::walk_table_with_progress(&key, Some(tick))?;
+        }
+        Ok(start.elapsed().as_secs_f64())
     })
-    .map_err(|e| e.into_py(Some(&progress)))
 }
 
 /// Whether every walk table `material` needs is in memory (an edit will not wait for one).

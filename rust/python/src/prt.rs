@@ -1,15 +1,19 @@
 //! `translucent.Prt`: precompute once, then evaluate any material in milliseconds.
 
-use crate::convert::{guard, non_negative, rgb_array, to_py, vec3, Progress};
+use crate::call::{busy, run};
+use crate::convert::{non_negative, rgb_array, to_py, vec3};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::sync::Mutex;
-use translucent_core::irradiance::{irradiance, Density, IrradianceReport, IrradianceSettings};
+use std::sync::{Mutex, MutexGuard, RwLock, RwLockReadGuard};
+use translucent_core::irradiance::{
+    irradiance_with_progress, Density, IrradianceReport, IrradianceSettings,
+};
 use translucent_core::optics::Material;
+use translucent_core::progress::cancel_only;
 use translucent_core::prt::basis::Degree;
 use translucent_core::walks::WalkTermSettings;
 
@@ -25,48 +29,82 @@ use translucent_core::single_scattering::{PathSettings, Phase};
 
 use translucent_core::Vec3;
 
-/// Precomputed transport (Xu 2007) of a scene for materials near `materials`.
-#[pyclass(name = "Prt", module = "translucent")]
+/// Precomputed transport (Xu 2007) of a scene for materials near `materials`. Shared between
+/// threads: evaluations run side by side (a read lock, taken off the GIL); a backend change
+/// takes the write lock, and what reads the object meanwhile is told it is busy.
+#[pyclass(name = "Prt", module = "translucent", frozen)]
 pub struct PyPrt {
-    inner: Prt,
-    last: Option<Evaluation>,
-    backend_message: String,
+    inner: RwLock<Prt>,
+    last: Mutex<Option<Evaluation>>,
+    backend_message: Mutex<String>,
     /// The rays and lights of the precompute's irradiance estimates (samples and vertices).
     lighting: IrradianceReport,
     /// Whether single scattering was computed, and why.
     single: single::Decision,
     /// The last evaluation's single scattering, when it had any.
-    last_single: Option<single::SingleEvaluation>,
+    last_single: Mutex<Option<single::SingleEvaluation>>,
+}
+
+/// A lock's value, whether or not a panic (caught by `call::run`) poisoned it.
+fn held<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 impl PyPrt {
+    /// The transport for a quick read with the GIL held: busy while a backend change runs.
+    fn read(&self) -> PyResult<RwLockReadGuard<'_, Prt>> {
+        match self.inner.try_read() {
+            Ok(g) => Ok(g),
+            Err(std::sync::TryLockError::Poisoned(e)) => Ok(e.into_inner()),
+            Err(std::sync::TryLockError::WouldBlock) => Err(busy("Prt")),
+        }
+    }
+
     /// "cpu", "gpu" (any adapter, lavapipe included) or "auto" (a hardware GPU if there is
     /// one, else the CPU). Returns what happened, in words.
-    fn choose_backend(&mut self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
-        let inner = &mut self.inner;
+    fn choose_backend(&self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
+        if !matches!(backend, "auto" | "gpu" | "cpu") {
+            return Err(PyValueError::new_err(format!(
+                "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
+            )));
+        }
+        let lock = &self.inner;
+        let (outcome, words) = run(py, None, |_| {
+            let mut inner = lock.write().unwrap_or_else(|e| e.into_inner());
+            Ok(match backend {
+                "cpu" => (inner.set_backend(Backend::Cpu, true), String::new()),
+                "gpu" => {
+                    let r = inner.set_backend_with(Backend::Gpu, true, half);
+                    (r, adapter_words(&inner))
+                }
+                _ => {
+                    let r = inner.set_backend_with(Backend::Gpu, false, half);
+                    (
+                        Ok(()),
+                        match r {
+                            Ok(()) => adapter_words(&inner),
+                            Err(e) => format!("CPU (rayon): {e}"),
+                        },
+                    )
+                }
+            })
+        })?;
         let result = match backend {
-            "cpu" => {
-                py.detach(|| inner.set_backend(Backend::Cpu, true))
-                    .map_err(to_py)?;
-                "CPU (rayon)".to_string()
-            }
-            "gpu" => {
-                py.detach(|| inner.set_backend_with(Backend::Gpu, true, half))
-                    .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-                adapter_words(inner)
-            }
-            "auto" => match py.detach(|| inner.set_backend_with(Backend::Gpu, false, half)) {
-                Ok(()) => adapter_words(inner),
-                Err(e) => format!("CPU (rayon): {e}"),
-            },
-            other => {
-                return Err(PyValueError::new_err(format!(
-                    "backend {other:?}: choose 'auto', 'gpu' or 'cpu'"
-                )))
-            }
+            "cpu" => outcome.map(|_| "CPU (rayon)".to_string()).map_err(to_py)?,
+            "gpu" => outcome
+                .map(|_| words)
+                .map_err(|e| PyRuntimeError::new_err(e.to_string()))?,
+            _ => words,
         };
-        self.backend_message = result.clone();
+        *held(&self.backend_message) = result.clone();
         Ok(result)
+    }
+}
+
+fn backend_name(prt: &Prt) -> &'static str {
+    match prt.backend() {
+        Backend::Gpu => "gpu",
+        Backend::Cpu => "cpu",
     }
 }
 
@@ -214,48 +252,46 @@ impl PyPrt {
             ..Default::default()
         };
         let tracer = scene.tracer();
-        let progress = Progress::new(progress);
         let core_scene = &scene.scene;
         let lighting = Mutex::new(IrradianceReport::default());
-        let result = py.detach(|| {
-            guard(|| {
-                let irradiance_fn = |p: &[Vec3], n: &[Vec3], d: Density| {
-                    irradiance(core_scene, &tracer, p, n, &irr.for_density(d)).map(|(v, r)| {
-                        let mut total = lighting.lock().unwrap_or_else(|e| e.into_inner());
-                        *total = total.merge(&r);
-                        v
-                    })
-                };
-                let tick = |f: f32| progress.call(f);
-                let mut prt = Prt::precompute(
-                    &core_scene.mesh,
+        let inner = run(py, progress, |tick| {
+            // The irradiance's rays stop on a cancel too.
+            let ask = cancel_only(Some(tick));
+            let irradiance_fn = |p: &[Vec3], n: &[Vec3], d: Density| {
+                let s = irr.for_density(d);
+                irradiance_with_progress(core_scene, &tracer, p, n, &s, Some(&ask)).map(|(v, r)| {
+                    let mut total = held(&lighting);
+                    *total = total.merge(&r);
+                    v
+                })
+            };
+            let mut prt = Prt::precompute(
+                &core_scene.mesh,
+                &materials,
+                &settings,
+                &irradiance_fn,
+                Some(tick),
+            )?;
+            // Single scattering (Xu 2007 eq. 15) only when decided on: no rays, memory or
+            // evaluation otherwise.
+            if single.on {
+                let s = single::SingleScattering::precompute(
+                    core_scene,
+                    &tracer,
                     &materials,
-                    &settings,
-                    &irradiance_fn,
-                    if progress.is_set() { Some(&tick) } else { None },
+                    &single_settings,
                 )?;
-                // Single scattering (Xu 2007 eq. 15) only when decided on: no rays, memory or
-                // evaluation otherwise.
-                if single.on {
-                    let s = single::SingleScattering::precompute(
-                        core_scene,
-                        &tracer,
-                        &materials,
-                        &single_settings,
-                    )?;
-                    prt.set_single_scattering(Some(s))?;
-                }
-                Ok(prt)
-            })
-        });
-        let inner = result.map_err(|e| e.into_py(Some(&progress)))?;
-        let mut prt = Self {
-            inner,
-            last: None,
-            backend_message: String::new(),
+                prt.set_single_scattering(Some(s))?;
+            }
+            Ok(prt)
+        })?;
+        let prt = Self {
+            inner: RwLock::new(inner),
+            last: Mutex::new(None),
+            backend_message: Mutex::new(String::new()),
             lighting: lighting.into_inner().unwrap_or_else(|e| e.into_inner()),
             single,
-            last_single: None,
+            last_single: Mutex::new(None),
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -267,29 +303,26 @@ impl PyPrt {
     /// `half=True` stores the GPU transport as f16: half the memory; `transport_f16_error`
     /// (also in `last_eval`) bounds the relative error it adds.
     #[pyo3(signature = (backend, half = false))]
-    fn set_backend(&mut self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
+    fn set_backend(&self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
         self.choose_backend(py, backend, half)
     }
 
     /// With f16 GPU storage, the bound on the relative error it adds; else None.
     #[getter]
-    fn transport_f16_error(&self) -> Option<f64> {
-        self.inner.gpu_half_error()
+    fn transport_f16_error(&self) -> PyResult<Option<f64>> {
+        Ok(self.read()?.gpu_half_error())
     }
 
     /// "gpu" or "cpu".
     #[getter]
-    fn backend(&self) -> &'static str {
-        match self.inner.backend() {
-            Backend::Gpu => "gpu",
-            Backend::Cpu => "cpu",
-        }
+    fn backend(&self) -> PyResult<&'static str> {
+        Ok(backend_name(&*self.read()?))
     }
 
     /// Which device evaluates edits, or why the CPU is used.
     #[getter]
     fn backend_message(&self) -> String {
-        self.backend_message.clone()
+        held(&self.backend_message).clone()
     }
 
     /// Radiosity B per vertex, (N, 3) float32: the profile summed over the lit surface (Xu 2007
@@ -300,20 +333,20 @@ impl PyPrt {
     /// `reference_radiosity` integrates.
     #[pyo3(signature = (material, interreflection = true, walks = true))]
     fn radiosity<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         interreflection: bool,
         walks: bool,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let inner = &self.inner;
-        let e = py
-            .detach(|| inner.radiosity_parts(&m, interreflection, walks))
-            .map_err(crate::convert::to_py)?;
+        let e = run(py, None, |_| {
+            let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
+            inner.radiosity_parts(&m, interreflection, walks)
+        })?;
         let out = rgb_array(py, &e.values);
-        self.last = Some(e);
-        self.last_single = None;
+        *held(&self.last) = Some(e);
+        *held(&self.last_single) = None;
         Ok(out)
     }
 
@@ -324,7 +357,7 @@ impl PyPrt {
     /// `phase` "hg" (exact Henyey–Greenstein per light group) or "eddington" (Xu eq. 11).
     #[pyo3(signature = (material, eye = None, phase = "hg"))]
     fn radiance<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         eye: Option<&Bound<'_, PyAny>>,
@@ -333,13 +366,13 @@ impl PyPrt {
         let m = material.inner;
         let eye = eye.map(|e| vec3("eye", e)).transpose()?;
         let phase = Phase::parse(phase).map_err(to_py)?;
-        let inner = &self.inner;
-        let (e, l1) = py
-            .detach(|| guard(|| inner.radiance_with(&m, eye, phase)))
-            .map_err(|e| e.into_py(None))?;
+        let (e, l1) = run(py, None, |_| {
+            let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
+            inner.radiance_with(&m, eye, phase)
+        })?;
         let out = rgb_array(py, &e.values);
-        self.last = Some(e);
-        self.last_single = l1;
+        *held(&self.last) = Some(e);
+        *held(&self.last_single) = l1;
         Ok(out)
     }
 
@@ -347,7 +380,7 @@ impl PyPrt {
     /// ValueError when the precompute left it out (report["single_scattering_reason"] says why).
     #[pyo3(signature = (material, eye = None, phase = "hg"))]
     fn single_radiance<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         eye: Option<&Bound<'_, PyAny>>,
@@ -356,17 +389,23 @@ impl PyPrt {
         let m = material.inner;
         let eye = eye.map(|e| vec3("eye", e)).transpose()?;
         let phase = Phase::parse(phase).map_err(to_py)?;
-        let Some(s) = self.inner.single_scattering() else {
+        if self.read()?.single_scattering().is_none() {
             return Err(PyValueError::new_err(format!(
                 "no single scattering in this precompute: {}",
                 self.single.reason
             )));
-        };
-        let l1 = py
-            .detach(|| guard(|| s.radiance(&m, eye, phase)))
-            .map_err(|e| e.into_py(None))?;
+        }
+        let l1 = run(py, None, |_| {
+            let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
+            match inner.single_scattering() {
+                Some(s) => s.radiance(&m, eye, phase),
+                None => Err(translucent_core::Error::InvalidArgument(
+                    "no single scattering in this precompute".into(),
+                )),
+            }
+        })?;
         let out = rgb_array(py, &l1.radiance);
-        self.last_single = Some(l1);
+        *held(&self.last_single) = Some(l1);
         Ok(out)
     }
 
@@ -376,13 +415,15 @@ impl PyPrt {
     /// single scattering's estimate and seconds, refresh_advised.
     #[getter]
     fn last_eval<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let Some(e) = &self.last else { return Ok(None) };
+        let inner = self.read()?;
+        let last = held(&self.last);
+        let Some(e) = &*last else { return Ok(None) };
         let d = crate::evaluation::evaluation_dict(py, "prt", e)?;
         let details = &e.details;
         d.set_item("fit_seconds", details.fit_seconds)?;
         d.set_item("dot_seconds", details.dot_seconds)?;
-        d.set_item("backend", self.backend())?;
-        if let Some(e) = self.inner.gpu_half_error() {
+        d.set_item("backend", backend_name(&inner))?;
+        if let Some(e) = inner.gpu_half_error() {
             d.set_item("transport_f16_error", e)?;
         }
         if let Some(g) = details.gpu {
@@ -391,12 +432,13 @@ impl PyPrt {
             d.set_item("readback_seconds", g.readback)?;
         }
         d.set_item("fit_error", details.fit_error.to_vec())?;
-        if let Some(l1) = &self.last_single {
+        if let Some(l1) = &*held(&self.last_single) {
             // On the GPU, L^(1)'s dot products run inside the MS dispatch (dispatch_seconds).
             d.set_item("single_error_estimate", l1.error_estimate.to_vec())?;
             d.set_item("single_seconds", l1.fit_seconds + l1.dot_seconds)?;
         }
-        d.set_item("refresh_advised", self.refresh_advised())?;
+        let advised = e.error_estimate.is_some_and(|x| inner.refresh_advised(&x));
+        d.set_item("refresh_advised", advised)?;
         Ok(Some(d))
     }
 
@@ -404,18 +446,19 @@ impl PyPrt {
     /// knots and samples were chosen for (above 1 % and above 3x the representatives' own
     /// estimate): precompute again with this material among `materials`. None before the first.
     #[getter]
-    fn refresh_advised(&self) -> Option<bool> {
-        let e = self.last.as_ref()?;
-        Some(
-            e.error_estimate
-                .is_some_and(|x| self.inner.refresh_advised(&x)),
-        )
+    fn refresh_advised(&self) -> PyResult<Option<bool>> {
+        let inner = self.read()?;
+        let last = held(&self.last);
+        Ok(last
+            .as_ref()
+            .map(|e| e.error_estimate.is_some_and(|x| inner.refresh_advised(&x))))
     }
 
     /// What the precompute did, skipped, and how long each step took.
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let r = self.inner.report();
+        let inner = self.read()?;
+        let r = inner.report();
         let d = PyDict::new(py);
         d.set_item("vertices", r.vertices)?;
         d.set_item("profile", r.model)?;
@@ -424,7 +467,7 @@ impl PyPrt {
         d.set_item("near_radius", r.near_radius)?;
         d.set_item("support_radius", r.support_radius)?;
         d.set_item("knots", r.knots.clone())?;
-        d.set_item("coefficients", self.inner.basis().len())?;
+        d.set_item("coefficients", inner.basis().len())?;
         d.set_item("basis_size_by_tolerance", r.basis_size_by_tolerance)?;
         d.set_item("representative_error", r.representative_error)?;
         d.set_item("rays", self.lighting.rays)?;
@@ -438,7 +481,7 @@ impl PyPrt {
         d.set_item("single_scattering_share", self.single.share)?;
         d.set_item("single_scattering_tolerance", single::SHARE_TOLERANCE)?;
         d.set_item("single_scattering_reason", self.single.reason.clone())?;
-        match self.inner.single_scattering() {
+        match inner.single_scattering() {
             Some(s) => {
                 let r = s.report();
                 let w = PyDict::new(py);
@@ -451,7 +494,7 @@ impl PyPrt {
                 w.set_item("legendre_order", r.legendre_order)?;
                 w.set_item("transport_bytes", r.transport_bytes)?;
                 w.set_item("quantization_error", r.quantization_error)?;
-                w.set_item("on_gpu", self.inner.single_on_gpu())?;
+                w.set_item("on_gpu", inner.single_on_gpu())?;
                 w.set_item("rays", r.rays)?;
                 w.set_item("bounded_paths", r.bounded_paths)?;
                 w.set_item("seconds", r.seconds)?;
@@ -508,29 +551,30 @@ impl PyPrt {
     /// The relative IOR of the irradiance's Fresnel factor (1 for Cycles' profile, whose
     /// walk leaves through an index-matched boundary).
     #[getter]
-    fn eta(&self) -> f64 {
-        self.inner.eta()
+    fn eta(&self) -> PyResult<f64> {
+        Ok(self.read()?.eta())
     }
 
     /// "cycles" or "dipole".
     #[getter]
-    fn profile(&self) -> &'static str {
-        self.inner.model().name()
+    fn profile(&self) -> PyResult<&'static str> {
+        Ok(self.read()?.model().name())
     }
 
     #[getter]
-    fn vertex_count(&self) -> usize {
-        self.inner.vertex_count()
+    fn vertex_count(&self) -> PyResult<usize> {
+        Ok(self.read()?.vertex_count())
     }
 
-    fn __repr__(&self) -> String {
-        let r = self.inner.report();
-        format!(
+    fn __repr__(&self) -> PyResult<String> {
+        let inner = self.read()?;
+        let r = inner.report();
+        Ok(format!(
             "Prt({} vertices, {} samples, {} coefficients, {:.2} s)",
             r.vertices,
             r.samples,
-            self.inner.basis().len(),
+            inner.basis().len(),
             r.seconds_total
-        )
+        ))
     }
 }

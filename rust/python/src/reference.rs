@@ -1,15 +1,17 @@
 //! `translucent.reference_radiosity`, `translucent.reference_radiance` (walks through the
 //! mesh) and `translucent.relative_error`.
 
-use crate::convert::{float_rows, guard, non_negative, rgb_array, to_py, Progress};
+use crate::call::run;
+use crate::convert::{float_rows, non_negative, rgb_array, to_py};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
+use translucent_core::irradiance::{irradiance_with_progress, Density, IrradianceSettings};
 use translucent_core::metrics;
 use translucent_core::profiles::Model;
+use translucent_core::progress::cancel_only;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::shadow_edges::ShadowEdges;
 use translucent_core::single_scattering::{reference_single, PathSettings, Phase};
@@ -68,25 +70,22 @@ pub fn reference_radiosity_py<'py>(
     };
     let tracer = scene.tracer();
     let core_scene = &scene.scene;
-    let progress = Progress::new(progress);
-    let result = py
-        .detach(|| {
-            guard(|| {
-                let irradiance_fn = |p: &[Vec3], nrm: &[Vec3], d: Density| {
-                    irradiance(core_scene, &tracer, p, nrm, &irr.for_density(d)).map(|(v, _)| v)
-                };
-                let tick = |f: f32| progress.call(f);
-                reference_radiosity(
-                    &core_scene.mesh,
-                    &m,
-                    &irradiance_fn,
-                    receivers.as_deref(),
-                    &settings,
-                    if progress.is_set() { Some(&tick) } else { None },
-                )
-            })
-        })
-        .map_err(|e| e.into_py(Some(&progress)))?;
+    let result = run(py, progress, |tick| {
+        // The irradiance of a fine level is long too: it stops on a cancel.
+        let ask = cancel_only(Some(tick));
+        let irradiance_fn = |p: &[Vec3], nrm: &[Vec3], d: Density| {
+            let s = irr.for_density(d);
+            irradiance_with_progress(core_scene, &tracer, p, nrm, &s, Some(&ask)).map(|(v, _)| v)
+        };
+        reference_radiosity(
+            &core_scene.mesh,
+            &m,
+            &irradiance_fn,
+            receivers.as_deref(),
+            &settings,
+            Some(tick),
+        )
+    })?;
     let values = rgb_array(py, &result.radiosity);
     if !details {
         return Ok(values.into_any());
@@ -199,45 +198,29 @@ pub fn reference_radiance_py<'py>(
     };
     let tracer = scene.tracer();
     let core_scene = &scene.scene;
-    let progress = Progress::new(progress);
-    let result = py
-        .detach(|| {
-            guard(|| {
-                let mesh = &core_scene.mesh;
-                let (e, _) = irradiance(
-                    core_scene,
-                    &tracer,
-                    mesh.positions(),
-                    mesh.normals(),
-                    &irr.for_density(Density::Receivers),
-                )?;
-                // The exits read the light finer where a shadow's edge crosses a triangle.
-                let edges = ShadowEdges::new(mesh, &e, &|p, n| {
-                    irradiance(
-                        core_scene,
-                        &tracer,
-                        p,
-                        n,
-                        &irr.for_density(Density::Receivers),
-                    )
-                    .map(|(v, _)| v)
-                })?;
-                let tick = |f: f32| progress.call(f);
-                walk_radiosity_lit(
-                    mesh,
-                    &tracer,
-                    &m,
-                    &ExitLight {
-                        vertices: &e,
-                        edges: &edges,
-                    },
-                    receivers.as_deref(),
-                    &settings,
-                    if progress.is_set() { Some(&tick) } else { None },
-                )
-            })
-        })
-        .map_err(|e| e.into_py(Some(&progress)))?;
+    let result = run(py, progress, |tick| {
+        let mesh = &core_scene.mesh;
+        let ask = cancel_only(Some(tick));
+        let lit = irr.for_density(Density::Receivers);
+        let light = |p: &[Vec3], n: &[Vec3]| {
+            irradiance_with_progress(core_scene, &tracer, p, n, &lit, Some(&ask))
+        };
+        let (e, _) = light(mesh.positions(), mesh.normals())?;
+        // The exits read the light finer where a shadow's edge crosses a triangle.
+        let edges = ShadowEdges::new(mesh, &e, &|p, n| light(p, n).map(|(v, _)| v))?;
+        walk_radiosity_lit(
+            mesh,
+            &tracer,
+            &m,
+            &ExitLight {
+                vertices: &e,
+                edges: &edges,
+            },
+            receivers.as_deref(),
+            &settings,
+            Some(tick),
+        )
+    })?;
     let k = (Model::Cycles.exit_weight(&m, 1.0) / std::f64::consts::PI) as f32;
     let to_radiance =
         |v: &[[f32; 3]]| -> Vec<[f32; 3]> { v.iter().map(|b| b.map(|x| x * k)).collect() };
@@ -285,10 +268,10 @@ fn receiver_indices(receivers: Option<Bound<'_, PyAny>>, n: usize) -> PyResult<O
 /// sampling and Fresnel as `Prt(single_scattering=True)`; `world_samples` / 4 world
 /// directions and `area_samples` points per area light at each step, as there). (K, 3)
 /// float32 for the `receivers` (all vertices by default); with `details=True` also a dict
-/// with the rays and seconds.
+/// with the rays and seconds. `progress(fraction)` as for `reference_radiance`.
 #[pyfunction]
 #[pyo3(signature = (scene, material, eye = None, receivers = None, phase = "hg", steps = 512,
-    world_samples = 64, area_samples = 16, details = false))]
+    world_samples = 64, area_samples = 16, details = false, progress = None))]
 #[allow(clippy::too_many_arguments)]
 #[pyo3(name = "reference_single_scattering")]
 pub fn reference_single_scattering_py<'py>(
@@ -302,6 +285,7 @@ pub fn reference_single_scattering_py<'py>(
     world_samples: i64,
     area_samples: i64,
     details: bool,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let eye = eye.map(|e| crate::convert::vec3("eye", e)).transpose()?;
     let phase = Phase::parse(phase).map_err(to_py)?;
@@ -320,22 +304,19 @@ pub fn reference_single_scattering_py<'py>(
     let tracer = scene.tracer();
     let core_scene = &scene.scene;
     let start = std::time::Instant::now();
-    let (values, rays) = py
-        .detach(|| {
-            guard(|| {
-                reference_single(
-                    core_scene,
-                    &tracer,
-                    &m,
-                    phase,
-                    eye,
-                    receivers.as_deref(),
-                    steps,
-                    &settings,
-                )
-            })
-        })
-        .map_err(|e| e.into_py(None))?;
+    let (values, rays) = run(py, progress, |tick| {
+        reference_single(
+            core_scene,
+            &tracer,
+            &m,
+            phase,
+            eye,
+            receivers.as_deref(),
+            steps,
+            &settings,
+            Some(tick),
+        )
+    })?;
     let out = rgb_array(py, &values).into_any();
     if !details {
         return Ok(out);

@@ -1,12 +1,13 @@
 //! `translucent.Scene`: a mesh, its lights and its world, and the ray tracer built over it.
 
-use crate::convert::{guard, rgb, rgb_array, to_py, triangle_array, vec3, vec3_array};
+use crate::call::run;
+use crate::convert::{rgb, rgb_array, to_py, triangle_array, vec3, vec3_array};
 use numpy::{PyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::{Arc, OnceLock};
-use translucent_core::irradiance::{irradiance, IrradianceSettings};
+use translucent_core::irradiance::{irradiance_with_progress, IrradianceSettings};
 use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
 use translucent_core::raytrace::Tracer;
@@ -45,9 +46,7 @@ impl PyScene {
         let positions = vec3_array("positions", positions)?;
         let triangles = triangle_array("triangles", triangles)?;
         let normals = normals.map(|n| vec3_array("normals", n)).transpose()?;
-        let mesh = py
-            .detach(|| guard(|| Mesh::new(positions, triangles, normals)))
-            .map_err(|e| e.into_py(None))?;
+        let mesh = run(py, None, |_| Mesh::new(positions, triangles, normals))?;
         Ok(Self {
             scene: Scene::new(mesh),
             tracer: OnceLock::new(),
@@ -230,7 +229,9 @@ impl PyScene {
 
     /// Irradiance entering the surface at each vertex [W/unit^2 as the lights give it],
     /// I = int F_t(eta) L (n . w) dw (Xu 2007 eq. 3); eta = 1 gives the plain irradiance E.
-    #[pyo3(signature = (eta = 1.0, world_samples = 64, area_samples = 16, seed = 0))]
+    /// `progress(fraction)` as for `Prt`: False cancels (`translucent.Cancelled`).
+    #[pyo3(signature = (eta = 1.0, world_samples = 64, area_samples = 16, seed = 0,
+        progress = None))]
     fn irradiance<'py>(
         &self,
         py: Python<'py>,
@@ -238,6 +239,7 @@ impl PyScene {
         world_samples: i64,
         area_samples: i64,
         seed: i64,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         check_eta(eta)?;
         let world_samples: u32 = crate::convert::non_negative("world_samples", world_samples)?;
@@ -250,20 +252,22 @@ impl PyScene {
             seed,
             ..Default::default()
         };
+        // Refused before the ray tracer is built for it.
+        let n = self.scene.mesh.vertex_count();
+        translucent_core::irradiance::check_request(&self.scene, n, &settings).map_err(to_py)?;
         let tracer = self.tracer();
         let mesh = &self.scene.mesh;
-        let values = py
-            .detach(|| {
-                irradiance(
-                    &self.scene,
-                    &tracer,
-                    mesh.positions(),
-                    mesh.normals(),
-                    &settings,
-                )
-            })
-            .map_err(to_py)?
-            .0;
+        let values = run(py, progress, |tick| {
+            irradiance_with_progress(
+                &self.scene,
+                &tracer,
+                mesh.positions(),
+                mesh.normals(),
+                &settings,
+                Some(tick),
+            )
+        })?
+        .0;
         Ok(rgb_array(py, &values))
     }
 

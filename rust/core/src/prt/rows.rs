@@ -218,7 +218,7 @@ pub(super) fn transport_rows(
     let vcount = mesh.vertex_count();
     let mut rows = vec![0f32; vcount * channels * stride];
     let mut counters = Counters::default();
-    let chunk = 2048;
+    let chunk = 512; // vertices per progress tick and cancel check
     for (ci, rows_chunk) in rows.chunks_mut(chunk * channels * stride).enumerate() {
         let first = ci * chunk;
         let chunk_counters = rows_chunk

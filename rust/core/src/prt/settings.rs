@@ -146,19 +146,23 @@ pub(super) fn check_settings(representatives: &[Material], s: &PrtSettings) -> R
                 s.model.name()
             )));
         }
-        if !(1..=1 << 20).contains(&g.walks) || g.vertices == 0 {
+        if g.walks == 0 || g.vertices == 0 {
             return Err(Error::InvalidArgument(format!(
-                "walks {} must lie in [1, 2^20] and vertices {} be > 0",
+                "walks {} and vertices {} must be > 0",
                 g.walks, g.vertices
             )));
         }
+        crate::limits::PRT_WALKS_PER_VERTEX.at_most("walks", g.walks as f64)?;
     }
     if let Some(n) = s.samples {
-        if !(100..=50_000_000).contains(&n) {
+        if n < 100 {
             return Err(Error::InvalidArgument(format!(
-                "samples {n} must lie in [100, 50 000 000]"
+                "samples {n} must be >= 100"
             )));
         }
+        let bytes = crate::limits::PRT_SAMPLE_BYTES * n as f64;
+        crate::limits::PRT_SAMPLES
+            .at_most(&format!("samples (~{:.1} GB)", bytes / 1e9), n as f64)?;
     }
     if let Some(m) = representatives
         .iter()

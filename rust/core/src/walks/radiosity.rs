@@ -21,9 +21,11 @@ use super::twin::tangent_gradients;
 use super::walker::{media, placements, Walker};
 use crate::bake_points::BakePoints;
 use crate::error::{Error, Result};
+use crate::limits;
 use crate::mesh::Mesh;
 use crate::optics::{Material, CHANNELS};
 use crate::profiles::walk::{ANISOTROPIC_BOUNCES, MAX_BOUNCES};
+use crate::progress::Ticker;
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
 use glam::Vec3;
@@ -63,6 +65,9 @@ impl Default for MeshWalkSettings {
 
 /// Vertices per progress tick.
 const TICK: usize = 512;
+/// Walks per progress tick within a vertex (~1-10 ms of work): a vertex with 2^24 walks
+/// ticks too.
+pub(super) const WALK_TICK: usize = 256;
 
 /// The walks' answer per receiver vertex.
 #[derive(Debug, Clone, PartialEq)]
@@ -146,17 +151,21 @@ pub fn walk_radiosity_lit(
     let media = media(material)?;
     let walker = Walker::new(mesh, tracer, material, light, settings);
     let active: Vec<usize> = (0..CHANNELS).filter(|&c| media[c].scale > 0.0).collect();
+    let total = (receivers.len() * active.len()) as f64 * settings.walks as f64;
+    limits::TOTAL_WALKS.at_most("walks x receivers x channels", total)?;
+    let ticker = Ticker::new(progress, total as u64);
     // The control variate's known mean: the half-space twin's total per channel.
     let mut plane = [0f64; CHANNELS];
     for &c in &active {
-        plane[c] = walker.plane_total_cached(&media[c]);
+        plane[c] = walker.plane_total_cached(&media[c], &ticker);
+        ticker.check()?;
     }
     let gradients = tangent_gradients(mesh, irradiance);
     let mut radiosity = Vec::with_capacity(receivers.len());
     let mut std_error = Vec::with_capacity(receivers.len());
     let mut receiver_rays = Vec::with_capacity(receivers.len());
     let mut rays = 0u64;
-    for (k, chunk) in receivers.chunks(TICK).enumerate() {
+    for chunk in receivers.chunks(TICK) {
         let part: Vec<([f32; 3], [f32; 3], u64)> = chunk
             .par_iter()
             .map(|&v| {
@@ -167,7 +176,8 @@ pub fn walk_radiosity_lit(
                 for &c in &active {
                     let grad =
                         Vec3::from_array(std::array::from_fn(|k| gradients[v as usize][k][c]));
-                    let (mean, err, r) = walker.vertex(v, c, &media[c], settings, plane[c], grad);
+                    let (mean, err, r) =
+                        walker.vertex(v, c, &media[c], settings, plane[c], grad, &ticker);
                     b[c] += (media[c].scale * mean) as f32;
                     se[c] = (media[c].scale * err) as f32;
                     rays += r;
@@ -181,11 +191,7 @@ pub fn walk_radiosity_lit(
             receiver_rays.push(r);
             rays += r;
         }
-        if let Some(p) = progress {
-            if !p(((k + 1) * TICK).min(receivers.len()) as f32 / receivers.len().max(1) as f32) {
-                return Err(Error::Cancelled);
-            }
-        }
+        ticker.check()?;
     }
     let noise = relative_noise(mesh, receivers, &radiosity, &std_error);
     Ok(MeshWalkResult {
@@ -218,12 +224,10 @@ fn check(mesh: &Mesh, irradiance: &[[f32; 3]], settings: &MeshWalkSettings) -> R
             "irradiance must be finite and >= 0".into(),
         ));
     }
-    if !(1..=1 << 24).contains(&settings.walks) {
-        return Err(Error::InvalidArgument(format!(
-            "walks = {} must lie in [1, 2^24]",
-            settings.walks
-        )));
+    if settings.walks == 0 {
+        return Err(Error::InvalidArgument("walks = 0 must be >= 1".into()));
     }
+    limits::WALKS_PER_VERTEX.at_most("walks", settings.walks as f64)?;
     if !(ANISOTROPIC_BOUNCES + 1..=1_000_000).contains(&settings.max_bounces) {
         return Err(Error::InvalidArgument(format!(
             "max_bounces = {} must lie in [11, 10^6]",

@@ -15,9 +15,11 @@
 //! difference mean 0.0, spread 1.0).
 
 use super::radiosity::MeshWalkSettings;
+use super::radiosity::WALK_TICK;
 use super::walker::{Medium, Streams, Walker};
 use crate::mesh::Mesh;
 use crate::optics::CHANNELS;
+use crate::progress::Ticker;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -49,6 +51,7 @@ impl Walker<'_> {
     /// and it is subtracted as a control variate with the coefficient fitted to the walks
     /// (in [0, 1]). Where the mesh is flat the two walks are the same walk and only the
     /// irradiance's curvature is left to sample.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn vertex(
         &self,
         v: u32,
@@ -57,9 +60,10 @@ impl Walker<'_> {
         s: &MeshWalkSettings,
         plane: f64,
         gradient: Vec3,
+        ticker: &Ticker,
     ) -> (f64, f64, u64) {
         let n = self.mesh.normals()[v as usize];
-        if n == Vec3::ZERO {
+        if n == Vec3::ZERO || ticker.stopped() {
             return (0.0, 0.0, 0);
         }
         let p = self.mesh.positions()[v as usize];
@@ -95,7 +99,11 @@ impl Walker<'_> {
             sums[3] += y * y;
             sums[4] += x * y;
             rays += r;
+            if (i + 1) % WALK_TICK == 0 && !ticker.add(WALK_TICK as u64) {
+                break; // cancelled: the call returns Cancelled
+            }
         }
+        ticker.add((s.walks % WALK_TICK) as u64);
         let k = s.walks as f64;
         let (mx, my) = (sums[0] / k, sums[1] / k);
         let (vx, vy, cxy) = (
@@ -122,7 +130,7 @@ impl Walker<'_> {
 
     /// `plane_total`, kept for the process per medium (the walk term walks the same
     /// material up to three times; marble's 2^16 half-space walks take 0.8 s on 2 cores).
-    pub(super) fn plane_total_cached(&self, m: &Medium) -> f64 {
+    pub(super) fn plane_total_cached(&self, m: &Medium, ticker: &Ticker) -> f64 {
         static TOTALS: Mutex<Vec<([u64; 9], f64)>> = Mutex::new(Vec::new());
         // The twin starts the tracer's epsilon beneath the surface (`walk`), which scales with
         // the mesh: part of the key, so a second mesh never reads the first one's total.
@@ -142,7 +150,10 @@ impl Walker<'_> {
         if let Some((_, t)) = lock().iter().find(|(k, _)| *k == key) {
             return *t;
         }
-        let total = self.plane_total(m);
+        let total = self.plane_total(m, ticker);
+        if ticker.stopped() {
+            return total; // cut short: not kept
+        }
         let mut totals = lock();
         if totals.len() >= PLANE_CACHE {
             totals.remove(0);
@@ -156,11 +167,15 @@ impl Walker<'_> {
     /// depth the twin starts at (the tracer's epsilon) only (seeded by `PLANE_SEED` and the
     /// chunk, not by channel or call), so a cached total is the same whichever call computed
     /// it.
-    fn plane_total(&self, m: &Medium) -> f64 {
+    fn plane_total(&self, m: &Medium, ticker: &Ticker) -> f64 {
         let chunks = PLANE_WALKS / PLANE_CHUNK;
         let sums: Vec<f64> = (0..chunks)
             .into_par_iter()
             .map(|k| {
+                // No share of the bar (a few seconds at most), but a cancel stops it.
+                if !ticker.add(0) {
+                    return 0.0;
+                }
                 let key = PLANE_SEED ^ (k as u64 + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9);
                 let mut streams = Streams::new(key);
                 (0..PLANE_CHUNK)
@@ -272,13 +287,14 @@ mod tests {
                 tunnel: true,
             })
             .collect();
-        let own: Vec<f64> = walkers.iter().map(|w| w.plane_total(&m)).collect();
+        let t = Ticker::new(None, 0);
+        let own: Vec<f64> = walkers.iter().map(|w| w.plane_total(&m, &t)).collect();
         assert!(
             (own[0] - own[1]).abs() > 1e-4 * own[0],
             "start depth should matter: {own:?}"
         );
         for (w, own) in walkers.iter().zip(&own) {
-            assert_eq!(w.plane_total_cached(&m), *own);
+            assert_eq!(w.plane_total_cached(&m, &t), *own);
         }
     }
 }

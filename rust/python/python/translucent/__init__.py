@@ -14,6 +14,7 @@ import os
 import pathlib
 
 from ._native import (
+    LIMITS,
     Cancelled,
     Hierarchy,
     Material,
@@ -42,6 +43,7 @@ def _default_cache() -> pathlib.Path:
 set_table_cache(str(_default_cache() / "tables"))
 
 __all__ = [
+    "LIMITS",
     "Cancelled",
     "Hierarchy",
     "Material",

@@ -1,4 +1,5 @@
 from ._native import (
+    LIMITS as LIMITS,
     Cancelled as Cancelled,
     Hierarchy as Hierarchy,
     Material as Material,

@@ -16,6 +16,10 @@ Progress = Callable[[float], bool | None]
 class Cancelled(RuntimeError):
     """Raised when a progress callback returned False."""
 
+LIMITS: dict[str, int | float]
+"""The stated limits on request sizes by name (docs/api.md, "Limits"); a request over one
+raises ValueError naming it."""
+
 Profile = Literal["cycles", "dipole"]
 
 class Material:
@@ -121,9 +125,15 @@ class Scene:
     ) -> None:
         """Uniform radiance `color` x `strength`, or an (H, W, 3) equirectangular radiance image."""
     def irradiance(
-        self, eta: float = 1.0, world_samples: int = 64, area_samples: int = 16, seed: int = 0
+        self,
+        eta: float = 1.0,
+        world_samples: int = 64,
+        area_samples: int = 16,
+        seed: int = 0,
+        progress: Progress | None = None,
     ) -> npt.NDArray[np.float32]:
-        """(N, 3) irradiance entering the surface at each vertex (Xu 2007 eq. 3)."""
+        """(N, 3) irradiance entering the surface at each vertex (Xu 2007 eq. 3). `progress` as
+        for every long call: False cancels (`Cancelled`)."""
     @property
     def vertex_count(self) -> int: ...
     @property
@@ -400,6 +410,7 @@ def reference_single_scattering(
     world_samples: int = 64,
     area_samples: int = 16,
     details: Literal[False] = False,
+    progress: Progress | None = None,
 ) -> npt.NDArray[np.float32]:
     """Ground-truth single scattering L^(1) toward `eye` (None: along each normal), (K, 3):
     Xu 2007 eq. 5 by brute force with the exact attenuation exp(-sigma_t (s'_i + s)) and phase
@@ -418,6 +429,7 @@ def reference_single_scattering(
     area_samples: int = 16,
     *,
     details: Literal[True],
+    progress: Progress | None = None,
 ) -> tuple[npt.NDArray[np.float32], dict[str, object]]: ...
 def relative_error(
     estimate: ArrayN3, truth: ArrayN3, weights: npt.ArrayLike | None = None
