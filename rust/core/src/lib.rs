@@ -1,12 +1,11 @@
 //! translucent-core: homogeneous subsurface scattering on triangle meshes, for any radial
 //! profile (Jensen's dipole, Cycles' random walk). Pure Rust; the Python binding lives in its
-//! own crate. One module per concept (DESIGN.md), grouped as the README's layout is.
+//! own crate. One module per concept (docs/design.md), grouped as the README's layout is.
 
 // Shared: what every method uses.
 pub mod bake_points; // where Cycles' vertex bake samples a vertex (its corners, 0.1 mm in)
 pub mod error; // the one error type
 pub mod evaluation; // the one answer every method gives: values, error estimate, seconds, skips
-pub mod gpu; // one wgpu context and the per-method kernels
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
 pub mod lights; // Blender/Cycles lights and the world
 pub mod limits; // the stated limits on request sizes, refused up front
@@ -24,7 +23,8 @@ pub mod spherical_harmonics; // real Y_lm and HG's Legendre series (addition the
 pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)
 pub mod walks; // Cycles' walk traced inside the mesh, its half-space twin, the walk term
 
-// Methods.
+// Methods, each with its private parts inside it (prt: basis, interreflection, gpu, single;
+// hierarchy: clusters, links, far field, rings).
 pub mod hierarchy; // Mertens et al. 2003: face clusters and links, deformation and moving lights
 pub mod prt; // Xu et al. 2007: precomputed transport, live material edits
 

@@ -1,5 +1,5 @@
 //! Light sources and the world, in Blender/Cycles units so that a comparison with a Cycles
-//! render is like for like (DESIGN.md, "Verified on this machine kind"):
+//! render is like for like (docs/design.md, "wgpu and headless Blender"):
 //! sun Strength = irradiance [W/m^2] on a surface facing it; point/spot Power P [W] gives
 //! radiant intensity P/(4 pi) [W/sr]; an area light of power P and area A emits radiance
 //! P/(pi A) from its front side; the world colour is radiance.

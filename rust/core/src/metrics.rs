@@ -1,4 +1,4 @@
-//! The error metrics every method is compared with (DESIGN.md, "Errors and speed"):
+//! The error metrics every method is compared with (docs/design.md, "Error metric"):
 //! area-weighted relative RMS over vertices per channel, and the maximum relative error.
 
 use crate::error::{Error, Result};

@@ -9,7 +9,7 @@
 //! straight line from the light (the shadow ray does not refract at x_i); its length inside,
 //! s_i, becomes the refracted distance s'_i of eq. 7. Conventions: `travel` directions are the
 //! way light moves, and the phase function takes the cosine between the light's travel
-//! direction before and after scattering (g > 0 forward), as DESIGN.md's plane limit states.
+//! direction before and after scattering (g > 0 forward), as the single-scattering plane limit (docs/design.md) states.
 
 use crate::error::{Error, Result};
 use crate::lights::{Light, World};
@@ -528,7 +528,7 @@ mod tests {
         1.0 - 0.5 * (rs * rs + rp * rp)
     }
 
-    /// DESIGN.md's plane limit, written out from Snell and the HG formula apart from the code:
+    /// the single-scattering plane limit (docs/design.md), written out from Snell and the HG formula apart from the code:
     /// L = sigma_s F_t(theta_i) F_t(0) p E / (sigma_t (1 + 1 / cos theta_i')).
     pub(crate) fn plane_limit(m: &Material, c: usize, theta: f64, e: f64) -> f64 {
         let eta = m.eta;

@@ -1,4 +1,4 @@
-//! PRT single scattering (Xu 2007 eqs. 12–15) against things other than itself: DESIGN.md's
+//! PRT single scattering (Xu 2007 eqs. 12–15) against things other than itself: docs/design.md's
 //! plane limit in closed form, and the brute-force integral of eq. 5 (exact E and phase
 //! function, 512 steps per channel) on a closed curved mesh lit by a point light and a sun.
 
@@ -32,7 +32,7 @@ fn ft(eta: f64, c: f64) -> f64 {
     1.0 - 0.5 * (rs * rs + rp * rp)
 }
 
-/// DESIGN.md: sun at theta on a large plane, viewed along the normal, path along -n:
+/// docs/design.md: sun at theta on a large plane, viewed along the normal, path along -n:
 /// L = sigma_s F_t(theta) F_t(0) p E / (sigma_t (1 + 1 / cos theta')).
 fn plane_limit(m: &Material, c: usize, theta: f64, e: f64, phase: Phase) -> f64 {
     let sin_t = theta.sin() / m.eta;
@@ -242,7 +242,7 @@ fn gpu_and_cpu_single_scattering_agree() {
 }
 
 fn gpu_and_cpu_agree_on(spread: bool) {
-    use translucent_core::gpu::GpuEvaluator;
+    use translucent_core::prt::gpu::GpuEvaluator;
     let mut scene = Scene::new(sphere(24, 20.0));
     scene.lights = vec![
         Light::point(Vec3::new(30.0, -40.0, 50.0), [4e4, 3e4, 2e4]).unwrap(),

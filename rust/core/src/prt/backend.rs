@@ -36,7 +36,7 @@ impl Prt {
             }
             Backend::Gpu => {
                 let t = &self.transport;
-                let mut gpu = crate::gpu::GpuEvaluator::new(
+                let mut gpu = crate::prt::gpu::GpuEvaluator::new(
                     t.values(),
                     t.vertices(),
                     t.channels(),
@@ -68,7 +68,7 @@ impl Prt {
     }
 
     /// The GPU adapter in use, if any.
-    pub fn gpu_adapter(&self) -> Option<&crate::gpu::AdapterDescription> {
+    pub fn gpu_adapter(&self) -> Option<&crate::prt::gpu::AdapterDescription> {
         self.gpu.as_ref().map(|g| g.adapter())
     }
 

@@ -41,7 +41,7 @@ pub struct PrtDetails {
     /// The whole dot product, GPU transfers included.
     pub dot_seconds: f64,
     /// Upload, dispatch and readback when the GPU ran it.
-    pub gpu: Option<crate::gpu::GpuTimings>,
+    pub gpu: Option<crate::prt::gpu::GpuTimings>,
 }
 
 /// One material evaluated by PRT (`evaluation::Evaluation`): B or L per vertex; the error
@@ -140,7 +140,7 @@ impl Prt {
         material: &Material,
         bounce: bool,
         walks: bool,
-        single: Option<&crate::gpu::SingleEdit>,
+        single: Option<&crate::prt::gpu::SingleEdit>,
     ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         let t0 = Instant::now();
         self.check_eta(material)?;
@@ -307,7 +307,7 @@ impl Prt {
         &self,
         material: &Material,
         eye: Option<Vec3>,
-        single: Option<&crate::gpu::SingleEdit>,
+        single: Option<&crate::prt::gpu::SingleEdit>,
     ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         crate::evaluation::check_eye(eye)?;
         let (mut e, l1) = self.radiosity_inner(material, true, true, single)?;

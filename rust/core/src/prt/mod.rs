@@ -20,6 +20,7 @@
 mod backend;
 pub mod basis;
 mod evaluate;
+pub mod gpu;
 mod interreflection;
 mod knots;
 mod layout;
@@ -53,7 +54,7 @@ pub struct Prt {
     fitter: Fitter,
     transport: Transport,
     /// The transport resident on a GPU once `use_gpu` succeeded.
-    gpu: Option<crate::gpu::GpuEvaluator>,
+    gpu: Option<crate::prt::gpu::GpuEvaluator>,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     /// I(x_o) per vertex, for the profiles' point mass (not scaled by the rim coverage: a

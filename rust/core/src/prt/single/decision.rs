@@ -5,7 +5,7 @@ use crate::error::{Error, Result};
 use crate::optics::Material;
 
 /// The single-scattering share of what a thick slab of `material` returns under a sun along
-/// the normal, per channel: L1 / (L1 + L_d) with L1 of DESIGN.md's plane limit seen along the
+/// the normal, per channel: L1 / (L1 + L_d) with L1 of the single-scattering plane limit (docs/design.md) seen along the
 /// normal and L_d = F_t(0)^2 R_total / pi (the dipole's total, Jensen 2001). The phase function
 /// is taken at its mean over directions, 1 / 4 pi: the share of single-scattered light
 /// whichever way g sends it (at the backscattering angle alone a g = 0.9 medium would look

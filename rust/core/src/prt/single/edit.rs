@@ -61,7 +61,7 @@ impl SingleScattering {
     }
 
     /// Uploads S_j to `gpu` (same mesh), so its edits run single scattering there too.
-    pub fn attach_to(&self, gpu: &mut crate::gpu::GpuEvaluator) -> Result<()> {
+    pub fn attach_to(&self, gpu: &mut crate::prt::gpu::GpuEvaluator) -> Result<()> {
         let (words, geometry, colours) = self.gpu_arrays();
         let q = &self.transport;
         let spread_words = pack_words(&self.spread.words);
@@ -70,7 +70,7 @@ impl SingleScattering {
             .iter()
             .map(|c| [c[0], c[1], c[2], 0.0])
             .collect();
-        gpu.attach_single(&crate::gpu::SingleTransport {
+        gpu.attach_single(&crate::prt::gpu::SingleTransport {
             words: &words,
             scales: &q.scales,
             geometry: &geometry,
@@ -91,10 +91,10 @@ impl SingleScattering {
         material: &Material,
         eye: Option<Vec3>,
         phase: Phase,
-    ) -> Result<(crate::gpu::SingleEdit, [f64; 3], f64)> {
+    ) -> Result<(crate::prt::gpu::SingleEdit, [f64; 3], f64)> {
         let t0 = Instant::now();
         let (coeffs, error_estimate) = self.prepare(material, eye, phase)?;
-        let edit = crate::gpu::SingleEdit {
+        let edit = crate::prt::gpu::SingleEdit {
             coefficients: coeffs
                 .iter()
                 .flat_map(|c| crate::prt::basis::edit_coefficients(c))
