@@ -1,7 +1,7 @@
 //! A validated triangle mesh: positions, triangles, vertex normals, areas, and the
 //! area-uniform surface samples every integration over the surface starts from.
 
-mod topology;
+pub mod topology;
 
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -32,8 +32,8 @@ pub struct MeshReport {
     pub degenerate_triangles: usize,
     /// Vertices referenced by no triangle: they get zero area and radiosity from their position.
     pub isolated_vertices: usize,
-    /// Vertices whose computed normal was zero (no triangle of area uses them) and was
-    /// replaced by +Z. A given normal of zero length is refused.
+    /// Vertices whose normal was zero at a vertex without area (loose, or only on degenerate
+    /// triangles) and was replaced by +Z. A given zero normal on the surface is refused.
     pub zero_normals: usize,
     /// Vertices whose given normal points against the area-weighted normal of the triangles
     /// around them (dot < 0): the normals and the winding disagree there.
@@ -118,14 +118,6 @@ impl Mesh {
                     normals[i]
                 )));
             }
-            // A zero normal has no direction to shade with (it used to become +Z silently).
-            if let Some(i) = normals.iter().position(|p| !(p.length() > 0.0)) {
-                return Err(Error::InvalidMesh(format!(
-                    "normals[{i}] = {:?} has zero length; give unit normals (Blender: Mesh > \
-                     Normals > Recalculate Outside), or none to have them computed",
-                    normals[i]
-                )));
-            }
         }
         check_extent(&positions)?;
 
@@ -178,6 +170,19 @@ impl Mesh {
         report.inward_components = top.inward_components;
         report.closed_volume = top.closed_volume;
         if let Some(given) = &normals {
+            // A zero normal where there is surface has no direction to shade with (it used to
+            // become +Z silently, changing B x2-13 there); at a vertex without area (loose, or
+            // only on degenerate triangles, where Blender gives zero too) it is replaced.
+            if let Some(i) =
+                (0..given.len()).find(|&i| !(given[i].length() > 0.0) && accumulated[i] != Vec3::ZERO)
+            {
+                return Err(Error::InvalidMesh(format!(
+                    "normals[{i}] = {:?} has zero length at a vertex on the surface; give unit \
+                     normals (Blender: Mesh > Normals > Recalculate Outside), or none to have them \
+                     computed",
+                    given[i]
+                )));
+            }
             report.normals_against_winding = check_normals(given, &accumulated, &top)?;
         }
         let normals = normals.unwrap_or(accumulated);
@@ -451,7 +456,7 @@ fn check_extent(positions: &[Vec3]) -> Result<()> {
         return Err(Error::InvalidMesh(format!(
             "the mesh is {diagonal:e} scene units across (bounding-box diagonal), below the \
              supported {MIN_EXTENT:e}: in single precision its triangles' squared areas \
-             underflow and every triangle would read as degenerate; {rescale}"
+             underflow to zero and its triangles would have no area; {rescale}"
         )));
     }
     Ok(())
@@ -485,7 +490,8 @@ fn check_topology(top: &Topology, diagonal: f32) -> Result<()> {
             "the mesh is wound inward: its closed surfaces enclose a signed volume of {:e} \
              (< 0; {} of {} closed surface(s) face inward), so every normal points into the \
              object and no light would enter; flip it (Blender: Mesh > Normals > Recalculate \
-             Outside, or Flip), i.e. reverse each triangle's vertex order",
+             Outside, or Flip; a negative object scale mirrors it too: apply the scale), i.e. \
+             reverse each triangle's vertex order",
             top.closed_volume, top.inward_components, top.closed_components
         )));
     }
