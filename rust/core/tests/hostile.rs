@@ -314,7 +314,8 @@ proptest! {
             prop_assert!((s.rel_max[c] - f64::from(b.abs())).abs() < 1e-4 * (1.0 + f64::from(b.abs())));
         }
         let mut bad = est.clone();
-        bad[nan_at.index(bad.len())][zero_channel] = f32::NAN;
+        let at = nan_at.index(bad.len());
+        bad[at][zero_channel] = f32::NAN;
         prop_assert!(relative_error(&bad, &truth, &w).is_err());
         prop_assert!(relative_error(&est, &bad, &w).is_err());
         prop_assert!(relative_error(&est, &truth, &vec![0.0; w.len()]).is_err());
@@ -359,4 +360,34 @@ fn a_lone_reversed_pair_is_reported_in_a_large_mesh() {
     let (p, mut t) = plane_parts(4, 1.0); // 18 triangles
     t.push([t[0][0], t[0][2], t[0][1]]);
     assert!(Mesh::new(p, t, None).is_err());
+}
+
+/// The cost of the topology checks: `Mesh::new` on a 97k-triangle sphere and the analysis
+/// alone, medians of 7 (run with --ignored --nocapture; timings only, nothing asserted).
+#[test]
+#[ignore]
+fn topology_cost() {
+    let (p, t) = sphere_parts(220, 1.0);
+    let areas = vec![1.0f32; t.len()];
+    let median = |f: &dyn Fn()| {
+        let mut s: Vec<f64> = (0..7)
+            .map(|_| {
+                let a = std::time::Instant::now();
+                f();
+                a.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        s.sort_by(f64::total_cmp);
+        s[3]
+    };
+    let new = median(&|| {
+        Mesh::new(p.clone(), t.clone(), None).unwrap();
+    });
+    let top = median(&|| {
+        translucent_core::mesh::topology::analyse(&p, &t, &areas, 0.0);
+    });
+    println!(
+        "{} triangles: Mesh::new {new:.1} ms, of which topology {top:.1} ms",
+        t.len()
+    );
 }

@@ -273,9 +273,9 @@ pub fn opt_int(value: &Bound<'_, PyAny>) -> PyResult<Option<i64>> {
 /// A pair of floats (`from_py_with`), e.g. `eps = (receiver, emitter)`; TypeError (named by
 /// pyo3) for anything else.
 pub fn float_pair(value: &Bound<'_, PyAny>) -> PyResult<(f64, f64)> {
-    let v: Vec<f64> = value
-        .extract()
-        .map_err(|_| PyTypeError::new_err(format!("expected two floats, got {}", describe(value))))?;
+    let v: Vec<f64> = value.extract().map_err(|_| {
+        PyTypeError::new_err(format!("expected two floats, got {}", describe(value)))
+    })?;
     <[f64; 2]>::try_from(v.as_slice())
         .map(|[a, b]| (a, b))
         .map_err(|_| {
@@ -336,7 +336,7 @@ pub fn receiver_indices(
         })?;
         if !(0..n as i64).contains(&i) {
             return Err(PyValueError::new_err(format!(
-                "{name}[{k}] = {i} is out of range for {n} vertices (indices 0..{})",
+                "{name}[{k}] = {i}: receiver index out of range for {n} vertices (0..{})",
                 n.saturating_sub(1)
             )));
         }

@@ -51,7 +51,11 @@ pub fn reference_radiosity_py<'py>(
     let max_level: u32 = non_negative("max_level", max_level)?;
     let world_samples: u32 = non_negative("world_samples", world_samples)?;
     let area_samples: u32 = non_negative("area_samples", area_samples)?;
-    let receivers = crate::convert::receiver_indices("receivers", receivers.as_ref(), scene.scene.mesh.vertex_count())?;
+    let receivers = crate::convert::receiver_indices(
+        "receivers",
+        receivers.as_ref(),
+        scene.scene.mesh.vertex_count(),
+    )?;
     let m = material.inner;
     let irr = IrradianceSettings {
         eta: model.irradiance_eta(&m),
@@ -181,7 +185,11 @@ pub fn reference_radiance_py<'py>(
     let walks: usize = non_negative("walks", walks)?;
     let world_samples: u32 = non_negative("world_samples", world_samples)?;
     let area_samples: u32 = non_negative("area_samples", area_samples)?;
-    let receivers = crate::convert::receiver_indices("receivers", receivers.as_ref(), scene.scene.mesh.vertex_count())?;
+    let receivers = crate::convert::receiver_indices(
+        "receivers",
+        receivers.as_ref(),
+        scene.scene.mesh.vertex_count(),
+    )?;
     let m = material.inner;
     let irr = IrradianceSettings {
         eta: 1.0,
@@ -284,9 +292,12 @@ pub fn reference_single_scattering_py<'py>(
     let steps: usize = non_negative("steps", steps)?;
     let world_samples: u32 = non_negative("world_samples", world_samples)?;
     let area_samples: u32 = non_negative("area_samples", area_samples)?;
-    let receivers: Option<Vec<usize>> =
-        crate::convert::receiver_indices("receivers", receivers.as_ref(), scene.scene.mesh.vertex_count())?
-            .map(|v| v.into_iter().map(|x| x as usize).collect());
+    let receivers: Option<Vec<usize>> = crate::convert::receiver_indices(
+        "receivers",
+        receivers.as_ref(),
+        scene.scene.mesh.vertex_count(),
+    )?
+    .map(|v| v.into_iter().map(|x| x as usize).collect());
     let m = material.inner;
     let settings = PathSettings {
         eta: m.eta,

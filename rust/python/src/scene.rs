@@ -77,7 +77,8 @@ impl PyScene {
         color: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         let c = colour_or_white("irradiance", irradiance, color)?;
-        let light = Light::sun(crate::convert::direction("direction", direction)?, c).map_err(to_py)?;
+        let light =
+            Light::sun(crate::convert::direction("direction", direction)?, c).map_err(to_py)?;
         self.scene.lights.push(light);
         self.lighting_changed();
         Ok(())
@@ -327,11 +328,7 @@ pub fn check_eta(eta: f64) -> PyResult<()> {
     Ok(())
 }
 
-fn colour_or_white(
-    name: &str,
-    power: f64,
-    color: Option<&Bound<'_, PyAny>>,
-) -> PyResult<[f32; 3]> {
+fn colour_or_white(name: &str, power: f64, color: Option<&Bound<'_, PyAny>>) -> PyResult<[f32; 3]> {
     if !power.is_finite() || power < 0.0 {
         return Err(PyValueError::new_err(format!(
             "light {name} {power} must be finite and >= 0"

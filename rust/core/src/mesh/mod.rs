@@ -174,7 +174,7 @@ impl Mesh {
             // become +Z silently, changing B x2-13 there); at a vertex without area (loose, or
             // only on degenerate triangles, where Blender gives zero too) it is replaced.
             if let Some(i) =
-                (0..given.len()).find(|&i| !(given[i].length() > 0.0) && accumulated[i] != Vec3::ZERO)
+                (0..given.len()).find(|&i| given[i].length() == 0.0 && accumulated[i] != Vec3::ZERO)
             {
                 return Err(Error::InvalidMesh(format!(
                     "normals[{i}] = {:?} has zero length at a vertex on the surface; give unit \
@@ -443,15 +443,20 @@ fn check_extent(positions: &[Vec3]) -> Result<()> {
         .fold(0.0f32, f32::max);
     let rescale = "rescale the scene (e.g. to metres; material coefficients, per unit of \
                    length, scale inversely)";
-    if largest > COORDINATE_LIMIT {
-        return Err(Error::InvalidMesh(format!(
-            "coordinates reach {largest:e} scene units, beyond the supported |x| <= {COORDINATE_LIMIT:e}: \
-             the methods work in single precision, where a mesh's squared areas overflow above \
-             ~1e9 units; {rescale}"
-        )));
-    }
     let (lo, hi) = bounds(positions);
     let diagonal = (hi.as_dvec3() - lo.as_dvec3()).length();
+    if largest > COORDINATE_LIMIT {
+        // Say "overflows" only where it does: squared areas (diagonal^4) beyond f32::MAX.
+        let what = if diagonal.powi(4) > f64::from(f32::MAX) {
+            "the mesh's extent overflows single precision (its squared areas exceed 3.4e38)"
+        } else {
+            "the mesh is too large for single precision with room"
+        };
+        return Err(Error::InvalidMesh(format!(
+            "{what}: coordinates reach {largest:e} scene units, beyond the supported \
+             |x| <= {COORDINATE_LIMIT:e}; {rescale}"
+        )));
+    }
     if diagonal > 0.0 && diagonal < f64::from(MIN_EXTENT) {
         return Err(Error::InvalidMesh(format!(
             "the mesh is {diagonal:e} scene units across (bounding-box diagonal), below the \
@@ -474,9 +479,10 @@ fn check_topology(top: &Topology, diagonal: f32) -> Result<()> {
     }
     // A lone pair (Blender's Suzanne has one) changes B locally; a sheet made double-sided
     // (every triangle with its reverse) changes it everywhere. Refused from 1 % of the surface.
-    if let Some((first, again)) = top.first_reversed.filter(|_| {
-        200 * top.reversed_pairs > top.triangles
-    }) {
+    if let Some((first, again)) = top
+        .first_reversed
+        .filter(|_| 200 * top.reversed_pairs > top.triangles)
+    {
         return Err(Error::InvalidMesh(format!(
             "triangle {again} is triangle {first} wound the other way ({} such pair(s)): a \
              double-sided sheet has no inside for light to scatter in; keep one side of each \
@@ -652,12 +658,18 @@ mod tests {
         for r in [1.01e8f32, 1e10, 1.2e19, 1e20] {
             let p = vec![Vec3::ZERO, Vec3::new(r, 0.0, 0.0), Vec3::new(0.0, r, 0.0)];
             let e = Mesh::new(p, vec![[0, 1, 2]], None).unwrap_err().to_string();
-            assert!(e.contains("beyond the supported |x| <= 1e8") && e.contains("rescale"), "{e}");
+            assert!(
+                e.contains("beyond the supported |x| <= 1e8") && e.contains("rescale"),
+                "{e}"
+            );
         }
         for r in [1e-12f32, 9e-9] {
             let p = vec![Vec3::ZERO, Vec3::new(r, 0.0, 0.0), Vec3::new(0.0, r, 0.0)];
             let e = Mesh::new(p, vec![[0, 1, 2]], None).unwrap_err().to_string();
-            assert!(e.contains("below the supported 1e-8") && e.contains("rescale"), "{e}");
+            assert!(
+                e.contains("below the supported 1e-8") && e.contains("rescale"),
+                "{e}"
+            );
         }
         // Inside the range, at both ends, a triangle has its area.
         for r in [1e-8f32, 5e7] {
