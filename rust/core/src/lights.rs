@@ -57,16 +57,43 @@ pub enum World {
     },
 }
 
+/// The largest coordinate a point off the mesh (a light, the eye) may have [scene units]:
+/// squared distances to it stay in single precision (3 (2e15)^2 ~ 1e31) with room.
+pub const POINT_LIMIT: f32 = 1e15;
+
+/// Why a point off the mesh (a light, the eye) cannot be used, if it cannot: not finite, or
+/// beyond `POINT_LIMIT`.
+fn point_problem(name: &str, v: Vec3) -> Option<String> {
+    if !v.is_finite() {
+        return Some(format!("{name} {v:?} is not finite"));
+    }
+    (v.abs().max_element() > POINT_LIMIT).then(|| {
+        format!(
+            "{name} {v:?} lies beyond the supported |x| <= {POINT_LIMIT:e} scene units \
+             (squared distances to it would leave single precision); bring it closer: from \
+             that far the directions to it no longer change across a mesh"
+        )
+    })
+}
+
+/// The eye (or any point off the mesh that is not a light): finite, within `POINT_LIMIT`.
+pub fn check_point(name: &str, v: Vec3) -> Result<Vec3> {
+    point_problem(name, v).map_or(Ok(v), |m| Err(Error::InvalidArgument(m)))
+}
+
 fn check_vec(name: &str, v: Vec3) -> Result<Vec3> {
+    point_problem(name, v).map_or(Ok(v), |m| Err(Error::InvalidLight(m)))
+}
+
+/// A unit direction: normalised in double precision (a finite (-1e30, 0, 0) is a direction,
+/// though its squared length overflows single precision).
+fn check_dir(name: &str, v: Vec3) -> Result<Vec3> {
     if !v.is_finite() {
         return Err(Error::InvalidLight(format!("{name} {v:?} is not finite")));
     }
-    Ok(v)
-}
-
-fn check_dir(name: &str, v: Vec3) -> Result<Vec3> {
-    let v = check_vec(name, v)?;
-    v.try_normalize()
+    v.as_dvec3()
+        .try_normalize()
+        .map(|d| d.as_vec3())
         .ok_or_else(|| Error::InvalidLight(format!("{name} {v:?} has zero length")))
 }
 

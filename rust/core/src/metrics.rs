@@ -24,6 +24,10 @@ impl ErrorStats {
 }
 
 /// Compares `estimate` with `truth`, weighting vertex i by `weights[i]` (its area).
+/// Errors: lengths that differ, a non-finite value in `estimate` or `truth` (naming the row),
+/// a negative or non-finite weight, weights that are all zero (nothing is compared).
+/// A channel whose truth is 0 at every vertex has no scale to be relative to: both figures
+/// are then 0 where the estimate is 0 there too, and infinite where it is not.
 pub fn relative_error(
     estimate: &[[f32; 3]],
     truth: &[[f32; 3]],
@@ -37,10 +41,26 @@ pub fn relative_error(
             weights.len()
         )));
     }
-    if weights.iter().any(|w| !w.is_finite() || *w < 0.0) {
-        return Err(Error::InvalidArgument(
-            "weights must be finite and >= 0".into(),
-        ));
+    for (name, rows) in [("estimate", estimate), ("truth", truth)] {
+        if let Some(i) = rows.iter().position(|r| !r.iter().all(|x| x.is_finite())) {
+            return Err(Error::InvalidArgument(format!(
+                "{name} row {i} holds {:?}: every value compared must be finite",
+                rows[i]
+            )));
+        }
+    }
+    if let Some(i) = weights.iter().position(|w| !w.is_finite() || *w < 0.0) {
+        return Err(Error::InvalidArgument(format!(
+            "weights[{i}] = {}: weights must be finite and >= 0",
+            weights[i]
+        )));
+    }
+    if !weights.iter().any(|w| *w > 0.0) {
+        return Err(Error::InvalidArgument(format!(
+            "weights are all zero ({} vertices): nothing would be compared; give positive \
+             weights (vertex areas) to the vertices that count",
+            weights.len()
+        )));
     }
     let mut stats = ErrorStats::default();
     for c in 0..3 {
@@ -64,7 +84,14 @@ pub fn relative_error(
         } else {
             0.0
         };
-        stats.rel_max[c] = worst;
+        // An all-zero truth: the maximum is as undefined as the RMS; the same answer.
+        stats.rel_max[c] = if peak > 0.0 {
+            worst
+        } else if estimate.iter().any(|e| e[c] != 0.0) {
+            f64::INFINITY
+        } else {
+            0.0
+        };
     }
     Ok(stats)
 }
@@ -92,6 +119,30 @@ mod tests {
         assert_eq!(s.rel_rms, [0.0; 3]);
         let s = relative_error(&e, &t, &[1.0, 3.0]).unwrap();
         assert!((s.rel_rms[0] - (3.0f64 / 4.0).sqrt()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn an_all_zero_truth_is_exact_or_infinitely_wrong() {
+        let t = vec![[0.0, 1.0, 0.0]; 3];
+        let s = relative_error(&t, &t, &[1.0; 3]).unwrap();
+        assert_eq!((s.rel_rms, s.rel_max), ([0.0; 3], [0.0; 3]));
+        let e = vec![[1e-9, 1.0, 0.0]; 3];
+        let s = relative_error(&e, &t, &[1.0; 3]).unwrap();
+        assert_eq!(s.rel_rms, [f64::INFINITY, 0.0, 0.0]);
+        assert_eq!(s.rel_max, [f64::INFINITY, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn non_finite_values_and_all_zero_weights_are_refused() {
+        let t = vec![[1.0; 3]; 3];
+        let mut e = t.clone();
+        e[2][1] = f32::NAN;
+        let m = relative_error(&e, &t, &[1.0; 3]).unwrap_err().to_string();
+        assert!(m.contains("estimate row 2"), "{m}");
+        let m = relative_error(&t, &e, &[1.0; 3]).unwrap_err().to_string();
+        assert!(m.contains("truth row 2"), "{m}");
+        let m = relative_error(&t, &t, &[0.0; 3]).unwrap_err().to_string();
+        assert!(m.contains("all zero"), "{m}");
     }
 
     #[test]

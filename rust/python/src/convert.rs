@@ -162,10 +162,173 @@ pub fn triangle_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[u32
         .collect())
 }
 
-/// A 3-vector from any sequence of three numbers.
+/// A 3-vector from any sequence of three numbers; a finite component beyond single precision
+/// (1e39) is refused naming `name` instead of becoming an infinity.
 pub fn vec3(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec3> {
     let v = rgb(name, value)?;
+    if let Some(x) = v
+        .iter()
+        .find(|x| x.is_finite() && x.abs() > f64::from(f32::MAX))
+    {
+        return Err(PyValueError::new_err(format!(
+            "{name} has a component {x:e}, which overflows single precision (|x| <= {:e})",
+            f32::MAX
+        )));
+    }
     Ok(Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32))
+}
+
+/// A direction from any sequence of three numbers, normalised in double precision first (so
+/// (-1e30, 0, 0) or (1e39, 0, 0) is the direction -X or +X); the core checks the rest.
+pub fn direction(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec3> {
+    let v = rgb(name, value)?;
+    // Scaled by the largest component first, so no square overflows.
+    let m = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let u = if m.is_finite() && m > 0.0 {
+        let s = v.map(|x| x / m);
+        let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+        s.map(|x| x / len)
+    } else {
+        v
+    };
+    Ok(Vec3::new(u[0] as f32, u[1] as f32, u[2] as f32))
+}
+
+/// The eye of a radiance evaluation: three numbers within the core's coordinate range for
+/// points off the mesh (`lights::POINT_LIMIT`), ValueError naming `eye` otherwise.
+pub fn eye(value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Vec3>> {
+    value
+        .filter(|v| !v.is_none())
+        .map(|v| {
+            let e = vec3("eye", v)?;
+            translucent_core::lights::check_point("eye", e).map_err(to_py)
+        })
+        .transpose()
+}
+
+fn describe(value: &Bound<'_, PyAny>) -> String {
+    let kind = value
+        .get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_else(|_| "object".into());
+    let repr = value
+        .repr()
+        .map(|r| r.to_string())
+        .unwrap_or_else(|_| "?".into());
+    let repr = if repr.len() > 60 {
+        format!("{}...", &repr[..57])
+    } else {
+        repr
+    };
+    format!("{kind} {repr}")
+}
+
+/// An integer argument (`#[pyo3(from_py_with = ...)]`): a Python int or numpy integer, not a
+/// bool or a float, within 64 bits. Its errors are TypeErrors, which pyo3 prefixes with the
+/// argument's name ("argument 'walks': ..."); ranges are checked by `non_negative`.
+pub fn int(value: &Bound<'_, PyAny>) -> PyResult<i64> {
+    use pyo3::exceptions::PyOverflowError;
+    use pyo3::types::{PyBool, PyFloat};
+    if value.is_instance_of::<PyBool>() || value.is_instance_of::<PyFloat>() {
+        return Err(PyTypeError::new_err(format!(
+            "expected an integer, got {}",
+            describe(value)
+        )));
+    }
+    value.extract::<i64>().map_err(|e| {
+        if e.is_instance_of::<PyOverflowError>(value.py()) {
+            PyTypeError::new_err(format!(
+                "expected an integer that fits 64 bits (|n| < 2^63), got {}",
+                describe(value)
+            ))
+        } else {
+            PyTypeError::new_err(format!("expected an integer, got {}", describe(value)))
+        }
+    })
+}
+
+/// An optional integer argument (`from_py_with`): None, or as `int`.
+pub fn opt_int(value: &Bound<'_, PyAny>) -> PyResult<Option<i64>> {
+    if value.is_none() {
+        return Ok(None);
+    }
+    int(value).map(Some)
+}
+
+/// A pair of floats (`from_py_with`), e.g. `eps = (receiver, emitter)`; TypeError (named by
+/// pyo3) for anything else.
+pub fn float_pair(value: &Bound<'_, PyAny>) -> PyResult<(f64, f64)> {
+    let v: Vec<f64> = value.extract().map_err(|_| {
+        PyTypeError::new_err(format!("expected two floats, got {}", describe(value)))
+    })?;
+    <[f64; 2]>::try_from(v.as_slice())
+        .map(|[a, b]| (a, b))
+        .map_err(|_| {
+            PyTypeError::new_err(format!(
+                "expected two floats, got {} value(s): {}",
+                v.len(),
+                describe(value)
+            ))
+        })
+}
+
+/// A progress callback (`from_py_with`): None or a callable taking a fraction in [0, 1];
+/// anything else is a TypeError now (named by pyo3), not when the first call would fail.
+pub fn callback(value: &Bound<'_, PyAny>) -> PyResult<Option<Py<PyAny>>> {
+    if value.is_none() {
+        return Ok(None);
+    }
+    if !value.is_callable() {
+        return Err(PyTypeError::new_err(format!(
+            "expected a callable taking a fraction in [0, 1] (return False to cancel) or None, \
+             got {}",
+            describe(value)
+        )));
+    }
+    Ok(Some(value.clone().unbind()))
+}
+
+/// Receiver vertex indices `name`: a sequence or integer array of ints, each in [0, n).
+/// A string ("0,5"), a lone number (5) or a float (1.5) is a TypeError saying what is wanted;
+/// an index out of range a ValueError naming it.
+pub fn receiver_indices(
+    name: &str,
+    value: Option<&Bound<'_, PyAny>>,
+    n: usize,
+) -> PyResult<Option<Vec<u32>>> {
+    use pyo3::types::{PyBytes, PyString};
+    let Some(value) = value.filter(|v| !v.is_none()) else {
+        return Ok(None);
+    };
+    let wanted = format!("{name} must be integer vertex indices (a sequence or integer array)");
+    if value.is_instance_of::<PyString>() || value.is_instance_of::<PyBytes>() {
+        return Err(PyTypeError::new_err(format!(
+            "{wanted}, got {}; parse the text first",
+            describe(value)
+        )));
+    }
+    let items = value.try_iter().map_err(|_| {
+        PyTypeError::new_err(format!(
+            "{wanted}, got {}; write [i] for one vertex",
+            describe(value)
+        ))
+    })?;
+    let mut out = Vec::new();
+    for (k, item) in items.enumerate() {
+        let item = item?;
+        let i = int(&item).map_err(|_| {
+            PyTypeError::new_err(format!("{wanted}: item {k} is {}", describe(&item)))
+        })?;
+        if !(0..n as i64).contains(&i) {
+            return Err(PyValueError::new_err(format!(
+                "{name}[{k}] = {i}: receiver index out of range for {n} vertices (0..{})",
+                n.saturating_sub(1)
+            )));
+        }
+        out.push(i as u32);
+    }
+    Ok(Some(out))
 }
 
 /// Per-vertex RGB values as an (N, 3) float32 numpy array.

@@ -2,7 +2,7 @@
 //! geometry, lights and material all change.
 
 use crate::call::{busy, run};
-use crate::convert::{non_negative, rgb_array, vec3, vec3_array};
+use crate::convert::{non_negative, rgb_array, vec3_array};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
@@ -60,11 +60,11 @@ impl PyHierarchy {
         scene: PyRef<'_, PyScene>,
         material: PyRef<'_, PyMaterial>,
         profile: &str,
-        eps: (f64, f64),
+        #[pyo3(from_py_with = crate::convert::float_pair)] eps: (f64, f64),
         mode: &str,
-        world_samples: i64,
-        area_samples: i64,
-        estimate_receivers: i64,
+        #[pyo3(from_py_with = crate::convert::int)] world_samples: i64,
+        #[pyo3(from_py_with = crate::convert::int)] area_samples: i64,
+        #[pyo3(from_py_with = crate::convert::int)] estimate_receivers: i64,
         world_shadows: bool,
     ) -> PyResult<Self> {
         let model = crate::material::model(profile)?;
@@ -119,7 +119,7 @@ impl PyHierarchy {
         eye: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let eye = eye.map(|e| vec3("eye", e)).transpose()?;
+        let eye = crate::convert::eye(eye)?;
         let b = run(py, None, |_| self.lock().radiance(&m, eye))?;
         let out = rgb_array(py, &b.values);
         self.keep(b);

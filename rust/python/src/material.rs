@@ -214,7 +214,7 @@ impl PyMaterial {
 pub fn prepare_profile(
     py: Python<'_>,
     material: PyRef<'_, PyMaterial>,
-    progress: Option<Py<PyAny>>,
+    #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
 ) -> PyResult<f64> {
     let m = material.inner;
     run(py, progress, |tick| {
@@ -255,19 +255,16 @@ pub fn table_cache() -> Option<String> {
 
 /// Cycles' `subsurface_random_walk_remap`: the single-scattering albedo for a Base Color
 /// channel and anisotropy g (before the clamp to [0, 0.999999]).
+/// `albedo` in [0, 1], `g` in [0, 0.9]; ValueError naming the argument otherwise.
 #[pyfunction]
-pub fn single_scattering_albedo(albedo: f64, g: f64) -> f64 {
-    principled::single_scattering_albedo(albedo, g)
+pub fn single_scattering_albedo(albedo: f64, g: f64) -> PyResult<f64> {
+    principled::checked_single_scattering_albedo(albedo, g).map_err(to_py)
 }
 
 /// What the Principled BSDF's specular layer leaves to the lobes under it at view cosine
-/// `cos_view`: 1 - E_spec (Cycles' `closure_layering_weight`).
+/// `cos_view`: 1 - E_spec (Cycles' `closure_layering_weight`). Roughness and cos_view in
+/// [0, 1], ior in [1, 5] (what `Material` accepts); ValueError naming the argument otherwise.
 #[pyfunction]
 pub fn layer_weight(roughness: f64, cos_view: f64, ior: f64) -> PyResult<f64> {
-    if ![roughness, cos_view, ior].iter().all(|x| x.is_finite()) || ior < 1.0 {
-        return Err(PyValueError::new_err(
-            "roughness, cos_view and ior must be finite, ior >= 1",
-        ));
-    }
-    Ok(principled::layer_weight(roughness, cos_view, ior))
+    principled::checked_layer_weight(roughness, cos_view, ior).map_err(to_py)
 }

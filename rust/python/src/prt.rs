@@ -1,7 +1,7 @@
 //! `translucent.Prt`: precompute once, then evaluate any material in milliseconds.
 
 use crate::call::{busy, run};
-use crate::convert::{non_negative, rgb_array, to_py, vec3};
+use crate::convert::{non_negative, rgb_array, to_py};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
@@ -43,6 +43,9 @@ pub struct PyPrt {
     single: single::Decision,
     /// The last evaluation's single scattering, when it had any.
     last_single: Mutex<Option<single::SingleEvaluation>>,
+    /// The scene's lighting version counter, and its value when the precompute began.
+    scene_lighting: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    lighting_version: u64,
 }
 
 /// A lock's value, whether or not a panic (caught by `call::run`) poisoned it.
@@ -140,25 +143,25 @@ impl PyPrt {
         py: Python<'_>,
         scene: PyRef<'_, PyScene>,
         materials: &Bound<'_, PyAny>,
-        coefficients: i64,
-        degree: i64,
-        samples: Option<i64>,
+        #[pyo3(from_py_with = crate::convert::int)] coefficients: i64,
+        #[pyo3(from_py_with = crate::convert::int)] degree: i64,
+        #[pyo3(from_py_with = crate::convert::opt_int)] samples: Option<i64>,
         tolerance: f64,
         far_field: f64,
-        world_samples: i64,
-        area_samples: i64,
-        progress: Option<Py<PyAny>>,
+        #[pyo3(from_py_with = crate::convert::int)] world_samples: i64,
+        #[pyo3(from_py_with = crate::convert::int)] area_samples: i64,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
         backend: &str,
         fit_tolerance: Option<f64>,
         profile: &str,
         interreflection: Option<bool>,
-        interreflection_rays: i64,
-        walks: Option<i64>,
-        walk_vertices: i64,
-        walk_rays: Option<i64>,
+        #[pyo3(from_py_with = crate::convert::int)] interreflection_rays: i64,
+        #[pyo3(from_py_with = crate::convert::opt_int)] walks: Option<i64>,
+        #[pyo3(from_py_with = crate::convert::int)] walk_vertices: i64,
+        #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
         single_scattering: Option<bool>,
-        single_coefficients: i64,
-        single_steps: i64,
+        #[pyo3(from_py_with = crate::convert::int)] single_coefficients: i64,
+        #[pyo3(from_py_with = crate::convert::int)] single_steps: i64,
     ) -> PyResult<Self> {
         let model = crate::material::model(profile)?;
         let single_coefficients: usize = non_negative("single_coefficients", single_coefficients)?;
@@ -252,6 +255,8 @@ impl PyPrt {
             ..Default::default()
         };
         let tracer = scene.tracer();
+        let scene_lighting = scene.lighting_counter();
+        let lighting_version = scene_lighting.load(std::sync::atomic::Ordering::Relaxed);
         let core_scene = &scene.scene;
         let lighting = Mutex::new(IrradianceReport::default());
         let inner = run(py, progress, |tick| {
@@ -292,6 +297,8 @@ impl PyPrt {
             lighting: lighting.into_inner().unwrap_or_else(|e| e.into_inner()),
             single,
             last_single: Mutex::new(None),
+            scene_lighting,
+            lighting_version,
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -364,7 +371,7 @@ impl PyPrt {
         phase: &str,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let eye = eye.map(|e| vec3("eye", e)).transpose()?;
+        let eye = crate::convert::eye(eye)?;
         let phase = Phase::parse(phase).map_err(to_py)?;
         let (e, l1) = run(py, None, |_| {
             let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
@@ -387,7 +394,7 @@ impl PyPrt {
         phase: &str,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let eye = eye.map(|e| vec3("eye", e)).transpose()?;
+        let eye = crate::convert::eye(eye)?;
         let phase = Phase::parse(phase).map_err(to_py)?;
         if self.read()?.single_scattering().is_none() {
             return Err(PyValueError::new_err(format!(
@@ -438,20 +445,41 @@ impl PyPrt {
             d.set_item("single_seconds", l1.fit_seconds + l1.dot_seconds)?;
         }
         let advised = e.error_estimate.is_some_and(|x| inner.refresh_advised(&x));
-        d.set_item("refresh_advised", advised)?;
+        d.set_item("refresh_advised", advised || self.stale_reason().is_some())?;
         Ok(Some(d))
     }
 
     /// Whether the last evaluation's error estimate says the material left the range the
     /// knots and samples were chosen for (above 1 % and above 3x the representatives' own
     /// estimate): precompute again with this material among `materials`. None before the first.
+    /// True as well, from then on, once the scene's lights or world changed after the
+    /// precompute (`stale_reason` says so).
     #[getter]
     fn refresh_advised(&self) -> PyResult<Option<bool>> {
+        if self.stale_reason().is_some() {
+            return Ok(Some(true));
+        }
         let inner = self.read()?;
         let last = held(&self.last);
         Ok(last
             .as_ref()
             .map(|e| e.error_estimate.is_some_and(|x| inner.refresh_advised(&x))))
+    }
+
+    /// None while the precompute's lighting is the scene's; else a sentence saying the
+    /// scene's lights or world changed since (the transport still holds the old ones).
+    #[getter]
+    fn stale_reason(&self) -> Option<String> {
+        let now = self
+            .scene_lighting
+            .load(std::sync::atomic::Ordering::Relaxed);
+        (now != self.lighting_version).then(|| {
+            format!(
+                "the scene's lights or world changed {} time(s) since this Prt was precomputed; \
+                 it still shows the old lighting: precompute again",
+                now - self.lighting_version
+            )
+        })
     }
 
     /// What the precompute did, skipped, and how long each step took.

@@ -35,13 +35,13 @@ pub fn reference_radiosity_py<'py>(
     material: PyRef<'_, PyMaterial>,
     rel_tol: f64,
     receivers: Option<Bound<'py, PyAny>>,
-    max_level: i64,
-    world_samples: i64,
-    area_samples: i64,
-    progress: Option<Py<PyAny>>,
+    #[pyo3(from_py_with = crate::convert::int)] max_level: i64,
+    #[pyo3(from_py_with = crate::convert::int)] world_samples: i64,
+    #[pyo3(from_py_with = crate::convert::int)] area_samples: i64,
+    #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     details: bool,
     profile: &str,
-    max_nodes: i64,
+    #[pyo3(from_py_with = crate::convert::int)] max_nodes: i64,
 ) -> PyResult<Bound<'py, PyAny>> {
     let max_nodes: usize = non_negative("max_nodes", max_nodes)?;
     let model = crate::material::model(profile)?;
@@ -53,7 +53,11 @@ pub fn reference_radiosity_py<'py>(
     let max_level: u32 = non_negative("max_level", max_level)?;
     let world_samples: u32 = non_negative("world_samples", world_samples)?;
     let area_samples: u32 = non_negative("area_samples", area_samples)?;
-    let receivers = receiver_indices(receivers, scene.scene.mesh.vertex_count())?;
+    let receivers = crate::convert::receiver_indices(
+        "receivers",
+        receivers.as_ref(),
+        scene.scene.mesh.vertex_count(),
+    )?;
     let m = material.inner;
     let irr = IrradianceSettings {
         eta: model.irradiance_eta(&m),
@@ -152,12 +156,12 @@ pub fn reference_radiance_py<'py>(
     scene: PyRef<'_, PyScene>,
     material: PyRef<'_, PyMaterial>,
     profile: &str,
-    walks: i64,
+    #[pyo3(from_py_with = crate::convert::int)] walks: i64,
     receivers: Option<Bound<'py, PyAny>>,
-    seed: u64,
-    world_samples: i64,
-    area_samples: i64,
-    progress: Option<Py<PyAny>>,
+    #[pyo3(from_py_with = crate::convert::int)] seed: i64,
+    #[pyo3(from_py_with = crate::convert::int)] world_samples: i64,
+    #[pyo3(from_py_with = crate::convert::int)] area_samples: i64,
+    #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     details: bool,
     at: &str,
     tunnel: bool,
@@ -180,7 +184,11 @@ pub fn reference_radiance_py<'py>(
     let walks: usize = non_negative("walks", walks)?;
     let world_samples: u32 = non_negative("world_samples", world_samples)?;
     let area_samples: u32 = non_negative("area_samples", area_samples)?;
-    let receivers = receiver_indices(receivers, scene.scene.mesh.vertex_count())?;
+    let receivers = crate::convert::receiver_indices(
+        "receivers",
+        receivers.as_ref(),
+        scene.scene.mesh.vertex_count(),
+    )?;
     let m = material.inner;
     let irr = IrradianceSettings {
         eta: 1.0,
@@ -191,7 +199,7 @@ pub fn reference_radiance_py<'py>(
     };
     let settings = MeshWalkSettings {
         walks,
-        seed: MeshWalkSettings::default().seed ^ seed,
+        seed: MeshWalkSettings::default().seed ^ non_negative::<u64>("seed", seed)?,
         at_bake_points,
         tunnel,
         ..MeshWalkSettings::default()
@@ -238,30 +246,6 @@ pub fn reference_radiance_py<'py>(
     Ok((values, d).into_pyobject(py)?.into_any())
 }
 
-/// Receiver vertex indices from any iterable of ints, each in [0, n).
-fn receiver_indices(receivers: Option<Bound<'_, PyAny>>, n: usize) -> PyResult<Option<Vec<u32>>> {
-    let n = n as i64;
-    receivers
-        .map(|r| -> PyResult<Vec<u32>> {
-            let mut out = Vec::new();
-            for item in r.try_iter()? {
-                let item = item?;
-                let i = item
-                    .extract::<i64>()
-                    .ok()
-                    .filter(|i| (0..n).contains(i))
-                    .ok_or_else(|| {
-                        PyValueError::new_err(format!(
-                            "receiver index {item} out of range for {n} vertices"
-                        ))
-                    })?;
-                out.push(i as u32);
-            }
-            Ok(out)
-        })
-        .transpose()
-}
-
 /// Ground-truth single scattering L^(1) toward `eye` (None: along each normal) by brute force:
 /// Xu 2007 eq. 5 with the exact attenuation and phase function ("hg" or "eddington"),
 /// `steps` cells per channel along the path below each receiver (the same path model, light
@@ -281,20 +265,23 @@ pub fn reference_single_scattering_py<'py>(
     eye: Option<&Bound<'py, PyAny>>,
     receivers: Option<Bound<'py, PyAny>>,
     phase: &str,
-    steps: i64,
-    world_samples: i64,
-    area_samples: i64,
+    #[pyo3(from_py_with = crate::convert::int)] steps: i64,
+    #[pyo3(from_py_with = crate::convert::int)] world_samples: i64,
+    #[pyo3(from_py_with = crate::convert::int)] area_samples: i64,
     details: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let eye = eye.map(|e| crate::convert::vec3("eye", e)).transpose()?;
+    let eye = crate::convert::eye(eye)?;
     let phase = Phase::parse(phase).map_err(to_py)?;
     let steps: usize = non_negative("steps", steps)?;
     let world_samples: u32 = non_negative("world_samples", world_samples)?;
     let area_samples: u32 = non_negative("area_samples", area_samples)?;
-    let receivers: Option<Vec<usize>> =
-        receiver_indices(receivers, scene.scene.mesh.vertex_count())?
-            .map(|v| v.into_iter().map(|x| x as usize).collect());
+    let receivers: Option<Vec<usize>> = crate::convert::receiver_indices(
+        "receivers",
+        receivers.as_ref(),
+        scene.scene.mesh.vertex_count(),
+    )?
+    .map(|v| v.into_iter().map(|x| x as usize).collect());
     let m = material.inner;
     let settings = PathSettings {
         eta: m.eta,

@@ -1,11 +1,12 @@
 //! `translucent.Scene`: a mesh, its lights and its world, and the ray tracer built over it.
 
 use crate::call::run;
-use crate::convert::{rgb, rgb_array, to_py, triangle_array, vec3, vec3_array};
+use crate::convert::{int, rgb, rgb_array, to_py, triangle_array, vec3, vec3_array};
 use numpy::{PyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use translucent_core::irradiance::{irradiance_with_progress, IrradianceSettings};
 use translucent_core::lights::{Light, World};
@@ -18,9 +19,21 @@ use translucent_core::scene::Scene;
 pub struct PyScene {
     pub scene: Scene,
     tracer: OnceLock<Arc<Tracer>>,
+    /// Bumped by every change of lights or world: what a `Prt` compares with the version it
+    /// was precomputed under to say its lighting is stale.
+    lighting: Arc<AtomicU64>,
 }
 
 impl PyScene {
+    /// The scene's lighting version counter, shared with what was precomputed from it.
+    pub fn lighting_counter(&self) -> Arc<AtomicU64> {
+        self.lighting.clone()
+    }
+
+    fn lighting_changed(&self) {
+        self.lighting.fetch_add(1, Ordering::Relaxed);
+    }
+
     /// The ray tracer over the mesh, built on first use (the mesh never changes).
     pub fn tracer(&self) -> Arc<Tracer> {
         self.tracer
@@ -50,6 +63,7 @@ impl PyScene {
         Ok(Self {
             scene: Scene::new(mesh),
             tracer: OnceLock::new(),
+            lighting: Arc::new(AtomicU64::new(0)),
         })
     }
 
@@ -61,9 +75,11 @@ impl PyScene {
         irradiance: f64,
         color: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        let c = colour_or_white(irradiance, color)?;
-        let light = Light::sun(vec3("direction", direction)?, c).map_err(to_py)?;
+        let c = colour_or_white("irradiance", irradiance, color)?;
+        let light =
+            Light::sun(crate::convert::direction("direction", direction)?, c).map_err(to_py)?;
         self.scene.lights.push(light);
+        self.lighting_changed();
         Ok(())
     }
 
@@ -75,9 +91,10 @@ impl PyScene {
         power: f64,
         color: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        let c = colour_or_white(power, color)?;
+        let c = colour_or_white("power", power, color)?;
         let light = Light::point(vec3("position", position)?, c).map_err(to_py)?;
         self.scene.lights.push(light);
+        self.lighting_changed();
         Ok(())
     }
 
@@ -92,16 +109,17 @@ impl PyScene {
         blend: f32,
         color: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        let c = colour_or_white(power, color)?;
+        let c = colour_or_white("power", power, color)?;
         let light = Light::spot(
             vec3("position", position)?,
-            vec3("direction", direction)?,
+            crate::convert::direction("direction", direction)?,
             c,
             spot_size,
             blend,
         )
         .map_err(to_py)?;
         self.scene.lights.push(light);
+        self.lighting_changed();
         Ok(())
     }
 
@@ -119,22 +137,24 @@ impl PyScene {
         power: f64,
         color: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        let c = colour_or_white(power, color)?;
+        let c = colour_or_white("power", power, color)?;
         let light = Light::area(
             vec3("position", position)?,
-            vec3("direction", direction)?,
-            vec3("axis_u", axis_u)?,
+            crate::convert::direction("direction", direction)?,
+            crate::convert::direction("axis_u", axis_u)?,
             size_u,
             size_v,
             c,
         )
         .map_err(to_py)?;
         self.scene.lights.push(light);
+        self.lighting_changed();
         Ok(())
     }
 
     /// The world: a uniform radiance `color` x `strength`, or an equirectangular (H, W, 3)
-    /// radiance `image` x `strength` (Cycles' Environment Texture mapping).
+    /// radiance `image` x `strength` (Cycles' Environment Texture mapping). Giving both
+    /// `color` and `image` is a ValueError: one world is one or the other.
     #[pyo3(signature = (color = None, strength = 1.0, image = None))]
     fn set_world(
         &mut self,
@@ -147,7 +167,14 @@ impl PyScene {
                 "world strength {strength} must be finite and >= 0"
             )));
         }
-        self.scene.world = match image {
+        let given = |v: Option<&Bound<'_, PyAny>>| v.is_some_and(|v| !v.is_none());
+        if given(color) && given(image) {
+            return Err(PyValueError::new_err(
+                "set_world: give color or image, not both (the image would replace the colour); \
+                 to tint an image, multiply it by the colour first",
+            ));
+        }
+        self.scene.world = match image.filter(|i| !i.is_none()) {
             Some(img) => {
                 let np = img.py().import("numpy")?;
                 let arr = np.call_method1("ascontiguousarray", (img, "float32"))?;
@@ -175,6 +202,7 @@ impl PyScene {
                 World::uniform(c.map(|x| (x * strength) as f32)).map_err(to_py)?
             }
         };
+        self.lighting_changed();
         Ok(())
     }
 
@@ -197,6 +225,12 @@ impl PyScene {
     #[getter]
     fn light_count(&self) -> usize {
         self.scene.lights.len()
+    }
+
+    /// A counter bumped by every change of lights or world (what `Prt.stale_reason` reads).
+    #[getter]
+    fn lighting_version(&self) -> u64 {
+        self.lighting.load(Ordering::Relaxed)
     }
 
     /// Per-vertex area (a third of each adjacent triangle): the weights of error metrics.
@@ -223,6 +257,14 @@ impl PyScene {
         d.set_item("degenerate_triangles", r.degenerate_triangles)?;
         d.set_item("isolated_vertices", r.isolated_vertices)?;
         d.set_item("zero_normals", r.zero_normals)?;
+        d.set_item("normals_against_winding", r.normals_against_winding)?;
+        d.set_item("open_edges", r.open_edges)?;
+        d.set_item("non_manifold_edges", r.non_manifold_edges)?;
+        d.set_item("inconsistent_edges", r.inconsistent_edges)?;
+        d.set_item("reversed_pairs", r.reversed_pairs)?;
+        d.set_item("closed_components", r.closed_components)?;
+        d.set_item("inward_components", r.inward_components)?;
+        d.set_item("closed_volume", r.closed_volume)?;
         d.set_item("area", r.area)?;
         Ok(d)
     }
@@ -236,9 +278,9 @@ impl PyScene {
         &self,
         py: Python<'py>,
         eta: f64,
-        world_samples: i64,
-        area_samples: i64,
-        seed: i64,
+        #[pyo3(from_py_with = int)] world_samples: i64,
+        #[pyo3(from_py_with = int)] area_samples: i64,
+        #[pyo3(from_py_with = int)] seed: i64,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         check_eta(eta)?;
@@ -290,10 +332,10 @@ pub fn check_eta(eta: f64) -> PyResult<()> {
     Ok(())
 }
 
-fn colour_or_white(power: f64, color: Option<&Bound<'_, PyAny>>) -> PyResult<[f32; 3]> {
+fn colour_or_white(name: &str, power: f64, color: Option<&Bound<'_, PyAny>>) -> PyResult<[f32; 3]> {
     if !power.is_finite() || power < 0.0 {
         return Err(PyValueError::new_err(format!(
-            "light power/strength {power} must be finite and >= 0"
+            "light {name} {power} must be finite and >= 0"
         )));
     }
     match color {

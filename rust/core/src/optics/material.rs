@@ -73,15 +73,29 @@ impl Layers {
     }
 }
 
+/// The largest coefficient a material may have [1/scene unit]. Profiles per unit area grow
+/// as sigma^2 and the methods store them in single precision (max 3.4e38): 1e15 leaves room.
+/// A denser medium is the same medium in a larger scene unit.
+pub const MAX_COEFFICIENT: f64 = 1e15;
+
 impl Material {
-    /// A validated material: coefficients finite and >= 0, |g| < 1, 1 <= eta <= 5, with the
-    /// default Principled layers.
+    /// A validated material: coefficients finite, >= 0 and at most `MAX_COEFFICIENT`, |g| < 1,
+    /// 1 <= eta <= 5, with the default Principled layers. A zero coefficient is accepted, an
+    /// all-zero medium too: it scatters nothing, so its radiosity is 0 (the continuous limit
+    /// the stability tests approach, docs/stability.md).
     pub fn new(sigma_a: [f64; 3], sigma_s: [f64; 3], g: f64, eta: f64) -> Result<Self> {
         for (name, v) in [("sigma_a", sigma_a), ("sigma_s", sigma_s)] {
             for (c, x) in v.iter().enumerate() {
                 if !x.is_finite() || *x < 0.0 {
                     return Err(Error::InvalidMaterial(format!(
                         "{name}[{c}] = {x}: coefficients must be finite and >= 0 (1/scene unit)"
+                    )));
+                }
+                if *x > MAX_COEFFICIENT {
+                    return Err(Error::InvalidMaterial(format!(
+                        "{name}[{c}] = {x:e}: coefficients must be at most {MAX_COEFFICIENT:e} \
+                         per scene unit (profiles grow as sigma^2 in single precision); use a \
+                         larger scene unit, which divides the coefficients by the same factor"
                     )));
                 }
             }
@@ -179,5 +193,8 @@ mod tests {
         assert!(Material::new([0.0; 3], [1.0; 3], 1.0, 1.3).is_err());
         assert!(Material::new([0.0; 3], [1.0; 3], 0.0, 0.9).is_err());
         assert!(Material::new([0.0; 3], [1.0; 3], 0.99, 2.5).is_ok());
+        let e = Material::new([0.0; 3], [1e39, 1.0, 1.0], 0.0, 1.3).unwrap_err();
+        assert!(e.to_string().contains("sigma_s[0]") && e.to_string().contains("at most 1e15"));
+        assert!(Material::new([1e15; 3], [1e15; 3], 0.0, 1.3).is_ok());
     }
 }

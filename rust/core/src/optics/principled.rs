@@ -73,6 +73,25 @@ fn poly(g: f64, c: [f64; 8]) -> f64 {
     c.iter().rev().fold(0.0, |acc, ci| acc * g + ci)
 }
 
+/// `single_scattering_albedo` over its domain only: `albedo` in [0, 1] (a Base Color channel,
+/// as `from_principled` passes it) and g in `G_RANGE` (Cycles clamps the anisotropy there
+/// before the remap; outside, the fit's polynomials in g run off: g = 2 gives 1.6e-51).
+pub fn checked_single_scattering_albedo(albedo: f64, g: f64) -> Result<f64> {
+    if !(albedo.is_finite() && (0.0..=1.0).contains(&albedo)) {
+        return Err(Error::InvalidArgument(format!(
+            "albedo = {albedo}: a Base Color channel must lie in [0, 1]"
+        )));
+    }
+    if !(g.is_finite() && (G_RANGE.0..=G_RANGE.1).contains(&g)) {
+        return Err(Error::InvalidArgument(format!(
+            "g = {g}: Cycles' random walk takes anisotropy in [{}, {}] (it clamps there before \
+             this remap)",
+            G_RANGE.0, G_RANGE.1
+        )));
+    }
+    Ok(single_scattering_albedo(albedo, g))
+}
+
 /// Cycles' `subsurface_random_walk_remap`: the single-scattering albedo that gives a thick slab
 /// the surface albedo `albedo` (a Base Color channel in [0, 1]) at anisotropy g, before the
 /// clamp to [0, 0.999999] (Chiang et al. 2016; anisotropic terms of Wrenninge et al. 2017).
@@ -318,6 +337,24 @@ pub fn specular_albedo(roughness: f64, mu: f64, ior: f64) -> f64 {
 /// Specular Tint white). A table over mu per (Roughness, IOR), built on first use.
 pub fn layer_weight(roughness: f64, mu: f64, ior: f64) -> f64 {
     layer_table(roughness, ior).weight(mu)
+}
+
+/// `layer_weight` for what a `Material` accepts only: Roughness in [0, 1] (as `Layers`),
+/// view cosine in [0, 1], IOR in [1, 5] (as `Material`'s eta); outside, an error naming the
+/// argument instead of the clamp `layer_weight` applies inside.
+pub fn checked_layer_weight(roughness: f64, mu: f64, ior: f64) -> Result<f64> {
+    for (name, v, lo, hi) in [
+        ("roughness", roughness, 0.0, 1.0),
+        ("cos_view", mu, 0.0, 1.0),
+        ("ior", ior, 1.0, 5.0),
+    ] {
+        if !(v.is_finite() && (lo..=hi).contains(&v)) {
+            return Err(Error::InvalidArgument(format!(
+                "{name} = {v}: must lie in [{lo}, {hi}]"
+            )));
+        }
+    }
+    Ok(layer_weight(roughness, mu, ior))
 }
 
 /// W at MU_SAMPLES + 1 view cosines, linear between them (as Cycles reads its tables).

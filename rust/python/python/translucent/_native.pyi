@@ -143,6 +143,9 @@ class Scene:
     @property
     def light_count(self) -> int: ...
     @property
+    def lighting_version(self) -> int:
+        """Grows with every light or world change (what `Prt.stale_reason` compares)."""
+    @property
     def vertex_coverage(self) -> npt.NDArray[np.float32]:
         """(N,) share of a small disc around each vertex that the surface covers: 1 inside, the
         angle share on an open boundary (1/2 on a straight edge), 0 for unused vertices."""
@@ -150,7 +153,11 @@ class Scene:
     def vertex_areas(self) -> npt.NDArray[np.float32]:
         """(N, 1) area per vertex, the weights of error metrics."""
     @property
-    def mesh_report(self) -> dict[str, float]: ...
+    def mesh_report(self) -> dict[str, float]:
+        """What validation found that is not fatal: degenerate_triangles, isolated_vertices,
+        zero_normals, normals_against_winding, open_edges, non_manifold_edges,
+        inconsistent_edges, reversed_pairs, closed_components, inward_components,
+        closed_volume, area."""
 
 class Prt:
     """Precomputed transport (Xu 2007) of a scene; evaluates a material in milliseconds."""
@@ -251,7 +258,12 @@ class Prt:
     @property
     def refresh_advised(self) -> bool | None:
         """True when the last evaluation's estimated error says the material left the range the
-        basis was chosen for (above 1 % and 3x the representatives' own): precompute again."""
+        basis was chosen for (above 1 % and 3x the representatives' own), or when the scene's
+        lights or world changed since the precompute (`stale_reason`): precompute again."""
+    @property
+    def stale_reason(self) -> str | None:
+        """None while the precompute's lighting is the scene's; else a sentence saying the
+        scene's lights or world changed since."""
     @property
     def report(self) -> dict[str, float | int | bool | list[float]]:
         """What the precompute did and left out: samples, support_radius [unit], knots,
@@ -434,7 +446,9 @@ def reference_single_scattering(
 def relative_error(
     estimate: ArrayN3, truth: ArrayN3, weights: npt.ArrayLike | None = None
 ) -> dict[str, list[float]]:
-    """Area-weighted relative RMS and max relative error per channel."""
+    """Area-weighted relative RMS and max relative error per channel. ValueError for a
+    non-finite value (naming the row) or weights all zero; an all-zero truth channel reads 0
+    where the estimate is 0 there too, inf where it is not."""
 def prepare_profile(material: Material, progress: Progress | None = None) -> float:
     """Builds (or reads from the table cache) the random-walk tables `material` needs under the
     Cycles profile; seconds taken. Releases the GIL."""
@@ -444,6 +458,8 @@ def set_table_cache(path: str | None = None) -> str | None:
     """Folder the walk tables are kept in between sessions (None: memory only)."""
 def table_cache() -> str | None: ...
 def single_scattering_albedo(albedo: float, g: float) -> float:
-    """Cycles' subsurface_random_walk_remap (before its clamp to [0, 0.999999])."""
+    """Cycles' subsurface_random_walk_remap (before its clamp to [0, 0.999999]); albedo in
+    [0, 1], g in [0, 0.9], ValueError naming the argument otherwise."""
 def layer_weight(roughness: float, cos_view: float, ior: float) -> float:
-    """1 - E_spec: what the Principled specular layer leaves to the lobes under it."""
+    """1 - E_spec: what the Principled specular layer leaves to the lobes under it; roughness,
+    cos_view in [0, 1], ior in [1, 5], ValueError naming the argument otherwise."""

@@ -1,8 +1,18 @@
 //! A validated triangle mesh: positions, triangles, vertex normals, areas, and the
 //! area-uniform surface samples every integration over the surface starts from.
 
+pub mod topology;
+
 use crate::error::{Error, Result};
 use glam::Vec3;
+pub use topology::Topology;
+
+/// The largest coordinate magnitude a mesh may have [scene units]. The methods work in single
+/// precision, where a mesh's squared areas (extent^4) overflow above ~1e9 units; 1e8 leaves room.
+pub const COORDINATE_LIMIT: f32 = 1e8;
+/// The smallest bounding-box diagonal a mesh with area may have [scene units]: below, squared
+/// areas (extent^4) fall under single precision's smallest normal number (1.2e-38) with little room.
+pub const MIN_EXTENT: f32 = 1e-8;
 
 /// A triangle mesh in scene units. Built only through `Mesh::new`, which validates it.
 #[derive(Debug, Clone)]
@@ -22,8 +32,28 @@ pub struct MeshReport {
     pub degenerate_triangles: usize,
     /// Vertices referenced by no triangle: they get zero area and radiosity from their position.
     pub isolated_vertices: usize,
-    /// Vertices whose given or computed normal was zero and was replaced by +Z.
+    /// Vertices whose normal was zero at a vertex without area (loose, or only on degenerate
+    /// triangles) and was replaced by +Z. A given zero normal on the surface is refused.
     pub zero_normals: usize,
+    /// Vertices whose given normal points against the area-weighted normal of the triangles
+    /// around them (dot < 0): the normals and the winding disagree there.
+    pub normals_against_winding: usize,
+    /// Edges exactly one triangle uses (0 for a closed surface).
+    pub open_edges: usize,
+    /// Edges three or more triangles use.
+    pub non_manifold_edges: usize,
+    /// Edges whose two triangles are wound opposite ways (an open or broken mesh is not
+    /// refused for it; a consistently wound surface has none).
+    pub inconsistent_edges: usize,
+    /// Pairs of triangles over the same three points wound opposite ways (refused from 1 % of
+    /// the triangles: a double-sided sheet).
+    pub reversed_pairs: usize,
+    /// Closed, consistently wound surfaces, and how many of them are wound inward on their
+    /// own (a cavity inside another surface is, correctly).
+    pub closed_components: usize,
+    pub inward_components: usize,
+    /// Signed volume the closed surfaces enclose [unit^3]: > 0 wound outward.
+    pub closed_volume: f64,
     /// Total surface area [unit^2].
     pub area: f64,
 }
@@ -43,9 +73,11 @@ pub struct SurfaceSample {
 impl Mesh {
     /// Validates and builds a mesh. `normals`, if given, must have one entry per vertex; when
     /// absent, area-weighted vertex normals are computed. Errors: empty input, NaN/Inf
-    /// coordinates, indices out of range, coordinates whose squared lengths or cross products
-    /// overflow f32, a mesh of zero total area. Degenerate triangles among others are reported,
-    /// not fatal.
+    /// coordinates, indices out of range, coordinates beyond `COORDINATE_LIMIT` or an extent
+    /// below `MIN_EXTENT`, a mesh of zero total area, a normal of zero length, a repeated
+    /// triangle, a triangle with its reverse, closed surfaces wound inward (signed volume < 0),
+    /// normals pointing inward on a closed outward mesh. Degenerate triangles among others, open
+    /// edges and inconsistently wound neighbours are reported, not fatal.
     pub fn new(
         positions: Vec<Vec3>,
         triangles: Vec<[u32; 3]>,
@@ -81,43 +113,26 @@ impl Mesh {
             }
             if let Some(i) = normals.iter().position(|p| !p.is_finite()) {
                 return Err(Error::InvalidMesh(format!(
-                    "normal {i} has a non-finite component"
+                    "normals[{i}] = {:?} has a non-finite component; give finite normals, or \
+                     none to have them computed from the triangles",
+                    normals[i]
                 )));
             }
         }
+        check_extent(&positions)?;
 
         let mut report = MeshReport::default();
         let mut triangle_areas = Vec::with_capacity(triangles.len());
         let mut vertex_areas = vec![0.0f32; positions.len()];
         let mut accumulated = vec![Vec3::ZERO; positions.len()];
         let mut used = vec![false; positions.len()];
-        // Coordinates that are finite in f32 can still overflow its squared lengths and cross
-        // products (|x| above ~1.8e19): every later distance would be infinite, so say so here.
         let diagonal = bounding_diagonal(&positions);
-        if !diagonal.is_finite() {
-            let largest = positions
-                .iter()
-                .map(|p| p.abs().max_element())
-                .fold(0.0f32, f32::max);
-            return Err(Error::InvalidMesh(format!(
-                "the mesh's extent overflows single precision: coordinates up to {largest:e} give a \
-                 bounding-box diagonal whose square exceeds {:e}; scale the scene down",
-                f32::MAX
-            )));
-        }
         let scale = diagonal.max(f32::MIN_POSITIVE);
-        for (t, tri) in triangles.iter().enumerate() {
+        for tri in &triangles {
             let [a, b, c] = tri.map(|v| positions[v as usize]);
             let cross = (b - a).cross(c - a);
+            // Finite: `check_extent` keeps |cross|^2 <= (2 sqrt(3) 1e8)^4 ~ 1e34.
             let area = 0.5 * cross.length();
-            if !area.is_finite() {
-                return Err(Error::InvalidMesh(format!(
-                    "triangle {t}'s area overflows single precision (edges up to {:e} units, \
-                     cross product above {:e}); scale the scene down",
-                    (b - a).length().max((c - a).length()),
-                    f32::MAX
-                )));
-            }
             // Zero area relative to the mesh's size, not in absolute units (scale 1e-4..1e4).
             if area <= 1e-12 * scale * scale {
                 report.degenerate_triangles += 1;
@@ -140,6 +155,36 @@ impl Mesh {
             )));
         }
         report.isolated_vertices = used.iter().filter(|u| !**u).count();
+        let top = topology::analyse(
+            &positions,
+            &triangles,
+            &triangle_areas,
+            1e-12 * scale * scale,
+        );
+        check_topology(&top, diagonal)?;
+        report.open_edges = top.open_edges;
+        report.non_manifold_edges = top.non_manifold_edges;
+        report.inconsistent_edges = top.inconsistent_edges;
+        report.reversed_pairs = top.reversed_pairs;
+        report.closed_components = top.closed_components;
+        report.inward_components = top.inward_components;
+        report.closed_volume = top.closed_volume;
+        if let Some(given) = &normals {
+            // A zero normal where there is surface has no direction to shade with (it used to
+            // become +Z silently, changing B x2-13 there); at a vertex without area (loose, or
+            // only on degenerate triangles, where Blender gives zero too) it is replaced.
+            if let Some(i) =
+                (0..given.len()).find(|&i| given[i].length() == 0.0 && accumulated[i] != Vec3::ZERO)
+            {
+                return Err(Error::InvalidMesh(format!(
+                    "normals[{i}] = {:?} has zero length at a vertex on the surface; give unit \
+                     normals (Blender: Mesh > Normals > Recalculate Outside), or none to have them \
+                     computed",
+                    given[i]
+                )));
+            }
+            report.normals_against_winding = check_normals(given, &accumulated, &top)?;
+        }
         let normals = normals.unwrap_or(accumulated);
         let normals = normals
             .into_iter()
@@ -389,6 +434,100 @@ pub fn interpolated_normal(corners: &[Vec3; 3], u: f32, v: f32, flat: Vec3) -> V
     n.try_normalize().unwrap_or(flat)
 }
 
+/// Refuses coordinates beyond `COORDINATE_LIMIT` and a mesh with extent below `MIN_EXTENT`
+/// (but not zero: one point has no area, and is refused for that), saying how to rescale.
+fn check_extent(positions: &[Vec3]) -> Result<()> {
+    let largest = positions
+        .iter()
+        .map(|p| p.abs().max_element())
+        .fold(0.0f32, f32::max);
+    let rescale = "rescale the scene (e.g. to metres; material coefficients, per unit of \
+                   length, scale inversely)";
+    let (lo, hi) = bounds(positions);
+    let diagonal = (hi.as_dvec3() - lo.as_dvec3()).length();
+    if largest > COORDINATE_LIMIT {
+        // Say "overflows" only where it does: squared areas (diagonal^4) beyond f32::MAX.
+        let what = if diagonal.powi(4) > f64::from(f32::MAX) {
+            "the mesh's extent overflows single precision (its squared areas exceed 3.4e38)"
+        } else {
+            "the mesh is too large for single precision with room"
+        };
+        return Err(Error::InvalidMesh(format!(
+            "{what}: coordinates reach {largest:e} scene units, beyond the supported \
+             |x| <= {COORDINATE_LIMIT:e}; {rescale}"
+        )));
+    }
+    if diagonal > 0.0 && diagonal < f64::from(MIN_EXTENT) {
+        return Err(Error::InvalidMesh(format!(
+            "the mesh is {diagonal:e} scene units across (bounding-box diagonal), below the \
+             supported {MIN_EXTENT:e}: in single precision its triangles' squared areas \
+             underflow to zero and its triangles would have no area; {rescale}"
+        )));
+    }
+    Ok(())
+}
+
+/// Refuses what makes every method count surface wrongly: a repeated triangle, a triangle and
+/// its reverse (a double-sided sheet), closed surfaces wound inward.
+fn check_topology(top: &Topology, diagonal: f32) -> Result<()> {
+    if let Some((first, again)) = top.duplicate {
+        return Err(Error::InvalidMesh(format!(
+            "triangle {again} repeats triangle {first} (the same three corners, the same \
+             winding): the surface there would count twice; remove duplicated faces (Blender: \
+             Mesh > Clean Up > Merge by Distance)"
+        )));
+    }
+    // A lone pair (Blender's Suzanne has one) changes B locally; a sheet made double-sided
+    // (every triangle with its reverse) changes it everywhere. Refused from 1 % of the surface.
+    if let Some((first, again)) = top
+        .first_reversed
+        .filter(|_| 200 * top.reversed_pairs > top.triangles)
+    {
+        return Err(Error::InvalidMesh(format!(
+            "triangle {again} is triangle {first} wound the other way ({} such pair(s)): a \
+             double-sided sheet has no inside for light to scatter in; keep one side of each \
+             pair (Blender: Mesh > Clean Up > Merge by Distance), the one facing outward",
+            top.reversed_pairs
+        )));
+    }
+    let d = f64::from(diagonal);
+    if top.closed_volume < -1e-9 * d * d * d {
+        return Err(Error::InvalidMesh(format!(
+            "the mesh is wound inward: its closed surfaces enclose a signed volume of {:e} \
+             (< 0; {} of {} closed surface(s) face inward), so every normal points into the \
+             object and no light would enter; flip it (Blender: Mesh > Normals > Recalculate \
+             Outside, or Flip; a negative object scale mirrors it too: apply the scale), i.e. \
+             reverse each triangle's vertex order",
+            top.closed_volume, top.inward_components, top.closed_components
+        )));
+    }
+    Ok(())
+}
+
+/// How many given normals point against the triangles' winding (dot with the area-weighted
+/// face normal < 0); refused when that is most of the vertices of a closed, outward mesh:
+/// then the normals, not the winding, are flipped.
+fn check_normals(given: &[Vec3], accumulated: &[Vec3], top: &Topology) -> Result<usize> {
+    let (mut against, mut defined) = (0usize, 0usize);
+    for (g, a) in given.iter().zip(accumulated) {
+        if a.length_squared() > 0.0 {
+            defined += 1;
+            if g.dot(*a) < 0.0 {
+                against += 1;
+            }
+        }
+    }
+    let closed = top.open_edges == 0 && top.non_manifold_edges == 0 && top.inconsistent_edges == 0;
+    if closed && top.closed_volume > 0.0 && 2 * against > defined {
+        return Err(Error::InvalidMesh(format!(
+            "the normals point into the object at {against} of {defined} vertices while the \
+             triangles are wound outward: flip the normals (Blender: Mesh > Normals > \
+             Recalculate Outside), or give none to have them computed from the triangles"
+        )));
+    }
+    Ok(against)
+}
+
 fn bounds(points: &[Vec3]) -> (Vec3, Vec3) {
     points.iter().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
@@ -403,7 +542,7 @@ fn bounding_diagonal(points: &[Vec3]) -> f32 {
 
 /// The integration tests' meshes (`tests/common`), for the unit tests too.
 #[cfg(test)]
-#[path = "../tests/common/mod.rs"]
+#[path = "../../tests/common/mod.rs"]
 pub(crate) mod test_meshes;
 
 #[cfg(test)]
@@ -513,31 +652,32 @@ mod tests {
     }
 
     #[test]
-    fn coordinates_overflowing_f32_products_are_refused_saying_so() {
-        // Finite f32 coordinates, but 1e20^2 = 1e40 is not: the diagonal overflows.
-        let big = vec![
-            Vec3::ZERO,
-            Vec3::new(1e20, 0.0, 0.0),
-            Vec3::new(0.0, 1e20, 0.0),
-        ];
-        let e = Mesh::new(big, vec![[0, 1, 2]], None).unwrap_err();
-        assert!(e.to_string().contains("overflows single precision"), "{e}");
-        // A finite diagonal does not make the cross product finite: legs of 1.2e19 give a
-        // squared diagonal of 2.9e38 (< 3.4e38) but a cross product of 1.44e38, squared 2e76.
-        let edge = 1.2e19f32;
-        let p = vec![
-            Vec3::ZERO,
-            Vec3::new(edge, 0.0, 0.0),
-            Vec3::new(0.0, edge, 0.0),
-        ];
-        assert!(bounding_diagonal(&p).is_finite());
-        assert!(
-            !(Vec3::new(edge, 0.0, 0.0).cross(Vec3::new(0.0, edge, 0.0)))
-                .length()
-                .is_finite()
-        );
-        let e = Mesh::new(p, vec![[0, 1, 2]], None).unwrap_err();
-        assert!(e.to_string().contains("triangle 0's area overflows"), "{e}");
+    fn meshes_beyond_the_coordinate_range_are_refused_stating_it() {
+        // 1e10 and 1.2e19: finite in f32, and the old messages claimed a cross product
+        // "above 3.4e38"; the real limit is the stated coordinate range.
+        for r in [1.01e8f32, 1e10, 1.2e19, 1e20] {
+            let p = vec![Vec3::ZERO, Vec3::new(r, 0.0, 0.0), Vec3::new(0.0, r, 0.0)];
+            let e = Mesh::new(p, vec![[0, 1, 2]], None).unwrap_err().to_string();
+            assert!(
+                e.contains("beyond the supported |x| <= 1e8") && e.contains("rescale"),
+                "{e}"
+            );
+        }
+        for r in [1e-12f32, 7e-9] {
+            let p = vec![Vec3::ZERO, Vec3::new(r, 0.0, 0.0), Vec3::new(0.0, r, 0.0)];
+            let e = Mesh::new(p, vec![[0, 1, 2]], None).unwrap_err().to_string();
+            assert!(
+                e.contains("below the supported 1e-8") && e.contains("rescale"),
+                "{e}"
+            );
+        }
+        // Inside the range, at both ends, a triangle has its area.
+        for r in [1e-8f32, 5e7] {
+            let p = vec![Vec3::ZERO, Vec3::new(r, 0.0, 0.0), Vec3::new(0.0, r, 0.0)];
+            let m = Mesh::new(p, vec![[0, 1, 2]], None).unwrap();
+            let exact = 0.5 * f64::from(r) * f64::from(r);
+            assert!((m.area() / exact - 1.0).abs() < 1e-6, "{r}: {}", m.area());
+        }
     }
 
     #[test]
