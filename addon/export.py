@@ -79,6 +79,10 @@ def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool):
     m = np.array(obj.matrix_world, dtype=np.float64)
     co = (co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
     key = f"{counts}:{hashlib.blake2b(co.tobytes(), digest_size=16).hexdigest()}"
+    if tris is not None and np.linalg.det(m[:3, :3]) < 0.0:
+        # A mirroring transform (a negative scale) turns the winding inward while Blender keeps
+        # the shading outward: the exported triangles turn back so they stay outward too.
+        tris = tris[:, ::-1].copy()
     if nrm is not None:
         # Normals transform by the inverse transpose.
         nrm = nrm.reshape(-1, 3) @ np.linalg.inv(m[:3, :3])

@@ -91,3 +91,27 @@ def test_writeback_touches_only_its_own_attribute(empty_blend):
     assert [m.name for m in obj.data.materials] == ["User material"]
     with pytest.raises(ValueError, match="shape"):
         writeback.write_colors(obj.data, colors[:-1])
+
+
+def test_a_mirrored_object_exports_outward(empty_blend):
+    # A negative scale mirrors the triangles' winding while Blender shades the object as
+    # before; the export turns them back, so the core (which refuses an inward mesh) takes it
+    # and a sun from above lights its top, as it does the unmirrored object.
+    bpy = empty_blend
+    from addon import export
+
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0.0, 0.0, 0.0))
+    ball = bpy.context.active_object
+    ball.scale = (-1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    before = mesh_hash(ball.data)
+    scene, _ = export.export_scene([ball])
+    scene.add_sun(direction=(0.0, 0.0, -1.0), irradiance=1.0)
+    e = scene.irradiance()[:, 0]
+    ball.scale = (1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    plain, _ = export.export_scene([ball])
+    plain.add_sun(direction=(0.0, 0.0, -1.0), irradiance=1.0)
+    assert e.max() > 0.5, "the top faces the sun"
+    np.testing.assert_allclose(np.sort(e), np.sort(plain.irradiance()[:, 0]), atol=1e-5)
+    assert mesh_hash(ball.data) == before, "export must not change the user's mesh"
