@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::limits;
 use crate::mesh::{interpolated_normal, Mesh};
 use crate::optics::Material;
-use crate::profiles::{Model, Profile, RadialProfile};
+use crate::profiles::{Profile, ProfileKind, RadialProfile};
 use crate::progress::Ticker;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -34,7 +34,7 @@ pub struct ReferenceSettings {
     /// Most sub-triangles a level may have.
     pub max_nodes: usize,
     /// The radial profile integrated.
-    pub model: Model,
+    pub model: ProfileKind,
 }
 
 impl Default for ReferenceSettings {
@@ -43,7 +43,7 @@ impl Default for ReferenceSettings {
             rel_tol: 1e-3,
             max_level: 4,
             max_nodes: 4_000_000,
-            model: Model::Dipole,
+            model: ProfileKind::Dipole,
         }
     }
 }

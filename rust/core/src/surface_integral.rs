@@ -444,7 +444,7 @@ mod tests {
     //! cancels the walk profile's 1/r at the entry point) with intervals graded toward the apex.
     use super::*;
     use crate::optics::Material;
-    use crate::profiles::{LookupProfile, Model, Profile, RadialProfile};
+    use crate::profiles::{LookupProfile, Profile, ProfileKind, RadialProfile};
 
     fn product_rule(x: DVec3, t: &Triangle, p: &Profile, k: usize) -> f64 {
         let [a, b, c] = t.corners;
@@ -511,8 +511,8 @@ mod tests {
         // Marble in mm: the dipole and Cycles' walk table of the same medium (red channel,
         // the most translucent, and blue).
         let m = Material::preset("marble", 1.0).unwrap();
-        let d = Model::Dipole.profiles(&m).unwrap();
-        let w = Model::Cycles.profiles(&m).unwrap();
+        let d = ProfileKind::Dipole.profiles(&m).unwrap();
+        let w = ProfileKind::Cycles.profiles(&m).unwrap();
         vec![
             ("dipole red", d[0].clone()),
             ("dipole blue", d[2].clone()),
@@ -568,7 +568,7 @@ mod tests {
         // below): both PRECISE, the table's terms FAST.
         let t = skew_triangle();
         for name in ["marble", "ketchup", "skin1"] {
-            for model in [Model::Dipole, Model::Cycles] {
+            for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
                 for scale in [1.0, 8.0] {
                     let m = Material::preset(name, scale).unwrap();
                     let exact = model.profiles(&m).unwrap();
@@ -600,7 +600,7 @@ mod tests {
     fn the_three_channels_at_once_equal_each_alone() {
         let t = skew_triangle();
         let m = Material::preset("skin1", 1.0).unwrap();
-        let p = Model::Dipole.profiles(&m).unwrap();
+        let p = ProfileKind::Dipole.profiles(&m).unwrap();
         for (_, x) in points(&t) {
             let rgb = triangle_integral_rgb(x, &t, &p, &EdgeRule::PRECISE);
             for c in 0..3 {

@@ -11,7 +11,7 @@ use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
 use translucent_core::metrics::{relative_error, ErrorStats};
 use translucent_core::optics::{fresnel_transmittance, Material};
-use translucent_core::profiles::{Model, RadialProfile};
+use translucent_core::profiles::{ProfileKind, RadialProfile};
 use translucent_core::raytrace::Tracer;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::scene::Scene;
@@ -57,7 +57,7 @@ fn rd_total(sigma_a: f64, sigma_s_prime: f64, eta: f64) -> f64 {
     0.5 * a * (1.0 + (-4.0 / 3.0 * big_a * s).exp()) * (-s).exp()
 }
 
-fn settings(model: Model, mode: Mode) -> HierarchySettings {
+fn settings(model: ProfileKind, mode: Mode) -> HierarchySettings {
     HierarchySettings {
         model,
         mode,
@@ -84,7 +84,7 @@ fn sun_over_a_large_plane_gives_the_closed_form() {
         ("skimmilk", 0.2),
     ] {
         let m = Material::preset(name, 1.0).unwrap();
-        for model in [Model::Dipole, Model::Cycles] {
+        for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
             let mut scene = Scene::new(mesh.clone());
             let dir = Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32);
             scene.lights.push(Light::sun(dir, [2.0; 3]).unwrap());
@@ -94,13 +94,13 @@ fn sun_over_a_large_plane_gives_the_closed_form() {
             for c in 0..3 {
                 // B = F_t(θ) E cos θ R_total (dipole); Cycles' walk has no Fresnel on the way in.
                 let expect = match model {
-                    Model::Dipole => {
+                    ProfileKind::Dipole => {
                         fresnel_transmittance(m.eta, cos)
                             * 2.0
                             * cos
                             * rd_total(m.sigma_a[c], m.sigma_s_prime()[c], m.eta)
                     }
-                    Model::Cycles => {
+                    ProfileKind::Cycles => {
                         let p = &model.profiles(&m).unwrap()[c];
                         2.0 * cos * (p.total() + p.point_mass())
                     }
@@ -117,7 +117,7 @@ fn sun_over_a_large_plane_gives_the_closed_form() {
 }
 
 /// The ground truth on `scene` for `receivers`, with the same irradiance estimator.
-fn truth(scene: &Scene, m: &Material, model: Model, receivers: &[u32]) -> Vec<[f32; 3]> {
+fn truth(scene: &Scene, m: &Material, model: ProfileKind, receivers: &[u32]) -> Vec<[f32; 3]> {
     let tracer = Tracer::new(&scene.mesh);
     let s = IrradianceSettings {
         eta: model.irradiance_eta(m),
@@ -141,7 +141,7 @@ fn truth(scene: &Scene, m: &Material, model: Model, receivers: &[u32]) -> Vec<[f
 fn error_on(
     scene: &Scene,
     m: &Material,
-    model: Model,
+    model: ProfileKind,
     receivers: &[u32],
     weights: &[f32],
 ) -> ErrorStats {
@@ -174,7 +174,7 @@ fn radiosity_matches_the_ground_truth_on_a_lumpy_sphere() {
     let scene = lit(mesh, Vec3::new(20.0, -10.0, 30.0));
     for name in ["marble", "ketchup"] {
         let m = Material::preset(name, 1.0).unwrap();
-        for model in [Model::Dipole, Model::Cycles] {
+        for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
             let e = error_on(&scene, &m, model, &receivers, &weights);
             eprintln!("{name} {model:?}: {e:?}");
             assert!(e.worst_rms() < 0.02, "{name} {model:?}: {e:?}");
@@ -207,7 +207,7 @@ fn vertices_on_an_open_edge_match_the_ground_truth() {
         .push(Light::sun(Vec3::new(0.2, 0.1, -1.0), [1.0; 3]).unwrap());
     for name in ["marble", "skimmilk"] {
         let m = Material::preset(name, 1.0).unwrap();
-        for model in [Model::Dipole, Model::Cycles] {
+        for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
             let e = error_on(&scene, &m, model, &receivers, &weights);
             eprintln!("edge, {name} {model:?}: {e:?}");
             assert!(e.worst_rms() < 0.01, "{name} {model:?}: {e:?}");
@@ -220,7 +220,8 @@ fn render_mode_after_a_light_move_equals_a_fresh_evaluation() {
     let mesh = lumpy_sphere(10.0, 16, 32, 0.1);
     let m = Material::preset("skin1", 1.0).unwrap();
     let scene = lit(mesh, Vec3::new(20.0, -10.0, 30.0));
-    let mut render = Hierarchy::new(scene.clone(), settings(Model::Dipole, Mode::Render)).unwrap();
+    let mut render =
+        Hierarchy::new(scene.clone(), settings(ProfileKind::Dipole, Mode::Render)).unwrap();
     let before = render.radiosity(&m).unwrap().values;
     let moved = vec![Light::point(Vec3::new(-25.0, 5.0, -10.0), [4e4; 3]).unwrap()];
     render.set_lights(moved.clone(), World::Black);
@@ -228,7 +229,8 @@ fn render_mode_after_a_light_move_equals_a_fresh_evaluation() {
     assert!(!render.report().relinked, "render mode keeps its links");
     let mut fresh_scene = scene.clone();
     fresh_scene.lights = moved;
-    let mut fresh = Hierarchy::new(fresh_scene, settings(Model::Dipole, Mode::OnTheFly)).unwrap();
+    let mut fresh =
+        Hierarchy::new(fresh_scene, settings(ProfileKind::Dipole, Mode::OnTheFly)).unwrap();
     let expect = fresh.radiosity(&m).unwrap().values;
     let w = render.scene().mesh.vertex_areas().to_vec();
     let e = relative_error(&after, &expect, &w).unwrap();
@@ -242,8 +244,11 @@ fn incremental_after_a_deformation_equals_a_fresh_build() {
     let mesh = lumpy_sphere(10.0, 20, 40, 0.0);
     let m = Material::preset("marble", 1.0).unwrap();
     let scene = lit(mesh.clone(), Vec3::new(20.0, -10.0, 30.0));
-    let mut inc =
-        Hierarchy::new(scene.clone(), settings(Model::Dipole, Mode::Incremental)).unwrap();
+    let mut inc = Hierarchy::new(
+        scene.clone(),
+        settings(ProfileKind::Dipole, Mode::Incremental),
+    )
+    .unwrap();
     inc.radiosity(&m).unwrap();
     // Squash and twist: a deformation, same topology.
     let deformed: Vec<Vec3> = mesh
@@ -264,7 +269,7 @@ fn incremental_after_a_deformation_equals_a_fresh_build() {
     let fresh_mesh = Mesh::new(deformed, mesh.triangles().to_vec(), None).unwrap();
     let mut fresh = Hierarchy::new(
         lit(fresh_mesh, Vec3::new(20.0, -10.0, 30.0)),
-        settings(Model::Dipole, Mode::OnTheFly),
+        settings(ProfileKind::Dipole, Mode::OnTheFly),
     )
     .unwrap();
     let expect = fresh.radiosity(&m).unwrap().values;

@@ -23,7 +23,7 @@ use std::sync::{Arc, OnceLock};
 use translucent_core::optics::principled::{layer_weight, specular_albedo, PrincipledInputs};
 use translucent_core::optics::{Layers, Material};
 use translucent_core::profiles::table::{TableKey, WalkProfile, WalkTable};
-use translucent_core::profiles::{Model, RadialProfile};
+use translucent_core::profiles::{ProfileKind, RadialProfile};
 
 fn config(cases: u32) -> Config {
     let mut c = Config::with_cases(cases);
@@ -197,7 +197,7 @@ proptest! {
             prop_assert!(m.sigma_a.iter().chain(&m.sigma_s).all(|x| x.is_finite() && *x >= 0.0));
             prop_assert!((0.0..=0.9).contains(&m.g));
             // The layers' weight is finite for it, whatever the tables.
-            let w = Model::Cycles.exit_weight(&m, 0.5);
+            let w = ProfileKind::Cycles.exit_weight(&m, 0.5);
             prop_assert!(w.is_finite() && (0.0..=1.0).contains(&w));
         }
     }

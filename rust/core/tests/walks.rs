@@ -10,7 +10,7 @@ mod common;
 
 use translucent_core::mesh::Mesh;
 use translucent_core::optics::{Layers, Material};
-use translucent_core::profiles::{Model, RadialProfile};
+use translucent_core::profiles::{ProfileKind, RadialProfile};
 use translucent_core::raytrace::Tracer;
 use translucent_core::walks::{walk_radiosity, MeshWalkSettings};
 use translucent_core::Vec3;
@@ -178,7 +178,7 @@ fn walks_on_a_half_lit_plane_follow_the_half_space_table() {
     // odd about the edge and costs under 0.1 % at >= 1 cm from it). Both sides of the edge,
     // for three albedos, against the table's profile integrated over the lit half-plane.
     let (m, albedo) = half_space_medium();
-    let profiles = Model::Cycles.profiles(&m).unwrap();
+    let profiles = ProfileKind::Cycles.profiles(&m).unwrap();
     let mesh = grid_box(1.0, 0.5, 251);
     let tracer = Tracer::new(&mesh);
     let e: Vec<[f32; 3]> = mesh
@@ -236,7 +236,7 @@ fn on_a_plane_under_linear_light_the_control_variate_leaves_no_noise() {
     // half-space table's (a separate simulation) times E(v), with almost no spread. Plain
     // walks at 64 per vertex spread by about 10 % here.
     let (m, albedo) = half_space_medium();
-    let profiles = Model::Cycles.profiles(&m).unwrap();
+    let profiles = ProfileKind::Cycles.profiles(&m).unwrap();
     let mesh = grid_box(1.0, 0.5, 101);
     let tracer = Tracer::new(&mesh);
     let e: Vec<[f32; 3]> = mesh

@@ -6,7 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use translucent_core::optics::principled::{self, PrincipledInputs};
 use translucent_core::optics::{Layers, Material};
-use translucent_core::profiles::{table, Model, RadialProfile};
+use translucent_core::profiles::{table, ProfileKind, RadialProfile};
 
 /// A homogeneous translucent material: the medium (coefficients in 1/scene unit) and the
 /// Principled BSDF layers Cycles puts around its subsurface lobe.
@@ -17,8 +17,8 @@ pub struct PyMaterial {
 }
 
 /// "cycles" or "dipole" as a core model.
-pub fn model(profile: &str) -> PyResult<Model> {
-    Model::parse(profile).map_err(to_py)
+pub fn model(profile: &str) -> PyResult<ProfileKind> {
+    ProfileKind::parse(profile).map_err(to_py)
 }
 
 #[pymethods]

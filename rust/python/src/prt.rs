@@ -174,7 +174,8 @@ impl PyPrt {
         }
         // By default what the profile's renderer shows: Cycles has the object's own light, the
         // dipole papers do not.
-        let bounce = interreflection.unwrap_or(model == translucent_core::profiles::Model::Cycles);
+        let bounce =
+            interreflection.unwrap_or(model == translucent_core::profiles::ProfileKind::Cycles);
         let strata = ((rays as f64).sqrt().round() as usize).max(1);
         // Walks through the mesh: by default with Cycles' profile (its walk is what Cycles
         // renders) as many as `walk_rays` rays allow; never for the dipole (it has no walk).
@@ -199,11 +200,13 @@ impl PyPrt {
                     ..WalkTermSettings::default()
                 })
             }
-            None if model == translucent_core::profiles::Model::Cycles => Some(WalkTermSettings {
-                rays: walk_rays,
-                vertices: walk_vertices,
-                ..WalkTermSettings::default()
-            }),
+            None if model == translucent_core::profiles::ProfileKind::Cycles => {
+                Some(WalkTermSettings {
+                    rays: walk_rays,
+                    vertices: walk_vertices,
+                    ..WalkTermSettings::default()
+                })
+            }
             None => None,
         };
         if !matches!(backend, "auto" | "gpu" | "cpu") {

@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use translucent_core::irradiance::{irradiance_with_progress, Density, IrradianceSettings};
 use translucent_core::metrics;
-use translucent_core::profiles::Model;
+use translucent_core::profiles::ProfileKind;
 use translucent_core::progress::cancel_only;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
 use translucent_core::shadow_edges::ShadowEdges;
@@ -175,7 +175,7 @@ pub fn reference_radiance_py<'py>(
             )))
         }
     };
-    if crate::material::model(profile)? != Model::Cycles {
+    if crate::material::model(profile)? != ProfileKind::Cycles {
         return Err(PyValueError::new_err(
             "reference_radiance traces Cycles' random walk (profile='cycles'); for the dipole \
              use reference_radiosity(..., profile='dipole')",
@@ -229,7 +229,7 @@ pub fn reference_radiance_py<'py>(
             Some(tick),
         )
     })?;
-    let k = (Model::Cycles.exit_weight(&m, 1.0) / std::f64::consts::PI) as f32;
+    let k = (ProfileKind::Cycles.exit_weight(&m, 1.0) / std::f64::consts::PI) as f32;
     let to_radiance =
         |v: &[[f32; 3]]| -> Vec<[f32; 3]> { v.iter().map(|b| b.map(|x| x * k)).collect() };
     let values = rgb_array(py, &to_radiance(&result.radiosity));

@@ -228,7 +228,7 @@ fn lerp(table: &[[f32; 4]], i: u32, f: f32) -> f32x4 {
 mod tests {
     use super::*;
     use crate::optics::Material;
-    use crate::profiles::{LookupProfile, Model};
+    use crate::profiles::{LookupProfile, ProfileKind};
     use glam::Vec3;
 
     /// The far rule in f64, as `links` states it: power × ½ (R(d′ − s_r) + R(d′ + s_r)) about
@@ -287,7 +287,7 @@ mod tests {
             tree.pull(&irr);
             // Marble with a mean free path of a few grid cells at either scale.
             let m = Material::preset("marble", 10.0 / f64::from(scale)).unwrap();
-            let profiles = Model::Dipole
+            let profiles = ProfileKind::Dipole
                 .profiles(&m)
                 .unwrap()
                 .map(|d| LookupProfile::new(&d, 1e-4));

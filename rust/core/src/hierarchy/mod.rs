@@ -4,7 +4,7 @@
 //! topology; links between clusters are refined from the root by the solid-angle oracle
 //! (`links`, §3.2, §5.2); irradiance is sampled at the faces and pulled up, gathered over the
 //! links (polygon integral near, point sample far, §3.1, §4), pushed down and averaged to the
-//! vertices (§3.2). Any profile (`profiles::Model`), read through a lookup table.
+//! vertices (§3.2). Any profile (`profiles::ProfileKind`), read through a lookup table.
 //!
 //! Modes (§5.5): on-the-fly refines and gathers from scratch each time, storing no links;
 //! render keeps the links and only gathers the new irradiance over them (after a material or
@@ -30,7 +30,7 @@ use crate::irradiance::{Density, IrradianceSettings, PerSource};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
 use crate::optics::Material;
-use crate::profiles::{LookupProfile, LookupRgb, Model, RadialProfile};
+use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use crate::surface_integral::{EdgeRule, Triangle};
@@ -77,7 +77,7 @@ pub struct HierarchySettings {
     pub eps_receiver: f64,
     /// ε₂: largest solid angle [sr] an emitter may subtend at a far link.
     pub eps_emitter: f64,
-    pub model: Model,
+    pub model: ProfileKind,
     pub mode: Mode,
     /// Share of the profile's total left out beyond its support radius.
     pub support_tolerance: f64,
@@ -97,7 +97,7 @@ impl Default for HierarchySettings {
         Self {
             eps_receiver: 0.005,
             eps_emitter: 0.5,
-            model: Model::Cycles,
+            model: ProfileKind::Cycles,
             mode: Mode::OnTheFly,
             support_tolerance: 1e-4,
             world_samples: 64,

@@ -281,7 +281,7 @@ impl RgbProfile for LookupRgb {
 mod tests {
     use super::*;
     use crate::optics::Material;
-    use crate::profiles::Model;
+    use crate::profiles::ProfileKind;
 
     #[test]
     fn three_channels_on_one_table_follow_each_profile() {
@@ -289,7 +289,7 @@ mod tests {
         // (uniform in √ρ up to the largest) must still follow the shortest one.
         for name in ["marble", "ketchup"] {
             let m = Material::preset(name, 1.0).unwrap();
-            for model in [Model::Dipole, Model::Cycles] {
+            for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
                 let exact = model.profiles(&m).unwrap();
                 let lookup = std::array::from_fn(|c| LookupProfile::new(&exact[c], 1e-4));
                 let rgb = LookupRgb::new(&lookup);
@@ -315,7 +315,7 @@ mod tests {
     #[test]
     fn the_table_follows_the_profile_it_copies() {
         let m = Material::preset("marble", 1.0).unwrap();
-        for model in [Model::Dipole, Model::Cycles] {
+        for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
             for p in model.profiles(&m).unwrap() {
                 let t = LookupProfile::new(&p, 1e-5);
                 let s = p.length_scales();

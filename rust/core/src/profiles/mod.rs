@@ -21,18 +21,18 @@ use crate::optics::{fresnel_transmittance, principled, Material};
 
 /// Which radial profile (and exit weight) a method sums.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Model {
+pub enum ProfileKind {
     /// Jensen's dipole with a smooth Fresnel boundary: the papers' model.
     Dipole,
     /// Cycles' random walk (Blender 5.0, Principled BSDF "Random Walk") with its layers.
     Cycles,
 }
 
-impl Model {
-    pub fn parse(name: &str) -> Result<Model> {
+impl ProfileKind {
+    pub fn parse(name: &str) -> Result<ProfileKind> {
         match name.to_ascii_lowercase().as_str() {
-            "dipole" => Ok(Model::Dipole),
-            "cycles" => Ok(Model::Cycles),
+            "dipole" => Ok(ProfileKind::Dipole),
+            "cycles" => Ok(ProfileKind::Cycles),
             other => Err(Error::InvalidArgument(format!(
                 "profile {other:?}: choose 'cycles' or 'dipole'"
             ))),
@@ -41,8 +41,8 @@ impl Model {
 
     pub fn name(self) -> &'static str {
         match self {
-            Model::Dipole => "dipole",
-            Model::Cycles => "cycles",
+            ProfileKind::Dipole => "dipole",
+            ProfileKind::Cycles => "cycles",
         }
     }
 
@@ -51,8 +51,8 @@ impl Model {
     /// index-matched boundary into a plain Lambertian BSDF (no Fresnel): 1.
     pub fn irradiance_eta(self, material: &Material) -> f64 {
         match self {
-            Model::Dipole => material.eta,
-            Model::Cycles => 1.0,
+            ProfileKind::Dipole => material.eta,
+            ProfileKind::Cycles => 1.0,
         }
     }
 
@@ -62,8 +62,8 @@ impl Model {
     /// (`principled::layer_weight`).
     pub fn exit_weight(self, material: &Material, cos_o: f64) -> f64 {
         match self {
-            Model::Dipole => fresnel_transmittance(material.eta, cos_o),
-            Model::Cycles => {
+            ProfileKind::Dipole => fresnel_transmittance(material.eta, cos_o),
+            ProfileKind::Cycles => {
                 if cos_o <= 0.0 {
                     0.0
                 } else {
@@ -98,8 +98,8 @@ impl Model {
     /// reflection left out). The dipole: 0 (the papers' model has no such layer).
     pub fn specular_reflectance(self, material: &Material, cos_o: f64) -> f64 {
         match self {
-            Model::Dipole => 0.0,
-            Model::Cycles => {
+            ProfileKind::Dipole => 0.0,
+            ProfileKind::Cycles => {
                 if cos_o <= 0.0 {
                     0.0
                 } else {
@@ -116,8 +116,8 @@ impl Model {
     /// (`table::tables_for`); g must lie in Cycles' [0, 0.9].
     pub fn profiles(self, material: &Material) -> Result<[Profile; 3]> {
         match self {
-            Model::Dipole => Ok(Dipole::all(material).map(Profile::Dipole)),
-            Model::Cycles => {
+            ProfileKind::Dipole => Ok(Dipole::all(material).map(Profile::Dipole)),
+            ProfileKind::Cycles => {
                 let tables = table::tables_for(material)?;
                 Ok(std::array::from_fn(|c| {
                     Profile::Walk(WalkProfile::new(&tables, material, c))
@@ -327,7 +327,7 @@ pub(crate) mod tests {
                 })
                 .unwrap();
             let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
-            let got = Model::Cycles.specular_reflectance(&m, 1.0);
+            let got = ProfileKind::Cycles.specular_reflectance(&m, 1.0);
             assert!((got - f0).abs() < 1e-6, "eta {eta}: {got} vs {f0}");
             let half = m
                 .with_layers(Layers {
@@ -335,9 +335,9 @@ pub(crate) mod tests {
                     ..m.layers
                 })
                 .unwrap();
-            assert!((Model::Cycles.specular_reflectance(&half, 1.0) - 0.5 * f0).abs() < 1e-6);
-            assert_eq!(Model::Cycles.specular_reflectance(&m, -0.2), 0.0);
-            assert_eq!(Model::Dipole.specular_reflectance(&m, 1.0), 0.0);
+            assert!((ProfileKind::Cycles.specular_reflectance(&half, 1.0) - 0.5 * f0).abs() < 1e-6);
+            assert_eq!(ProfileKind::Cycles.specular_reflectance(&m, -0.2), 0.0);
+            assert_eq!(ProfileKind::Dipole.specular_reflectance(&m, 1.0), 0.0);
         }
     }
 

@@ -3,7 +3,7 @@
 
 use super::{single, Prt};
 use crate::error::{Error, Result};
-use crate::profiles::Model;
+use crate::profiles::ProfileKind;
 
 /// Where the per-edit dot product runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -79,7 +79,7 @@ impl Prt {
         single: Option<single::SingleScattering>,
     ) -> Result<()> {
         if let Some(s) = &single {
-            if self.model != Model::Dipole {
+            if self.model != ProfileKind::Dipole {
                 return Err(Error::InvalidArgument(format!(
                     "single scattering joins the dipole only: the {} profile already contains it",
                     self.model.name()

@@ -7,7 +7,7 @@ use super::{single, Prt};
 use crate::error::{Error, Result};
 use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
 use crate::optics::Material;
-use crate::profiles::{Model, Profile, RadialProfile};
+use crate::profiles::{Profile, ProfileKind, RadialProfile};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -234,8 +234,8 @@ impl Prt {
             (None, _) => out.push(Skipped::new(
                 "walks through the mesh",
                 match self.model {
-                    Model::Dipole => "the dipole's model is the half-space profile",
-                    Model::Cycles => "not precomputed (walks off)",
+                    ProfileKind::Dipole => "the dipole's model is the half-space profile",
+                    ProfileKind::Cycles => "not precomputed (walks off)",
                 },
             )),
             (Some(_), false) => out.push(Skipped::new(
@@ -295,7 +295,7 @@ impl Prt {
     }
 
     /// Multiple-scattering radiance toward `eye`: L_d = W(w_o) B / pi, W the model's exit
-    /// weight (`Model::exit_weight`: F_t(eta, w_o) for the dipole, Xu 2007 eq. 2; what
+    /// weight (`ProfileKind::exit_weight`: F_t(eta, w_o) for the dipole, Xu 2007 eq. 2; what
     /// Cycles' specular layer lets through for its walk). Vertices facing away from the eye get
     /// 0. Without an eye, the radiance leaving along each vertex normal (what a bake sees).
     pub fn radiance(&self, material: &Material, eye: Option<Vec3>) -> Result<Evaluation> {

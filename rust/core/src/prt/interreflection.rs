@@ -4,8 +4,8 @@
 //! E_ind(x) = int_H L(y(w), -w) (n . w) dw, y(w) the first surface point along w, L the
 //! outgoing radiance there, a sum of sources L = sum_k W_k(mu_y) V_k(y) / pi, each V_k
 //! interpolated from the vertices with its weight per channel W_k at the view cosine mu_y: the
-//! radiosity B under the profile's exit weight (`Model::exit_weight`), and for Cycles the
-//! irradiance the specular layer reflects (`Model::specular_reflectance`). Cosine-weighted
+//! radiosity B under the profile's exit weight (`ProfileKind::exit_weight`), and for Cycles the
+//! irradiance the specular layer reflects (`ProfileKind::specular_reflectance`). Cosine-weighted
 //! directions on a stratified grid (rotated per vertex) give E_ind = pi mean L. Rays that leave
 //! the mesh, or meet the inside of a surface, bring nothing.
 

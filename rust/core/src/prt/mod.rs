@@ -33,7 +33,7 @@ pub mod single;
 mod tests;
 mod tree;
 
-use crate::profiles::Model;
+use crate::profiles::ProfileKind;
 use crate::walks::WalkTerm;
 use basis::{Basis, Fitter};
 use glam::Vec3;
@@ -65,7 +65,7 @@ pub struct Prt {
     whole_mesh: bool,
     /// The index of refraction of the irradiance's Fresnel factor.
     eta: f64,
-    model: Model,
+    model: ProfileKind,
     /// The object's own light: what it adds per vertex, and the source albedo it was computed
     /// with (see `Bounce`).
     bounce: Option<Bounce>,
@@ -90,7 +90,7 @@ impl Prt {
         self.eta
     }
 
-    pub fn model(&self) -> Model {
+    pub fn model(&self) -> ProfileKind {
         self.model
     }
 

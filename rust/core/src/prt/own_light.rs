@@ -4,7 +4,7 @@
 use super::interreflection::{indirect_irradiance, Source};
 use crate::mesh::Mesh;
 use crate::optics::Material;
-use crate::profiles::{Model, Profile, RadialProfile};
+use crate::profiles::{Profile, ProfileKind, RadialProfile};
 use crate::raytrace::Tracer;
 use crate::walks::WalkTerm;
 
@@ -41,11 +41,11 @@ pub(crate) fn totals(p: &[Profile; 3]) -> [f64; 3] {
 }
 
 /// What a surface of `material` (its `profiles`) sends on per unit irradiance toward a viewer
-/// at cosine `cos`, times pi: the exit weight with the view factor (`Model::exit_weights`)
-/// times its lobes' `totals`, plus what it reflects (`Model::specular_reflectance`). Along the
+/// at cosine `cos`, times pi: the exit weight with the view factor (`ProfileKind::exit_weights`)
+/// times its lobes' `totals`, plus what it reflects (`ProfileKind::specular_reflectance`). Along the
 /// normal, a thick slab's albedo.
 pub(super) fn sent_on(
-    model: Model,
+    model: ProfileKind,
     material: &Material,
     profiles: &[Profile; 3],
     cos: f64,
@@ -86,7 +86,7 @@ pub(super) struct Cast {
 pub(super) fn cast(
     mesh: &Mesh,
     tracer: &Tracer,
-    model: Model,
+    model: ProfileKind,
     rep: &Material,
     rep_profiles: &[Profile; 3],
     sent: Sent<'_>,

@@ -4,7 +4,7 @@
 use super::basis::Degree;
 use crate::error::{Error, Result};
 use crate::optics::Material;
-use crate::profiles::Model;
+use crate::profiles::ProfileKind;
 use crate::walks::{WalkTermReport, WalkTermSettings};
 
 /// The most samples the default spacing asks for.
@@ -34,10 +34,10 @@ pub struct PrtSettings {
     /// moments when rho <= far_field (d - rho). 0 sums every sample exactly (brute force).
     pub far_field: f64,
     /// Relative index of refraction the irradiance (its Fresnel factor) was computed for:
-    /// `Model::irradiance_eta` of the materials (1 for Cycles' index-matched walk).
+    /// `ProfileKind::irradiance_eta` of the materials (1 for Cycles' index-matched walk).
     pub eta: f64,
     /// The radial profile the basis is chosen for and edits are fitted to.
-    pub model: Model,
+    pub model: ProfileKind,
     /// The object's own light falling back on it (`interreflection`): `strata` x `strata`
     /// rays per vertex, or None for direct light only.
     pub interreflection: Option<usize>,
@@ -56,7 +56,7 @@ impl Default for PrtSettings {
             tolerance: 1e-5,
             far_field: 0.25,
             eta: 1.3,
-            model: Model::Dipole,
+            model: ProfileKind::Dipole,
             interreflection: None,
             geometry: None,
         }
@@ -140,7 +140,7 @@ pub(super) fn check_settings(representatives: &[Material], s: &PrtSettings) -> R
         }
     }
     if let Some(g) = &s.geometry {
-        if s.model != Model::Cycles {
+        if s.model != ProfileKind::Cycles {
             return Err(Error::InvalidArgument(format!(
                 "walks through the mesh are Cycles' random walk: the {} profile has none",
                 s.model.name()

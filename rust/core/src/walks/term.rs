@@ -41,7 +41,7 @@ use super::radiosity::{ExitLight, MeshWalkSettings};
 use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::optics::{Material, CHANNELS};
-use crate::profiles::{Model, Profile, RadialProfile};
+use crate::profiles::{Profile, ProfileKind, RadialProfile};
 use crate::raytrace::Tracer;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -159,7 +159,7 @@ impl WalkTerm {
         progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
     ) -> Result<WalkTerm> {
         let start = Instant::now();
-        let (lengths, albedo) = lengths_and_albedos(&Model::Cycles.profiles(material)?);
+        let (lengths, albedo) = lengths_and_albedos(&ProfileKind::Cycles.profiles(material)?);
         let passes = Passes::new(
             mesh, tracer, material, irradiance, halfspace, settings, progress, lengths,
         );

@@ -46,12 +46,12 @@ pub struct Decision {
 /// Cycles' profile, whose walk holds every order of scattering already), Some(false) leaves it
 /// out, None takes it when the representatives' share reaches `SHARE_TOLERANCE`.
 pub fn decide(
-    model: crate::profiles::Model,
+    model: crate::profiles::ProfileKind,
     representatives: &[Material],
     request: Option<bool>,
 ) -> Result<Decision> {
-    use crate::profiles::{Model, RadialProfile};
-    if model == Model::Cycles {
+    use crate::profiles::{ProfileKind, RadialProfile};
+    if model == ProfileKind::Cycles {
         if request == Some(true) {
             return Err(Error::InvalidArgument(
                 "single scattering joins the dipole only: Cycles' random-walk profile already \
@@ -92,22 +92,26 @@ pub fn decide(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::profiles::Model;
+    use crate::profiles::ProfileKind;
 
     #[test]
     fn the_share_decides_and_cycles_never_adds_single_scattering() {
         let marble = Material::preset("marble", 1.0).unwrap();
-        let d = decide(Model::Dipole, &[marble], None).unwrap();
+        let d = decide(ProfileKind::Dipole, &[marble], None).unwrap();
         // Marble: albedo ~1, 1/(4 pi) / 2 = 0.040 against R_total / pi = 0.866 / pi = 0.276
         // (Jensen 2001's closed form at alpha' = 0.999, eta 1.3): 0.126 on the worst channel.
         assert!(d.on && (d.share - 0.126).abs() < 0.01, "{d:?}");
-        assert!(!decide(Model::Dipole, &[marble], Some(false)).unwrap().on);
-        assert!(decide(Model::Cycles, &[marble], Some(true)).is_err());
-        let c = decide(Model::Cycles, &[marble], None).unwrap();
+        assert!(
+            !decide(ProfileKind::Dipole, &[marble], Some(false))
+                .unwrap()
+                .on
+        );
+        assert!(decide(ProfileKind::Cycles, &[marble], Some(true)).is_err());
+        let c = decide(ProfileKind::Cycles, &[marble], None).unwrap();
         assert!(!c.on && c.reason.contains("cycles"));
         // No scattering: nothing single scatters toward the eye.
         let dark = Material::new([50.0; 3], [0.0; 3], 0.0, 1.3).unwrap();
-        let d = decide(Model::Dipole, &[dark], None).unwrap();
+        let d = decide(ProfileKind::Dipole, &[dark], None).unwrap();
         assert!(!d.on && d.share < SHARE_TOLERANCE, "{d:?}");
     }
 }
