@@ -81,6 +81,25 @@ def time_it(f, runs: int) -> float:
     return 1e3 * statistics.median(times)
 
 
+def timed(h, run, runs: int) -> tuple[float, float, dict]:
+    """`time_it(run, runs)`: median wall and CPU milliseconds, and the report of `h` after them."""
+    ms = time_it(run, runs)
+    return ms, CPU[-1], dict(h.report)
+
+
+def light_move(h, lights, material):
+    """A run that moves the key light (`h` switches between the two light sets of `lights`,
+    each call the other), then evaluates `material`."""
+    toggle = list(lights)
+
+    def run():
+        h.update(lights=toggle[0])
+        toggle.reverse()
+        h.radiosity(material)
+
+    return run
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=5)
@@ -109,30 +128,13 @@ def main() -> int:
         fly = translucent.Hierarchy(scene, marble, profile=args.profile, mode="on_the_fly")
         first = time.perf_counter() - t0
         build = fly.report["seconds_build"]
-        fly_lights = [moved_light, scene]
-
-        def from_scratch():
-            # A new irradiance too (the lights toggle), then everything from the root.
-            fly.update(lights=fly_lights[0])
-            fly_lights.reverse()
-            fly.radiosity(marble)
-
-        fly_ms = time_it(from_scratch, args.runs)
-        fly_cpu = CPU[-1]
-        fly_report = dict(fly.report)
+        # On the fly a light move is a new irradiance and everything from the root.
+        fly_ms, fly_cpu, fly_report = timed(fly, light_move(fly, (moved_light, scene), marble), args.runs)
 
         render = translucent.Hierarchy(scene, marble, profile=args.profile, mode="render")
         links = render.report["links"]
-        lights = [moved_light, scene]
-
-        def light_move():
-            render.update(lights=lights[0])
-            lights.reverse()
-            render.radiosity(marble)
-
-        render_ms = time_it(light_move, args.runs)
-        render_cpu = CPU[-1]
-        render_report = dict(render.report)
+        render_ms, render_cpu, render_report = timed(render, light_move(render, (moved_light, scene), marble),
+                                                     args.runs)
 
         inc = translucent.Hierarchy(scene, marble, profile=args.profile, mode="incremental")
         k = [0]
@@ -145,9 +147,7 @@ def main() -> int:
             inc.update(positions=q.astype(np.float32))
             inc.radiosity(marble)
 
-        inc_ms = time_it(deform, args.runs)
-        inc_cpu = CPU[-1]
-        inc_report = dict(inc.report)
+        inc_ms, inc_cpu, inc_report = timed(inc, deform, args.runs)
         n = len(t)
         rows.append(dict(n=n, links=links, build=build, first=first, fly=fly_ms, render=render_ms, inc=inc_ms,
                          fly_cpu=fly_cpu, render_cpu=render_cpu, inc_cpu=inc_cpu,

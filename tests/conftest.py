@@ -25,3 +25,13 @@ def empty_blend():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     yield bpy
     bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+@pytest.fixture
+def addon(empty_blend):
+    """The add-on registered in an empty file, unregistered afterwards (the bpy tests' fixture)."""
+    import addon as package
+
+    package.register()
+    yield package
+    package.unregister()

@@ -161,3 +161,67 @@ def mesh_hash(mesh) -> str:
         h.update(a.domain.encode())
         h.update(str(len(a.data)).encode())
     return h.hexdigest()
+
+
+def read_preview(obj) -> np.ndarray:
+    """The add-on's preview colours on a Blender mesh object, (N, 3): what the viewport shows."""
+    from addon import writeback
+
+    attr = obj.data.color_attributes[writeback.ATTRIBUTE]
+    px = np.empty(len(attr.data) * 4, np.float32)
+    attr.data.foreach_get("color", px)
+    return px.reshape(-1, 4)[:, :3]
+
+
+# ---------------------------------------------------------------- headless Blender scenes and panel
+
+
+def key_light(bpy, location=(0.0, -0.15, 0.15), energy: float = 5.0):
+    """A point light "Key" of `energy` watts at `location`, linked to the scene."""
+    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    light.data.energy = energy
+    light.location = location
+    bpy.context.scene.collection.objects.link(light)
+    return light
+
+
+def lit_sphere(bpy, method="PRT"):
+    """A small sphere (114 vertices) with a Displace modifier of strength 0 and a point light."""
+    mat = bpy.data.materials.new("Wax")
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=16, ring_count=8)
+    obj = bpy.context.active_object
+    obj.data.materials.append(mat)
+    displace = obj.modifiers.new("Displace", "DISPLACE")  # no texture: along the normals
+    displace.strength = 0.0
+    light = key_light(bpy)
+    s = mat.translucent
+    s.enabled = True
+    s.preset = "MARBLE"
+    s.coefficients = 8
+    s.method = method
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    return mat, obj, light
+
+
+class Layout:
+    """Stands in for a panel's UILayout: records the labels, accepts everything else."""
+
+    def __init__(self, labels):
+        self.labels = labels
+
+    def label(self, text="", **_):
+        self.labels.append(text)
+
+    def __getattr__(self, name):
+        return lambda *a, **k: self
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+
+
+def draw_panel(addon, mat):
+    from types import SimpleNamespace
+
+    labels = []
+    addon.panel.TRANSLUCENT_PT_material.draw(SimpleNamespace(layout=Layout(labels)), SimpleNamespace(material=mat))
+    return labels

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import translucent
-from helpers import centre_index, fresnel_t, plane, plane_limit
+from helpers import centre_index, fresnel_t, plane, plane_limit, sun_plane
 
 
 # ---------------------------------------------------------------- bad input -> clear errors
@@ -59,9 +59,7 @@ def test_bad_lights_raise_value_error(call, words):
 
 
 def test_bad_prt_arguments_raise_value_error():
-    p, t = plane(9)
-    s = translucent.Scene(p, t)
-    s.add_sun((0, 0, -1), 1.0)
+    p, s = sun_plane(9, 0.2)
     m = translucent.Material.preset("marble")
     with pytest.raises(ValueError, match="at least one material"):
         translucent.Prt(s, [])
@@ -102,9 +100,7 @@ def test_sun_on_plane_matches_closed_form_through_the_whole_api(theta):
 
 
 def test_radiance_is_fresnel_over_pi_times_radiosity():
-    p, t = plane(21, 0.1)
-    s = translucent.Scene(p, t)
-    s.add_sun((0, 0, -1), 1.0)
+    p, s = sun_plane(21, 0.1)
     m = translucent.Material.preset("skin1")
     prt = translucent.Prt(s, m, profile="dipole", single_scattering=False)  # L_d alone
     b = prt.radiosity(m)
@@ -140,9 +136,7 @@ def test_prt_matches_reference_on_a_lit_plane_with_a_shadow_edge():
 
 
 def test_progress_is_reported_and_false_cancels():
-    p, t = plane(31)
-    s = translucent.Scene(p, t)
-    s.add_sun((0, 0, -1), 1.0)
+    p, s = sun_plane(31, 0.2)
     m = translucent.Material.preset("marble")
     seen = []
     translucent.Prt(s, m, progress=lambda f: seen.append(f))
@@ -152,9 +146,7 @@ def test_progress_is_reported_and_false_cancels():
 
 
 def test_exception_in_progress_callback_propagates():
-    p, t = plane(11)
-    s = translucent.Scene(p, t)
-    s.add_sun((0, 0, -1), 1.0)
+    p, s = sun_plane(11, 0.2)
 
     def boom(f):
         raise KeyError("from the callback")
@@ -164,9 +156,7 @@ def test_exception_in_progress_callback_propagates():
 
 
 def test_precompute_releases_the_gil():
-    p, t = plane(101, 0.2)
-    s = translucent.Scene(p, t)
-    s.add_sun((0, 0, -1), 1.0)
+    p, s = sun_plane(101, 0.2)
     m = translucent.Material.preset("marble")
     ticks = 0
     done = threading.Event()

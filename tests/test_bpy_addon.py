@@ -5,27 +5,9 @@ cancelling, save and reload; the user's data stays untouched."""
 import numpy as np
 import pytest
 
-from helpers import mesh_hash
+from helpers import key_light, mesh_hash, read_preview
 
 pytestmark = pytest.mark.bpy
-
-
-@pytest.fixture
-def addon(empty_blend):
-    import addon as package
-
-    package.register()
-    yield package
-    package.unregister()
-
-
-def read_preview(obj):
-    from addon import writeback
-
-    attr = obj.data.color_attributes[writeback.ATTRIBUTE]
-    px = np.empty(len(attr.data) * 4, np.float32)
-    attr.data.foreach_get("color", px)
-    return px.reshape(-1, 4)[:, :3]
 
 
 def scene_with_two_spheres(bpy):
@@ -38,10 +20,7 @@ def scene_with_two_spheres(bpy):
         objs.append(o)
     smooth = objs[0].modifiers.new("Smooth", "SMOOTH")  # keeps the vertex count
     smooth.factor = 0.5
-    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
-    light.data.energy = 5.0
-    light.location = (0.0, -0.2, 0.2)
-    bpy.context.scene.collection.objects.link(light)
+    light = key_light(bpy, (0.0, -0.2, 0.2))
     bpy.context.view_layer.objects.active = objs[0]
     return mat, objs, light
 

@@ -18,47 +18,16 @@ import pathlib
 import numpy as np
 import pytest
 
-from helpers import mesh_hash
-from test_bpy_addon import read_preview
+from helpers import draw_panel, lit_sphere, mesh_hash, read_preview
 
 pytestmark = pytest.mark.bpy
 
 ADDON = pathlib.Path(__file__).resolve().parents[1] / "addon"
 
 
-@pytest.fixture
-def addon(empty_blend):
-    import addon as package
-
-    package.register()
-    yield package
-    package.unregister()
-
-
 def node_inputs(mat):
     return [(n.name, i.identifier, tuple(i.default_value) if hasattr(i.default_value, "__len__") else i.default_value)
             for n in mat.node_tree.nodes for i in n.inputs if hasattr(i, "default_value")]
-
-
-def lit_sphere(bpy, method="PRT"):
-    """A small sphere (114 vertices) with a Displace modifier of strength 0 and a point light."""
-    mat = bpy.data.materials.new("Wax")
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=16, ring_count=8)
-    obj = bpy.context.active_object
-    obj.data.materials.append(mat)
-    displace = obj.modifiers.new("Displace", "DISPLACE")  # no texture: along the normals
-    displace.strength = 0.0
-    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
-    light.data.energy = 5.0
-    light.location = (0.0, -0.15, 0.15)
-    bpy.context.scene.collection.objects.link(light)
-    s = mat.translucent
-    s.enabled = True
-    s.preset = "MARBLE"
-    s.coefficients = 8
-    s.method = method
-    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
-    return mat, obj, light
 
 
 def precomputed_preview(bpy, mat, obj):
@@ -243,30 +212,6 @@ def test_without_following_the_panel_says_stale_and_nothing_refreshes(addon):
     mat.translucent.follow_scene = True
     follow.follow_now()
     assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
-
-
-class Layout:
-    """Stands in for a panel's UILayout: records the labels, accepts everything else."""
-
-    def __init__(self, labels):
-        self.labels = labels
-
-    def label(self, text="", **_):
-        self.labels.append(text)
-
-    def __getattr__(self, name):
-        return lambda *a, **k: self
-
-    def __setattr__(self, name, value):
-        object.__setattr__(self, name, value)
-
-
-def draw_panel(addon, mat):
-    from types import SimpleNamespace
-
-    labels = []
-    addon.panel.TRANSLUCENT_PT_material.draw(SimpleNamespace(layout=Layout(labels)), SimpleNamespace(material=mat))
-    return labels
 
 
 def test_the_panel_draw_evaluates_no_mesh(addon, monkeypatch):

@@ -46,19 +46,10 @@ def build(bpy):
 
 def bake_direct_diffuse(bpy, obj, samples: int) -> np.ndarray:
     """Cycles' direct diffuse light without the albedo (E / pi) at each vertex."""
-    from blender_scripts.lib.cycles_reference import use_cycles
+    from blender_scripts.lib.cycles_reference import bake_diffuse_vertex_colors, use_cycles
 
     use_cycles(samples)
-    mesh = obj.data
-    attr = mesh.color_attributes.new("bake", "FLOAT_COLOR", "POINT")
-    mesh.color_attributes.active_color = attr
-    bpy.ops.object.select_all(action="DESELECT")
-    obj.select_set(True)
-    bpy.context.view_layer.objects.active = obj
-    bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT"}, target="VERTEX_COLORS")
-    px = np.empty(len(mesh.vertices) * 4, np.float32)
-    mesh.color_attributes["bake"].data.foreach_get("color", px)
-    return px.reshape(-1, 4)[:, :3]
+    return bake_diffuse_vertex_colors(obj, {"DIRECT"})
 
 
 def test_irradiance_matches_a_cycles_diffuse_bake(empty_blend):

@@ -6,19 +6,9 @@ and changes nothing else; a missing or switched-off material is an error naming 
 import numpy as np
 import pytest
 
-from helpers import mesh_hash
-from test_bpy_addon import read_preview
+from helpers import key_light, mesh_hash, read_preview
 
 pytestmark = pytest.mark.bpy
-
-
-@pytest.fixture
-def addon(empty_blend):
-    import addon as package
-
-    package.register()
-    yield package
-    package.unregister()
 
 
 def scene_with_a_floor(bpy):
@@ -35,10 +25,7 @@ def scene_with_a_floor(bpy):
     jade.translucent.enabled = True  # previewable, but not asked for
     bpy.ops.mesh.primitive_plane_add(size=0.5, location=(0.0, 0.0, -0.05))
     floor = bpy.context.active_object
-    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
-    light.data.energy = 5.0
-    light.location = (0.0, -0.15, 0.15)
-    bpy.context.scene.collection.objects.link(light)
+    key_light(bpy)
     s = wax.translucent
     s.enabled = True
     s.preset = "MARBLE"

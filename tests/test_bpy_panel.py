@@ -10,18 +10,9 @@ import re
 import numpy as np
 import pytest
 
-from test_bpy_follow import draw_panel, lit_sphere
+from helpers import draw_panel, lit_sphere
 
 pytestmark = pytest.mark.bpy
-
-
-@pytest.fixture
-def addon(empty_blend):
-    import addon as package
-
-    package.register()
-    yield package
-    package.unregister()
 
 
 def percent(estimate) -> str:

@@ -68,7 +68,7 @@ def test_low_single_scattering_albedo_is_flagged_inexact():
 
 def ortho_cycles(bpy, ortho_scale, samples):
     """An orthographic camera `ortho_scale` wide as the scene's, Cycles on the CPU at
-    `samples` spp, no denoising, 16 x 16 pixels, linear EXR out."""
+    `samples` spp, no denoising, 16 x 16 pixels (rendered with `cycles_reference.render_exr`)."""
     from blender_scripts.lib.cycles_reference import use_cycles
 
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
@@ -79,7 +79,6 @@ def ortho_cycles(bpy, ortho_scale, samples):
     use_cycles(samples)
     scene.render.resolution_x = scene.render.resolution_y = 16
     scene.view_settings.view_transform = "Standard"
-    scene.render.image_settings.file_format = "OPEN_EXR"
     return cam, scene
 
 
@@ -91,6 +90,8 @@ def test_a_thick_slab_in_cycles_is_what_the_walk_table_predicts(empty_blend):
     darker than the Base Color (measured with Blender 5.0.1: 0.604, 0.433, 0.244 against
     0.655, 0.491, 0.292); the random-walk table (`slab_reflectance`, Cycles' walk simulated
     in a half-space, independent of this render) predicts it within 2 % per channel."""
+    from blender_scripts.lib.cycles_reference import render_exr
+
     bpy = empty_blend
     p = cycles.to_principled((2.0, 6.0, 20.0), (60.0, 60.0, 60.0), 0.0, 1.3)
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 0, -0.25))
@@ -110,10 +111,7 @@ def test_a_thick_slab_in_cycles_is_what_the_walk_table_predicts(empty_blend):
     bpy.context.scene.world = world
     cam, scene = ortho_cycles(bpy, 0.1, 128)
     cam.location = (0, 0, 1)
-    scene.render.filepath = "/tmp/slab/slab.exr"
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load("/tmp/slab/slab.exr")
-    px = np.array(img.pixels[:], dtype=np.float32).reshape(16, 16, 4)[:, :, :3]
+    px = render_exr(scene)[:, :, :3]
     measured = px.reshape(-1, 3).mean(axis=0)
     ratio = measured / np.array(p.base_color)
     assert np.all(ratio > 0.8) and np.all(ratio < 1.02), ratio
@@ -142,7 +140,7 @@ def test_volume_reference_material_holds_the_coefficients(empty_blend):
 
 
 @pytest.mark.bpy
-def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(empty_blend, tmp_path):
+def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(empty_blend):
     """A 40 cm block of ketchup (the preset at 1 mm = 1/1000 unit) under a sun along its normal,
     seen orthographically from 0, 60 and 75 degrees; the specular layer's own reflection taken
     off (the same render with Base Color black and Subsurface Weight 0). What the subsurface
@@ -152,6 +150,7 @@ def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(emp
     half-space, independent of this render) predicts it within 3 % per channel, and
     tests/helpers.py keeps these renders' figures."""
     import translucent
+    from blender_scripts.lib.cycles_reference import render_exr
     from helpers import CYCLES_VIEW_KETCHUP
 
     bpy = empty_blend
@@ -178,11 +177,7 @@ def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(emp
         t = math.radians(deg)
         cam.location = (0, -0.5 * math.sin(t), 0.5 * math.cos(t))
         cam.rotation_euler = (t, 0, 0)
-        scene.render.filepath = str(tmp_path / f"v{deg}.exr")
-        bpy.ops.render.render(write_still=True)
-        img = bpy.data.images.load(scene.render.filepath)
-        px = np.array(img.pixels[:], dtype=np.float64).reshape(16, 16, 4)[:, :, :3]
-        bpy.data.images.remove(img)
+        px = render_exr(scene)[:, :, :3].astype(np.float64)
         return px.reshape(-1, 3).mean(axis=0)
 
     full = {deg: seen(deg) for deg in (0, 60, 75)}

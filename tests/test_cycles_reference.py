@@ -5,6 +5,8 @@ again. Values are finite, non-negative, one per vertex."""
 import numpy as np
 import pytest
 
+from helpers import key_light
+
 pytestmark = pytest.mark.bpy
 
 
@@ -17,10 +19,7 @@ def test_bakes_are_cached_and_keyed_by_their_inputs(empty_blend, tmp_path, monke
     monkeypatch.setattr(cr, "CACHE", tmp_path)
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.05, segments=16, ring_count=8)
     obj = bpy.context.active_object
-    light = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
-    light.data.energy = 5.0
-    light.location = (0.1, -0.2, 0.2)
-    bpy.context.scene.collection.objects.link(light)
+    light = key_light(bpy, (0.1, -0.2, 0.2))
     m = translucent.Material.preset("skin1", mm_per_unit=1000.0)
     first, seconds = cr.bake_vertices(obj, m, 2)
     assert first.shape == (len(obj.data.vertices), 3)

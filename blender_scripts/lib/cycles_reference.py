@@ -18,6 +18,7 @@ stored with it, so reports can plot it without rendering again.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import pathlib
 import tempfile
@@ -28,6 +29,8 @@ import numpy as np
 
 import translucent
 from translucent import cycles
+
+from blender_scripts.lib.figures import write_png
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
 CACHE = REPO / "out" / "cache" / "cycles"
@@ -112,9 +115,51 @@ def use_cycles(samples: int, seed: int = 0, denoising: bool = False) -> bpy.type
     return scene
 
 
+@contextlib.contextmanager
+def _simulated_in_cycles(obj: bpy.types.Object, material: translucent.Material, samples: int, seed: int,
+                         adaptive: bool):
+    """Cycles at `samples` and `seed`, adaptive sampling on or off, and `obj` in the Principled
+    simulation of `material` (`principled_material`, yielded) while the block runs; afterwards
+    the scene's adaptive sampling and the object's materials as they were, the mapped one removed."""
+    scene = use_cycles(samples, seed)
+    was_adaptive = scene.cycles.use_adaptive_sampling
+    scene.cycles.use_adaptive_sampling = adaptive
+    mat = principled_material(material)
+    old = _with_material(obj, mat)
+    try:
+        yield mat
+    finally:
+        scene.cycles.use_adaptive_sampling = was_adaptive
+        for s, m in zip(obj.material_slots, old):
+            s.material = m
+        bpy.data.materials.remove(mat)
+
+
 def _diffuse_passes(direct_only: bool) -> set[str]:
     """The diffuse bake's passes: light times colour, with or without indirect light."""
     return {"DIRECT", "COLOR"} if direct_only else {"DIRECT", "INDIRECT", "COLOR"}
+
+
+def bake_diffuse_vertex_colors(obj: bpy.types.Object, passes: set[str], also_selected=(), **options) -> np.ndarray:
+    """Cycles' diffuse bake of `passes` (Blender's pass filter: "DIRECT", "INDIRECT", "COLOR")
+    into a temporary colour attribute of `obj` (a mesh with no modifiers), read back per vertex,
+    (N, 3), the attribute removed again. `obj` is the active object; `also_selected` are
+    selected beside it and `options` go to `bpy.ops.object.bake` (for "selected to active").
+    Cycles and its settings as the scene has them."""
+    mesh = obj.data
+    attr = mesh.color_attributes.new("cycles_bake", "FLOAT_COLOR", "POINT")
+    try:
+        mesh.color_attributes.active_color = attr
+        bpy.ops.object.select_all(action="DESELECT")
+        for o in (obj, *also_selected):
+            o.select_set(True)
+        bpy.context.view_layer.objects.active = obj
+        bpy.ops.object.bake(type="DIFFUSE", pass_filter=passes, target="VERTEX_COLORS", **options)
+        px = np.empty(len(mesh.vertices) * 4, np.float32)
+        mesh.color_attributes["cycles_bake"].data.foreach_get("color", px)
+    finally:
+        mesh.color_attributes.remove(mesh.color_attributes["cycles_bake"])
+    return px.reshape(-1, 4)[:, :3]
 
 
 def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples: int, direct_only: bool = False,
@@ -131,28 +176,8 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
                                *_material_key(material)[4:])).encode()).hexdigest()[:24]
 
     def compute():
-        scene = use_cycles(samples, seed)
-        was_adaptive = scene.cycles.use_adaptive_sampling
-        scene.cycles.use_adaptive_sampling = adaptive
-        mat = principled_material(material)
-        old = _with_material(obj, mat)
-        mesh = obj.data
-        attr = mesh.color_attributes.new("cycles_bake", "FLOAT_COLOR", "POINT")
-        try:
-            mesh.color_attributes.active_color = attr
-            bpy.ops.object.select_all(action="DESELECT")
-            obj.select_set(True)
-            bpy.context.view_layer.objects.active = obj
-            bpy.ops.object.bake(type="DIFFUSE", pass_filter=_diffuse_passes(direct_only), target="VERTEX_COLORS")
-            px = np.empty(len(mesh.vertices) * 4, np.float32)
-            attr.data.foreach_get("color", px)
-        finally:
-            scene.cycles.use_adaptive_sampling = was_adaptive
-            mesh.color_attributes.remove(mesh.color_attributes["cycles_bake"])
-            for s, m in zip(obj.material_slots, old):
-                s.material = m
-            bpy.data.materials.remove(mat)
-        return px.reshape(-1, 4)[:, :3]
+        with _simulated_in_cycles(obj, material, samples, seed, adaptive):
+            return bake_diffuse_vertex_colors(obj, _diffuse_passes(direct_only))
 
     return _cached(key, compute)
 
@@ -217,40 +242,39 @@ def bake_receivers(obj: bpy.types.Object, material: translucent.Material, sample
         added_uv = not mesh.uv_layers
         if added_uv:
             mesh.uv_layers.new(name="Translucent bake")
-        scene = use_cycles(samples, seed)
-        was_adaptive = scene.cycles.use_adaptive_sampling
-        scene.cycles.use_adaptive_sampling = False
-        mat = principled_material(material)
-        old = _with_material(obj, mat)
-        helper_mesh.materials.append(mat)
-        attr = helper_mesh.color_attributes.new("cycles_bake", "FLOAT_COLOR", "POINT")
         try:
-            helper_mesh.color_attributes.active_color = attr
-            bpy.ops.object.select_all(action="DESELECT")
-            obj.select_set(True)
-            helper.select_set(True)
-            bpy.context.view_layer.objects.active = helper
-            # A ray from 1e-4 of the mesh's size above each point, back along the normal onto `obj`.
-            bpy.ops.object.bake(type="DIFFUSE", pass_filter=_diffuse_passes(direct_only), target="VERTEX_COLORS",
-                                use_selected_to_active=True, cage_extrusion=1e-4 * size,
-                                max_ray_distance=3e-4 * size)
-            px = np.empty(len(points) * 4, np.float32)
-            attr.data.foreach_get("color", px)
+            with _simulated_in_cycles(obj, material, samples, seed, adaptive=False) as mat:
+                helper_mesh.materials.append(mat)
+                # A ray from 1e-4 of the mesh's size above each point, back along the normal onto `obj`.
+                px = bake_diffuse_vertex_colors(helper, _diffuse_passes(direct_only), also_selected=(obj,),
+                                                use_selected_to_active=True, cage_extrusion=1e-4 * size,
+                                                max_ray_distance=3e-4 * size)
         finally:
-            scene.cycles.use_adaptive_sampling = was_adaptive
             bpy.data.objects.remove(helper)
             bpy.data.meshes.remove(helper_mesh)
             if added_uv:
                 mesh.uv_layers.remove(mesh.uv_layers["Translucent bake"])
-            for s, mm in zip(obj.material_slots, old):
-                s.material = mm
-            bpy.data.materials.remove(mat)
-        first = px.reshape(-1, 3, 4)[:, 0, :3].astype(np.float64)
+        first = px.reshape(-1, 3, 3)[:, 0, :].astype(np.float64)
         values = np.zeros((len(receivers), 3))
         np.add.at(values, np.array(owner), first)
         return (values / np.bincount(owner, minlength=len(receivers))[:, None]).astype(np.float32)
 
     return _cached(key, compute)
+
+
+def render_exr(scene: bpy.types.Scene) -> np.ndarray:
+    """A render of `scene` as it is set (engine, camera, resolution) through a temporary linear
+    OpenEXR file: (height, width, 4) RGBA, float32, top row first."""
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    with tempfile.TemporaryDirectory() as tmp:
+        scene.render.filepath = str(pathlib.Path(tmp) / "frame.exr")
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(scene.render.filepath)
+        try:
+            width, height = img.size
+            return np.array(img.pixels[:], dtype=np.float32).reshape(height, width, 4)[::-1]
+        finally:
+            bpy.data.images.remove(img)
 
 
 def render_image(obj: bpy.types.Object, material: translucent.Material, samples: int, engine: str = "CYCLES",
@@ -275,21 +299,14 @@ def render_image(obj: bpy.types.Object, material: translucent.Material, samples:
         scene.render.film_transparent = True
         scene.render.resolution_x = scene.render.resolution_y = size
         scene.view_settings.view_transform = "Standard"
-        scene.render.image_settings.file_format = "OPEN_EXR"
         mat = principled_material(material)
         old = _with_material(obj, mat)
         try:
-            with tempfile.TemporaryDirectory() as tmp:
-                scene.render.filepath = str(pathlib.Path(tmp) / "frame.exr")
-                bpy.ops.render.render(write_still=True)
-                img = bpy.data.images.load(scene.render.filepath)
-                px = np.array(img.pixels[:], dtype=np.float32).reshape(size, size, 4)[::-1]
-                bpy.data.images.remove(img)
+            return render_exr(scene)
         finally:
             for s, m in zip(obj.material_slots, old):
                 s.material = m
             bpy.data.materials.remove(mat)
-        return px
 
     return _cached(key, compute)
 
@@ -304,10 +321,5 @@ def render_beside(source: bpy.types.Object, preview: bpy.types.Object, material:
     source.data.materials.clear()
     source.data.materials.append(mat)
     source.hide_render, preview.hide_render = False, True
-    scene = use_cycles(samples, seed=0, denoising=True)
-    scene.render.resolution_x = scene.render.resolution_y = 256
-    scene.view_settings.view_transform = "Standard"
-    scene.render.image_settings.file_format = "PNG"
-    scene.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
+    write_png(use_cycles(samples, seed=0, denoising=True), path)
     source.hide_render, preview.hide_render = True, False

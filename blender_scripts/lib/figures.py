@@ -18,8 +18,16 @@ def render_preview(path: pathlib.Path) -> None:
     scene.render.engine = "BLENDER_WORKBENCH"
     scene.display.shading.light = "FLAT"
     scene.display.shading.color_type = "VERTEX"
-    scene.render.resolution_x = scene.render.resolution_y = 256
     scene.render.film_transparent = False
+    write_png(scene, path)
+
+
+def write_png(scene, path: pathlib.Path, size: int = 256) -> None:
+    """Renders `scene` with its engine as it is set, `size` px square, Blender's Standard view
+    transform, to the PNG `path`."""
+    import bpy
+
+    scene.render.resolution_x = scene.render.resolution_y = size
     scene.view_settings.view_transform = "Standard"
     scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = str(path)
