@@ -17,13 +17,6 @@ use translucent_core::progress::cancel_only;
 use translucent_core::prt::basis::Degree;
 use translucent_core::walks::WalkTermSettings;
 
-/// The walks' default ray budget: 20 M rays (8-9 s on 2 cores for the 10 cm bunny), at least
-/// 600 per vertex (a larger mesh gets the bunny's walks per vertex, so the same noise per
-/// vertex, in proportionally more time: the horse's 48,485 vertices 29 M) and at most 2500 per
-/// vertex (a small mesh needs fewer for the same noise per area).
-const DEFAULT_WALK_RAYS: u64 = 20_000_000;
-const MIN_WALK_RAYS_PER_VERTEX: u64 = 600;
-const MAX_WALK_RAYS_PER_VERTEX: u64 = 2500;
 use translucent_core::prt::{single, Backend, Evaluation, Prt, PrtSettings};
 use translucent_core::single_scattering::{PathSettings, Phase};
 
@@ -182,12 +175,7 @@ impl PyPrt {
         // `walks=N` asks for exactly N per walked vertex and channel, 0 for none.
         let walk_rays: u64 = match walk_rays {
             Some(r) => non_negative("walk_rays", r)?,
-            None => {
-                let n = scene.scene.mesh.vertex_count() as u64;
-                DEFAULT_WALK_RAYS
-                    .max(MIN_WALK_RAYS_PER_VERTEX * n)
-                    .min(MAX_WALK_RAYS_PER_VERTEX * n)
-            }
+            None => translucent_core::prt::default_walk_rays(scene.scene.mesh.vertex_count()),
         };
         let walk_vertices: usize = non_negative("walk_vertices", walk_vertices)?;
         let geometry = match walks {

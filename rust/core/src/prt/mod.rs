@@ -46,7 +46,10 @@ pub use backend::Backend;
 pub use evaluate::{Coefficients, Evaluation, PrtDetails, REFRESH_FACTOR, REFRESH_FLOOR};
 pub use knots::BASIS_SIZES;
 pub use own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
-pub use settings::{PrtReport, PrtSettings, DEFAULT_MAX_SAMPLES};
+pub use settings::{
+    default_walk_rays, PrtReport, PrtSettings, DEFAULT_MAX_SAMPLES, DEFAULT_WALK_RAYS,
+    MAX_WALK_RAYS_PER_VERTEX, MIN_WALK_RAYS_PER_VERTEX,
+};
 
 /// The precomputed transport of one mesh under fixed lighting.
 #[derive(Debug)]

@@ -295,3 +295,13 @@ fn eta_mismatch_and_bad_settings_are_errors() {
     let nan = |p: &[Vec3], _n: &[Vec3], _d: Density| Ok(vec![[f32::NAN; 3]; p.len()]);
     assert!(Prt::precompute(&mesh, &[m], &PrtSettings::default(), &nan, None).is_err());
 }
+
+#[test]
+fn the_default_walk_budget_is_twenty_million_rays_within_600_to_2500_per_vertex() {
+    // The bunny at 10 cm (34,834 vertices): 20 M rays, 574 per vertex -> raised to 600.
+    assert_eq!(default_walk_rays(34_834), 600 * 34_834);
+    // A mid-size mesh gets the flat budget.
+    assert_eq!(default_walk_rays(10_000), 20_000_000);
+    // A small one at most 2500 per vertex.
+    assert_eq!(default_walk_rays(42), 2500 * 42);
+}
