@@ -190,3 +190,20 @@ def test_a_slanted_view_of_a_block_in_cycles_is_what_the_walk_table_predicts(emp
         np.testing.assert_allclose(measured, CYCLES_VIEW_KETCHUP[deg], rtol=0.04, err_msg=f"{deg} degrees")
         predicted = np.array(m.slab_reflectance("cycles", math.cos(math.radians(deg)))) / along
         np.testing.assert_allclose(measured, predicted, rtol=0.03, err_msg=f"{deg} degrees")
+
+
+def test_cycles_clamps_are_blenders_and_stated_once():
+    """The clamps as Blender 5.0.1's Cycles source states them (kernel/closure/bssrdf.h:
+    `bssrdf_setup` clamps anisotropy to [0, 0.9] and the IOR to [1.01, 3.8];
+    kernel/integrator/subsurface_random_walk.h clamps the albedo to 0.999999 and walks below
+    0.2 with 0.2), read through the one place the project keeps them."""
+    import translucent
+
+    assert translucent.CYCLES_CLAMPS == {"anisotropy": (0.0, 0.9), "ior": (1.01, 3.8), "albedo": (0.2, 0.999999)}
+    assert (cycles.MIN_ALPHA, cycles.MAX_ALPHA) == (0.2, 0.999999)
+    assert cycles.G_RANGE == (0.0, 0.9) and cycles.IOR_RANGE == (1.01, 3.8)
+    # The walk refuses what lies outside, naming the clamp.
+    with pytest.raises(ValueError, match=r"\[0(\.0)?, 0\.9\]"):
+        cycles.to_principled((1.0,) * 3, (10.0,) * 3, g=0.95)
+    with pytest.raises(ValueError, match=r"1\.01, 3\.8"):
+        cycles.to_principled((1.0,) * 3, (10.0,) * 3, eta=4.0)

@@ -128,7 +128,7 @@ fn truth(scene: &Scene, m: &Material, model: ProfileKind, receivers: &[u32]) -> 
         irradiance(scene, &tracer, p, n, &s.for_density(d)).map(|(v, _)| v)
     };
     let settings = ReferenceSettings {
-        model,
+        profile: model,
         max_level: 3,
         ..Default::default()
     };

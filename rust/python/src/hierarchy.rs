@@ -67,7 +67,7 @@ impl PyHierarchy {
         #[pyo3(from_py_with = crate::convert::int)] estimate_receivers: i64,
         world_shadows: bool,
     ) -> PyResult<Self> {
-        let model = crate::material::model(profile)?;
+        let model = crate::material::profile_kind(profile)?;
         let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
         let settings = HierarchySettings {
             eps_receiver: eps.0,

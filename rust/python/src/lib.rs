@@ -28,6 +28,13 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
         }
     }
     m.add("LIMITS", limits)?;
+    // Cycles' clamps of the random walk's inputs (`optics::principled`), by name.
+    use translucent_core::optics::principled as p;
+    let clamps = pyo3::types::PyDict::new(m.py());
+    clamps.set_item("anisotropy", p::G_RANGE)?;
+    clamps.set_item("ior", p::IOR_RANGE)?;
+    clamps.set_item("albedo", (p::MIN_ALBEDO, p::MAX_ALBEDO))?;
+    m.add("CYCLES_CLAMPS", clamps)?;
     m.add_class::<material::PyMaterial>()?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<prt::PyPrt>()?;
@@ -45,5 +52,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(material::table_cache, m)?)?;
     m.add_function(wrap_pyfunction!(material::single_scattering_albedo, m)?)?;
     m.add_function(wrap_pyfunction!(material::layer_weight, m)?)?;
+    m.add_function(wrap_pyfunction!(material::principled_for_medium, m)?)?;
     Ok(())
 }

@@ -6,7 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use translucent_core::optics::principled::{self, PrincipledInputs};
 use translucent_core::optics::{Layers, Material};
-use translucent_core::profiles::{table, ProfileKind, RadialProfile};
+use translucent_core::profiles::{table, ProfileKind, Resolved};
 
 /// A homogeneous translucent material: the medium (coefficients in 1/scene unit) and the
 /// Principled BSDF layers Cycles puts around its subsurface lobe.
@@ -17,7 +17,7 @@ pub struct PyMaterial {
 }
 
 /// "cycles" or "dipole" as a core model.
-pub fn model(profile: &str) -> PyResult<ProfileKind> {
+pub fn profile_kind(profile: &str) -> PyResult<ProfileKind> {
     ProfileKind::parse(profile).map_err(to_py)
 }
 
@@ -174,17 +174,18 @@ impl PyMaterial {
         profile: &str,
         cos_view: f64,
     ) -> PyResult<(f64, f64, f64)> {
-        let model = model(profile)?;
+        let model = profile_kind(profile)?;
         if !(cos_view.is_finite() && (0.0..=1.0).contains(&cos_view)) {
             return Err(PyValueError::new_err(format!(
                 "cos_view {cos_view} must lie in [0, 1]"
             )));
         }
         let m = self.inner;
-        let profiles = run(py, None, |_| model.profiles(&m))?;
-        let w = model.exit_weights(&m, &profiles, cos_view);
-        let r = |c: usize| w[c] * (profiles[c].total() + profiles[c].point_mass());
-        Ok((r(0), r(1), r(2)))
+        let r = run(py, None, |tick| {
+            Resolved::with_progress(model, &m, Some(tick))
+        })?;
+        let s = r.slab_reflectance(cos_view);
+        Ok((s[0], s[1], s[2]))
     }
 
     fn __repr__(&self) -> String {
@@ -219,15 +220,7 @@ pub fn prepare_profile(
     let m = material.inner;
     run(py, progress, |tick| {
         let start = std::time::Instant::now();
-        let keys = table::TableKey::of(&m).map_err(|e| match e {
-            translucent_core::Error::InvalidArgument(s) => {
-                translucent_core::Error::InvalidMaterial(s)
-            }
-            other => other,
-        })?;
-        for (key, _) in keys {
-            table::walk_table_with_progress(&key, Some(tick))?;
-        }
+        table::tables_for_with_progress(&m, Some(tick))?;
         Ok(start.elapsed().as_secs_f64())
     })
 }
@@ -259,6 +252,31 @@ pub fn table_cache() -> Option<String> {
 #[pyfunction]
 pub fn single_scattering_albedo(albedo: f64, g: f64) -> PyResult<f64> {
     principled::checked_single_scattering_albedo(albedo, g).map_err(to_py)
+}
+
+/// The Principled inputs under which Cycles simulates the medium (sigma_a, sigma_s) [1 / scene
+/// unit], g, eta: (base_color, radius, scale, exact), radius normalised to its largest channel
+/// and scale that channel's radius x scale; `exact` False where a channel's single-scattering
+/// albedo is below Cycles' 0.2 (Cycles scales the throughput there instead). ValueError for
+/// what Cycles cannot represent, naming it.
+#[pyfunction]
+#[pyo3(signature = (sigma_a, sigma_s, g = 0.0, eta = 1.3))]
+#[allow(clippy::type_complexity)]
+pub fn principled_for_medium(
+    sigma_a: &Bound<'_, PyAny>,
+    sigma_s: &Bound<'_, PyAny>,
+    g: f64,
+    eta: f64,
+) -> PyResult<((f64, f64, f64), (f64, f64, f64), f64, bool)> {
+    let (p, exact) = principled::principled_for_medium(
+        rgb("sigma_a", sigma_a)?,
+        rgb("sigma_s", sigma_s)?,
+        g,
+        eta,
+    )
+    .map_err(to_py)?;
+    let t = |v: [f64; 3]| (v[0], v[1], v[2]);
+    Ok((t(p.base_color), t(p.radius), p.scale, exact))
 }
 
 /// What the Principled BSDF's specular layer leaves to the lobes under it at view cosine

@@ -14,11 +14,9 @@ use translucent_core::irradiance::{
 };
 use translucent_core::optics::Material;
 use translucent_core::progress::cancel_only;
-use translucent_core::prt::basis::Degree;
-use translucent_core::walks::WalkTermSettings;
 
-use translucent_core::prt::{single, Backend, Evaluation, Prt, PrtSettings};
-use translucent_core::single_scattering::{PathSettings, Phase};
+use translucent_core::prt::{path_settings, single, Backend, Evaluation, Prt, PrtRequest};
+use translucent_core::single_scattering::Phase;
 
 use translucent_core::Vec3;
 
@@ -156,87 +154,47 @@ impl PyPrt {
         #[pyo3(from_py_with = crate::convert::int)] single_coefficients: i64,
         #[pyo3(from_py_with = crate::convert::int)] single_steps: i64,
     ) -> PyResult<Self> {
-        let model = crate::material::model(profile)?;
+        let model = crate::material::profile_kind(profile)?;
         let single_coefficients: usize = non_negative("single_coefficients", single_coefficients)?;
         let single_steps: usize = non_negative("single_steps", single_steps)?;
-        let rays: usize = non_negative("interreflection_rays", interreflection_rays)?;
-        if !(1..=1_000_000).contains(&rays) {
-            return Err(PyValueError::new_err(format!(
-                "interreflection_rays {rays} must lie in [1, 1000000]"
-            )));
-        }
-        // By default what the profile's renderer shows: Cycles has the object's own light, the
-        // dipole papers do not.
-        let bounce =
-            interreflection.unwrap_or(model == translucent_core::profiles::ProfileKind::Cycles);
-        let strata = ((rays as f64).sqrt().round() as usize).max(1);
-        // Walks through the mesh: by default with Cycles' profile (its walk is what Cycles
-        // renders) as many as `walk_rays` rays allow; never for the dipole (it has no walk).
-        // `walks=N` asks for exactly N per walked vertex and channel, 0 for none.
-        let walk_rays: u64 = match walk_rays {
-            Some(r) => non_negative("walk_rays", r)?,
-            None => translucent_core::prt::default_walk_rays(scene.scene.mesh.vertex_count()),
-        };
-        let walk_vertices: usize = non_negative("walk_vertices", walk_vertices)?;
-        let geometry = match walks {
-            Some(w) => {
-                let w: usize = non_negative("walks", w)?;
-                (w > 0).then(|| WalkTermSettings {
-                    walks: w,
-                    rays: 0,
-                    vertices: walk_vertices,
-                    ..WalkTermSettings::default()
-                })
-            }
-            None if model == translucent_core::profiles::ProfileKind::Cycles => {
-                Some(WalkTermSettings {
-                    rays: walk_rays,
-                    vertices: walk_vertices,
-                    ..WalkTermSettings::default()
-                })
-            }
-            None => None,
-        };
         if !matches!(backend, "auto" | "gpu" | "cpu") {
             return Err(PyValueError::new_err(format!(
                 "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
             )));
         }
-        let coefficients: usize = non_negative("coefficients", coefficients)?;
-        let degree: u32 = non_negative("degree", degree)?;
-        let samples: Option<usize> = samples.map(|n| non_negative("samples", n)).transpose()?;
+        let request = PrtRequest {
+            profile: model,
+            coefficients: non_negative("coefficients", coefficients)?,
+            fit_tolerance,
+            degree: non_negative("degree", degree)?,
+            samples: samples.map(|n| non_negative("samples", n)).transpose()?,
+            tolerance,
+            far_field,
+            interreflection,
+            interreflection_rays: non_negative("interreflection_rays", interreflection_rays)?,
+            walks: walks.map(|w| non_negative("walks", w)).transpose()?,
+            walk_vertices: non_negative("walk_vertices", walk_vertices)?,
+            walk_rays: walk_rays
+                .map(|r| non_negative("walk_rays", r))
+                .transpose()?,
+        };
         let world_samples: u32 = non_negative("world_samples", world_samples)?;
         let area_samples: u32 = non_negative("area_samples", area_samples)?;
         let materials = materials_of(materials)?;
+        let settings = request
+            .settings(&materials, scene.scene.mesh.vertex_count())
+            .map_err(to_py)?;
+        let eta = settings.eta;
         let single = single::decide(model, &materials, single_scattering).map_err(to_py)?;
         let single_settings = single::SingleSettings {
             coefficients: single_coefficients,
             steps: single_steps,
-            paths: PathSettings {
-                eta: materials.first().map_or(1.3, |m| m.eta),
-                area_samples: area_samples.clamp(1, 16),
-                world_directions: (world_samples / 4).max(4),
-            },
+            paths: path_settings(
+                materials.first().map_or(1.3, |m| m.eta),
+                world_samples,
+                area_samples,
+            ),
             ..Default::default()
-        };
-        // The irradiance's Fresnel factor: the dipole's smooth boundary, or none for Cycles'
-        // walk (it leaves into a plain Lambertian BSDF).
-        let eta = materials
-            .first()
-            .map(|m| model.irradiance_eta(m))
-            .unwrap_or(1.3);
-        let degree = Degree::from_int(degree).map_err(crate::convert::to_py)?;
-        let settings = PrtSettings {
-            coefficients,
-            fit_tolerance,
-            degree,
-            samples,
-            tolerance,
-            far_field,
-            eta,
-            model,
-            interreflection: bounce.then_some(strata),
-            geometry,
         };
         let irr = IrradianceSettings {
             eta,
@@ -480,7 +438,7 @@ impl PyPrt {
         let r = inner.report();
         let d = PyDict::new(py);
         d.set_item("vertices", r.vertices)?;
-        d.set_item("profile", r.model)?;
+        d.set_item("profile", r.profile)?;
         d.set_item("samples", r.samples)?;
         d.set_item("sample_spacing", r.sample_spacing)?;
         d.set_item("near_radius", r.near_radius)?;
@@ -535,10 +493,7 @@ impl PyPrt {
         d.set_item("shadow_edge_triangles", r.shadow_edge_triangles)?;
         d.set_item("shadow_edge_points", r.shadow_edge_points)?;
         d.set_item("seconds_shadow_edges", r.seconds_shadow_edges)?;
-        for (key, report) in [
-            ("walks", &r.geometry),
-            ("walks_indirect", &r.geometry_indirect),
-        ] {
+        for (key, report) in [("walks", &r.walks), ("walks_indirect", &r.walks_indirect)] {
             match report {
                 Some(g) => {
                     let w = PyDict::new(py);
@@ -577,7 +532,7 @@ impl PyPrt {
     /// "cycles" or "dipole".
     #[getter]
     fn profile(&self) -> PyResult<&'static str> {
-        Ok(self.read()?.model().name())
+        Ok(self.read()?.profile().name())
     }
 
     #[getter]

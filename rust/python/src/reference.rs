@@ -12,10 +12,12 @@ use translucent_core::irradiance::{irradiance_with_progress, Density, Irradiance
 use translucent_core::metrics;
 use translucent_core::profiles::ProfileKind;
 use translucent_core::progress::cancel_only;
-use translucent_core::reference::{reference_radiosity, ReferenceSettings};
-use translucent_core::shadow_edges::ShadowEdges;
-use translucent_core::single_scattering::{reference_single, PathSettings, Phase};
-use translucent_core::walks::{walk_radiosity_lit, ExitLight, MeshWalkSettings};
+use translucent_core::prt::path_settings;
+use translucent_core::reference::{
+    reference_radiance, reference_radiosity, RadianceReferenceSettings, ReferenceSettings,
+};
+use translucent_core::single_scattering::{reference_single, Phase};
+use translucent_core::walks::MeshWalkSettings;
 use translucent_core::Vec3;
 
 /// Ground-truth radiosity by direct integration over the mesh (no basis, no clusters) of the
@@ -44,7 +46,7 @@ pub fn reference_radiosity_py<'py>(
     #[pyo3(from_py_with = crate::convert::int)] max_nodes: i64,
 ) -> PyResult<Bound<'py, PyAny>> {
     let max_nodes: usize = non_negative("max_nodes", max_nodes)?;
-    let model = crate::material::model(profile)?;
+    let model = crate::material::profile_kind(profile)?;
     if !(rel_tol.is_finite() && rel_tol > 0.0 && rel_tol < 1.0) {
         return Err(PyValueError::new_err(format!(
             "rel_tol {rel_tol} must lie in (0, 1)"
@@ -70,7 +72,7 @@ pub fn reference_radiosity_py<'py>(
         rel_tol,
         max_level,
         max_nodes,
-        model,
+        profile: model,
     };
     let tracer = scene.tracer();
     let core_scene = &scene.scene;
@@ -175,7 +177,7 @@ pub fn reference_radiance_py<'py>(
             )))
         }
     };
-    if crate::material::model(profile)? != ProfileKind::Cycles {
+    if crate::material::profile_kind(profile)? != ProfileKind::Cycles {
         return Err(PyValueError::new_err(
             "reference_radiance traces Cycles' random walk (profile='cycles'); for the dipole \
              use reference_radiosity(..., profile='dipole')",
@@ -190,59 +192,41 @@ pub fn reference_radiance_py<'py>(
         scene.scene.mesh.vertex_count(),
     )?;
     let m = material.inner;
-    let irr = IrradianceSettings {
-        eta: 1.0,
+    let settings = RadianceReferenceSettings {
+        walks: MeshWalkSettings {
+            walks,
+            seed: MeshWalkSettings::default().seed ^ non_negative::<u64>("seed", seed)?,
+            at_bake_points,
+            tunnel,
+            ..MeshWalkSettings::default()
+        },
         world_samples,
         area_samples,
-        seed: 1,
-        ..Default::default()
-    };
-    let settings = MeshWalkSettings {
-        walks,
-        seed: MeshWalkSettings::default().seed ^ non_negative::<u64>("seed", seed)?,
-        at_bake_points,
-        tunnel,
-        ..MeshWalkSettings::default()
     };
     let tracer = scene.tracer();
     let core_scene = &scene.scene;
     let result = run(py, progress, |tick| {
-        let mesh = &core_scene.mesh;
-        let ask = cancel_only(Some(tick));
-        let lit = irr.for_density(Density::Receivers);
-        let light = |p: &[Vec3], n: &[Vec3]| {
-            irradiance_with_progress(core_scene, &tracer, p, n, &lit, Some(&ask))
-        };
-        let (e, _) = light(mesh.positions(), mesh.normals())?;
-        // The exits read the light finer where a shadow's edge crosses a triangle.
-        let edges = ShadowEdges::new(mesh, &e, &|p, n| light(p, n).map(|(v, _)| v))?;
-        walk_radiosity_lit(
-            mesh,
+        reference_radiance(
+            core_scene,
             &tracer,
             &m,
-            &ExitLight {
-                vertices: &e,
-                edges: &edges,
-            },
             receivers.as_deref(),
             &settings,
             Some(tick),
         )
     })?;
-    let k = (ProfileKind::Cycles.exit_weight(&m, 1.0) / std::f64::consts::PI) as f32;
-    let to_radiance =
-        |v: &[[f32; 3]]| -> Vec<[f32; 3]> { v.iter().map(|b| b.map(|x| x * k)).collect() };
-    let values = rgb_array(py, &to_radiance(&result.radiosity));
+    let values = rgb_array(py, &result.radiance);
     if !details {
         return Ok(values.into_any());
     }
+    let walk = &result.walk;
     let d = PyDict::new(py);
-    d.set_item("std_error", rgb_array(py, &to_radiance(&result.std_error)))?;
-    d.set_item("noise", result.noise.to_vec())?;
-    d.set_item("walks", result.walks)?;
-    d.set_item("rays", result.rays)?;
-    d.set_item("channels_skipped", result.channels_skipped)?;
-    d.set_item("seconds", result.seconds)?;
+    d.set_item("std_error", rgb_array(py, &result.std_error))?;
+    d.set_item("noise", walk.noise.to_vec())?;
+    d.set_item("walks", walk.walks)?;
+    d.set_item("rays", walk.rays)?;
+    d.set_item("channels_skipped", walk.channels_skipped)?;
+    d.set_item("seconds", walk.seconds)?;
     Ok((values, d).into_pyobject(py)?.into_any())
 }
 
@@ -283,11 +267,7 @@ pub fn reference_single_scattering_py<'py>(
     )?
     .map(|v| v.into_iter().map(|x| x as usize).collect());
     let m = material.inner;
-    let settings = PathSettings {
-        eta: m.eta,
-        area_samples: area_samples.clamp(1, 16),
-        world_directions: (world_samples / 4).max(4),
-    };
+    let settings = path_settings(m.eta, world_samples, area_samples);
     let tracer = scene.tracer();
     let core_scene = &scene.scene;
     let start = std::time::Instant::now();

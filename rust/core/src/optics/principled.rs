@@ -30,6 +30,11 @@ use std::sync::{Arc, Mutex, OnceLock};
 /// Cycles' anisotropy and IOR clamps for the random walk (`bssrdf_setup`).
 pub const G_RANGE: (f64, f64) = (0.0, 0.9);
 pub const IOR_RANGE: (f64, f64) = (1.01, 3.8);
+/// Cycles' clamps of the single-scattering albedo: `subsurface_random_walk_remap` clamps it
+/// to at most 0.999999, and `subsurface_random_walk_coefficients` walks a channel below 0.2
+/// with 0.2 and a throughput scaled by alpha / 0.2 instead (not the same medium).
+pub const MIN_ALBEDO: f64 = 0.2;
+pub const MAX_ALBEDO: f64 = 0.999_999;
 
 /// The Principled BSDF inputs that change Cycles' subsurface answer, as Blender names them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -184,6 +189,81 @@ pub fn single_scattering_albedo(albedo: f64, g: f64) -> f64 {
     (1.0 - blend) * a * (b * albedo).atan().powf(c) + blend * d * (e * albedo).atan().powf(f)
 }
 
+/// The Principled inputs under which Cycles simulates the medium (sigma_a, sigma_s) [1 / scene
+/// unit], g and eta: the inverse of `Material::from_principled`'s medium map per channel.
+/// The remap is increasing in the Base Color, so bisection finds it; d = 1 / (sigma_t (1 - g))
+/// gives radius x scale = 4 pi d, with the largest channel's as Subsurface Scale. The layers
+/// are Blender's defaults. Also returns whether every channel is the same medium in Cycles
+/// (alpha >= `MIN_ALBEDO`; below, Cycles scales the throughput instead). Errors for what
+/// Cycles cannot represent: g outside `G_RANGE`, eta outside `IOR_RANGE`, a channel without
+/// scattering or with alpha above `MAX_ALBEDO`.
+pub fn principled_for_medium(
+    sigma_a: [f64; 3],
+    sigma_s: [f64; 3],
+    g: f64,
+    eta: f64,
+) -> Result<(PrincipledInputs, bool)> {
+    let bad = |m: String| Err(Error::InvalidMaterial(m));
+    for (name, v) in [("sigma_a", sigma_a), ("sigma_s", sigma_s)] {
+        if v.iter().any(|x| !x.is_finite() || *x < 0.0) {
+            return bad(format!(
+                "{name} must be three finite values >= 0, got {v:?}"
+            ));
+        }
+    }
+    if !(g.is_finite() && (G_RANGE.0..=G_RANGE.1).contains(&g)) {
+        return bad(format!(
+            "g = {g}: Cycles' random walk takes anisotropy in [{}, {}]",
+            G_RANGE.0, G_RANGE.1
+        ));
+    }
+    if !(eta.is_finite() && (IOR_RANGE.0..=IOR_RANGE.1).contains(&eta)) {
+        return bad(format!(
+            "eta = {eta}: Cycles clamps the subsurface IOR to [{}, {}]",
+            IOR_RANGE.0, IOR_RANGE.1
+        ));
+    }
+    let mut colour = [0.0; 3];
+    let mut radius = [0.0; 3];
+    let mut exact = true;
+    for c in 0..3 {
+        let st = sigma_a[c] + sigma_s[c];
+        if sigma_s[c] <= 0.0 || st <= 0.0 {
+            return bad("every channel needs sigma_s > 0 for a random-walk medium".into());
+        }
+        let alpha = sigma_s[c] / st;
+        if alpha > MAX_ALBEDO {
+            return bad(format!(
+                "single-scattering albedo {alpha} is above Cycles' clamp {MAX_ALBEDO}"
+            ));
+        }
+        exact &= alpha >= MIN_ALBEDO;
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if single_scattering_albedo(mid, g) < alpha {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        colour[c] = 0.5 * (lo + hi);
+        radius[c] = 4.0 * PI / (st * (1.0 - g));
+    }
+    let scale = radius.iter().copied().fold(0.0, f64::max);
+    Ok((
+        PrincipledInputs {
+            base_color: colour,
+            radius: radius.map(|r| r / scale),
+            scale,
+            anisotropy: g,
+            ior: eta,
+            ..PrincipledInputs::default()
+        },
+        exact,
+    ))
+}
+
 impl Material {
     /// The medium and layers Cycles 5.0 renders for a Principled BSDF (method "Random Walk"),
     /// coefficients in 1 / (the unit of radius x scale); `eta` is the IOR the specular layer and
@@ -232,7 +312,8 @@ impl Material {
                     p.radius[c] * p.scale
                 ));
             }
-            let alpha = single_scattering_albedo(p.base_color[c].min(1.0), g).clamp(0.0, 0.999_999);
+            let alpha =
+                single_scattering_albedo(p.base_color[c].min(1.0), g).clamp(0.0, MAX_ALBEDO);
             let sigma_t = 1.0 / d / (1.0 - g);
             sigma_s[c] = alpha * sigma_t;
             sigma_a[c] = (1.0 - alpha) * sigma_t;
@@ -446,6 +527,32 @@ fn layer_table(roughness: f64, ior: f64) -> Arc<LayerTable> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Blender's own forward map, then back: the medium is recovered (from_principled's
+    /// remap is the independent side).
+    #[test]
+    fn principled_for_medium_inverts_the_forward_map() {
+        let inputs = PrincipledInputs {
+            base_color: [0.8, 0.5, 0.3],
+            radius: [1.0, 0.4, 0.2],
+            scale: 0.05,
+            anisotropy: 0.3,
+            ior: 1.4,
+            subsurface_weight: 1.0,
+            ..PrincipledInputs::default()
+        };
+        let m = Material::from_principled(&inputs).unwrap();
+        let (back, exact) = principled_for_medium(m.sigma_a, m.sigma_s, m.g, m.eta).unwrap();
+        assert!(exact);
+        for c in 0..3 {
+            assert!((back.base_color[c] - inputs.base_color[c]).abs() < 1e-9);
+            let r = back.radius[c] * back.scale;
+            assert!((r - inputs.radius[c] * inputs.scale).abs() < 1e-12 * r.max(1.0));
+        }
+        assert!(principled_for_medium([1.0; 3], [0.0; 3], 0.0, 1.3).is_err());
+        assert!(principled_for_medium([1.0; 3], [1.0; 3], 0.95, 1.3).is_err());
+        assert!(principled_for_medium([1.0; 3], [1.0; 3], 0.0, 1.0).is_err());
+    }
 
     #[test]
     fn specular_albedo_matches_cycles_tables() {

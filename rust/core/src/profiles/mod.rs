@@ -9,11 +9,13 @@
 
 pub mod dipole;
 pub mod lookup;
+pub mod resolved;
 pub mod table;
 pub mod walk;
 
 pub use dipole::Dipole;
 pub use lookup::{LookupProfile, LookupRgb};
+pub use resolved::Resolved;
 pub use table::{WalkProfile, WalkTable};
 
 use crate::error::{Error, Result};
@@ -115,10 +117,19 @@ impl ProfileKind {
     /// of the material's (g, IOR, Roughness) are looked up, and built when they are missing
     /// (`table::tables_for`); g must lie in Cycles' [0, 0.9].
     pub fn profiles(self, material: &Material) -> Result<[Profile; 3]> {
+        self.profiles_with_progress(material, None)
+    }
+
+    /// As `profiles`; building missing walk tables reports `progress` and stops on a cancel.
+    pub fn profiles_with_progress(
+        self,
+        material: &Material,
+        progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
+    ) -> Result<[Profile; 3]> {
         match self {
             ProfileKind::Dipole => Ok(Dipole::all(material).map(Profile::Dipole)),
             ProfileKind::Cycles => {
-                let tables = table::tables_for(material)?;
+                let tables = table::tables_for_with_progress(material, progress)?;
                 Ok(std::array::from_fn(|c| {
                     Profile::Walk(WalkProfile::new(&tables, material, c))
                 }))

@@ -25,9 +25,9 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
-/// Cycles' clamps of the single-scattering albedo.
-pub const MIN_ALBEDO: f64 = 0.2;
-pub const MAX_ALBEDO: f64 = 0.999_999;
+use crate::optics::principled::{G_RANGE, IOR_RANGE};
+/// Cycles' clamps of the single-scattering albedo (stated once, in `principled`).
+pub use crate::optics::principled::{MAX_ALBEDO, MIN_ALBEDO};
 /// Albedos on the grid and radial bin edges (optical radius, geometric).
 pub const ALBEDOS: usize = 100;
 pub const EDGES: usize = 96;
@@ -80,7 +80,7 @@ impl TableKey {
         let settings = WalkSettings {
             g,
             roughness,
-            ior: ior.clamp(1.01, 3.8),
+            ior: ior.clamp(IOR_RANGE.0, IOR_RANGE.1),
             walks,
             ..Default::default()
         };
@@ -103,11 +103,12 @@ impl TableKey {
         TableKey::new(g, material.layers.roughness, material.eta, DEFAULT_WALKS)?;
         let round = |x: f64, step: f64| (x / step).round() * step;
         let roughness = round(material.layers.roughness, ROUGHNESS_STEP);
-        let ior = round(material.eta.clamp(1.01, 3.8), IOR_STEP).clamp(1.01, 3.8);
+        let ior = round(material.eta.clamp(IOR_RANGE.0, IOR_RANGE.1), IOR_STEP)
+            .clamp(IOR_RANGE.0, IOR_RANGE.1);
         let below = (g / G_STEP + 1e-9).floor();
         let t = g / G_STEP - below;
         let at = |k: f64| {
-            let g = (k * G_STEP).clamp(0.0, 0.9);
+            let g = (k * G_STEP).clamp(G_RANGE.0, G_RANGE.1);
             TableKey::new(g, roughness, ior, default_walks(g))
         };
         if t < 1e-6 {
@@ -712,11 +713,28 @@ pub fn walk_table_with_progress(
 /// The tables of a material's walk with their weights, from memory, disk or built now.
 /// What the Cycles profile cannot take (g outside [0, 0.9]) is an `InvalidMaterial` error.
 pub fn tables_for(material: &Material) -> Result<Vec<(Arc<WalkTable>, f64)>> {
+    tables_for_with_progress(material, None)
+}
+
+/// As `tables_for`; a build reports `progress` (over all the material's tables) and stops with
+/// `Error::Cancelled` when it returns false.
+pub fn tables_for_with_progress(
+    material: &Material,
+    progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
+) -> Result<Vec<(Arc<WalkTable>, f64)>> {
     let keys = TableKey::of(material).map_err(|e| match e {
         Error::InvalidArgument(m) => Error::InvalidMaterial(m),
         other => other,
     })?;
-    keys.iter().map(|(k, w)| Ok((walk_table(k)?, *w))).collect()
+    let n = keys.len().max(1) as f32;
+    keys.iter()
+        .enumerate()
+        .map(|(i, (k, w))| {
+            let part = progress.map(|p| move |f: f32| p((i as f32 + f) / n));
+            let table = walk_table_with_progress(k, part.as_ref().map(|f| f as _))?;
+            Ok((table, *w))
+        })
+        .collect()
 }
 
 /// Whether every table `material` needs is in memory (an edit with it will not build any).

@@ -24,6 +24,7 @@
 //! record minima) gives the exit, weighted alpha^10 alpha*^(j-1), alpha* = sigma_s*/sigma_t*.
 
 use crate::error::{Error, Result};
+use crate::optics::principled;
 use glam::DVec3;
 use rand_core::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -85,19 +86,21 @@ impl Default for WalkSettings {
 impl WalkSettings {
     pub fn validate(&self) -> Result<()> {
         let bad = |what: String| Err(Error::InvalidArgument(what));
-        if !(self.g.is_finite() && (0.0..=0.9).contains(&self.g)) {
+        let (g0, g1) = principled::G_RANGE;
+        if !(self.g.is_finite() && (g0..=g1).contains(&self.g)) {
             return bad(format!(
-                "g = {}: Cycles' random walk takes anisotropy in [0, 0.9] (use the dipole profile \
-                 for other values)",
+                "g = {}: Cycles' random walk takes anisotropy in [{g0}, {g1}] (use the dipole \
+                 profile for other values)",
                 self.g
             ));
         }
         if !(self.roughness.is_finite() && (0.0..=1.0).contains(&self.roughness)) {
             return bad(format!("roughness = {} must lie in [0, 1]", self.roughness));
         }
-        if !(self.ior.is_finite() && (1.01..=3.8).contains(&self.ior)) {
+        let (i0, i1) = principled::IOR_RANGE;
+        if !(self.ior.is_finite() && (i0..=i1).contains(&self.ior)) {
             return bad(format!(
-                "IOR = {}: Cycles' walk refracts by an IOR in [1.01, 3.8]",
+                "IOR = {}: Cycles' walk refracts by an IOR in [{i0}, {i1}]",
                 self.ior
             ));
         }

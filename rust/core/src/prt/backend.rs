@@ -79,10 +79,10 @@ impl Prt {
         single: Option<single::SingleScattering>,
     ) -> Result<()> {
         if let Some(s) = &single {
-            if self.model != ProfileKind::Dipole {
+            if self.profile != ProfileKind::Dipole {
                 return Err(Error::InvalidArgument(format!(
                     "single scattering joins the dipole only: the {} profile already contains it",
-                    self.model.name()
+                    self.profile.name()
                 )));
             }
             if s.report().coefficients == 0 || s.vertex_count() != self.vertex_count() {

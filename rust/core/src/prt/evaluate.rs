@@ -2,12 +2,11 @@
 //! per vertex, the walks' term and the object's own light rescaled, radiance from radiosity.
 
 use super::knots::error_estimate;
-use super::own_light::{sent_on, totals};
 use super::{single, Prt};
 use crate::error::{Error, Result};
 use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
 use crate::optics::Material;
-use crate::profiles::{Profile, ProfileKind, RadialProfile};
+use crate::profiles::{Profile, ProfileKind, RadialProfile, Resolved};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -54,13 +53,20 @@ impl Prt {
     /// channel, the coefficient vector of the dot product: [M(near_radius), c_0 .. c_{n-1}],
     /// M the profile's disc integral, and the profile's point mass.
     pub fn coefficients(&self, material: &Material) -> Result<Coefficients> {
+        let r = self.resolve(material)?;
+        self.coefficients_of(&r.profiles)
+    }
+
+    /// The material resolved once under this transport's profile, its index of refraction
+    /// checked against the irradiance's.
+    pub fn resolve(&self, material: &Material) -> Result<Resolved> {
         self.check_eta(material)?;
-        self.coefficients_of(&self.model.profiles(material)?)
+        Resolved::new(self.profile, material)
     }
 
     /// The material's index of refraction is the one the irradiance was computed for.
     fn check_eta(&self, material: &Material) -> Result<()> {
-        let eta = self.model.irradiance_eta(material);
+        let eta = self.profile.irradiance_eta(material);
         if (eta - self.eta).abs() > 1e-9 {
             return Err(Error::InvalidArgument(format!(
                 "this transport was precomputed for eta = {}, the material has eta = {}: \
@@ -103,7 +109,7 @@ impl Prt {
         // The walks' own noise is there at the representatives too: part of the baseline.
         let noise = self
             .report
-            .geometry
+            .walks
             .as_ref()
             .map_or(0.0, |g| g.noise.iter().copied().fold(0.0, f64::max));
         worst > REFRESH_FLOOR.max(REFRESH_FACTOR * (self.report.representative_error + noise))
@@ -129,6 +135,16 @@ impl Prt {
         bounce: bool,
         walks: bool,
     ) -> Result<Evaluation> {
+        self.radiosity_of(&self.resolve(material)?, bounce, walks)
+    }
+
+    /// As `radiosity_parts` for a material already resolved (`resolve`).
+    pub fn radiosity_of(
+        &self,
+        material: &Resolved,
+        bounce: bool,
+        walks: bool,
+    ) -> Result<Evaluation> {
         self.radiosity_inner(material, bounce, walks, None)
             .map(|(e, _)| e)
     }
@@ -137,16 +153,17 @@ impl Prt {
     /// in the same submission and its L^(1) comes back beside B.
     fn radiosity_inner(
         &self,
-        material: &Material,
+        material: &Resolved,
         bounce: bool,
         walks: bool,
         single: Option<&crate::prt::gpu::SingleEdit>,
     ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         let t0 = Instant::now();
-        self.check_eta(material)?;
-        // The material's profiles, once: the fit, the walks' term and the bounce all read them.
-        let profiles = self.model.profiles(material)?;
-        let c = self.coefficients_of(&profiles)?;
+        self.check_eta(&material.material)?;
+        // The material's profiles, resolved once: the fit, the walks' term and the bounce all
+        // read them.
+        let profiles = &material.profiles;
+        let c = self.coefficients_of(profiles)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         let (mut radiosity, l1, gpu) = match &self.gpu {
@@ -165,15 +182,15 @@ impl Prt {
                 .for_each(|(b, i)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * i[ch]));
         }
         let mut error_estimate = c.error_estimate;
-        if let Some(g) = self.geometry.as_ref().filter(|_| walks) {
-            let added = g.add_to(&mut radiosity, &profiles);
+        if let Some(g) = self.walks.as_ref().filter(|_| walks) {
+            let added = g.add_to(&mut radiosity, profiles);
             for (e, a) in error_estimate.iter_mut().zip(added) {
                 *e += a;
             }
         }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
-            let receiving = totals(&profiles);
-            let albedo = sent_on(self.model, material, &profiles, 1.0);
+            let receiving = material.totals();
+            let albedo = material.sent_on(1.0);
             // How much more or less light the edited material sends out than the source did.
             let ratio: [f64; 3] = std::array::from_fn(|ch| {
                 if bounce.source_albedo[ch] > 0.0 {
@@ -190,7 +207,7 @@ impl Prt {
             if let Some(g) = bounce.walked.as_ref().filter(|_| walks) {
                 // Its noise is relative to the indirect light, a share of B.
                 let share = self.report.interreflection_share;
-                let added = g.add_scaled_to(&mut radiosity, &profiles, ratio.map(|r| r as f32));
+                let added = g.add_scaled_to(&mut radiosity, profiles, ratio.map(|r| r as f32));
                 for (e, a) in error_estimate.iter_mut().zip(added) {
                     *e += if a >= 1.0 { a } else { a * share };
                 }
@@ -230,10 +247,10 @@ impl Prt {
             )),
             _ => {}
         }
-        match (&self.geometry, walks) {
+        match (&self.walks, walks) {
             (None, _) => out.push(Skipped::new(
                 "walks through the mesh",
-                match self.model {
+                match self.profile {
                     ProfileKind::Dipole => "the dipole's model is the half-space profile",
                     ProfileKind::Cycles => "not precomputed (walks off)",
                 },
@@ -285,7 +302,7 @@ impl Prt {
         }
         // CPU: B, then one pass that turns it into F_t B / pi (the dipole's exit weight, as
         // `radiance`) and adds L^(1).
-        let (mut e, _) = self.radiosity_inner(material, true, true, None)?;
+        let (mut e, _) = self.radiosity_inner(&self.resolve(material)?, true, true, None)?;
         let l1 = s.radiance_joined(material, eye, phase, &mut e.values)?;
         e.quantity = Quantity::Radiance;
         e.details.fit_seconds += l1.fit_seconds;
@@ -310,15 +327,15 @@ impl Prt {
         single: Option<&crate::prt::gpu::SingleEdit>,
     ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         crate::evaluation::check_eye(eye)?;
-        let (mut e, l1) = self.radiosity_inner(material, true, true, single)?;
+        let r = self.resolve(material)?;
+        let (mut e, l1) = self.radiosity_inner(&r, true, true, single)?;
         let t = Instant::now();
-        let profiles = self.model.profiles(material)?;
         radiance_from_radiosity(
             &mut e.values,
             &self.positions,
             &self.normals,
             eye,
-            &|cos_o| self.model.exit_weights(material, &profiles, cos_o),
+            &|cos_o| r.exit_weights(cos_o),
         );
         e.quantity = Quantity::Radiance;
         e.details.dot_seconds += t.elapsed().as_secs_f64();

@@ -26,6 +26,7 @@ mod knots;
 mod layout;
 mod own_light;
 mod precompute;
+pub mod request;
 mod rows;
 mod settings;
 pub mod single;
@@ -46,6 +47,7 @@ pub use backend::Backend;
 pub use evaluate::{Coefficients, Evaluation, PrtDetails, REFRESH_FACTOR, REFRESH_FLOOR};
 pub use knots::BASIS_SIZES;
 pub use own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
+pub use request::{irradiance_eta, path_settings, PrtRequest};
 pub use settings::{
     default_walk_rays, PrtReport, PrtSettings, DEFAULT_MAX_SAMPLES, DEFAULT_WALK_RAYS,
     MAX_WALK_RAYS_PER_VERTEX, MIN_WALK_RAYS_PER_VERTEX,
@@ -68,12 +70,12 @@ pub struct Prt {
     whole_mesh: bool,
     /// The index of refraction of the irradiance's Fresnel factor.
     eta: f64,
-    model: ProfileKind,
+    profile: ProfileKind,
     /// The object's own light: what it adds per vertex, and the source albedo it was computed
     /// with (see `Bounce`).
     bounce: Option<Bounce>,
-    /// What the walks through the mesh add to the half-space profile (`geometry`).
-    geometry: Option<WalkTerm>,
+    /// What the walks through the mesh add to the half-space profile (`walks`).
+    walks: Option<WalkTerm>,
     /// Single scattering (Xu 2007 eqs. 12-15), when attached (`set_single_scattering`).
     single: Option<single::SingleScattering>,
     report: PrtReport,
@@ -93,8 +95,8 @@ impl Prt {
         self.eta
     }
 
-    pub fn model(&self) -> ProfileKind {
-        self.model
+    pub fn profile(&self) -> ProfileKind {
+        self.profile
     }
 
     pub fn vertex_count(&self) -> usize {

@@ -3,8 +3,7 @@
 
 use super::interreflection::{indirect_irradiance, Source};
 use crate::mesh::Mesh;
-use crate::optics::Material;
-use crate::profiles::{Profile, ProfileKind, RadialProfile};
+use crate::profiles::Resolved;
 use crate::raytrace::Tracer;
 use crate::walks::WalkTerm;
 
@@ -32,28 +31,6 @@ pub(super) struct Bounce {
     pub(super) source_albedo: [f64; 3],
     /// What the walks through the mesh make of E_ind beyond its local conversion.
     pub(super) walked: Option<WalkTerm>,
-}
-
-/// What a thick slab returns per unit irradiance under the three profiles at hand, profile
-/// and lobes: the profile's total plus its point mass, per channel.
-pub(crate) fn totals(p: &[Profile; 3]) -> [f64; 3] {
-    std::array::from_fn(|c| p[c].total() + p[c].point_mass())
-}
-
-/// What a surface of `material` (its `profiles`) sends on per unit irradiance toward a viewer
-/// at cosine `cos`, times pi: the exit weight with the view factor (`ProfileKind::exit_weights`)
-/// times its lobes' `totals`, plus what it reflects (`ProfileKind::specular_reflectance`). Along the
-/// normal, a thick slab's albedo.
-pub(super) fn sent_on(
-    model: ProfileKind,
-    material: &Material,
-    profiles: &[Profile; 3],
-    cos: f64,
-) -> [f64; 3] {
-    let w = model.exit_weights(material, profiles, cos);
-    let s = model.specular_reflectance(material, cos);
-    let t = totals(profiles);
-    std::array::from_fn(|c| w[c] * t[c] + s)
 }
 
 /// What the surface sends out, per vertex: the half-space B, the irradiance (for the light
@@ -86,9 +63,7 @@ pub(super) struct Cast {
 pub(super) fn cast(
     mesh: &Mesh,
     tracer: &Tracer,
-    model: ProfileKind,
-    rep: &Material,
-    rep_profiles: &[Profile; 3],
+    rep: &Resolved,
     sent: Sent<'_>,
     strata: usize,
 ) -> Cast {
@@ -96,11 +71,11 @@ pub(super) fn cast(
     // W(cos) V(cos), the view factor V included (a slanted view enters Cycles' walk
     // shallower: more comes out); the walks' term under W(cos) alone (light through a
     // thin part: a slanted view enters shallower there too, and less gets through).
-    let exit = |cos: f64| model.exit_weights(rep, rep_profiles, cos);
-    let exit_plain = |cos: f64| [model.exit_weight(rep, cos); 3];
+    let exit = |cos: f64| rep.exit_weights(cos);
+    let exit_plain = |cos: f64| [rep.exit_weight(cos); 3];
     // Beside the lobes' B, the surface where the light falls back reflects part of the
     // irradiance there without entering (Cycles' specular layer, E_spec(mu) E).
-    let reflected = |cos: f64| [model.specular_reflectance(rep, cos); 3];
+    let reflected = |cos: f64| [rep.specular_reflectance(cos); 3];
     let mut sources = vec![
         Source {
             values: sent.halfspace,
@@ -120,7 +95,7 @@ pub(super) fn cast(
     let first = indirect_irradiance(mesh, tracer, &sources, strata);
     // The later passes send E_ind on: its lobes' share W (R_total + point mass) and the
     // specular layer's.
-    let onward = |cos: f64| sent_on(model, rep, rep_profiles, cos);
+    let onward = |cos: f64| rep.sent_on(cos);
     let later = (strata * LATER_BOUNCE_STRATA.0 / LATER_BOUNCE_STRATA.1).max(1);
     let mut irradiance = first.clone();
     for _ in 1..INTERREFLECTION_BOUNCES {

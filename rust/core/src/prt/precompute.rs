@@ -2,7 +2,7 @@
 //! receiver's disc, the knots, the transport rows, then the walks and the object's own light.
 
 use super::knots::{default_spacing, Knots};
-use super::own_light::{self, sent_on, totals, Bounce, INDIRECT_WALK_SHARE};
+use super::own_light::{self, Bounce, INDIRECT_WALK_SHARE};
 use super::rows::{transport_rows, within, FarField};
 use super::settings::check_settings;
 use super::tree::{SampleTree, WeightedSample};
@@ -10,7 +10,7 @@ use super::{Density, IrradianceFn, ProgressFn, Prt, PrtReport, PrtSettings};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, SurfaceSample};
 use crate::optics::Material;
-use crate::profiles::Profile;
+use crate::profiles::{Profile, Resolved};
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
 use crate::walks::ExitLight;
@@ -39,15 +39,25 @@ impl Prt {
         tick(0.0)?;
         let mut report = PrtReport {
             vertices: mesh.vertex_count(),
-            model: settings.model.name(),
+            profile: settings.profile.name(),
             ..Default::default()
         };
-        let profiles: Vec<Profile> = representatives
+        // Each representative resolved once (walk tables looked up or built, cancellably):
+        // every step below reads these.
+        let tables_progress = progress.map(|p| move |f: f32| p(0.05 * f));
+        let resolved: Vec<Resolved> = representatives
             .iter()
-            .map(|m| settings.model.profiles(m))
-            .collect::<Result<Vec<_>>>()?
-            .into_iter()
-            .flatten()
+            .map(|m| {
+                Resolved::with_progress(
+                    settings.profile,
+                    m,
+                    tables_progress.as_ref().map(|f| f as _),
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let profiles: Vec<Profile> = resolved
+            .iter()
+            .flat_map(|r| r.profiles.iter().cloned())
             .collect();
 
         let lit = SampledLight::new(mesh, &profiles, settings, irradiance)?;
@@ -75,11 +85,7 @@ impl Prt {
         let t_transport = Instant::now();
         let far = FarField::new(settings.far_field);
         report.far_field_distance_bound = far.distance_bound();
-        let transport_end = if settings.geometry.is_some() {
-            0.6
-        } else {
-            1.0
-        };
+        let transport_end = if settings.walks.is_some() { 0.6 } else { 1.0 };
         let (transport, counters) = transport_rows(
             mesh,
             &tree,
@@ -108,27 +114,24 @@ impl Prt {
             near_radius: disc.near_radius,
             whole_mesh: knots.whole_mesh,
             eta: settings.eta,
-            model: settings.model,
+            profile: settings.profile,
             bounce: None,
-            geometry: None,
+            walks: None,
             single: None,
             report,
         };
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);
-        let tracer = (settings.geometry.is_some() || bounce_strata.is_some())
+        let tracer = (settings.walks.is_some() || bounce_strata.is_some())
             .then(|| crate::raytrace::Tracer::new(mesh));
         // The first representative's half-space B (no walks, no own light): what the walks
         // correct, and the part of B the own light sends under the view factor.
+        let rep = &resolved[0];
         let halfspace = match &tracer {
-            Some(_) => {
-                prt.radiosity_parts(&representatives[0], false, false)?
-                    .values
-            }
+            Some(_) => prt.radiosity_of(rep, false, false)?.values,
             None => Vec::new(),
         };
-        let rep = &representatives[0];
-        if let (Some(g), Some(tracer)) = (&settings.geometry, &tracer) {
+        if let (Some(g), Some(tracer)) = (&settings.walks, &tracer) {
             let end = if bounce_strata.is_some() { 0.85 } else { 0.95 };
             let walk_progress = progress.map(|p| move |f: f32| p(0.6 + (end - 0.6) * f));
             prt.add_walks(
@@ -167,7 +170,7 @@ impl Prt {
         &mut self,
         mesh: &Mesh,
         tracer: &Tracer,
-        rep: &Material,
+        rep: &Resolved,
         halfspace: &[[f32; 3]],
         g: &WalkTermSettings,
         irradiance: &IrradianceFn,
@@ -185,8 +188,8 @@ impl Prt {
             edges: &edges,
         };
         let term = WalkTerm::compute(mesh, tracer, rep, &lit, halfspace, g, progress)?;
-        self.report.geometry = Some(term.report.clone());
-        self.geometry = Some(term);
+        self.report.walks = Some(term.report.clone());
+        self.walks = Some(term);
         Ok(())
     }
 
@@ -198,7 +201,7 @@ impl Prt {
         &mut self,
         mesh: &Mesh,
         tracer: &Tracer,
-        rep: &Material,
+        rep: &Resolved,
         halfspace: &[[f32; 3]],
         strata: usize,
         settings: &PrtSettings,
@@ -207,24 +210,20 @@ impl Prt {
         let t_bounce = Instant::now();
         // B's half-space part and what the walks through the mesh add to it (thin parts'
         // transmitted glow), sent under different view factors (`own_light::cast`).
-        let direct = self.radiosity(rep)?.values;
-        let walked_part = self.geometry.as_ref().map(|_| {
+        let direct = self.radiosity_of(rep, true, true)?.values;
+        let walked_part = self.walks.as_ref().map(|_| {
             direct
                 .iter()
                 .zip(halfspace)
                 .map(|(b, h)| std::array::from_fn(|c| b[c] - h[c]))
                 .collect::<Vec<[f32; 3]>>()
         });
-        let model = settings.model;
-        let rep_profiles = model.profiles(rep)?;
-        let receiving = totals(&rep_profiles);
-        let source_albedo = sent_on(model, rep, &rep_profiles, 1.0);
+        let receiving = rep.totals();
+        let source_albedo = rep.sent_on(1.0);
         let cast = own_light::cast(
             mesh,
             tracer,
-            model,
             rep,
-            &rep_profiles,
             own_light::Sent {
                 halfspace,
                 irradiance: &self.vertex_irradiance,
@@ -241,7 +240,7 @@ impl Prt {
         // front of an ear comes out at its back): walks gather E_ind against its local
         // conversion (R_total + point mass) E_ind, on a share of the walks' budget (E_ind
         // is a few per cent of the light, so is the noise that share leaves).
-        let walked = match &settings.geometry {
+        let walked = match &settings.walks {
             Some(g) => {
                 let local: Vec<[f32; 3]> = irradiance
                     .iter()
@@ -258,7 +257,7 @@ impl Prt {
                     edges: &ShadowEdges::none(),
                 };
                 let term = WalkTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)?;
-                self.report.geometry_indirect = Some(term.report.clone());
+                self.report.walks_indirect = Some(term.report.clone());
                 Some(term)
             }
             None => None,

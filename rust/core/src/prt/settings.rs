@@ -53,13 +53,13 @@ pub struct PrtSettings {
     /// `ProfileKind::irradiance_eta` of the materials (1 for Cycles' index-matched walk).
     pub eta: f64,
     /// The radial profile the basis is chosen for and edits are fitted to.
-    pub model: ProfileKind,
+    pub profile: ProfileKind,
     /// The object's own light falling back on it (`interreflection`): `strata` x `strata`
     /// rays per vertex, or None for direct light only.
     pub interreflection: Option<usize>,
-    /// Cycles' walk through the mesh (`geometry`): the mesh's own shape (thin and curved
+    /// Cycles' walk through the mesh (`walks`): the mesh's own shape (thin and curved
     /// parts) in the transport, Cycles' model only; None for the half-space profile alone.
-    pub geometry: Option<WalkTermSettings>,
+    pub walks: Option<WalkTermSettings>,
 }
 
 impl Default for PrtSettings {
@@ -72,9 +72,9 @@ impl Default for PrtSettings {
             tolerance: 1e-5,
             far_field: 0.25,
             eta: 1.3,
-            model: ProfileKind::Dipole,
+            profile: ProfileKind::Dipole,
             interreflection: None,
-            geometry: None,
+            walks: None,
         }
     }
 }
@@ -91,7 +91,7 @@ pub struct PrtReport {
     pub support_radius: f64,
     pub knots: Vec<f64>,
     /// The radial profile ("dipole" or "cycles").
-    pub model: &'static str,
+    pub profile: &'static str,
     /// Whether the basis size was chosen by `fit_tolerance` (else fixed by `coefficients`).
     pub basis_size_by_tolerance: bool,
     /// The largest estimated relative error of B over the representatives' channels with the
@@ -121,8 +121,8 @@ pub struct PrtReport {
     pub seconds_total: f64,
     /// The walks through the mesh, when asked for: for the direct light, and for the object's
     /// own light (when interreflection is on too).
-    pub geometry: Option<WalkTermReport>,
-    pub geometry_indirect: Option<WalkTermReport>,
+    pub walks: Option<WalkTermReport>,
+    pub walks_indirect: Option<WalkTermReport>,
     /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
     /// evaluated there, and the time it took.
     pub shadow_edge_triangles: usize,
@@ -155,11 +155,11 @@ pub(super) fn check_settings(representatives: &[Material], s: &PrtSettings) -> R
             )));
         }
     }
-    if let Some(g) = &s.geometry {
-        if s.model != ProfileKind::Cycles {
+    if let Some(g) = &s.walks {
+        if s.profile != ProfileKind::Cycles {
             return Err(Error::InvalidArgument(format!(
                 "walks through the mesh are Cycles' random walk: the {} profile has none",
-                s.model.name()
+                s.profile.name()
             )));
         }
         if g.walks == 0 || g.vertices == 0 {
@@ -182,12 +182,12 @@ pub(super) fn check_settings(representatives: &[Material], s: &PrtSettings) -> R
     }
     if let Some(m) = representatives
         .iter()
-        .find(|m| (s.model.irradiance_eta(m) - s.eta).abs() > 1e-9)
+        .find(|m| (s.profile.irradiance_eta(m) - s.eta).abs() > 1e-9)
     {
         return Err(Error::InvalidArgument(format!(
             "all materials must share the eta the irradiance is computed for ({}), found {}",
             s.eta,
-            s.model.irradiance_eta(m)
+            s.profile.irradiance_eta(m)
         )));
     }
     Ok(())

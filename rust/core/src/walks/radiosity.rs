@@ -23,6 +23,7 @@ use crate::bake_points::BakePoints;
 use crate::error::{Error, Result};
 use crate::limits;
 use crate::mesh::Mesh;
+use crate::optics::principled::IOR_RANGE;
 use crate::optics::{Material, CHANNELS};
 use crate::profiles::walk::{ANISOTROPIC_BOUNCES, MAX_BOUNCES};
 use crate::progress::Ticker;
@@ -253,7 +254,7 @@ impl<'a> Walker<'a> {
             edges: light.edges,
             g: material.g,
             entry_alpha: material.layers.roughness * material.layers.roughness,
-            inv_ior: 1.0 / material.eta.clamp(1.01, 3.8),
+            inv_ior: 1.0 / material.eta.clamp(IOR_RANGE.0, IOR_RANGE.1),
             max_bounces: settings.max_bounces,
             placement: placements(mesh, tracer),
             bake_points: settings.at_bake_points.then(|| BakePoints::new(mesh)),

@@ -38,10 +38,10 @@
 use super::grid::Grid;
 use super::passes::{Passes, KERNEL_SPACINGS};
 use super::radiosity::{ExitLight, MeshWalkSettings};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::optics::{Material, CHANNELS};
-use crate::profiles::{Profile, ProfileKind, RadialProfile};
+use crate::optics::CHANNELS;
+use crate::profiles::{Profile, ProfileKind, RadialProfile, Resolved};
 use crate::raytrace::Tracer;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -145,23 +145,36 @@ fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
 }
 
 impl WalkTerm {
-    /// Walks `mesh` for `material` (Cycles' model), lit by `irradiance` (per vertex, finer across
+    /// Walks `mesh` for `material` (resolved under Cycles' model), lit by `irradiance` (per vertex, finer across
     /// shadow edges), against
     /// `halfspace` (B of the half-space profile per vertex, direct light, point mass included).
     #[allow(clippy::too_many_arguments)]
     pub fn compute(
         mesh: &Mesh,
         tracer: &Tracer,
-        material: &Material,
+        material: &Resolved,
         irradiance: &ExitLight,
         halfspace: &[[f32; 3]],
         settings: &WalkTermSettings,
         progress: Option<&(dyn Fn(f32) -> bool + Sync)>,
     ) -> Result<WalkTerm> {
         let start = Instant::now();
-        let (lengths, albedo) = lengths_and_albedos(&ProfileKind::Cycles.profiles(material)?);
+        if material.kind != ProfileKind::Cycles {
+            return Err(Error::InvalidArgument(format!(
+                "walks through the mesh are Cycles' random walk: the {} profile has none",
+                material.kind.name()
+            )));
+        }
+        let (lengths, albedo) = lengths_and_albedos(&material.profiles);
         let passes = Passes::new(
-            mesh, tracer, material, irradiance, halfspace, settings, progress, lengths,
+            mesh,
+            tracer,
+            &material.material,
+            irradiance,
+            halfspace,
+            settings,
+            progress,
+            lengths,
         );
         let main = passes.main()?;
         let sharp = passes.sharp(main.walks_per_vertex)?;

@@ -99,9 +99,10 @@ enum Exit {
 pub(super) fn media(material: &Material) -> Result<[Medium; CHANNELS]> {
     Material::new(material.sigma_a, material.sigma_s, material.g, material.eta)?
         .with_layers(material.layers)?;
-    if !(0.0..=0.9).contains(&material.g) {
+    let (g0, g1) = principled::G_RANGE;
+    if !(g0..=g1).contains(&material.g) {
         return Err(Error::InvalidArgument(format!(
-            "g = {}: Cycles' random walk takes anisotropy in [0, 0.9]",
+            "g = {}: Cycles' random walk takes anisotropy in [{g0}, {g1}]",
             material.g
         )));
     }

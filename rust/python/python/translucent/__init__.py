@@ -14,6 +14,7 @@ import os
 import pathlib
 
 from ._native import (
+    CYCLES_CLAMPS,
     LIMITS,
     Cancelled,
     Hierarchy,
@@ -23,6 +24,7 @@ from ._native import (
     __version__,
     layer_weight,
     prepare_profile,
+    principled_for_medium,
     profile_ready,
     reference_radiance,
     reference_radiosity,

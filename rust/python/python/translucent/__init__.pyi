@@ -1,4 +1,5 @@
 from ._native import (
+    CYCLES_CLAMPS as CYCLES_CLAMPS,
     LIMITS as LIMITS,
     Cancelled as Cancelled,
     Hierarchy as Hierarchy,
@@ -7,6 +8,7 @@ from ._native import (
     Scene as Scene,
     __version__ as __version__,
     layer_weight as layer_weight,
+    principled_for_medium as principled_for_medium,
     prepare_profile as prepare_profile,
     profile_ready as profile_ready,
     reference_radiance as reference_radiance,

@@ -17,6 +17,8 @@ class Cancelled(RuntimeError):
     """Raised when a progress callback returned False."""
 
 LIMITS: dict[str, int | float]
+# Cycles' clamps of the walk's inputs: "anisotropy", "ior", "albedo" -> (low, high).
+CYCLES_CLAMPS: dict[str, tuple[float, float]]
 """The stated limits on request sizes by name (docs/api.md, "Limits"); a request over one
 raises ValueError naming it."""
 
@@ -463,3 +465,8 @@ def single_scattering_albedo(albedo: float, g: float) -> float:
 def layer_weight(roughness: float, cos_view: float, ior: float) -> float:
     """1 - E_spec: what the Principled specular layer leaves to the lobes under it; roughness,
     cos_view in [0, 1], ior in [1, 5], ValueError naming the argument otherwise."""
+def principled_for_medium(
+    sigma_a: float | Sequence[float], sigma_s: float | Sequence[float], g: float = 0.0, eta: float = 1.3
+) -> tuple[tuple[float, float, float], tuple[float, float, float], float, bool]:
+    """(base_color, radius, scale, exact): the Principled inputs under which Cycles simulates the
+    medium; ValueError for what Cycles cannot represent."""

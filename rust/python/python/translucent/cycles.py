@@ -14,8 +14,8 @@ intern/cycles/kernel/integrator/subsurface_random_walk.h):
 
 Hence sigma_s = alpha sigma_t and sigma_a = (1 - alpha) sigma_t, in 1 / scene unit when the
 radius is in scene units. `to_principled` inverts this per channel (alpha is increasing in the
-albedo: bisection); `from_principled` is the forward map. Pure Python + numpy; the bpy helpers
-import bpy when called.
+albedo: bisection); `from_principled` is the forward map. Both maps and the clamps live in the
+native core; this module adapts them and holds the bpy helpers (which import bpy when called).
 """
 
 from __future__ import annotations
@@ -27,10 +27,10 @@ import numpy as np
 
 from . import _native
 
-MIN_ALPHA = 0.2  # subsurface_random_walk_coefficients: below, throughput scaling stands in
-MAX_ALPHA = 0.999999  # subsurface_random_walk_remap's clamp
-G_RANGE = (0.0, 0.9)  # bssrdf_setup's anisotropy clamp
-IOR_RANGE = (1.01, 3.8)  # bssrdf_setup's IOR clamp
+# Cycles' clamps, stated once in the native core (`optics::principled`).
+MIN_ALPHA, MAX_ALPHA = _native.CYCLES_CLAMPS["albedo"]  # below MIN_ALPHA throughput scaling stands in
+G_RANGE = tuple(_native.CYCLES_CLAMPS["anisotropy"])  # bssrdf_setup's anisotropy clamp
+IOR_RANGE = tuple(_native.CYCLES_CLAMPS["ior"])  # bssrdf_setup's IOR clamp
 
 
 def single_scattering_albedo(albedo: float, g: float) -> float:
@@ -87,36 +87,13 @@ def from_principled(base_color, radius, scale: float, anisotropy: float, ior: fl
 
 
 def to_principled(sigma_a, sigma_s, g: float = 0.0, eta: float = 1.3) -> Principled:
-    """Principled inputs for which Cycles simulates sigma_a, sigma_s [1 / scene unit], g, eta.
+    """Principled inputs for which Cycles simulates sigma_a, sigma_s [1 / scene unit], g, eta
+    (the native `principled_for_medium`: bisection on the increasing remap per channel).
     Raises ValueError for what Cycles cannot represent: g outside [0, 0.9], eta outside
     [1.01, 3.8], a channel with no scattering or a single-scattering albedo above 0.999999."""
     sigma_a, sigma_s = _check_rgb("sigma_a", sigma_a), _check_rgb("sigma_s", sigma_s)
-    if not (G_RANGE[0] <= g <= G_RANGE[1]):
-        raise ValueError(f"g = {g}: Cycles' random walk takes anisotropy in [0, 0.9]")
-    if not (IOR_RANGE[0] <= eta <= IOR_RANGE[1]):
-        raise ValueError(f"eta = {eta}: Cycles clamps the subsurface IOR to [1.01, 3.8]")
-    colour, radius, exact = [], [], True
-    for sa, ss in zip(sigma_a, sigma_s):
-        st = sa + ss
-        if ss <= 0.0 or st <= 0.0:
-            raise ValueError("every channel needs sigma_s > 0 for a random-walk medium")
-        alpha = ss / st
-        if alpha > MAX_ALPHA:
-            raise ValueError(f"single-scattering albedo {alpha} is above Cycles' clamp {MAX_ALPHA}")
-        exact &= alpha >= MIN_ALPHA
-        # Bisection on the increasing remap: albedo in [0, 1].
-        lo, hi = 0.0, 1.0
-        for _ in range(80):
-            mid = 0.5 * (lo + hi)
-            if single_scattering_albedo(mid, g) < alpha:
-                lo = mid
-            else:
-                hi = mid
-        colour.append(0.5 * (lo + hi))
-        d = 1.0 / (st * (1.0 - g))
-        radius.append(4.0 * math.pi * d)
-    scale = max(radius)
-    return Principled(tuple(colour), tuple(r / scale for r in radius), scale, g, eta, exact)
+    colour, radius, scale, exact = _native.principled_for_medium(sigma_a, sigma_s, float(g), float(eta))
+    return Principled(tuple(colour), tuple(radius), scale, g, eta, exact)
 
 
 def principled_for(material) -> Principled:

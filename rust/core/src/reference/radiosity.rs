@@ -34,7 +34,7 @@ pub struct ReferenceSettings {
     /// Most sub-triangles a level may have.
     pub max_nodes: usize,
     /// The radial profile integrated.
-    pub model: ProfileKind,
+    pub profile: ProfileKind,
 }
 
 impl Default for ReferenceSettings {
@@ -43,7 +43,7 @@ impl Default for ReferenceSettings {
             rel_tol: 1e-3,
             max_level: 4,
             max_nodes: 4_000_000,
-            model: ProfileKind::Dipole,
+            profile: ProfileKind::Dipole,
         }
     }
 }
@@ -269,7 +269,7 @@ pub fn reference_radiosity(
         }
         None => (0..n as u32).collect(),
     };
-    let dips = settings.model.profiles(material)?;
+    let dips = settings.profile.profiles(material)?;
     let support = std::array::from_fn(|c| dips[c].support_radius(TAIL_SHARE * settings.rel_tol));
     // Light returned at the entry point itself (a diffuse lobe beside the profile): the
     // receiver's own irradiance, once.

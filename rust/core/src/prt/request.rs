@@ -1,0 +1,173 @@
+//! What a caller asks of a precompute, in the words of the Python API, and the defaults the
+//! profile and the mesh decide where it leaves a choice open: the object's own light and the
+//! walks by profile, the walks' ray budget by vertex count, the irradiance's Fresnel index by
+//! profile, the single-scattering paths' light sampling. The binding only converts.
+
+use super::basis::Degree;
+use super::settings::{default_walk_rays, PrtSettings};
+use crate::error::{Error, Result};
+use crate::optics::Material;
+use crate::profiles::ProfileKind;
+use crate::single_scattering::PathSettings;
+use crate::walks::WalkTermSettings;
+
+/// The most rays per vertex the object's own light may cast in its first bounce.
+pub const MAX_INTERREFLECTION_RAYS: usize = 1_000_000;
+
+/// A precompute as asked for; `None` takes the default stated on each field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrtRequest {
+    pub profile: ProfileKind,
+    pub coefficients: usize,
+    pub fit_tolerance: Option<f64>,
+    pub degree: u32,
+    pub samples: Option<usize>,
+    pub tolerance: f64,
+    pub far_field: f64,
+    /// The object's own light; None: on for Cycles (its renders have it), off for the dipole
+    /// (the papers' model has none).
+    pub interreflection: Option<bool>,
+    /// Rays per vertex of the own light's first bounce, cast as the nearest square of strata.
+    pub interreflection_rays: usize,
+    /// Walks per walked vertex and channel, 0 for none; None: Cycles walks as many as
+    /// `walk_rays` allow, the dipole never (it has no walk).
+    pub walks: Option<usize>,
+    pub walk_vertices: usize,
+    /// The walks' ray budget; None: `default_walk_rays` of the mesh's vertex count.
+    pub walk_rays: Option<u64>,
+}
+
+impl Default for PrtRequest {
+    fn default() -> Self {
+        Self {
+            profile: ProfileKind::Cycles,
+            coefficients: 32,
+            fit_tolerance: None,
+            degree: 1,
+            samples: None,
+            tolerance: 1e-5,
+            far_field: 0.25,
+            interreflection: None,
+            interreflection_rays: 144,
+            walks: None,
+            walk_vertices: 1000,
+            walk_rays: None,
+        }
+    }
+}
+
+impl PrtRequest {
+    /// The settings of a precompute of a mesh of `vertices` vertices for `materials`, the open
+    /// choices filled in. Errors name the argument.
+    pub fn settings(&self, materials: &[Material], vertices: usize) -> Result<PrtSettings> {
+        let profile = self.profile;
+        let rays = self.interreflection_rays;
+        if !(1..=MAX_INTERREFLECTION_RAYS).contains(&rays) {
+            return Err(Error::InvalidArgument(format!(
+                "interreflection_rays {rays} must lie in [1, {MAX_INTERREFLECTION_RAYS}]"
+            )));
+        }
+        let bounce = self
+            .interreflection
+            .unwrap_or(profile == ProfileKind::Cycles);
+        let strata = ((rays as f64).sqrt().round() as usize).max(1);
+        let walk_rays = self
+            .walk_rays
+            .unwrap_or_else(|| default_walk_rays(vertices));
+        let walks = match self.walks {
+            Some(w) => (w > 0).then(|| WalkTermSettings {
+                walks: w,
+                rays: 0,
+                vertices: self.walk_vertices,
+                ..WalkTermSettings::default()
+            }),
+            None if profile == ProfileKind::Cycles => Some(WalkTermSettings {
+                rays: walk_rays,
+                vertices: self.walk_vertices,
+                ..WalkTermSettings::default()
+            }),
+            None => None,
+        };
+        Ok(PrtSettings {
+            coefficients: self.coefficients,
+            fit_tolerance: self.fit_tolerance,
+            degree: Degree::from_int(self.degree)?,
+            samples: self.samples,
+            tolerance: self.tolerance,
+            far_field: self.far_field,
+            eta: irradiance_eta(profile, materials),
+            profile,
+            interreflection: bounce.then_some(strata),
+            walks,
+        })
+    }
+}
+
+/// The irradiance's Fresnel index for `materials` under `profile`: the dipole's smooth
+/// boundary, or 1 for Cycles' walk (it leaves into a plain Lambertian BSDF); the first
+/// material's (every representative must share it, `check_settings`).
+pub fn irradiance_eta(profile: ProfileKind, materials: &[Material]) -> f64 {
+    materials.first().map_or(1.3, |m| profile.irradiance_eta(m))
+}
+
+/// How a single-scattering path samples the lights at each step, from the irradiance's
+/// sampling: a k x k grid of at most 16 points per area light and a quarter of the world
+/// rays (at least 4) as directions over the sphere.
+pub fn path_settings(eta: f64, world_samples: u32, area_samples: u32) -> PathSettings {
+    PathSettings {
+        eta,
+        area_samples: area_samples.clamp(1, 16),
+        world_directions: (world_samples / 4).max(4),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn marble() -> Material {
+        Material::new([0.0021, 0.0041, 0.0071], [2.19, 2.62, 3.0], 0.0, 1.5).unwrap()
+    }
+
+    #[test]
+    fn open_choices_follow_the_profile() {
+        let m = [marble()];
+        let cycles = PrtRequest::default().settings(&m, 10_000).unwrap();
+        assert_eq!(
+            cycles.interreflection,
+            Some(12),
+            "sqrt(144) strata with Cycles"
+        );
+        assert_eq!(cycles.eta, 1.0, "Cycles' walk leaves index-matched");
+        let w = cycles.walks.expect("Cycles walks by default");
+        assert_eq!(w.rays, 20_000_000);
+        let dipole = PrtRequest {
+            profile: ProfileKind::Dipole,
+            ..PrtRequest::default()
+        }
+        .settings(&m, 10_000)
+        .unwrap();
+        assert_eq!(dipole.interreflection, None);
+        assert!(dipole.walks.is_none());
+        assert_eq!(
+            dipole.eta, 1.5,
+            "the dipole's Fresnel index is the material's"
+        );
+    }
+
+    #[test]
+    fn asked_for_walks_and_bad_rays() {
+        let m = [marble()];
+        let none = PrtRequest {
+            walks: Some(0),
+            ..PrtRequest::default()
+        };
+        assert!(none.settings(&m, 100).unwrap().walks.is_none());
+        let bad = PrtRequest {
+            interreflection_rays: 0,
+            ..PrtRequest::default()
+        };
+        let e = bad.settings(&m, 100).unwrap_err().to_string();
+        assert!(e.contains("interreflection_rays"), "{e}");
+    }
+}
