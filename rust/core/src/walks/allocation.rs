@@ -68,10 +68,14 @@ pub(super) fn more_where_noisy(
             from + (to - from) * (done + share) as f32,
         );
         done += share;
-        let r = walk(&verts, *level, *level as u64, a, b)?;
+        let mut r = walk(&verts, *level, *level as u64, a, b)?;
         for (j, &k) in list.iter().enumerate() {
             let (na, nb) = (counts[k], *level as f32);
             let n = na + nb;
+            if let (Some(all), Some(more)) = (merged.records.as_mut(), r.records.as_mut()) {
+                let mine = std::mem::take(&mut all[k]);
+                all[k] = mine.merge(f64::from(na), std::mem::take(&mut more[j]), f64::from(nb));
+            }
             for c in 0..3 {
                 merged.radiosity[k][c] = (na * merged.radiosity[k][c] + nb * r.radiosity[j][c]) / n;
                 merged.std_error[k][c] = ((na * merged.std_error[k][c]).powi(2)
@@ -283,6 +287,7 @@ mod tests {
                 receiver_rays: Vec::new(),
                 channels_skipped: 0,
                 seconds: 0.0,
+                records: None,
             };
             for &v in verts {
                 let se = sigma(v) / (k as f64).sqrt();

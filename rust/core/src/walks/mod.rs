@@ -3,13 +3,16 @@
 
 mod allocation;
 mod grid;
+mod operator;
 mod passes;
 mod radiosity;
 mod term;
 mod twin;
 mod walker;
 
+pub use operator::ReceiverRecord;
 pub use radiosity::{
-    walk_radiosity, walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings,
+    relit_radiosity, walk_radiosity, walk_radiosity_lit, ExitLight, MeshWalkResult,
+    MeshWalkSettings,
 };
 pub use term::{WalkTerm, WalkTermReport, WalkTermSettings, FLAT_TOLERANCE, LENGTH_MARGIN};

@@ -17,6 +17,7 @@
 //! by about a mean free path in one direction, which a radial table never sees: measured on a
 //! half-lit plane, `tests/walks.rs`. Plain pseudo-random numbers have no such bias.)
 
+use super::operator::ReceiverRecord;
 use super::twin::tangent_gradients;
 use super::walker::{media, placements, Walker};
 use crate::bake_points::BakePoints;
@@ -50,6 +51,9 @@ pub struct MeshWalkSettings {
     /// light: off, the walks give Cycles' direct light alone (what a direct-light bake holds),
     /// such an exit bringing nothing.
     pub tunnel: bool,
+    /// Keep what the walks found independent of the light (`ReceiverRecord`: the exits and
+    /// the control variate's coefficients), so a new light is read at the same exits.
+    pub record: bool,
 }
 
 impl Default for MeshWalkSettings {
@@ -60,6 +64,7 @@ impl Default for MeshWalkSettings {
             max_bounces: MAX_BOUNCES,
             at_bake_points: true,
             tunnel: true,
+            record: false,
         }
     }
 }
@@ -89,6 +94,8 @@ pub struct MeshWalkResult {
     /// Channels that carry no subsurface light (zero weight or no scattering): no walks.
     pub channels_skipped: usize,
     pub seconds: f64,
+    /// Per receiver, with `MeshWalkSettings::record`: its walks as a function of the light.
+    pub records: Option<Vec<ReceiverRecord>>,
 }
 
 /// Radiosity at the `receivers` (all vertices when None) from walks inside `mesh`, lit by
@@ -165,32 +172,54 @@ pub fn walk_radiosity_lit(
     let mut radiosity = Vec::with_capacity(receivers.len());
     let mut std_error = Vec::with_capacity(receivers.len());
     let mut receiver_rays = Vec::with_capacity(receivers.len());
+    let mut records = settings.record.then(|| Vec::with_capacity(receivers.len()));
     let mut rays = 0u64;
     for chunk in receivers.chunks(TICK) {
-        let part: Vec<([f32; 3], [f32; 3], u64)> = chunk
+        // Per receiver: B, its standard error, rays, and (asked for) its record.
+        type Scored = ([f32; 3], [f32; 3], u64, Option<ReceiverRecord>);
+        let part: Vec<Scored> = chunk
             .par_iter()
             .map(|&v| {
                 let e = irradiance[v as usize];
                 let mut b = std::array::from_fn(|c| (media[c].point_mass * f64::from(e[c])) as f32);
                 let mut se = [0f32; 3];
                 let mut rays = 0;
+                let mut record = settings.record.then(|| ReceiverRecord {
+                    scale: media.map(|m| m.scale as f32),
+                    point_mass: media.map(|m| m.point_mass as f32),
+                    ..ReceiverRecord::default()
+                });
                 for &c in &active {
                     let grad =
                         Vec3::from_array(std::array::from_fn(|k| gradients[v as usize][k][c]));
-                    let (mean, err, r) =
-                        walker.vertex(v, c, &media[c], settings, plane[c], grad, &ticker);
+                    let (mean, err, r, pass) = walker.vertex(
+                        v,
+                        c,
+                        &media[c],
+                        settings,
+                        plane[c],
+                        grad,
+                        &ticker,
+                        settings.record,
+                    );
                     b[c] += (media[c].scale * mean) as f32;
                     se[c] = (media[c].scale * err) as f32;
                     rays += r;
+                    if let (Some(rec), Some(pass)) = (record.as_mut(), pass) {
+                        rec.passes[c].push(pass);
+                    }
                 }
-                (b, se, rays)
+                (b, se, rays, record)
             })
             .collect();
-        for (b, se, r) in part {
+        for (b, se, r, record) in part {
             radiosity.push(b);
             std_error.push(se);
             receiver_rays.push(r);
             rays += r;
+            if let (Some(all), Some(record)) = (records.as_mut(), record) {
+                all.push(record);
+            }
         }
         ticker.check()?;
     }
@@ -204,11 +233,42 @@ pub fn walk_radiosity_lit(
         receiver_rays,
         channels_skipped: CHANNELS - active.len(),
         seconds: start.elapsed().as_secs_f64(),
+        records,
     })
 }
 
-/// The irradiance (one finite value >= 0 per vertex) and the walks' counts, checked.
-fn check(mesh: &Mesh, irradiance: &[[f32; 3]], settings: &MeshWalkSettings) -> Result<()> {
+/// B at the `receivers` of walks that kept their records (`MeshWalkSettings::record`), lit
+/// anew by `light`: the same exits read under the new light (`operator`), no walk traced.
+pub fn relit_radiosity(
+    mesh: &Mesh,
+    records: &[ReceiverRecord],
+    receivers: &[u32],
+    light: &ExitLight,
+) -> Result<Vec<[f32; 3]>> {
+    check_irradiance(mesh, light.vertices)?;
+    if records.len() != receivers.len() {
+        return Err(Error::InvalidArgument(format!(
+            "{} records for {} receivers",
+            records.len(),
+            receivers.len()
+        )));
+    }
+    let n = mesh.vertex_count();
+    if let Some(bad) = receivers.iter().find(|&&v| v as usize >= n) {
+        return Err(Error::InvalidArgument(format!(
+            "receiver index {bad} out of range for {n} vertices"
+        )));
+    }
+    let gradients = tangent_gradients(mesh, light.vertices);
+    Ok(records
+        .par_iter()
+        .zip(receivers.par_iter())
+        .map(|(r, &v)| r.radiosity(mesh, v, light, &gradients))
+        .collect())
+}
+
+/// One finite irradiance >= 0 per vertex.
+fn check_irradiance(mesh: &Mesh, irradiance: &[[f32; 3]]) -> Result<()> {
     let n = mesh.vertex_count();
     if irradiance.len() != n {
         return Err(Error::InvalidArgument(format!(
@@ -225,6 +285,12 @@ fn check(mesh: &Mesh, irradiance: &[[f32; 3]], settings: &MeshWalkSettings) -> R
             "irradiance must be finite and >= 0".into(),
         ));
     }
+    Ok(())
+}
+
+/// The irradiance (one finite value >= 0 per vertex) and the walks' counts, checked.
+fn check(mesh: &Mesh, irradiance: &[[f32; 3]], settings: &MeshWalkSettings) -> Result<()> {
+    check_irradiance(mesh, irradiance)?;
     if settings.walks == 0 {
         return Err(Error::InvalidArgument("walks = 0 must be >= 1".into()));
     }

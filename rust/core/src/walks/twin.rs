@@ -14,6 +14,7 @@
 //! 6.1 %, for 15 % more time, and the mean unchanged (1,024 walks each way: ratio 0.999-1.000, per-vertex z-scores of the
 //! difference mean 0.0, spread 1.0).
 
+use super::operator::{ExitRecord, PassRecord};
 use super::radiosity::MeshWalkSettings;
 use super::radiosity::WALK_TICK;
 use super::walker::{Medium, Streams, Walker};
@@ -61,10 +62,11 @@ impl Walker<'_> {
         plane: f64,
         gradient: Vec3,
         ticker: &Ticker,
-    ) -> (f64, f64, u64) {
+        record: bool,
+    ) -> (f64, f64, u64, Option<PassRecord>) {
         let n = self.mesh.normals()[v as usize];
         if n == Vec3::ZERO || ticker.stopped() {
-            return (0.0, 0.0, 0);
+            return (0.0, 0.0, 0, None);
         }
         let p = self.mesh.positions()[v as usize];
         let e = f64::from(self.irradiance[v as usize][c]);
@@ -87,12 +89,28 @@ impl Walker<'_> {
         // Sums of x (mesh), y (control, less its known mean), x^2, y^2, xy.
         let mut sums = [0f64; 5];
         let mut rays = 0;
+        // With `record`: every exit, and mean(y)'s coefficients of E(v) and grad E.
+        let mut exits = Vec::new();
+        let (mut at_vertex, mut along) = (0f64, glam::DVec3::ZERO);
         for i in 0..s.walks {
             let (q, nq, ng) = starts[(rotation + i) % starts.len()];
             // The control's irradiance, linear about the vertex, at the entry point.
             let eq = e + g.dot((q - p).as_dvec3());
-            let (x, twin, r) = self.walk(q, nq, ng, c, m, &mut streams, true);
+            let (x, twin, r) = self.walk(
+                q,
+                nq,
+                ng,
+                c,
+                m,
+                &mut streams,
+                true,
+                record.then_some(&mut exits),
+            );
             let y = eq * twin.total + g.dot(twin.offset) - eq * plane;
+            if record {
+                at_vertex += twin.total - plane;
+                along += (q - p).as_dvec3() * (twin.total - plane) + twin.offset;
+            }
             sums[0] += x;
             sums[1] += y;
             sums[2] += x * x;
@@ -125,7 +143,20 @@ impl Walker<'_> {
         } else {
             0.0
         };
-        (mean, se, rays)
+        let record = record.then(|| PassRecord {
+            share: 1.0,
+            exits: exits
+                .into_iter()
+                .map(|x| ExitRecord {
+                    weight: (f64::from(x.weight) / k) as f32,
+                    ..x
+                })
+                .collect(),
+            at_vertex: (at_vertex / k) as f32,
+            along_gradient: (along / k).as_vec3().to_array(),
+            beta: beta as f32,
+        });
+        (mean, se, rays, record)
     }
 
     /// `plane_total`, kept for the process per medium (the walk term walks the same
@@ -180,7 +211,7 @@ impl Walker<'_> {
                 let mut streams = Streams::new(key);
                 (0..PLANE_CHUNK)
                     .map(|_| {
-                        self.walk(Vec3::ZERO, Vec3::Z, None, 0, m, &mut streams, false)
+                        self.walk(Vec3::ZERO, Vec3::Z, None, 0, m, &mut streams, false, None)
                             .1
                             .total
                     })

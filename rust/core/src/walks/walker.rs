@@ -22,6 +22,7 @@
 //! most of the noise of thin parts. The exit's irradiance is interpolated from the vertices',
 //! and from a finer grid where a shadow's edge crosses the triangle (`shadow_edges`).
 
+use super::operator::ExitRecord;
 use super::twin::PlaneScore;
 use crate::bake_points::BakePoints;
 use crate::error::{Error, Result};
@@ -89,8 +90,9 @@ pub(super) enum Placement {
 
 /// Where a walk's flight ended.
 enum Exit {
-    /// Out through the surface, into the irradiance there.
-    Lit(f64),
+    /// Out through the surface, into the irradiance there (at barycentrics `w` where that
+    /// depends on the light; None where it is dark whatever the light).
+    Lit(f64, Option<[f32; 3]>),
     /// Out through a surface inside another part of the mesh (`Walker::tunnel`).
     Inside,
 }
@@ -227,7 +229,8 @@ impl Walker<'_> {
     /// `face`: the entry triangle's normal Ng where the walk enters on a triangle (a bake
     /// point): it starts just beneath that triangle, and an entry direction that does not go
     /// into it ends the mesh walk as Cycles does (`dot(-Ng, D) <= 0`). With `mesh` false only
-    /// the twin walks (`p` on an unbounded plane) and no rays are cast.
+    /// the twin walks (`p` on an unbounded plane) and no rays are cast. With `exits`, every
+    /// exit whose light depends on the lighting is recorded there (`operator`).
     ///
     /// Long (about 170 lines) on purpose: the flight loop is the precompute's innermost loop,
     /// and it steps the mesh walk and its twin on the same random numbers flight by flight,
@@ -244,6 +247,7 @@ impl Walker<'_> {
         m: &Medium,
         streams: &mut Streams,
         mesh: bool,
+        mut exits: Option<&mut Vec<ExitRecord>>,
     ) -> (f64, PlaneScore, u64) {
         let Streams {
             flights: rng,
@@ -317,7 +321,16 @@ impl Walker<'_> {
                     if let Some((h, s)) = exit {
                         let y = inside.pos + dir * s;
                         match self.exit(h.triangle, y, dir, c) {
-                            Exit::Lit(e) => score += left * e,
+                            Exit::Lit(e, at) => {
+                                score += left * e;
+                                if let (Some(record), Some(w)) = (exits.as_deref_mut(), at) {
+                                    record.push(ExitRecord {
+                                        triangle: h.triangle,
+                                        w,
+                                        weight: left as f32,
+                                    });
+                                }
+                            }
                             // Without the tunnel that share's light is dark (Cycles' indirect).
                             Exit::Inside if !self.tunnel => {}
                             Exit::Inside => {
@@ -423,19 +436,20 @@ impl Walker<'_> {
         }
         let outward = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
         if outward.as_dvec3().dot(dir) < 0.0 {
-            return Exit::Lit(0.0);
+            return Exit::Lit(0.0, None);
         }
         let Some(w) = barycentric(&corners, y.as_vec3()) else {
-            return Exit::Lit(0.0);
+            return Exit::Lit(0.0, None);
         };
         if let Some(e) = self.edges.value(triangle, w, c) {
-            return Exit::Lit(f64::from(e));
+            return Exit::Lit(f64::from(e), Some(w));
         }
         Exit::Lit(
             tri.iter()
                 .zip(w)
                 .map(|(&i, w)| f64::from(w) * f64::from(self.irradiance[i as usize][c]))
                 .sum(),
+            Some(w),
         )
     }
 
