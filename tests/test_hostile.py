@@ -247,7 +247,12 @@ def test_a_prt_says_when_the_scenes_lights_changed(change):
     assert "changed" in prt.stale_reason and prt.refresh_advised is True
     prt.radiosity(m)
     assert prt.last_eval["refresh_advised"] is True
+    assert "update(lights=scene)" in prt.stale_reason
     assert dipole_prt(s).stale_reason is None
+    # The way out it names: the Prt follows the scene's lights again.
+    prt.update(lights=s)
+    prt.radiosity(m)
+    assert prt.stale_reason is None and prt.refresh_advised is False
 
 
 # --------------------------------------------------------------------------- relative_error

@@ -644,8 +644,12 @@ fn recorded_walks_relit_follow_the_half_space_table() {
         vertices: e,
         edges: &none,
     };
-    let same = relit_radiosity(&mesh, records, &receivers, &light(&uniform)).unwrap();
-    for (a, b) in same.iter().zip(&r.radiosity) {
+    let (same, same_se) = relit_radiosity(&mesh, records, &receivers, &light(&uniform)).unwrap();
+    for ((a, b), (sa, sb)) in same
+        .iter()
+        .zip(&r.radiosity)
+        .zip(same_se.iter().zip(&r.std_error))
+    {
         for c in 0..3 {
             assert!(
                 (a[c] - b[c]).abs() <= 1e-5 * b[c].max(1e-6),
@@ -653,9 +657,13 @@ fn recorded_walks_relit_follow_the_half_space_table() {
                 a[c],
                 b[c]
             );
+            assert!(
+                (sa[c] - sb[c]).abs() <= 1e-4 * sb[c].max(1e-6),
+                "standard error {sa:?} vs {sb:?}"
+            );
         }
     }
-    let relit = relit_radiosity(&mesh, records, &receivers, &light(&half)).unwrap();
+    let (relit, relit_se) = relit_radiosity(&mesh, records, &receivers, &light(&half)).unwrap();
     for (i, &v) in receivers.iter().enumerate() {
         let x = f64::from(mesh.positions()[v as usize].x);
         for c in 0..3 {
@@ -665,10 +673,7 @@ fn recorded_walks_relit_follow_the_half_space_table() {
             } else {
                 p.total() - dark_side(p, -x)
             };
-            // The relit walks' noise: at most that of the uncontrolled walks, sqrt(B/n) for
-            // scores in [0, 1] (the control variate was fitted to the uniform light).
-            let se = (expected.max(1e-4) / settings.walks as f64).sqrt();
-            let b = f64::from(relit[i][c]);
+            let (b, se) = (f64::from(relit[i][c]), f64::from(relit_se[i][c]));
             eprintln!(
                 "relit x {x:+.3} albedo {}: {b:.5}, table {expected:.5}",
                 albedo[c]

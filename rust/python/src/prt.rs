@@ -28,15 +28,22 @@ pub struct PyPrt {
     inner: RwLock<Prt>,
     last: Mutex<Option<Evaluation>>,
     backend_message: Mutex<String>,
-    /// The rays and lights of the precompute's irradiance estimates (samples and vertices).
-    lighting: IrradianceReport,
+    /// The rays and lights of the precompute's irradiance estimates (samples and vertices),
+    /// the last `update`'s once there was one.
+    lighting: Mutex<IrradianceReport>,
+    /// How the irradiance is estimated (kept for `update`), and single scattering's settings.
+    irradiance: IrradianceSettings,
+    single_settings: single::SingleSettings,
+    /// The backend asked for (and f16), chosen again after an `update`.
+    backend_request: Mutex<(String, bool)>,
     /// Whether single scattering was computed, and why.
     single: single::Decision,
     /// The last evaluation's single scattering, when it had any.
     last_single: Mutex<Option<single::SingleEvaluation>>,
-    /// The scene's lighting version counter, and its value when the precompute began.
-    scene_lighting: std::sync::Arc<std::sync::atomic::AtomicU64>,
-    lighting_version: u64,
+    /// The lighting scene's version counter, and its value when the precompute (or the last
+    /// `update`) began.
+    scene_lighting: Mutex<std::sync::Arc<std::sync::atomic::AtomicU64>>,
+    lighting_version: std::sync::atomic::AtomicU64,
 }
 
 /// A lock's value, whether or not a panic (caught by `call::run`) poisoned it.
@@ -91,7 +98,28 @@ impl PyPrt {
             _ => words,
         };
         *held(&self.backend_message) = result.clone();
+        *held(&self.backend_request) = (backend.to_string(), half);
         Ok(result)
+    }
+
+    /// The irradiance callback of `scene` under `irr`, its estimates' report merged into
+    /// `lighting`, stopping when `tick` says so.
+    fn lit_by<'a>(
+        scene: &'a translucent_core::scene::Scene,
+        tracer: &'a translucent_core::raytrace::Tracer,
+        irr: &'a IrradianceSettings,
+        lighting: &'a Mutex<IrradianceReport>,
+        ask: &'a (dyn Fn(f32) -> bool + Sync),
+    ) -> impl Fn(&[Vec3], &[Vec3], Density) -> translucent_core::Result<Vec<[f32; 3]>> + Sync + 'a
+    {
+        move |p: &[Vec3], n: &[Vec3], d: Density| {
+            let s = irr.for_density(d);
+            irradiance_with_progress(scene, tracer, p, n, &s, Some(ask)).map(|(v, r)| {
+                let mut total = held(lighting);
+                *total = total.merge(&r);
+                v
+            })
+        }
     }
 }
 
@@ -211,14 +239,7 @@ impl PyPrt {
         let inner = run(py, progress, |tick| {
             // The irradiance's rays stop on a cancel too.
             let ask = cancel_only(Some(tick));
-            let irradiance_fn = |p: &[Vec3], n: &[Vec3], d: Density| {
-                let s = irr.for_density(d);
-                irradiance_with_progress(core_scene, &tracer, p, n, &s, Some(&ask)).map(|(v, r)| {
-                    let mut total = held(&lighting);
-                    *total = total.merge(&r);
-                    v
-                })
-            };
+            let irradiance_fn = Self::lit_by(core_scene, &tracer, &irr, &lighting, &ask);
             let mut prt = Prt::precompute(
                 &core_scene.mesh,
                 &materials,
@@ -243,11 +264,14 @@ impl PyPrt {
             inner: RwLock::new(inner),
             last: Mutex::new(None),
             backend_message: Mutex::new(String::new()),
-            lighting: lighting.into_inner().unwrap_or_else(|e| e.into_inner()),
+            lighting,
+            irradiance: irr,
+            single_settings,
+            backend_request: Mutex::new((backend.to_string(), false)),
             single,
             last_single: Mutex::new(None),
-            scene_lighting,
-            lighting_version,
+            scene_lighting: Mutex::new(scene_lighting),
+            lighting_version: std::sync::atomic::AtomicU64::new(lighting_version),
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -419,16 +443,86 @@ impl PyPrt {
     /// scene's lights or world changed since (the transport still holds the old ones).
     #[getter]
     fn stale_reason(&self) -> Option<String> {
-        let now = self
-            .scene_lighting
+        let now = held(&self.scene_lighting).load(std::sync::atomic::Ordering::Relaxed);
+        let then = self
+            .lighting_version
             .load(std::sync::atomic::Ordering::Relaxed);
-        (now != self.lighting_version).then(|| {
+        (now != then).then(|| {
             format!(
-                "the scene's lights or world changed {} time(s) since this Prt was precomputed; \
-                 it still shows the old lighting: precompute again",
-                now - self.lighting_version
+                "the scene's lights or world changed {} time(s) since this Prt was lit; it \
+                 still shows the old lighting: prt.update(lights=scene)",
+                now.wrapping_sub(then)
             )
         })
+    }
+
+    /// New lights for the same mesh (the call `Hierarchy.update` takes): `lights` is a Scene
+    /// of this mesh whose lights and world replace the precompute's. Only what depends on the
+    /// light is computed again: the irradiance, the transport rows, the walks' term (its walks
+    /// read at the same exits under the new light, none traced) and the object's own light
+    /// (cast again); samples, basis, walk tables and walks stay. Single scattering, when on,
+    /// is precomputed again; the backend is chosen again. Releases the GIL; `progress` as for
+    /// the constructor. Returns {"seconds", "seconds_irradiance", "seconds_transport",
+    /// "seconds_walks", "seconds_own_light", "seconds_single_scattering", "rays" (the
+    /// irradiance's), "own_light_rays", "walks_traced"}.
+    #[pyo3(signature = (lights, progress = None))]
+    fn update<'py>(
+        &self,
+        py: Python<'py>,
+        lights: PyRef<'_, PyScene>,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let tracer = lights.tracer();
+        let counter = lights.lighting_counter();
+        let version = counter.load(std::sync::atomic::Ordering::Relaxed);
+        let scene = &lights.scene;
+        let lighting = Mutex::new(IrradianceReport::default());
+        let (irr, single_on, single_settings) =
+            (&self.irradiance, self.single.on, &self.single_settings);
+        let lock = &self.inner;
+        // The new transport is built beside the old one, which goes on answering edits; it
+        // replaces it only once the whole call succeeded (a cancel, even at the last progress
+        // call, leaves the old light in place).
+        let (next, report, single_seconds) = run(py, progress, |tick| {
+            let inner = lock.read().unwrap_or_else(|e| e.into_inner());
+            let ask = cancel_only(Some(tick));
+            let irradiance_fn = Self::lit_by(scene, &tracer, irr, &lighting, &ask);
+            let (mut next, report) = inner.relit(&scene.mesh, &irradiance_fn, Some(tick))?;
+            let t = std::time::Instant::now();
+            if single_on {
+                let materials = next.representatives().to_vec();
+                let s = single::SingleScattering::precompute(
+                    scene,
+                    &tracer,
+                    &materials,
+                    single_settings,
+                )?;
+                next.set_single_scattering(Some(s))?;
+            }
+            Ok((next, report, t.elapsed().as_secs_f64()))
+        })?;
+        *self.inner.write().unwrap_or_else(|e| e.into_inner()) = next;
+        *held(&self.lighting) = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
+        *held(&self.scene_lighting) = counter;
+        self.lighting_version
+            .store(version, std::sync::atomic::Ordering::Relaxed);
+        *held(&self.last) = None;
+        *held(&self.last_single) = None;
+        if report.dropped.contains(&"the GPU copy of the transport") {
+            let (backend, half) = held(&self.backend_request).clone();
+            self.choose_backend(py, &backend, half)?;
+        }
+        let d = PyDict::new(py);
+        d.set_item("seconds", report.seconds + single_seconds)?;
+        d.set_item("seconds_irradiance", report.seconds_irradiance)?;
+        d.set_item("seconds_transport", report.seconds_transport)?;
+        d.set_item("seconds_walks", report.seconds_walks)?;
+        d.set_item("seconds_own_light", report.seconds_own_light)?;
+        d.set_item("seconds_single_scattering", single_seconds)?;
+        d.set_item("rays", held(&self.lighting).rays)?;
+        d.set_item("own_light_rays", report.own_light_rays)?;
+        d.set_item("walks_traced", report.walks_traced)?;
+        Ok(d)
     }
 
     /// What the precompute did, skipped, and how long each step took.
@@ -447,11 +541,11 @@ impl PyPrt {
         d.set_item("coefficients", inner.basis().len())?;
         d.set_item("basis_size_by_tolerance", r.basis_size_by_tolerance)?;
         d.set_item("representative_error", r.representative_error)?;
-        d.set_item("rays", self.lighting.rays)?;
-        d.set_item("lights_used", self.lighting.lights_used)?;
-        d.set_item("lights_skipped_black", self.lighting.lights_skipped)?;
-        d.set_item("lights_unreached", self.lighting.lights_unreached)?;
-        d.set_item("world_skipped", self.lighting.world_skipped)?;
+        d.set_item("rays", held(&self.lighting).rays)?;
+        d.set_item("lights_used", held(&self.lighting).lights_used)?;
+        d.set_item("lights_skipped_black", held(&self.lighting).lights_skipped)?;
+        d.set_item("lights_unreached", held(&self.lighting).lights_unreached)?;
+        d.set_item("world_skipped", held(&self.lighting).world_skipped)?;
         // Single scattering (Xu 2007 eqs. 12-15): whether it was computed, on what share and
         // why; none of its work when it is off.
         d.set_item("single_scattering", self.single.on)?;
@@ -511,6 +605,8 @@ impl PyPrt {
                     w.set_item("noise", g.noise.to_vec())?;
                     w.set_item("share", g.share.to_vec())?;
                     w.set_item("seconds", g.seconds)?;
+                    w.set_item("relight_bytes", g.relight_bytes)?;
+                    w.set_item("seconds_relight", g.seconds_relight)?;
                     d.set_item(key, w)?;
                 }
                 None => d.set_item(key, py.None())?,

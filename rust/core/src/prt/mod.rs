@@ -26,6 +26,7 @@ mod knots;
 mod layout;
 mod own_light;
 mod precompute;
+mod relight;
 pub mod request;
 mod rows;
 mod settings;
@@ -47,6 +48,7 @@ pub use backend::Backend;
 pub use evaluate::{Coefficients, Evaluation, PrtDetails, REFRESH_FACTOR, REFRESH_FLOOR};
 pub use knots::BASIS_SIZES;
 pub use own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
+pub use relight::RelightReport;
 pub use request::{irradiance_eta, path_settings, PrtRequest};
 pub use settings::{
     default_walk_rays, PrtReport, PrtSettings, DEFAULT_MAX_SAMPLES, DEFAULT_WALK_RAYS,
@@ -79,6 +81,12 @@ pub struct Prt {
     /// Single scattering (Xu 2007 eqs. 12-15), when attached (`set_single_scattering`).
     single: Option<single::SingleScattering>,
     report: PrtReport,
+    /// What a new light needs (`relight`): the surface samples and their spacing, the
+    /// settings and the representatives the transport was precomputed with.
+    samples: Vec<crate::mesh::SurfaceSample>,
+    spacing: f32,
+    settings: PrtSettings,
+    representatives: Vec<crate::optics::Material>,
 }
 
 impl Prt {
@@ -97,6 +105,12 @@ impl Prt {
 
     pub fn profile(&self) -> ProfileKind {
         self.profile
+    }
+
+    /// The materials the transport was precomputed for (the first is the representative the
+    /// walks and the object's own light were computed with).
+    pub fn representatives(&self) -> &[crate::optics::Material] {
+        &self.representatives
     }
 
     pub fn vertex_count(&self) -> usize {

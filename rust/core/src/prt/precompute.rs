@@ -1,7 +1,9 @@
 //! The precompute, step by step: samples and their irradiance, the sample tree, the
 //! receiver's disc, the knots, the transport rows, then the walks and the object's own light.
 
+use super::basis::Basis;
 use super::knots::{default_spacing, Knots};
+use super::layout::Transport;
 use super::own_light::{self, Bounce, INDIRECT_WALK_SHARE};
 use super::rows::{transport_rows, within, FarField};
 use super::settings::check_settings;
@@ -66,14 +68,9 @@ impl Prt {
         report.seconds_irradiance = start.elapsed().as_secs_f64();
         tick(0.1)?;
 
-        let colour = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
-        let t_tree = Instant::now();
-        let tree = lit.tree(&colour);
-        report.seconds_tree = t_tree.elapsed().as_secs_f64();
-
-        let disc = ReceiverDisc::new(mesh, &tree, lit.spacing);
-        report.near_radius = disc.near_radius;
-        let knots = Knots::choose(mesh, &profiles, disc.near_radius, settings)?;
+        let near_radius = ReceiverDisc::near_radius_for(lit.spacing);
+        report.near_radius = near_radius;
+        let knots = Knots::choose(mesh, &profiles, near_radius, settings)?;
         report.support_radius = knots.support;
         report.basis_size_by_tolerance = settings.fit_tolerance.is_some();
         report.representative_error = knots.representative_error;
@@ -82,27 +79,10 @@ impl Prt {
 
         // Transport T_j per vertex (Xu 2007 eq. 10). With walks through the mesh, it is the
         // first 60 % of the progress bar.
-        let t_transport = Instant::now();
-        let far = FarField::new(settings.far_field);
-        report.far_field_distance_bound = far.distance_bound();
         let transport_end = if settings.walks.is_some() { 0.6 } else { 1.0 };
-        let (transport, counters) = transport_rows(
-            mesh,
-            &tree,
-            &knots.basis,
-            &far,
-            &disc,
-            &colour,
-            &lit.vertex_irradiance,
-            &|f| tick(0.15 + (transport_end - 0.15) * f),
-        )?;
-        report.exact_samples = counters.exact;
-        report.far_clusters = counters.far;
-        report.skipped_beyond_support = counters.beyond;
-        report.skipped_dark = counters.dark;
-        report.transport_bytes = transport.bytes();
-        report.stored_channels = colour.channels;
-        report.seconds_transport = t_transport.elapsed().as_secs_f64();
+        let transport = transport_under(mesh, &lit, &knots.basis, settings, &mut report, &|f| {
+            tick(0.15 + (transport_end - 0.15) * f)
+        })?;
         report.seconds_total = start.elapsed().as_secs_f64();
         let mut prt = Prt {
             fitter: knots.fitter,
@@ -111,7 +91,7 @@ impl Prt {
             positions: mesh.positions().to_vec(),
             normals: mesh.normals().to_vec(),
             vertex_irradiance: lit.vertex_irradiance,
-            near_radius: disc.near_radius,
+            near_radius,
             whole_mesh: knots.whole_mesh,
             eta: settings.eta,
             profile: settings.profile,
@@ -119,6 +99,10 @@ impl Prt {
             walks: None,
             single: None,
             report,
+            samples: lit.samples,
+            spacing: lit.spacing,
+            settings: settings.clone(),
+            representatives: representatives.to_vec(),
         };
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);
@@ -166,7 +150,7 @@ impl Prt {
     /// half-space B of the first representative. Their exits read the light finer where a
     /// shadow's edge crosses a triangle.
     #[allow(clippy::too_many_arguments)]
-    fn add_walks(
+    pub(super) fn add_walks(
         &mut self,
         mesh: &Mesh,
         tracer: &Tracer,
@@ -205,6 +189,26 @@ impl Prt {
         halfspace: &[[f32; 3]],
         strata: usize,
         settings: &PrtSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<()> {
+        self.cast_own_light(
+            mesh, tracer, rep, halfspace, strata, settings, None, progress,
+        )
+    }
+
+    /// `add_own_light`; with `walked_before` (the own light's walk term of an earlier light,
+    /// kept relightable) its walks are read under the new indirect light instead of walked
+    /// again.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn cast_own_light(
+        &mut self,
+        mesh: &Mesh,
+        tracer: &Tracer,
+        rep: &Resolved,
+        halfspace: &[[f32; 3]],
+        strata: usize,
+        settings: &PrtSettings,
+        walked_before: Option<WalkTerm>,
         progress: Option<&ProgressFn>,
     ) -> Result<()> {
         let t_bounce = Instant::now();
@@ -256,7 +260,13 @@ impl Prt {
                     vertices: &irradiance,
                     edges: &ShadowEdges::none(),
                 };
-                let term = WalkTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)?;
+                let term = match walked_before.filter(WalkTerm::relightable) {
+                    Some(mut term) => {
+                        term.relight(mesh, rep, &lit, &local)?;
+                        term
+                    }
+                    None => WalkTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)?,
+                };
                 self.report.walks_indirect = Some(term.report.clone());
                 Some(term)
             }
@@ -271,12 +281,51 @@ impl Prt {
     }
 }
 
+/// The half of the precompute that depends on the light: the colour projection, the sample
+/// tree weighted by the samples' irradiance, the receiver's disc and the transport rows T_j
+/// (Xu 2007 eq. 10) on `basis`; fills the report's counters and seconds.
+pub(super) fn transport_under(
+    mesh: &Mesh,
+    lit: &SampledLight,
+    basis: &Basis,
+    settings: &PrtSettings,
+    report: &mut PrtReport,
+    tick: &dyn Fn(f32) -> Result<()>,
+) -> Result<Transport> {
+    let colour = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
+    let t_tree = Instant::now();
+    let tree = lit.tree(&colour);
+    report.seconds_tree = t_tree.elapsed().as_secs_f64();
+    let disc = ReceiverDisc::new(mesh, &tree, lit.spacing);
+    let t_transport = Instant::now();
+    let far = FarField::new(settings.far_field);
+    report.far_field_distance_bound = far.distance_bound();
+    let (transport, counters) = transport_rows(
+        mesh,
+        &tree,
+        basis,
+        &far,
+        &disc,
+        &colour,
+        &lit.vertex_irradiance,
+        tick,
+    )?;
+    report.exact_samples = counters.exact;
+    report.far_clusters = counters.far;
+    report.skipped_beyond_support = counters.beyond;
+    report.skipped_dark = counters.dark;
+    report.transport_bytes = transport.bytes();
+    report.stored_channels = colour.channels;
+    report.seconds_transport = t_transport.elapsed().as_secs_f64();
+    Ok(transport)
+}
+
 /// Samples and their irradiance (Xu 2007 §6.1), and the irradiance at the receivers.
-struct SampledLight {
-    spacing: f32,
-    samples: Vec<SurfaceSample>,
+pub(super) struct SampledLight {
+    pub(super) spacing: f32,
+    pub(super) samples: Vec<SurfaceSample>,
     sample_irradiance: Vec<[f32; 3]>,
-    vertex_irradiance: Vec<[f32; 3]>,
+    pub(super) vertex_irradiance: Vec<[f32; 3]>,
 }
 
 impl SampledLight {
@@ -290,7 +339,16 @@ impl SampledLight {
             Some(count) => mesh.spacing_for_sample_count(count),
             None => default_spacing(mesh, profiles),
         };
-        let samples = mesh.surface_samples(spacing)?;
+        Self::lit(mesh, spacing, mesh.surface_samples(spacing)?, irradiance)
+    }
+
+    /// The `samples` (at `spacing`) and the vertices lit by `irradiance`.
+    pub(super) fn lit(
+        mesh: &Mesh,
+        spacing: f32,
+        samples: Vec<SurfaceSample>,
+        irradiance: &IrradianceFn,
+    ) -> Result<Self> {
         let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
         let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
         let sample_irradiance = irradiance(&points, &normals, Density::Dense)?;
@@ -361,9 +419,14 @@ pub(super) struct ReceiverDisc {
 }
 
 impl ReceiverDisc {
+    /// The disc integrated in closed form: a quarter of the sample spacing.
+    pub(super) fn near_radius_for(spacing: f32) -> f64 {
+        0.25 * f64::from(spacing)
+    }
+
     fn new(mesh: &Mesh, tree: &SampleTree, spacing: f32) -> Self {
         let exclusion = 1.5 * f64::from(spacing);
-        let near_radius = 0.25 * f64::from(spacing);
+        let near_radius = Self::near_radius_for(spacing);
         let excluded: Vec<(f64, [f64; 3])> = mesh
             .positions()
             .par_iter()

@@ -123,6 +123,8 @@ pub struct PrtReport {
     /// own light (when interreflection is on too).
     pub walks: Option<WalkTermReport>,
     pub walks_indirect: Option<WalkTermReport>,
+    /// The last `Prt::relight`, if any.
+    pub last_relight: Option<super::relight::RelightReport>,
     /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
     /// evaluated there, and the time it took.
     pub shadow_edge_triangles: usize,

@@ -305,3 +305,55 @@ fn the_default_walk_budget_is_twenty_million_rays_within_600_to_2500_per_vertex(
     // A small one at most 2500 per vertex.
     assert_eq!(default_walk_rays(42), 2500 * 42);
 }
+
+/// A new light keeps everything the light does not hold: precomputed under a sun at the
+/// zenith, relit to a sun 0.6 rad off it, the plane gives the closed form at the new angle, as
+/// a fresh precompute does, bit for bit (samples, knots and irradiance are the same), and
+/// nothing is walked.
+#[test]
+#[allow(clippy::needless_range_loop)]
+fn relit_plane_gives_the_closed_form_at_the_new_angle() {
+    let mesh = plane(101, 200.0);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let settings = PrtSettings {
+        eta: m.eta,
+        ..Default::default()
+    };
+    let mut prt = Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, m.eta), None).unwrap();
+    // A relight stopped halfway leaves the old light in place.
+    let before = prt.radiosity(&m).unwrap().values;
+    let stop = |f: f32| f < 0.5;
+    let err = prt.relight(&mesh, &sun(1.0, 0.6, m.eta), Some(&stop));
+    assert!(matches!(err, Err(Error::Cancelled)), "{err:?}");
+    assert_eq!(prt.radiosity(&m).unwrap().values, before);
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let progress = |f: f32| {
+        assert!((0.0..=1.0).contains(&f));
+        calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        true
+    };
+    let report = prt
+        .relight(&mesh, &sun(1.0, 0.6, m.eta), Some(&progress))
+        .unwrap();
+    assert_eq!(report.walks_traced, 0);
+    assert!(calls.load(std::sync::atomic::Ordering::Relaxed) >= 2);
+    let b = prt.radiosity(&m).unwrap().values;
+    let v = centre(&mesh);
+    let e = fresnel_transmittance(m.eta, 0.6f64.cos()) * 0.6f64.cos();
+    for c in 0..3 {
+        let expect = e * rd_total(m.sigma_a[c], m.sigma_s_prime()[c], m.eta);
+        let got = f64::from(b[v][c]);
+        assert!(
+            (got - expect).abs() <= 0.01 * expect,
+            "channel {c}: relit B {got} vs closed form {expect}"
+        );
+    }
+    let fresh = Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.6, m.eta), None).unwrap();
+    assert_eq!(fresh.radiosity(&m).unwrap().values, b);
+    // Another mesh is refused, naming what differs.
+    let other = plane(101, 100.0);
+    let err = prt
+        .relight(&other, &sun(1.0, 0.6, m.eta), None)
+        .unwrap_err();
+    assert!(err.to_string().contains("precomputed for"), "{err}");
+}

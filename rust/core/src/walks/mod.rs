@@ -6,6 +6,7 @@ mod grid;
 mod operator;
 mod passes;
 mod radiosity;
+mod relight;
 mod term;
 mod twin;
 mod walker;

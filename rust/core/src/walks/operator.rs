@@ -7,11 +7,11 @@
 //! One pass's estimate at vertex v, channel c (`twin`): x_i = sum over walk i's exits of the
 //! leaving weight times E(exit), y_i = e (T_i - P) + grad E . ((q_i - p) (T_i - P) + O_i) with
 //! e = E(v), T_i and O_i the twin's total and offset, P the half-space total, q_i the entry;
-//! mean = max(0, mean(x) - beta mean(y)). Both means are linear in E, so a pass is stored as its
-//! exits (weights divided by the walks), the two coefficients of mean(y) and beta (fitted
-//! under the precompute's light and kept: any fixed beta leaves the estimate unbiased). A
-//! vertex walked in several passes (`allocation::more_where_noisy`) keeps each pass with its
-//! share of the merged mean.
+//! mean = max(0, mean(x) - beta mean(y)), beta = cov(x, y) / var(y) in [0, 1]. x_i and y_i are
+//! linear in E, so each walk is stored as its exits and y_i's two coefficients, and the relit
+//! estimate replays the estimator itself: beta fitted and the standard error taken under the
+//! new light, as the same walks traced under it would give. A vertex walked in several passes
+//! (`allocation::more_where_noisy`) keeps each pass with its share of the merged mean.
 
 use super::radiosity::ExitLight;
 use crate::mesh::Mesh;
@@ -24,21 +24,72 @@ pub(crate) struct ExitRecord {
     pub(crate) triangle: u32,
     /// Barycentric coordinates of the exit on the triangle.
     pub(crate) w: [f32; 3],
-    /// The leaving weight, divided by the pass's walks.
+    /// The leaving weight.
     pub(crate) weight: f32,
 }
 
-/// One pass's walks at one vertex and channel, as a linear function of the light.
+/// One walk: where its exits end in the pass's list, and its control's y = e `at_vertex` +
+/// grad E . `along_gradient`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct WalkRecord {
+    pub(crate) exits_end: u32,
+    pub(crate) at_vertex: f32,
+    pub(crate) along_gradient: [f32; 3],
+}
+
+/// One pass's walks at one vertex and channel, as a function of the light.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct PassRecord {
     /// This pass's share of the vertex's merged mean.
     pub(crate) share: f32,
     pub(crate) exits: Vec<ExitRecord>,
-    /// mean(y) = e `at_vertex` + grad E . `along_gradient`.
-    pub(crate) at_vertex: f32,
-    pub(crate) along_gradient: [f32; 3],
-    /// The control variate's coefficient, fitted under the precompute's light.
-    pub(crate) beta: f32,
+    pub(crate) walks: Vec<WalkRecord>,
+}
+
+impl PassRecord {
+    /// The pass's mean and standard error under `light` (`twin`'s estimator, replayed).
+    fn estimate(&self, mesh: &Mesh, light: &ExitLight, e: f64, g: Vec3, c: usize) -> (f64, f64) {
+        let mut sums = [0f64; 5];
+        let mut from = 0usize;
+        for w in &self.walks {
+            let to = w.exits_end as usize;
+            let x: f64 = self.exits[from..to]
+                .iter()
+                .map(|x| f64::from(x.weight) * exit_irradiance(mesh, light, x, c))
+                .sum();
+            from = to;
+            let y =
+                e * f64::from(w.at_vertex) + f64::from(g.dot(Vec3::from_array(w.along_gradient)));
+            sums[0] += x;
+            sums[1] += y;
+            sums[2] += x * x;
+            sums[3] += y * y;
+            sums[4] += x * y;
+        }
+        let k = self.walks.len() as f64;
+        if k == 0.0 {
+            return (0.0, 0.0);
+        }
+        let (mx, my) = (sums[0] / k, sums[1] / k);
+        let (vx, vy, cxy) = (
+            (sums[2] / k - mx * mx).max(0.0),
+            (sums[3] / k - my * my).max(0.0),
+            sums[4] / k - mx * my,
+        );
+        let beta = if vy > 0.0 {
+            (cxy / vy).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let mean = (mx - beta * my).max(0.0);
+        let var = (vx - 2.0 * beta * cxy + beta * beta * vy).max(0.0);
+        let se = if k > 1.0 {
+            (var / (k - 1.0)).sqrt()
+        } else {
+            0.0
+        };
+        (mean, se)
+    }
 }
 
 /// The walks of one receiver: per channel its passes (none for a channel without walks), the
@@ -61,6 +112,7 @@ impl ReceiverRecord {
                 .map(|p| {
                     std::mem::size_of::<PassRecord>()
                         + p.exits.len() * std::mem::size_of::<ExitRecord>()
+                        + p.walks.len() * std::mem::size_of::<WalkRecord>()
                 })
                 .sum::<usize>()
     }
@@ -85,33 +137,31 @@ impl ReceiverRecord {
     }
 
     /// B at vertex `v` lit by `light` (the irradiance per vertex with its shadow edges, and
-    /// `gradients` its tangent gradients, `twin::tangent_gradients`).
+    /// `gradients` its tangent gradients, `twin::tangent_gradients`), and its standard error.
     pub(crate) fn radiosity(
         &self,
         mesh: &Mesh,
         v: u32,
         light: &ExitLight,
         gradients: &[[[f32; 3]; 3]],
-    ) -> [f32; 3] {
+    ) -> ([f32; 3], [f32; 3]) {
         let e = light.vertices[v as usize];
-        std::array::from_fn(|c| {
+        let mut b = [0f32; 3];
+        let mut se = [0f32; 3];
+        for c in 0..CHANNELS {
             let g = Vec3::from_array(std::array::from_fn(|k| gradients[v as usize][k][c]));
-            let walked: f64 = self.passes[c]
-                .iter()
-                .map(|p| {
-                    let x: f64 = p
-                        .exits
-                        .iter()
-                        .map(|x| f64::from(x.weight) * exit_irradiance(mesh, light, x, c))
-                        .sum();
-                    let y = f64::from(e[c]) * f64::from(p.at_vertex)
-                        + f64::from(g.dot(Vec3::from_array(p.along_gradient)));
-                    f64::from(p.share) * (x - f64::from(p.beta) * y).max(0.0)
-                })
-                .sum();
-            (f64::from(self.point_mass[c]) * f64::from(e[c]) + f64::from(self.scale[c]) * walked)
-                as f32
-        })
+            let (mut mean, mut var) = (0f64, 0f64);
+            for p in &self.passes[c] {
+                let (m, s) = p.estimate(mesh, light, f64::from(e[c]), g, c);
+                let share = f64::from(p.share);
+                mean += share * m;
+                var += (share * s).powi(2);
+            }
+            let scale = f64::from(self.scale[c]);
+            b[c] = (f64::from(self.point_mass[c]) * f64::from(e[c]) + scale * mean) as f32;
+            se[c] = (scale * var.sqrt()) as f32;
+        }
+        (b, se)
     }
 }
 

@@ -4,6 +4,7 @@
 use super::allocation::{flat_vertices, more_where_noisy, spread_where};
 use super::grid::Grid;
 use super::radiosity::{walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings};
+use super::relight::Kept;
 use super::term::{Diff, WalkTermSettings, FLAT_TOLERANCE};
 use crate::bake_points::sharp_vertices;
 use crate::error::Result;
@@ -92,6 +93,8 @@ pub(super) struct Sharp {
     pub(super) own: Vec<Option<Diff>>,
     pub(super) walks: u64,
     pub(super) rays: u64,
+    /// Their records, for a new light (`relight`).
+    pub(super) kept: Option<Kept>,
 }
 
 /// The second pass, closer together where D changes faster than the main spacing.
@@ -100,10 +103,12 @@ pub(super) struct Refined {
     pub(super) points: Vec<(u32, Diff)>,
     pub(super) walks_per_vertex: usize,
     /// Per vertex: whether it takes the fine kernel (near a flagged or embedded vertex).
-    near_flagged: Vec<bool>,
-    fine_spacing: f32,
+    pub(super) near_flagged: Vec<bool>,
+    pub(super) fine_spacing: f32,
     pub(super) walks: u64,
     pub(super) rays: u64,
+    /// Their records, for a new light (`relight`).
+    pub(super) kept: Option<Kept>,
 }
 
 /// D = B_walk - B_half-space at the `k`-th walked vertex of `walks`, whose half-space B is
@@ -194,6 +199,7 @@ impl<'a> Passes<'a> {
             &MeshWalkSettings {
                 walks,
                 seed,
+                record: self.settings.record,
                 ..MeshWalkSettings::default()
             },
             tick.as_ref().map(|f| f as _),
@@ -280,6 +286,7 @@ impl<'a> Passes<'a> {
             .min(settings.max_walks.max(1));
         let mut own: Vec<Option<Diff>> = vec![None; self.n];
         let (mut walks, mut rays) = (0, 0);
+        let mut kept = None;
         if !list.is_empty() {
             let w = self.walk(
                 &list,
@@ -292,6 +299,7 @@ impl<'a> Passes<'a> {
                 own[v as usize] = Some(diff_at(&w, k, self.halfspace[v as usize]));
             }
             (walks, rays) = (w.walks, w.rays);
+            kept = Kept::of(&list, &w);
         }
         Ok(Sharp {
             list,
@@ -299,6 +307,7 @@ impl<'a> Passes<'a> {
             own,
             walks,
             rays,
+            kept,
         })
     }
 
@@ -354,6 +363,7 @@ impl<'a> Passes<'a> {
             fine_spacing: spacing,
             walks: 0,
             rays: 0,
+            kept: None,
         };
         let any_embedded = embedded.iter().any(|e| *e);
         if !((!flagged.is_empty() || any_embedded)
@@ -415,6 +425,7 @@ impl<'a> Passes<'a> {
                 .collect();
             refined.walks_per_vertex = w;
             (refined.walks, refined.rays) = (more.walks, more.rays);
+            refined.kept = Kept::of(&fine, &more);
         }
         refined.near_flagged = near_flagged;
         refined.fine_spacing = fine_spacing;
@@ -431,29 +442,57 @@ impl<'a> Passes<'a> {
         sharp: &Sharp,
         refined: &Refined,
     ) -> Vec<Diff> {
-        let (mesh, candidates, embedded) = (self.mesh, &main.candidates, &self.embedded);
-        let (fine_points, fine_diff): (Vec<u32>, Vec<Diff>) = candidates
-            .iter()
-            .copied()
-            .zip(diff.iter().copied())
-            .chain(refined.points.iter().copied())
-            .unzip();
-        let fine_grid = Grid::new(mesh, &fine_points, KERNEL_SPACINGS * refined.fine_spacing);
-        (0..self.n)
-            .into_par_iter()
-            .map(|v| {
-                if let Some(d) = sharp.own[v] {
-                    return d;
-                }
-                if refined.near_flagged[v] {
-                    let (d, var) =
-                        fine_grid.average(mesh, v as u32, &fine_points, &fine_diff, embedded);
-                    if var != [0.0; 3] || d != [0.0; 3] {
-                        return (d, var);
-                    }
-                }
-                grid.average(mesh, v as u32, candidates, diff, embedded)
-            })
-            .collect()
+        smooth(
+            self.mesh,
+            &self.embedded,
+            &main.candidates,
+            diff,
+            grid,
+            &sharp.own,
+            &refined.points,
+            &refined.near_flagged,
+            refined.fine_spacing,
+        )
     }
+}
+
+/// D and its variance at every vertex: a sharp vertex's own (`sharp_own`), near a flagged
+/// vertex (`near_flagged`) the `fine_spacing` kernel over every walked vertex (the candidates'
+/// `diff` and the `refined` points), elsewhere `grid`'s over the candidates. Linear in the
+/// walked vertices' D: the kernels' weights are the mesh's alone.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn smooth(
+    mesh: &Mesh,
+    embedded: &[bool],
+    candidates: &[u32],
+    diff: &[Diff],
+    grid: &Grid,
+    sharp_own: &[Option<Diff>],
+    refined: &[(u32, Diff)],
+    near_flagged: &[bool],
+    fine_spacing: f32,
+) -> Vec<Diff> {
+    let (fine_points, fine_diff): (Vec<u32>, Vec<Diff>) = candidates
+        .iter()
+        .copied()
+        .zip(diff.iter().copied())
+        .chain(refined.iter().copied())
+        .unzip();
+    let fine_grid = Grid::new(mesh, &fine_points, KERNEL_SPACINGS * fine_spacing);
+    (0..mesh.vertex_count())
+        .into_par_iter()
+        .map(|v| {
+            if let Some(d) = sharp_own[v] {
+                return d;
+            }
+            if near_flagged[v] {
+                let (d, var) =
+                    fine_grid.average(mesh, v as u32, &fine_points, &fine_diff, embedded);
+                if var != [0.0; 3] || d != [0.0; 3] {
+                    return (d, var);
+                }
+            }
+            grid.average(mesh, v as u32, candidates, diff, embedded)
+        })
+        .collect()
 }

@@ -237,14 +237,18 @@ pub fn walk_radiosity_lit(
     })
 }
 
-/// B at the `receivers` of walks that kept their records (`MeshWalkSettings::record`), lit
-/// anew by `light`: the same exits read under the new light (`operator`), no walk traced.
+/// B per receiver and its standard error.
+pub type Relit = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+
+/// B and its standard error at the `receivers` of walks that kept their records
+/// (`MeshWalkSettings::record`), lit anew by `light`: the same exits read under the new light
+/// and the estimator replayed (`operator`), no walk traced.
 pub fn relit_radiosity(
     mesh: &Mesh,
     records: &[ReceiverRecord],
     receivers: &[u32],
     light: &ExitLight,
-) -> Result<Vec<[f32; 3]>> {
+) -> Result<Relit> {
     check_irradiance(mesh, light.vertices)?;
     if records.len() != receivers.len() {
         return Err(Error::InvalidArgument(format!(
@@ -264,7 +268,7 @@ pub fn relit_radiosity(
         .par_iter()
         .zip(receivers.par_iter())
         .map(|(r, &v)| r.radiosity(mesh, v, light, &gradients))
-        .collect())
+        .unzip())
 }
 
 /// One finite irradiance >= 0 per vertex.

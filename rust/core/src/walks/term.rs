@@ -38,6 +38,7 @@
 use super::grid::Grid;
 use super::passes::{Passes, KERNEL_SPACINGS};
 use super::radiosity::{ExitLight, MeshWalkSettings};
+use super::relight::{Kept, Layout};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::optics::CHANNELS;
@@ -73,6 +74,9 @@ pub struct WalkTermSettings {
     /// Whether the second pass walks again where D changes faster than the spacing (the
     /// object's own light, smooth, does without).
     pub refine: bool,
+    /// Keep what the walks found as a function of the light, so a new light is read at the
+    /// same exits (`WalkTerm::relight`) instead of walking again.
+    pub record: bool,
 }
 
 impl Default for WalkTermSettings {
@@ -84,6 +88,7 @@ impl Default for WalkTermSettings {
             vertices: 1000,
             seed: MeshWalkSettings::default().seed,
             refine: true,
+            record: true,
         }
     }
 }
@@ -116,17 +121,23 @@ pub struct WalkTermReport {
     /// Area-weighted RMS of D relative to B, per channel: how much geometry changed.
     pub share: [f64; 3],
     pub seconds: f64,
+    /// Bytes kept for a new light (`WalkTerm::relight`; 0 without `record`), and the seconds
+    /// of the last relight (0 before any).
+    pub relight_bytes: usize,
+    pub seconds_relight: f64,
 }
 
 /// D / A per vertex and channel at the three walked diffusion lengths.
 #[derive(Debug, Clone)]
 pub struct WalkTerm {
-    per_albedo: Vec<[f32; 3]>,
+    pub(super) per_albedo: Vec<[f32; 3]>,
     /// ln L of the walked channels, with the channel index, sorted.
     lengths: Vec<(f64, usize)>,
     /// Relative noise per channel (added to the error estimate).
-    noise: [f64; 3],
+    pub(super) noise: [f64; 3],
     pub report: WalkTermReport,
+    /// What a new light needs (`relight`), when the walks kept their records.
+    pub(super) layout: Option<Box<Layout>>,
 }
 
 /// Diffusion length 1 / sigma_tr of each channel's profile (capped at a large multiple of the
@@ -136,7 +147,7 @@ pub struct WalkTerm {
 /// edit of Subsurface Weight w scales D by w; with the point mass in A it was scaled by
 /// (w T + (1 - w) Base Color) / T, and at w 0.4 the rim of an open sheet was up to 32 % too
 /// bright, `test_the_lobes_add_up_as_cycles_weighs_them`).
-fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
+pub(super) fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
     let l = std::array::from_fn(|c| {
         let s = p[c].length_scales();
         s.decay.min(1e6 * s.near).max(1e-30)
@@ -185,18 +196,20 @@ impl WalkTerm {
         let refined = passes.refine(&main, &flagged, sharp.rays)?;
         let smoothed = passes.smooth(&main, &diff, &grid, &sharp, &refined);
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
-        let per_albedo = smoothed
-            .iter()
-            .map(|(d, _)| {
-                std::array::from_fn(|c| {
-                    if albedo[c] > 0.0 {
-                        (f64::from(d[c]) / albedo[c]) as f32
-                    } else {
-                        0.0
-                    }
-                })
-            })
-            .collect();
+        let per_albedo = per_albedo(&smoothed, &albedo);
+        let layout = match (Kept::of(&main.walked, &main.walks), settings.record) {
+            (Some(main_kept), true) => Some(Box::new(Layout {
+                candidates: main.candidates.clone(),
+                main: main_kept,
+                sharp: sharp.kept.clone().unwrap_or_default(),
+                refined: refined.kept.clone().unwrap_or_default(),
+                near_flagged: refined.near_flagged.clone(),
+                fine_spacing: refined.fine_spacing,
+                spacing: main.spacing,
+                embedded: passes.embedded.clone(),
+            })),
+            _ => None,
+        };
         let mut sorted: Vec<(f64, usize)> = (0..CHANNELS)
             .filter(|&c| albedo[c] > 0.0)
             .map(|c| (lengths[c].ln(), c))
@@ -225,7 +238,10 @@ impl WalkTerm {
                 noise,
                 share,
                 seconds: start.elapsed().as_secs_f64(),
+                relight_bytes: layout.as_ref().map_or(0, |l| l.bytes()),
+                seconds_relight: 0.0,
             },
+            layout,
         })
     }
 
@@ -289,9 +305,29 @@ impl WalkTerm {
     }
 }
 
+/// D / A per vertex and channel (0 where A is 0).
+pub(super) fn per_albedo(smoothed: &[Diff], albedo: &[f64; 3]) -> Vec<[f32; 3]> {
+    smoothed
+        .iter()
+        .map(|(d, _)| {
+            std::array::from_fn(|c| {
+                if albedo[c] > 0.0 {
+                    (f64::from(d[c]) / albedo[c]) as f32
+                } else {
+                    0.0
+                }
+            })
+        })
+        .collect()
+}
+
 /// The term's own noise and D's size, each relative to B = `halfspace` + D: area-weighted RMS
 /// over the vertices, per channel.
-fn noise_and_share(mesh: &Mesh, smoothed: &[Diff], halfspace: &[[f32; 3]]) -> ([f64; 3], [f64; 3]) {
+pub(super) fn noise_and_share(
+    mesh: &Mesh,
+    smoothed: &[Diff],
+    halfspace: &[[f32; 3]],
+) -> ([f64; 3], [f64; 3]) {
     let areas = mesh.vertex_areas();
     let mut sums = [[0f64; 3]; 3]; // noise^2, D^2, B^2 (area-weighted)
     for ((d, var), (b, a)) in smoothed.iter().zip(halfspace.iter().zip(areas)) {

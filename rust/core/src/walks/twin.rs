@@ -14,7 +14,7 @@
 //! 6.1 %, for 15 % more time, and the mean unchanged (1,024 walks each way: ratio 0.999-1.000, per-vertex z-scores of the
 //! difference mean 0.0, spread 1.0).
 
-use super::operator::{ExitRecord, PassRecord};
+use super::operator::{PassRecord, WalkRecord};
 use super::radiosity::MeshWalkSettings;
 use super::radiosity::WALK_TICK;
 use super::walker::{Medium, Streams, Walker};
@@ -89,9 +89,9 @@ impl Walker<'_> {
         // Sums of x (mesh), y (control, less its known mean), x^2, y^2, xy.
         let mut sums = [0f64; 5];
         let mut rays = 0;
-        // With `record`: every exit, and mean(y)'s coefficients of E(v) and grad E.
+        // With `record`: every exit, and each walk's y as coefficients of E(v) and grad E.
         let mut exits = Vec::new();
-        let (mut at_vertex, mut along) = (0f64, glam::DVec3::ZERO);
+        let mut walks = Vec::with_capacity(if record { s.walks } else { 0 });
         for i in 0..s.walks {
             let (q, nq, ng) = starts[(rotation + i) % starts.len()];
             // The control's irradiance, linear about the vertex, at the entry point.
@@ -108,8 +108,12 @@ impl Walker<'_> {
             );
             let y = eq * twin.total + g.dot(twin.offset) - eq * plane;
             if record {
-                at_vertex += twin.total - plane;
-                along += (q - p).as_dvec3() * (twin.total - plane) + twin.offset;
+                let a = twin.total - plane;
+                walks.push(WalkRecord {
+                    exits_end: exits.len() as u32,
+                    at_vertex: a as f32,
+                    along_gradient: ((q - p).as_dvec3() * a + twin.offset).as_vec3().to_array(),
+                });
             }
             sums[0] += x;
             sums[1] += y;
@@ -143,18 +147,10 @@ impl Walker<'_> {
         } else {
             0.0
         };
-        let record = record.then(|| PassRecord {
+        let record = record.then_some(PassRecord {
             share: 1.0,
-            exits: exits
-                .into_iter()
-                .map(|x| ExitRecord {
-                    weight: (f64::from(x.weight) / k) as f32,
-                    ..x
-                })
-                .collect(),
-            at_vertex: (at_vertex / k) as f32,
-            along_gradient: (along / k).as_vec3().to_array(),
-            beta: beta as f32,
+            exits,
+            walks,
         });
         (mean, se, rays, record)
     }

@@ -261,11 +261,17 @@ class Prt:
     def refresh_advised(self) -> bool | None:
         """True when the last evaluation's estimated error says the material left the range the
         basis was chosen for (above 1 % and 3x the representatives' own), or when the scene's
-        lights or world changed since the precompute (`stale_reason`): precompute again."""
+        lights or world changed since the precompute (`stale_reason`): `update(lights=scene)`."""
     @property
     def stale_reason(self) -> str | None:
-        """None while the precompute's lighting is the scene's; else a sentence saying the
-        scene's lights or world changed since."""
+        """None while the precompute's (or the last update's) lighting is the scene's; else a
+        sentence saying the scene's lights or world changed since."""
+    def update(self, lights: Scene, progress: Progress | None = None) -> dict[str, float | int]:
+        """New lights and world for the same mesh (`lights`: a Scene of this mesh). Recomputes
+        only what depends on the light (irradiance, transport rows, the walks' term read at the
+        same exits with no walk traced, the object's own light); the old transport answers
+        edits until the new one replaces it, and a cancel keeps it. Returns seconds (and per
+        stage), rays, own_light_rays, walks_traced."""
     @property
     def report(self) -> dict[str, float | int | bool | list[float]]:
         """What the precompute did and left out: samples, support_radius [unit], knots,

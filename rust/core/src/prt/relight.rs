@@ -1,0 +1,198 @@
+//! A new light for a precomputed transport: what depends on the light is computed again and
+//! nothing else. The samples, their spacing, the basis and its knots, the walk tables and the
+//! walks themselves stay; the irradiance, the sample tree's weights, the transport rows
+//! (Xu 2007 eq. 10 holds the light), the walks' term (its walks read at the same exits under
+//! the new light, `walks::relight`) and the object's own light (cast again from the new B)
+//! are redone.
+
+use super::precompute::{transport_under, SampledLight};
+use super::{Density, IrradianceFn, ProgressFn, Prt};
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use crate::profiles::Resolved;
+use crate::raytrace::Tracer;
+use crate::shadow_edges::ShadowEdges;
+use crate::walks::ExitLight;
+use std::time::Instant;
+
+/// What a relight did and cost.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RelightReport {
+    pub seconds: f64,
+    /// The irradiance at the samples and vertices.
+    pub seconds_irradiance: f64,
+    /// The sample tree and the transport rows.
+    pub seconds_transport: f64,
+    /// The shadow edges and the walks' term read under the new light.
+    pub seconds_walks: f64,
+    /// The object's own light cast again (its walks read anew).
+    pub seconds_own_light: f64,
+    /// Rays of the object's own light (the irradiance's rays are the caller's to count).
+    pub own_light_rays: u64,
+    /// Walks traced: 0 when every walk term kept its records (none is walked again).
+    pub walks_traced: u64,
+    /// What was dropped and must be attached again: the GPU copy of the transport, single
+    /// scattering (both hold the old light).
+    pub dropped: Vec<&'static str>,
+}
+
+impl Prt {
+    /// Replaces the light: `irradiance` is the new lights' (same mesh, same Fresnel index).
+    /// Errors when `mesh` is not the precomputed one; `Error::Cancelled` when `progress`
+    /// returns false. On any error the transport is left as it was.
+    pub fn relight(
+        &mut self,
+        mesh: &Mesh,
+        irradiance: &IrradianceFn,
+        progress: Option<&ProgressFn>,
+    ) -> Result<RelightReport> {
+        let (next, report) = self.relit(mesh, irradiance, progress)?;
+        *self = next;
+        Ok(report)
+    }
+
+    /// The transport under a new light, this one untouched (it may go on evaluating
+    /// meanwhile): what `relight` puts in its place. The GPU copy and single scattering hold
+    /// the old light and are not carried (the report says so): attach them again.
+    pub fn relit(
+        &self,
+        mesh: &Mesh,
+        irradiance: &IrradianceFn,
+        progress: Option<&ProgressFn>,
+    ) -> Result<(Prt, RelightReport)> {
+        let mut next = Prt {
+            fitter: self.fitter.clone(),
+            transport: self.transport.clone(),
+            gpu: None,
+            positions: self.positions.clone(),
+            normals: self.normals.clone(),
+            vertex_irradiance: self.vertex_irradiance.clone(),
+            near_radius: self.near_radius,
+            whole_mesh: self.whole_mesh,
+            eta: self.eta,
+            profile: self.profile,
+            bounce: self.bounce.clone(),
+            walks: self.walks.clone(),
+            single: None,
+            report: self.report.clone(),
+            samples: self.samples.clone(),
+            spacing: self.spacing,
+            settings: self.settings.clone(),
+            representatives: self.representatives.clone(),
+        };
+        let mut out = next.relight_steps(mesh, irradiance, progress)?;
+        if self.gpu.is_some() {
+            out.dropped.push("the GPU copy of the transport");
+        }
+        if self.single.is_some() {
+            out.dropped.push("single scattering");
+        }
+        next.report.last_relight = Some(out.clone());
+        Ok((next, out))
+    }
+
+    fn relight_steps(
+        &mut self,
+        mesh: &Mesh,
+        irradiance: &IrradianceFn,
+        progress: Option<&ProgressFn>,
+    ) -> Result<RelightReport> {
+        let start = Instant::now();
+        if mesh.positions() != self.positions.as_slice()
+            || mesh.normals() != self.normals.as_slice()
+        {
+            return Err(Error::InvalidArgument(
+                "relight needs the mesh the transport was precomputed for (its positions or \
+                 normals differ): precompute again for a new shape"
+                    .into(),
+            ));
+        }
+        let tick = |f: f32| match progress {
+            Some(p) if !p(f) => Err(Error::Cancelled),
+            _ => Ok(()),
+        };
+        tick(0.0)?;
+        let resolved: Vec<Resolved> = self
+            .representatives
+            .iter()
+            .map(|m| Resolved::new(self.profile, m))
+            .collect::<Result<Vec<_>>>()?;
+        let mut out = RelightReport::default();
+        let lit = SampledLight::lit(mesh, self.spacing, self.samples.clone(), irradiance)?;
+        out.seconds_irradiance = start.elapsed().as_secs_f64();
+        tick(0.2)?;
+        let t = Instant::now();
+        let mut report = self.report.clone();
+        let settings = self.settings.clone();
+        self.transport = transport_under(
+            mesh,
+            &lit,
+            self.fitter.basis(),
+            &settings,
+            &mut report,
+            &|f| tick(0.2 + 0.5 * f),
+        )?;
+        out.seconds_transport = t.elapsed().as_secs_f64();
+        self.vertex_irradiance = lit.vertex_irradiance;
+        self.report = report;
+        let rep = &resolved[0];
+        let tracer = (self.walks.is_some() || self.bounce.is_some()).then(|| Tracer::new(mesh));
+        let halfspace = self.radiosity_of(rep, false, false)?.values;
+        let t = Instant::now();
+        if let (Some(mut term), Some(tracer)) = (self.walks.take(), &tracer) {
+            let edges = ShadowEdges::new(mesh, &self.vertex_irradiance, &|p, n| {
+                irradiance(p, n, Density::Receivers)
+            })?;
+            self.report.shadow_edge_triangles = edges.len();
+            self.report.shadow_edge_points = edges.points();
+            if term.relightable() {
+                let light = ExitLight {
+                    vertices: &self.vertex_irradiance,
+                    edges: &edges,
+                };
+                term.relight(mesh, rep, &light, &halfspace)?;
+                self.report.walks = Some(term.report.clone());
+                self.walks = Some(term);
+            } else if let Some(g) = &settings.walks {
+                let walk_progress = progress.map(|p| move |f: f32| p(0.7 + 0.1 * f));
+                self.add_walks(
+                    mesh,
+                    tracer,
+                    rep,
+                    &halfspace,
+                    g,
+                    irradiance,
+                    walk_progress.as_ref().map(|f| f as _),
+                )?;
+                out.walks_traced += self.report.walks.as_ref().map_or(0, |w| w.walks);
+            }
+        }
+        out.seconds_walks = t.elapsed().as_secs_f64();
+        tick(0.8)?;
+        let t = Instant::now();
+        if let (Some(bounce), Some(tracer), Some(strata)) =
+            (self.bounce.take(), &tracer, settings.interreflection)
+        {
+            let relit = bounce.walked.as_ref().is_some_and(|w| w.relightable());
+            let walk_progress = progress.map(|p| move |f: f32| p(0.8 + 0.19 * f));
+            self.cast_own_light(
+                mesh,
+                tracer,
+                rep,
+                &halfspace,
+                strata,
+                &settings,
+                bounce.walked,
+                walk_progress.as_ref().map(|f| f as _),
+            )?;
+            out.own_light_rays = self.report.interreflection_rays;
+            if !relit {
+                out.walks_traced += self.report.walks_indirect.as_ref().map_or(0, |w| w.walks);
+            }
+        }
+        out.seconds_own_light = t.elapsed().as_secs_f64();
+        out.seconds = start.elapsed().as_secs_f64();
+        tick(1.0)?;
+        Ok(out)
+    }
+}

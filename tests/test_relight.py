@@ -1,0 +1,105 @@
+"""`Prt.update(lights=scene)`: a new light for the same mesh recomputes only what depends on
+the light (issue 29, points 1-2). Judged against what is independent of the relight: a fresh
+precompute under the new lights, the walk reference `reference_radiance` (Cycles' walk traced
+inside the mesh, no basis, no kernels), and a closed form (the dipole's plane)."""
+
+import math
+
+import numpy as np
+import pytest
+
+import translucent
+from helpers import fresnel_t, rd_total, sphere, sun_plane
+
+SKIN = translucent.Material.preset("skin1", mm_per_unit=1000.0)  # metres
+
+
+def ball_scene(sun_direction, point=(0.0, 0.03, 0.01)):
+    """A 1 cm ball (metres) under a sun and a point light: two lights, one of them moved."""
+    p, t = sphere(16, 0.01)
+    s = translucent.Scene(p, t)
+    s.add_sun(sun_direction, 2.0)
+    s.add_point_light(point, 0.5)
+    return s
+
+
+@pytest.fixture(scope="module")
+def relit():
+    """Precomputed lit from the front, then updated to a sun from behind and the point light
+    moved to the other side: (the updated Prt, its update report, the new scene)."""
+    prt = translucent.Prt(ball_scene((0.0, 1.0, -0.2)), SKIN, backend="cpu", walk_rays=3_000_000)
+    new = ball_scene((0.0, -1.0, -0.2), point=(0.0, -0.03, -0.01))
+    report = prt.update(lights=new)
+    return prt, report, new
+
+
+def test_an_update_traces_no_walk_and_says_what_it_cost(relit):
+    prt, report, _ = relit
+    assert report["walks_traced"] == 0
+    assert report["rays"] > 0 and report["own_light_rays"] > 0
+    parts = ["seconds_irradiance", "seconds_transport", "seconds_walks", "seconds_own_light"]
+    assert all(report[k] >= 0.0 for k in parts)
+    assert report["seconds"] >= sum(report[k] for k in parts) * 0.99
+    assert prt.report["walks"]["relight_bytes"] > 0
+    assert prt.stale_reason is None
+
+
+def test_the_updated_preview_is_as_close_to_cycles_walk_as_a_fresh_precompute(relit):
+    prt, _, new = relit
+    fresh = translucent.Prt(new, SKIN, backend="cpu", walk_rays=3_000_000)
+    receivers = list(range(0, new.vertex_count, 7))
+    truth = translucent.reference_radiance(new, SKIN, walks=512, receivers=receivers, tunnel=True)
+    # The reference's own view of the direct light: compare direct light with direct light.
+    lit = [prt.radiance(SKIN), fresh.radiance(SKIN)]
+    w = new.vertex_areas[receivers]
+    direct = [
+        translucent.relative_error(
+            p.radiosity(SKIN, interreflection=False)[receivers]
+            * (translucent.layer_weight(SKIN.roughness, 1.0, SKIN.eta) / math.pi),
+            truth,
+            w,
+        )["rms"]
+        for p in (prt, fresh)
+    ]
+    relit_err, fresh_err = (max(e) for e in direct)
+    assert relit_err <= fresh_err + 0.01, f"relit {relit_err:.4f} vs fresh {fresh_err:.4f} from the walk reference"
+    assert relit_err < 0.08
+    between = translucent.relative_error(lit[0], lit[1], new.vertex_areas)["rms"]
+    estimates = np.add(prt.last_eval["error_estimate"], fresh.last_eval["error_estimate"])
+    assert np.all(np.asarray(between) <= 2.0 * estimates), (between, estimates)
+
+
+def test_a_dipole_update_is_a_fresh_precompute_bit_for_bit_and_follows_the_closed_form():
+    """No walks, no own light: nothing the precompute keeps depends on the light, so the
+    update gives exactly what a fresh precompute does; at the plane's centre the closed form
+    F_t(theta) E cos(theta) R_d,total (Jensen 2001)."""
+    marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    p, first = sun_plane(n=61, size=0.2, theta=0.0)
+    prt = translucent.Prt(first, marble, profile="dipole", backend="cpu")
+    theta = 0.7
+    _, second = sun_plane(n=61, size=0.2, theta=theta)
+    report = prt.update(lights=second)
+    assert report["walks_traced"] == 0 and report["own_light_rays"] == 0
+    fresh = translucent.Prt(second, marble, profile="dipole", backend="cpu")
+    assert np.array_equal(prt.radiosity(marble), fresh.radiosity(marble))
+    b = prt.radiosity(marble)[int(np.argmin(np.linalg.norm(p, axis=1)))]
+    for c in range(3):
+        sp = marble.sigma_s[c] * (1 - marble.g)
+        expect = fresnel_t(marble.eta, math.cos(theta)) * math.cos(theta) * rd_total(marble.sigma_a[c], sp, marble.eta)
+        assert b[c] == pytest.approx(expect, rel=0.01)
+
+
+def test_an_update_refuses_another_mesh_and_a_cancel_keeps_the_old_light():
+    marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    _, first = sun_plane(n=31, size=0.2, theta=0.0)
+    prt = translucent.Prt(first, marble, profile="dipole", backend="cpu")
+    before = prt.radiosity(marble)
+    _, other = sun_plane(n=21, size=0.2, theta=0.3)
+    with pytest.raises(ValueError, match="precomputed for"):
+        prt.update(lights=other)
+    _, second = sun_plane(n=31, size=0.2, theta=0.5)
+    with pytest.raises(translucent.Cancelled):
+        prt.update(lights=second, progress=lambda f: f < 0.5)
+    assert np.array_equal(prt.radiosity(marble), before)
+    with pytest.raises(TypeError, match="lights"):
+        prt.update(lights="sun")
