@@ -46,6 +46,8 @@ def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting,
     session.chosen_for = job.chosen_for
     session.method = getattr(job, "method", "prt")
     session.method_message = method_message
+    # What the follow refresh did ("relit: ... no walk traced"), for the panel.
+    session.follow_message = getattr(job, "stage_message", "")
     session.remap = nearest_original_vertices(objects, info)
     SESSIONS[material.name] = session
     edit(material)

@@ -174,7 +174,8 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
     topology = any(v != "deformed" for v in s.deformed.values()) or bool(s.members_changed)
     name = mat.name
     try:
-        job, objects, info, lighting = jobs.start(mat, method=method, previous=None if topology else s)
+        job, objects, info, lighting = jobs.start(mat, method=method, previous=None if topology else s,
+                                                  relight=change == "light" and not topology)
     except ValueError as e:
         s.follow_message = f"following the scene failed: {e}"
         return

@@ -77,6 +77,33 @@ class HierarchyJob(Job):
             self.error = e
 
 
+class RelightJob(Job):
+    """PRT under new lights, same mesh: `Prt.update(lights=scene)` on a worker thread (no
+    walk traced; the old transport answers edits until the new one is in). Its result is the
+    same `translucent.Prt`. Should the update refuse (the exported mesh differs after all), a
+    fresh precompute runs instead."""
+
+    def __init__(self, scene, materials, previous, **kwargs):
+        super().__init__(scene, materials, **kwargs)
+        self._previous = previous
+        self.stage_message = ""
+
+    def _run(self, scene, materials, kwargs):
+        import translucent
+
+        try:
+            try:
+                r = self._previous.update(lights=scene, progress=self._tick)
+                self.stage_message = (f"relit: {r['seconds']:.2f} s, {r['walks_traced']} walks traced, "
+                                      f"{r['rays'] + r['own_light_rays']:,} rays")
+                self.result = self._previous
+            except ValueError as e:
+                self.result = translucent.Prt(scene, materials, progress=self._tick, **kwargs)
+                self.stage_message = f"precomputed again ({e})"
+        except BaseException as e:  # reported to the user by the follow refresh
+            self.error = e
+
+
 def hierarchy_available() -> bool:
     import translucent
 
@@ -103,11 +130,12 @@ def resolve_method(setting: str, change: str, current: str = "prt") -> tuple[str
 
 
 def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
-          previous=None) -> tuple[Job, list[str], export.ExportInfo, dict]:
+          previous=None, relight: bool = False) -> tuple[Job, list[str], export.ExportInfo, dict]:
     """Exports what the material needs and creates (but does not start) the job that builds its
-    transport: PRT's precompute, or the hierarchy (updated in place from the `previous` session
-    when the topology is the same). Returns the job, the objects, the export info and the
-    lighting keys."""
+    transport: PRT's precompute (with `relight`, only the lights changed: the `previous`
+    session's Prt updated to them, when it was built for the same objects and settings), or the
+    hierarchy (updated in place from the `previous` session when the topology is the same).
+    Returns the job, the objects, the export info and the lighting keys."""
     bl_scene = bl_scene or bpy.context.scene
     objects = objects_with(material, bl_scene)
     if not objects:
@@ -125,8 +153,14 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
         job = HierarchyJob(scene, s.material(), previous=previous.transport if same else None, positions=positions,
                            profile=s.profile_name())
     else:
-        job = Job(scene, [s.material()], coefficients=s.coefficients, degree=int(s.degree), backend=s.backend,
-                  profile=s.profile_name())
+        kwargs = dict(coefficients=s.coefficients, degree=int(s.degree), backend=s.backend, profile=s.profile_name())
+        same = (relight and previous is not None and previous.method == "prt"
+                and hasattr(previous.transport, "update") and previous.chosen_for == params(s)
+                and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
+        if same:
+            job = RelightJob(scene, [s.material()], previous.transport, **kwargs)
+        else:
+            job = Job(scene, [s.material()], **kwargs)
     job.method = method
     job.chosen_for = params(s)
     job.profile = s.profile_name()
