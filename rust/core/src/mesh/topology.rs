@@ -201,3 +201,63 @@ pub fn analyse(
     top.weld = weld;
     top
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::test_meshes::sphere_parts;
+    use crate::mesh::Mesh;
+    use std::time::Instant;
+
+    fn median_ms(mut run: impl FnMut()) -> f64 {
+        let mut ms: Vec<f64> = (0..5)
+            .map(|_| {
+                let t = Instant::now();
+                run();
+                1e3 * t.elapsed().as_secs_f64()
+            })
+            .collect();
+        ms.sort_by(f64::total_cmp);
+        ms[2]
+    }
+
+    /// Time, not a check: `cargo test -p translucent-core --lib mesh::topology::tests::timing
+    /// -- --ignored --nocapture`. A 192,720-triangle UV sphere, its vertices shuffled (a scan's
+    /// order is not a sphere's rings), median of five runs.
+    #[test]
+    #[ignore = "a timing to read, not a check"]
+    fn timing() {
+        let (p, t) = sphere_parts(220, 1.0);
+        // Shuffle the vertices (a fixed LCG permutation) so the sort sees no presorted order.
+        let n = p.len();
+        let mut perm: Vec<u32> = (0..n as u32).collect();
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        for i in (1..n).rev() {
+            s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            perm.swap(i, (s >> 33) as usize % (i + 1));
+        }
+        let mut q = vec![Vec3::ZERO; n];
+        for (old, &new) in perm.iter().enumerate() {
+            q[new as usize] = p[old];
+        }
+        let t: Vec<[u32; 3]> = t.iter().map(|tri| tri.map(|v| perm[v as usize])).collect();
+        let mesh = Mesh::new(q.clone(), t.clone(), None).unwrap();
+        let areas = mesh.triangle_areas().to_vec();
+        let weld_ms = median_ms(|| {
+            std::hint::black_box(weld(&q));
+        });
+        let analyse_ms = median_ms(|| {
+            std::hint::black_box(analyse(&q, &t, &areas, 0.0));
+        });
+        let new_ms = median_ms(|| {
+            std::hint::black_box(Mesh::new(q.clone(), t.clone(), None).unwrap());
+        });
+        println!(
+            "{} vertices, {} triangles: weld {weld_ms:.1} ms, analyse {analyse_ms:.1} ms, \
+             Mesh::new {new_ms:.1} ms (median of 5, {} threads)",
+            n,
+            t.len(),
+            rayon::current_num_threads()
+        );
+    }
+}
