@@ -82,9 +82,13 @@ impl PyHierarchy {
         };
         let core_scene = scene.scene.clone();
         let m = material.inner;
-        let (inner, e) = run(py, None, |_| {
-            let mut h = Hierarchy::new(core_scene, settings)?;
-            let e = h.radiosity(&m)?;
+        // The build is the first half of the bar, the first evaluation the second; either
+        // stops at Ctrl-C (a NaN only asks whether to go on, and stays NaN).
+        let (inner, e) = run(py, None, |tick| {
+            let build = |f: f32| tick(0.5 * f);
+            let first = |f: f32| tick(0.5 + 0.5 * f);
+            let mut h = Hierarchy::new_with_progress(core_scene, settings, Some(&build))?;
+            let e = h.radiosity_with_progress(&m, Some(&first))?;
             Ok((h, e))
         })?;
         let out = Self {
@@ -103,7 +107,9 @@ impl PyHierarchy {
         material: PyRef<'_, PyMaterial>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let b = run(py, None, |_| self.lock().radiosity(&m))?;
+        let b = run(py, None, |tick| {
+            self.lock().radiosity_with_progress(&m, Some(tick))
+        })?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
         Ok(out)
@@ -120,7 +126,9 @@ impl PyHierarchy {
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let b = run(py, None, |_| self.lock().radiance(&m, eye))?;
+        let b = run(py, None, |tick| {
+            self.lock().radiance_with_progress(&m, eye, Some(tick))
+        })?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
         Ok(out)
