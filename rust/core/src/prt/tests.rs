@@ -266,6 +266,33 @@ fn cancelling_stops_the_precompute() {
 }
 
 #[test]
+fn the_own_light_beyond_its_limit_is_refused_before_any_work() {
+    // 121 vertices: 1490^2 x 121 = 268,632,100 rays exceed 2^28 = 268,435,456 (1489^2 x 121 =
+    // 268,271,641 would fit).
+    let mesh = plane(11, 10.0);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let settings = PrtSettings {
+        interreflection: Some(1490),
+        ..Default::default()
+    };
+    let asked = std::sync::atomic::AtomicBool::new(false);
+    let progress = |_: f32| {
+        asked.store(true, std::sync::atomic::Ordering::Relaxed);
+        true
+    };
+    let e =
+        Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), Some(&progress)).unwrap_err();
+    assert!(
+        matches!(&e, Error::InvalidArgument(s) if s.contains("limit own_light_rays")),
+        "{e}"
+    );
+    assert!(
+        !asked.load(std::sync::atomic::Ordering::Relaxed),
+        "refused only after the work began"
+    );
+}
+
+#[test]
 fn eta_mismatch_and_bad_settings_are_errors() {
     let mesh = plane(11, 10.0);
     let m = Material::preset("marble", 1.0).unwrap();
