@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::optics::Material;
 
+use crate::mesh::test_meshes::oracles::rd_total;
 use crate::mesh::test_meshes::plane;
 use crate::optics::fresnel_transmittance;
 
@@ -19,15 +20,6 @@ fn sun(
     let c = theta.cos();
     let i = (fresnel_transmittance(eta, c) * c * f64::from(e)) as f32;
     move |p: &[Vec3], _n: &[Vec3], _d: Density| Ok(vec![[i; 3]; p.len()])
-}
-
-/// Jensen 2001's closed form for R_d,total, written out apart from `optics`.
-fn rd_total(sigma_a: f64, sigma_s_prime: f64, eta: f64) -> f64 {
-    let a = sigma_s_prime / (sigma_a + sigma_s_prime);
-    let f_dr = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
-    let big_a = (1.0 + f_dr) / (1.0 - f_dr);
-    let s = (3.0 * (1.0 - a)).sqrt();
-    0.5 * a * (1.0 + (-4.0 / 3.0 * big_a * s).exp()) * (-s).exp()
 }
 
 fn centre(mesh: &Mesh) -> usize {
