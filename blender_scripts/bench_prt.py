@@ -53,6 +53,7 @@ def main() -> int:
     p, t = models.load("stanford-bunny.obj", diagonal=0.1)
     scene = models.standard_scene(p, t)
     translucent.prepare_profile(marble)
+    kept = {}
     for profile in ("cycles", "dipole"):
         times, reports = [], []
         for _ in range(args.runs):
@@ -77,6 +78,8 @@ def main() -> int:
             f"transport {r['seconds_transport']:.2f} s, the object's own light {r['seconds_interreflection']:.2f} s "
             f"for {r['interreflection_rays']} rays{walks}) [budget 20 s]"
         )
+        kept[profile] = (prt, statistics.median(times))
+    relight(p, t, marble, kept, args)
 
     # Growth: the same surface with 4x the vertices and 4x the samples. Brute force (Xu 2007
     # §6.1) would take 16x; the clustered far field should take a little over 4x.
@@ -151,6 +154,49 @@ def main() -> int:
         return 0
     gpu_edits(f"edit on {where}", lambda k: prt.radiosity(marble if k % 2 else skin), prt, args.edits)
     return 0
+
+
+def moved_scene(positions, triangles, turn: float, across: float) -> translucent.Scene:
+    """The benchmark lighting with the sun turned by `turn` radians about the vertical and the
+    point light moved by `across` diagonals along x."""
+    scene = translucent.Scene(positions, triangles)
+    diag = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
+    scene.add_point_light(((0.6 + across) * diag, -1.0 * diag, 1.2 * diag), power=110.0 * diag**2)
+    c, s = np.cos(turn), np.sin(turn)
+    scene.add_sun(direction=(0.5 * c - 0.6 * s, 0.5 * s + 0.6 * c, -0.62), irradiance=2.0)
+    return scene
+
+
+def relight(positions, triangles, marble, kept, args) -> None:
+    """`Prt.update(lights=...)`: the sun turned by 90 degrees and the point light moved across,
+    then back; median over the runs, against a fresh precompute under the moved lights."""
+    moved = moved_scene(positions, triangles, np.pi / 2, -1.2)
+    back = moved_scene(positions, triangles, 0.0, 0.0)
+    for profile, (prt, precompute_s) in kept.items():
+        times, reports = [], []
+        for k in range(args.runs):
+            r = prt.update(lights=moved if k % 2 == 0 else back)
+            times.append(r["seconds"])
+            reports.append(r)
+        if args.runs % 2 == 0:
+            prt.update(lights=moved)
+        r = reports[0]
+        fresh = translucent.Prt(moved, marble, coefficients=32, profile=profile, single_scattering=False)
+        between = translucent.relative_error(prt.radiance(marble), fresh.radiance(marble), moved.vertex_areas)
+        est = [100 * x for x in prt.last_eval["error_estimate"]]
+        fresh_est = [100 * x for x in fresh.last_eval["error_estimate"]]
+        print(
+            f"update(lights=...), bunny, marble, {profile}: sun turned 90 degrees and the point light moved across: "
+            f"median {statistics.median(times):.2f} s over {args.runs} updates (precompute {precompute_s:.2f} s: "
+            f"x{precompute_s / statistics.median(times):.1f}) (irradiance {r['seconds_irradiance']:.2f} s for "
+            f"{r['rays'] / 1e6:.1f} M rays, transport {r['seconds_transport']:.2f} s, walks' term "
+            f"{r['seconds_walks']:.3f} s with {r['walks_traced']} walks traced, the object's own light "
+            f"{r['seconds_own_light']:.2f} s for {r['own_light_rays'] / 1e6:.1f} M rays); kept for it: "
+            f"{(prt.report['walks'] or {}).get('relight_bytes', 0) / 1e6:.1f} MB; "
+            f"against a fresh precompute: rel. RMS {', '.join(f'{100 * x:.2f}' for x in between['rms'])} % "
+            f"(estimates: updated {', '.join(f'{x:.2f}' for x in est)} %, fresh "
+            f"{', '.join(f'{x:.2f}' for x in fresh_est)} %)"
+        )
 
 
 def gpu_edits(label, edit, prt, edits) -> None:

@@ -62,9 +62,19 @@ def unbuilt_tables(tmp_path):
     translucent.set_table_cache(before)
 
 
-def long_calls(ball, lit_by_world, marble, unbuilt=None):
+@pytest.fixture(scope="module")
+def big_ball():
+    """44,702 vertices: a Hierarchy with fine thresholds links for ~20 s on 2 cores."""
+    p, t = sphere(150, 1.0)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.3, 0.2, -1.0), 2.0)
+    return s
+
+
+def long_calls(ball, lit_by_world, marble, unbuilt=None, big=None):
     """name -> call(progress): each would run for minutes."""
     return {
+        "hierarchy": lambda progress: translucent.Hierarchy(big, marble, eps=(1e-6, 1e-3), progress=progress),
         "prt_tables": lambda progress: translucent.Prt(ball, unbuilt, backend="cpu", progress=progress),
         "prt_walks": lambda progress: translucent.Prt(
             ball, marble, walks=2**20, backend="cpu", progress=progress
@@ -89,12 +99,13 @@ def long_calls(ball, lit_by_world, marble, unbuilt=None):
     }
 
 
-NAMES = ["prt_tables", "prt_walks", "reference_radiance", "irradiance", "reference_radiosity", "reference_single_scattering"]
+NAMES = ["hierarchy", "prt_tables", "prt_walks", "reference_radiance", "irradiance", "reference_radiosity", "reference_single_scattering"]
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_progress_comes_often_and_false_stops_within_a_second(name, ball, lit_by_world, marble, unbuilt_tables):
-    call = long_calls(ball, lit_by_world, marble, unbuilt_tables)[name]
+def test_progress_comes_often_and_false_stops_within_a_second(name, ball, lit_by_world, marble, unbuilt_tables,
+                                                                big_ball):
+    call = long_calls(ball, lit_by_world, marble, unbuilt_tables, big_ball)[name]
     times, fractions = [], []
     start = time.monotonic()
     stopped_at = None
@@ -120,8 +131,8 @@ def test_progress_comes_often_and_false_stops_within_a_second(name, ball, lit_by
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_ctrl_c_stops_within_a_second(name, ball, lit_by_world, marble, unbuilt_tables):
-    call = long_calls(ball, lit_by_world, marble, unbuilt_tables)[name]
+def test_ctrl_c_stops_within_a_second(name, ball, lit_by_world, marble, unbuilt_tables, big_ball):
+    call = long_calls(ball, lit_by_world, marble, unbuilt_tables, big_ball)[name]
     sent = []
 
     def interrupt():

@@ -4,6 +4,7 @@
 //! fresh on-the-fly evaluation; incremental after a deformation equals a fresh build).
 
 mod common;
+use common::oracles::rd_total;
 use common::plane;
 use translucent_core::hierarchy::{Hierarchy, HierarchySettings, Mode};
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
@@ -48,18 +49,9 @@ fn lumpy_sphere(r: f32, rings: usize, segments: usize, bump: f32) -> Mesh {
     Mesh::new(p, t, None).unwrap()
 }
 
-/// Jensen 2001's closed form for R_d,total, written out apart from `optics`.
-fn rd_total(sigma_a: f64, sigma_s_prime: f64, eta: f64) -> f64 {
-    let a = sigma_s_prime / (sigma_a + sigma_s_prime);
-    let f_dr = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
-    let big_a = (1.0 + f_dr) / (1.0 - f_dr);
-    let s = (3.0 * (1.0 - a)).sqrt();
-    0.5 * a * (1.0 + (-4.0 / 3.0 * big_a * s).exp()) * (-s).exp()
-}
-
 fn settings(model: ProfileKind, mode: Mode) -> HierarchySettings {
     HierarchySettings {
-        model,
+        profile: model,
         mode,
         ..Default::default()
     }

@@ -49,11 +49,11 @@ impl PyHierarchy {
 #[pymethods]
 impl PyHierarchy {
     /// Builds the hierarchy and evaluates `material` once (links, in render and incremental
-    /// modes). Releases the GIL.
+    /// modes). Releases the GIL; `progress(fraction)` as for every long call (False cancels).
     #[new]
     #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.5),
         mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32,
-        world_shadows = false))]
+        world_shadows = false, progress = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -66,13 +66,14 @@ impl PyHierarchy {
         #[pyo3(from_py_with = crate::convert::int)] area_samples: i64,
         #[pyo3(from_py_with = crate::convert::int)] estimate_receivers: i64,
         world_shadows: bool,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
         let model = crate::material::profile_kind(profile)?;
         let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
         let settings = HierarchySettings {
             eps_receiver: eps.0,
             eps_emitter: eps.1,
-            model,
+            profile: model,
             mode,
             world_samples: non_negative("world_samples", world_samples)?,
             area_samples: non_negative("area_samples", area_samples)?,
@@ -82,9 +83,13 @@ impl PyHierarchy {
         };
         let core_scene = scene.scene.clone();
         let m = material.inner;
-        let (inner, e) = run(py, None, |_| {
-            let mut h = Hierarchy::new(core_scene, settings)?;
-            let e = h.radiosity(&m)?;
+        // The build is the first half of the bar, the first evaluation the second; either
+        // stops at Ctrl-C (a NaN only asks whether to go on, and stays NaN).
+        let (inner, e) = run(py, progress, |tick| {
+            let build = |f: f32| tick(0.5 * f);
+            let first = |f: f32| tick(0.5 + 0.5 * f);
+            let mut h = Hierarchy::new_with_progress(core_scene, settings, Some(&build))?;
+            let e = h.radiosity_with_progress(&m, Some(&first))?;
             Ok((h, e))
         })?;
         let out = Self {
@@ -103,7 +108,9 @@ impl PyHierarchy {
         material: PyRef<'_, PyMaterial>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let b = run(py, None, |_| self.lock().radiosity(&m))?;
+        let b = run(py, None, |tick| {
+            self.lock().radiosity_with_progress(&m, Some(tick))
+        })?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
         Ok(out)
@@ -120,7 +127,9 @@ impl PyHierarchy {
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let b = run(py, None, |_| self.lock().radiance(&m, eye))?;
+        let b = run(py, None, |tick| {
+            self.lock().radiance_with_progress(&m, eye, Some(tick))
+        })?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
         Ok(out)
@@ -173,7 +182,7 @@ impl PyHierarchy {
     /// "cycles" or "dipole".
     #[getter]
     fn profile(&self) -> PyResult<&'static str> {
-        Ok(self.read()?.settings().model.name())
+        Ok(self.read()?.settings().profile.name())
     }
 
     /// (ε₁, ε₂) [sr].
@@ -198,7 +207,7 @@ impl PyHierarchy {
         let r = h.report();
         let d = PyDict::new(py);
         d.set_item("mode", r.mode)?;
-        d.set_item("profile", h.settings().model.name())?;
+        d.set_item("profile", h.settings().profile.name())?;
         d.set_item("faces", r.faces)?;
         d.set_item("clusters", r.clusters)?;
         d.set_item("depth", r.depth)?;

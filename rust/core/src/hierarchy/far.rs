@@ -279,7 +279,7 @@ mod tests {
             }
             let mesh = crate::mesh::Mesh::new(p.clone(), t.clone(), None).unwrap();
             let faces = super::super::faces_of(&mesh);
-            let mut tree = ClusterTree::build(&p, &t);
+            let mut tree = ClusterTree::build(&p, &t, None).unwrap();
             tree.refit(&faces);
             let irr: Vec<[f32; 3]> = (0..faces.len())
                 .map(|f| [1.0 + (f % 7) as f32, 2.0, 0.5 + (f % 3) as f32])

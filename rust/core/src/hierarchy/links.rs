@@ -29,6 +29,7 @@
 use super::clusters::ClusterTree;
 use super::far::FarEmitters;
 use crate::profiles::LookupRgb;
+use crate::progress::Ticker;
 use crate::surface_integral::{triangle_integral_rgb, EdgeRule, Triangle};
 use glam::DVec3;
 
@@ -72,6 +73,9 @@ pub struct Context<'a> {
     pub rule: EdgeRule,
     /// Skip emitters with no power (on-the-fly only: stored links must outlive the lighting).
     pub skip_dark: bool,
+    /// Counts the receivers `visit` refines (one per node); once it says stop, `visit` leaves
+    /// the rest of the tree untouched and its caller returns `Error::Cancelled`.
+    pub ticker: Option<&'a Ticker<'a>>,
 }
 
 /// The links gathered at one receiver node.
@@ -337,6 +341,9 @@ impl Context<'_> {
         let t = self.tree;
         let first = t.first[r as usize] as usize;
         debug_assert_eq!(slots.len(), r as usize - first + 1);
+        if self.ticker.is_some_and(|k| k.stopped()) {
+            return LinkCounts::default();
+        }
         let mut stack = candidates;
         if let Some(prev) = previous {
             let old = &prev[r as usize].links;
@@ -346,6 +353,9 @@ impl Context<'_> {
         let mut down = Vec::new();
         let mut counts = LinkCounts::default();
         self.refine_at(r, stack, &mut links, &mut down, &mut counts);
+        if let Some(k) = self.ticker {
+            k.add(1);
+        }
         if keep {
             links.far_factors = self.far_factors(r, &links.far);
         }

@@ -8,8 +8,14 @@
 //! irradiance the specular layer reflects (`ProfileKind::specular_reflectance`). Cosine-weighted
 //! directions on a stratified grid (rotated per vertex) give E_ind = pi mean L. Rays that leave
 //! the mesh, or meet the inside of a surface, bring nothing.
+//!
+//! A pass casts vertices x strata^2 rays, refused up front beyond `limits::OWN_LIGHT_RAYS`;
+//! it hears its progress callback every row of strata (a cancel stops it within one row).
 
+use crate::error::Result;
+use crate::limits::OWN_LIGHT_RAYS;
 use crate::mesh::{barycentric, interpolated_normal, Mesh};
+use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -23,22 +29,41 @@ pub struct Source<'a> {
     pub weight: &'a (dyn Fn(f64) -> [f64; 3] + Sync),
 }
 
+/// Refuses a pass of `strata` x `strata` rays per vertex over `vertices` beyond
+/// `limits::OWN_LIGHT_RAYS`, naming the setting, before any ray is cast.
+pub fn check_rays(vertices: usize, strata: usize) -> Result<()> {
+    let strata = strata.max(1);
+    let rays = vertices as f64 * strata as f64 * strata as f64;
+    OWN_LIGHT_RAYS.at_most(
+        &format!("interreflection_rays ({strata} x {strata} per vertex, {vertices} vertices)"),
+        rays,
+    )
+}
+
 /// Irradiance per vertex from the mesh's own outgoing light, the sum of `sources`; `strata` x
-/// `strata` rays per vertex.
+/// `strata` rays per vertex. Refused beyond `limits::OWN_LIGHT_RAYS` (`check_rays`);
+/// `progress` hears the share of rays cast, and a false from it is `Error::Cancelled`.
 pub fn indirect_irradiance(
     mesh: &Mesh,
     tracer: &Tracer,
     sources: &[Source],
     strata: usize,
-) -> Vec<[f32; 3]> {
+    progress: Option<&ProgressFn>,
+) -> Result<Vec<[f32; 3]>> {
+    check_rays(mesh.vertex_count(), strata)?;
     let strata = strata.max(1);
     let rays = (strata * strata) as f32;
-    mesh.positions()
+    let ticker = Ticker::new(
+        progress,
+        mesh.vertex_count() as u64 * (strata * strata) as u64,
+    );
+    let out = mesh
+        .positions()
         .par_iter()
         .zip(mesh.normals().par_iter())
         .enumerate()
         .map(|(v, (&p, &n))| {
-            if n == Vec3::ZERO {
+            if n == Vec3::ZERO || ticker.stopped() {
                 return [0.0; 3];
             }
             let (t, b) = n.any_orthonormal_pair();
@@ -47,6 +72,10 @@ pub fn indirect_irradiance(
             let shift = (v as u32).wrapping_mul(2_654_435_761) as f32 / u32::MAX as f32;
             let mut sum = [0f32; 3];
             for i in 0..strata {
+                // A row of strata at a time (at most 1000 rays: milliseconds).
+                if !ticker.add(strata as u64) {
+                    return [0.0; 3];
+                }
                 for j in 0..strata {
                     // Cosine-weighted: r = sqrt(u), phi = 2 pi v (Malley's method).
                     let u = (i as f32 + 0.5) / strata as f32;
@@ -63,7 +92,9 @@ pub fn indirect_irradiance(
             }
             sum.map(|s| PI * s / rays)
         })
-        .collect()
+        .collect();
+    ticker.check()?;
+    Ok(out)
 }
 
 /// The radiance arriving at `origin` along `dir` from the mesh, if the ray meets the outside
@@ -106,9 +137,8 @@ mod tests {
     /// sides): the lower one receives from the upper one, of uniform radiosity B and a
     /// Lambertian exit (W = 1), E = B F with F the view factor of parallel squares (Howell's
     /// catalogue, C-11), at the centre of the lower square the point-to-square form factor.
-    #[test]
-    fn facing_squares_exchange_the_view_factor() {
-        let n = 41;
+    /// Two 4 x 4 squares of `n` x `n` vertices each, one unit apart, facing each other.
+    fn facing_squares(n: usize) -> Mesh {
         let mut p = Vec::new();
         let mut t = Vec::new();
         for (z, flip) in [(0.0f32, false), (1.0, true)] {
@@ -134,7 +164,13 @@ mod tests {
                 }
             }
         }
-        let mesh = Mesh::new(p, t, None).unwrap();
+        Mesh::new(p, t, None).unwrap()
+    }
+
+    #[test]
+    fn facing_squares_exchange_the_view_factor() {
+        let n = 41;
+        let mesh = facing_squares(n);
         let tracer = Tracer::new(&mesh);
         let b = vec![[1.0f32, 0.5, 0.0]; mesh.vertex_count()];
         let one = |_: f64| [1.0; 3];
@@ -146,7 +182,9 @@ mod tests {
                 weight: &one,
             }],
             24,
-        );
+            None,
+        )
+        .unwrap();
         // Centre of the lower square: a point under a 4 x 4 square at height 1. The point-to-
         // rectangle form factor (Howell C-15 for a parallel rectangle with the point under a
         // corner, times four quarters): F = 4 * (1/2pi) [A/sqrt(1+A^2) atan(B/sqrt(1+A^2))
@@ -182,9 +220,73 @@ mod tests {
                 },
             ],
             24,
-        );
+            None,
+        )
+        .unwrap();
         let got = both[centre];
         assert!((f64::from(got[0]) - f).abs() < 0.02 * f);
         assert!((f64::from(got[2]) - f).abs() < 0.02 * f, "{got:?} vs {f}");
+    }
+
+    #[test]
+    fn a_pass_beyond_the_limit_is_refused_naming_the_setting() {
+        // 2 x 41 x 41 = 3362 vertices: 282^2 x 3362 = 267,359,688 rays fit in 2^28 =
+        // 268,435,456, 283^2 x 3362 = 269,259,218 do not.
+        assert!(check_rays(3362, 282).is_ok());
+        let s = check_rays(3362, 283).unwrap_err().to_string();
+        assert!(
+            s.contains("interreflection_rays (283 x 283 per vertex, 3362 vertices)")
+                && s.contains("asks for 269259218 rays")
+                && s.contains("limit own_light_rays is at most 268435456"),
+            "{s}"
+        );
+        // The pass itself refuses before casting (2.7e8 rays would take minutes here).
+        let mesh = facing_squares(41);
+        let tracer = Tracer::new(&mesh);
+        let b = vec![[1.0f32; 3]; mesh.vertex_count()];
+        let one = |_: f64| [1.0; 3];
+        let source = Source {
+            values: &b,
+            weight: &one,
+        };
+        let e = indirect_irradiance(&mesh, &tracer, &[source], 283, None).unwrap_err();
+        assert!(
+            matches!(&e, crate::Error::InvalidArgument(m) if m.contains("own_light_rays")),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_false_from_the_callback_stops_the_cast() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let mesh = facing_squares(41);
+        let tracer = Tracer::new(&mesh);
+        let b = vec![[1.0f32; 3]; mesh.vertex_count()];
+        let one = |_: f64| [1.0; 3];
+        let source = Source {
+            values: &b,
+            weight: &one,
+        };
+        // 64 x 64 rays per vertex, 1.4e7 in all; a callback slower than the
+        // ticker's spacing, going on once and then refusing: the cast is asked again while it
+        // runs and stops there.
+        let calls = AtomicUsize::new(0);
+        let once = |_: f32| {
+            std::thread::sleep(crate::progress::INTERVAL + std::time::Duration::from_millis(1));
+            calls.fetch_add(1, Ordering::Relaxed) == 0
+        };
+        let start = std::time::Instant::now();
+        let got = indirect_irradiance(&mesh, &tracer, &[source], 64, Some(&once));
+        let took = start.elapsed();
+        assert!(matches!(got, Err(crate::Error::Cancelled)));
+        assert!(calls.load(Ordering::Relaxed) >= 2);
+        // Stopped within rows of the refusal (~45 ms), not at the end (~6 s on 2 cores).
+        assert!(took < std::time::Duration::from_secs(2), "{took:?}");
+        // Going on throughout: the same values as without a callback.
+        let on = |_: f32| true;
+        assert_eq!(
+            indirect_irradiance(&mesh, &tracer, &[source], 4, Some(&on)).unwrap(),
+            indirect_irradiance(&mesh, &tracer, &[source], 4, None).unwrap()
+        );
     }
 }

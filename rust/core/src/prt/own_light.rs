@@ -2,8 +2,10 @@
 //! carried to any edit by the ratio of the slab albedos the material sends on.
 
 use super::interreflection::{indirect_irradiance, Source};
+use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::profiles::Resolved;
+use crate::progress::{cancel_only, ProgressFn};
 use crate::raytrace::Tracer;
 use crate::walks::WalkTerm;
 
@@ -60,13 +62,18 @@ pub(super) struct Cast {
 /// where the wall's shadowed side shows 0.51 / 0.28 / 0.10 (tests/test_bpy_walks.py; no
 /// diffuse fallback at the wall, whatever `PATH_RAY_DIFFUSE_ANCESTOR` suggests in Cycles'
 /// source).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn cast(
     mesh: &Mesh,
     tracer: &Tracer,
     rep: &Resolved,
     sent: Sent<'_>,
     strata: usize,
-) -> Cast {
+    progress: Option<&ProgressFn>,
+) -> Result<Cast> {
+    // Asked only whether to go on: the precompute's bar moves with the walks after it.
+    let ask = cancel_only(progress);
+    let ask = progress.map(|_| &ask as &ProgressFn);
     // Toward a receiver at cosine cos from the sender's normal: the half-space B under
     // W(cos) V(cos), the view factor V included (a slanted view enters Cycles' walk
     // shallower: more comes out); the walks' term under W(cos) alone (light through a
@@ -92,7 +99,7 @@ pub(super) fn cast(
             weight: &exit_plain,
         });
     }
-    let first = indirect_irradiance(mesh, tracer, &sources, strata);
+    let first = indirect_irradiance(mesh, tracer, &sources, strata, ask)?;
     // The later passes send E_ind on: its lobes' share W (R_total + point mass) and the
     // specular layer's.
     let onward = |cos: f64| rep.sent_on(cos);
@@ -107,7 +114,8 @@ pub(super) fn cast(
                 weight: &onward,
             }],
             later,
-        );
+            ask,
+        )?;
         irradiance = first
             .iter()
             .zip(&more)
@@ -116,7 +124,7 @@ pub(super) fn cast(
     }
     let rays = (mesh.vertex_count()
         * (strata * strata + (INTERREFLECTION_BOUNCES - 1) * later * later)) as u64;
-    Cast { irradiance, rays }
+    Ok(Cast { irradiance, rays })
 }
 
 /// The share of B the own light adds: area-weighted over the vertices, the worst channel of

@@ -34,6 +34,10 @@ impl Prt {
     ) -> Result<Prt> {
         let start = Instant::now();
         check_settings(representatives, settings)?;
+        // The object's own light beyond its limit is refused now, not after the transport.
+        if let Some(strata) = settings.interreflection.filter(|&s| s > 0) {
+            super::interreflection::check_rays(mesh.vertex_count(), strata)?;
+        }
         let tick = |f: f32| match progress {
             Some(p) if !p(f) => Err(Error::Cancelled),
             _ => Ok(()),
@@ -234,7 +238,8 @@ impl Prt {
                 walked: walked_part.as_deref(),
             },
             strata,
-        );
+            progress,
+        )?;
         self.report.interreflection_share =
             own_light::share(&cast.irradiance, &direct, mesh.vertex_areas(), &receiving);
         self.report.interreflection_rays = cast.rays;

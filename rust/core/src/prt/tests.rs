@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::optics::Material;
 
+use crate::mesh::test_meshes::oracles::rd_total;
 use crate::mesh::test_meshes::plane;
 use crate::optics::fresnel_transmittance;
 
@@ -19,15 +20,6 @@ fn sun(
     let c = theta.cos();
     let i = (fresnel_transmittance(eta, c) * c * f64::from(e)) as f32;
     move |p: &[Vec3], _n: &[Vec3], _d: Density| Ok(vec![[i; 3]; p.len()])
-}
-
-/// Jensen 2001's closed form for R_d,total, written out apart from `optics`.
-fn rd_total(sigma_a: f64, sigma_s_prime: f64, eta: f64) -> f64 {
-    let a = sigma_s_prime / (sigma_a + sigma_s_prime);
-    let f_dr = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
-    let big_a = (1.0 + f_dr) / (1.0 - f_dr);
-    let s = (3.0 * (1.0 - a)).sqrt();
-    0.5 * a * (1.0 + (-4.0 / 3.0 * big_a * s).exp()) * (-s).exp()
 }
 
 fn centre(mesh: &Mesh) -> usize {
@@ -263,6 +255,33 @@ fn cancelling_stops_the_precompute() {
         Some(&stop),
     );
     assert_eq!(r.unwrap_err(), Error::Cancelled);
+}
+
+#[test]
+fn the_own_light_beyond_its_limit_is_refused_before_any_work() {
+    // 121 vertices: 1490^2 x 121 = 268,632,100 rays exceed 2^28 = 268,435,456 (1489^2 x 121 =
+    // 268,271,641 would fit).
+    let mesh = plane(11, 10.0);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let settings = PrtSettings {
+        interreflection: Some(1490),
+        ..Default::default()
+    };
+    let asked = std::sync::atomic::AtomicBool::new(false);
+    let progress = |_: f32| {
+        asked.store(true, std::sync::atomic::Ordering::Relaxed);
+        true
+    };
+    let e =
+        Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), Some(&progress)).unwrap_err();
+    assert!(
+        matches!(&e, Error::InvalidArgument(s) if s.contains("limit own_light_rays")),
+        "{e}"
+    );
+    assert!(
+        !asked.load(std::sync::atomic::Ordering::Relaxed),
+        "refused only after the work began"
+    );
 }
 
 #[test]

@@ -397,6 +397,7 @@ fn worst_rel_rms(a: &[[f64; 3]], b: &[[f64; 3]], w: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::test_meshes::oracles::rd_total;
     use crate::mesh::test_meshes::plane;
     use crate::profiles::Dipole;
     use crate::quadrature::GAUSS8;
@@ -452,15 +453,6 @@ mod tests {
                 "{x:?}: {exact} vs {bf}"
             );
         }
-    }
-
-    /// Jensen 2001 closed form, written out apart from `optics`.
-    fn rd_total(sa: f64, sp: f64, eta: f64) -> f64 {
-        let a = sp / (sa + sp);
-        let f = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
-        let big = (1.0 + f) / (1.0 - f);
-        let s = (3.0 * (1.0 - a)).sqrt();
-        0.5 * a * (1.0 + (-4.0 / 3.0 * big * s).exp()) * (-s).exp()
     }
 
     fn centre(mesh: &Mesh) -> u32 {

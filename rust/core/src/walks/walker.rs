@@ -324,11 +324,7 @@ impl Walker<'_> {
                             Exit::Lit(e, at) => {
                                 score += left * e;
                                 if let (Some(record), Some(w)) = (exits.as_deref_mut(), at) {
-                                    record.push(ExitRecord {
-                                        triangle: h.triangle,
-                                        w,
-                                        weight: left as f32,
-                                    });
+                                    record.push(ExitRecord::new(h.triangle, w, left as f32));
                                 }
                             }
                             // Without the tunnel that share's light is dark (Cycles' indirect).

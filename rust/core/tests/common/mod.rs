@@ -5,6 +5,8 @@
 use translucent_core::mesh::Mesh;
 use translucent_core::Vec3;
 
+pub mod oracles;
+
 /// A flat square grid of `n` x `n` vertices and side `size`, centred at the origin, normal +Z.
 pub fn plane_parts(n: usize, size: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     let mut p = Vec::new();

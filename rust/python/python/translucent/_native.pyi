@@ -311,6 +311,7 @@ class Hierarchy:
         area_samples: int = 16,
         estimate_receivers: int = 32,
         world_shadows: bool = False,
+        progress: Progress | None = None,
     ) -> None:
         """Builds the hierarchy and evaluates `material` once. `world_shadows`: False lights
         by the world's nine spherical-harmonic coefficients, unshadowed (Mertens 2003 §5.3,
