@@ -103,3 +103,30 @@ def test_an_update_refuses_another_mesh_and_a_cancel_keeps_the_old_light():
     assert np.array_equal(prt.radiosity(marble), before)
     with pytest.raises(TypeError, match="lights"):
         prt.update(lights="sun")
+
+
+def test_a_power_or_colour_change_of_every_light_is_a_rescale_with_no_ray():
+    """The lights where they were, every emission times one factor per channel (a power or
+    colour slider on the only light): the update multiplies, casting nothing, and gives what a
+    fresh precompute under the new power gives (B is linear in the light)."""
+    p, t = sphere(12, 0.01)
+
+    def scene(power, colour=(1.0, 1.0, 1.0)):
+        s = translucent.Scene(p, t)
+        s.add_point_light((0.0, 0.03, 0.01), power, color=colour)
+        return s
+
+    prt = translucent.Prt(scene(0.5), SKIN, backend="cpu", walk_rays=500_000)
+    before = prt.radiosity(SKIN)
+    r = prt.update(lights=scene(1.0, (1.0, 0.5, 0.25)))
+    assert r["rescaled"] == pytest.approx([2.0, 1.0, 0.5]) and r["rays"] == 0 and r["walks_traced"] == 0
+    np.testing.assert_allclose(prt.radiosity(SKIN), before * np.array([2.0, 1.0, 0.5], np.float32), rtol=1e-6)
+    marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    dipole = translucent.Prt(scene(0.5), marble, profile="dipole", backend="cpu")
+    dipole.update(lights=scene(1.5))
+    fresh = translucent.Prt(scene(1.5), marble, profile="dipole", backend="cpu")
+    np.testing.assert_allclose(dipole.radiosity(marble), fresh.radiosity(marble), rtol=1e-5, atol=1e-9)
+    # A moved light is not a rescale.
+    moved = translucent.Scene(p, t)
+    moved.add_point_light((0.0, -0.03, 0.01), 1.5)
+    assert dipole.update(lights=moved)["rescaled"] is None

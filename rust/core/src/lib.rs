@@ -7,6 +7,7 @@ pub mod bake_points; // where Cycles' vertex bake samples a vertex (its corners,
 pub mod error; // the one error type
 pub mod evaluation; // the one answer every method gives: values, error estimate, seconds, skips
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
+pub mod light_scale; // new lights that are the old ones times one factor per channel
 pub mod lights; // Blender/Cycles lights and the world
 pub mod limits; // the stated limits on request sizes, refused up front
 pub mod mesh; // validated triangle meshes, surface samples, vertex areas

@@ -44,6 +44,12 @@ pub struct PyPrt {
     /// `update`) began.
     scene_lighting: Mutex<std::sync::Arc<std::sync::atomic::AtomicU64>>,
     lighting_version: std::sync::atomic::AtomicU64,
+    /// The lights and world the transport holds (a power or colour change of all of them
+    /// together is a rescale: `light_scale::common_scale`).
+    lit_with: Mutex<(
+        Vec<translucent_core::lights::Light>,
+        translucent_core::lights::World,
+    )>,
 }
 
 /// A lock's value, whether or not a panic (caught by `call::run`) poisoned it.
@@ -272,6 +278,7 @@ impl PyPrt {
             last_single: Mutex::new(None),
             scene_lighting: Mutex::new(scene_lighting),
             lighting_version: std::sync::atomic::AtomicU64::new(lighting_version),
+            lit_with: Mutex::new((core_scene.lights.clone(), core_scene.world.clone())),
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -476,6 +483,55 @@ impl PyPrt {
         let counter = lights.lighting_counter();
         let version = counter.load(std::sync::atomic::Ordering::Relaxed);
         let scene = &lights.scene;
+        let scale = {
+            let (old_lights, old_world) = &*held(&self.lit_with);
+            translucent_core::light_scale::common_scale(
+                old_lights,
+                old_world,
+                &scene.lights,
+                &scene.world,
+            )
+        };
+        let same_mesh = {
+            let inner = self.read()?;
+            inner.vertex_count() == scene.mesh.vertex_count()
+        };
+        if let (Some(k), false, true) = (scale, self.single.on, same_mesh) {
+            // Only the emissions changed, all by one factor per channel: a rescale, no ray.
+            let t = std::time::Instant::now();
+            run(py, progress, |_| {
+                let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
+                if inner.positions() != scene.mesh.positions() {
+                    return Err(translucent_core::Error::InvalidArgument(
+                        "relight needs the mesh the transport was precomputed for (its positions \
+                         differ): precompute again for a new shape"
+                            .into(),
+                    ));
+                }
+                inner.rescale_light(k)
+            })?;
+            *held(&self.lit_with) = (scene.lights.clone(), scene.world.clone());
+            *held(&self.scene_lighting) = counter;
+            self.lighting_version
+                .store(version, std::sync::atomic::Ordering::Relaxed);
+            *held(&self.last) = None;
+            let d = PyDict::new(py);
+            d.set_item("seconds", t.elapsed().as_secs_f64())?;
+            for key in [
+                "seconds_irradiance",
+                "seconds_transport",
+                "seconds_walks",
+                "seconds_own_light",
+                "seconds_single_scattering",
+            ] {
+                d.set_item(key, 0.0)?;
+            }
+            d.set_item("rays", 0)?;
+            d.set_item("own_light_rays", 0)?;
+            d.set_item("walks_traced", 0)?;
+            d.set_item("rescaled", k.to_vec())?;
+            return Ok(d);
+        }
         let lighting = Mutex::new(IrradianceReport::default());
         let (irr, single_on, single_settings) =
             (&self.irradiance, self.single.on, &self.single_settings);
@@ -502,6 +558,7 @@ impl PyPrt {
             Ok((next, report, t.elapsed().as_secs_f64()))
         })?;
         *self.inner.write().unwrap_or_else(|e| e.into_inner()) = next;
+        *held(&self.lit_with) = (scene.lights.clone(), scene.world.clone());
         *held(&self.lighting) = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
         *held(&self.scene_lighting) = counter;
         self.lighting_version
@@ -522,6 +579,7 @@ impl PyPrt {
         d.set_item("rays", held(&self.lighting).rays)?;
         d.set_item("own_light_rays", report.own_light_rays)?;
         d.set_item("walks_traced", report.walks_traced)?;
+        d.set_item("rescaled", py.None())?;
         Ok(d)
     }
 

@@ -213,6 +213,13 @@ impl Prt {
                 }
             }
         }
+        if self.light_scale != [1.0; 3] {
+            // The lights were rescaled since the transport was lit (`rescale_light`).
+            let k = self.light_scale;
+            radiosity
+                .par_iter_mut()
+                .for_each(|b| *b = std::array::from_fn(|ch| b[ch] * k[ch]));
+        }
         let dot_seconds = t1.elapsed().as_secs_f64();
         Ok((
             Evaluation {

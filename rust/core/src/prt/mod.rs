@@ -87,6 +87,9 @@ pub struct Prt {
     spacing: f32,
     settings: PrtSettings,
     representatives: Vec<crate::optics::Material>,
+    /// Every light's emission times this since the transport was lit (`rescale_light`): B is
+    /// linear in the light, so it scales each evaluation.
+    light_scale: [f32; 3],
 }
 
 impl Prt {
@@ -111,6 +114,11 @@ impl Prt {
     /// walks and the object's own light were computed with).
     pub fn representatives(&self) -> &[crate::optics::Material] {
         &self.representatives
+    }
+
+    /// The vertex positions the transport was precomputed for.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
     }
 
     pub fn vertex_count(&self) -> usize {

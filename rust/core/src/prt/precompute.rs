@@ -107,6 +107,7 @@ impl Prt {
             spacing: lit.spacing,
             settings: settings.clone(),
             representatives: representatives.to_vec(),
+            light_scale: [1.0; 3],
         };
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);

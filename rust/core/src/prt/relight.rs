@@ -37,6 +37,25 @@ pub struct RelightReport {
 }
 
 impl Prt {
+    /// Every light's (and the world's) emission is now `k` times what it was, per channel
+    /// (`light_scale::common_scale`): B is linear in the light, so each evaluation is scaled;
+    /// no ray. Refused with single scattering attached (its L^(1) is added apart: precompute
+    /// or relight instead) and for a factor that is not finite and >= 0.
+    pub fn rescale_light(&mut self, k: [f32; 3]) -> Result<()> {
+        if k.iter().any(|x| !x.is_finite() || *x < 0.0) {
+            return Err(Error::InvalidArgument(format!(
+                "light scale {k:?} must be finite and >= 0"
+            )));
+        }
+        if self.single.is_some() {
+            return Err(Error::InvalidArgument(
+                "a light rescale with single scattering attached: relight instead".into(),
+            ));
+        }
+        self.light_scale = std::array::from_fn(|c| self.light_scale[c] * k[c]);
+        Ok(())
+    }
+
     /// Replaces the light: `irradiance` is the new lights' (same mesh, same Fresnel index).
     /// Errors when `mesh` is not the precomputed one; `Error::Cancelled` when `progress`
     /// returns false. On any error the transport is left as it was.
@@ -79,6 +98,7 @@ impl Prt {
             spacing: self.spacing,
             settings: self.settings.clone(),
             representatives: self.representatives.clone(),
+            light_scale: [1.0; 3],
         };
         let mut out = next.relight_steps(mesh, irradiance, progress)?;
         if self.gpu.is_some() {

@@ -270,8 +270,10 @@ class Prt:
         """New lights and world for the same mesh (`lights`: a Scene of this mesh). Recomputes
         only what depends on the light (irradiance, transport rows, the walks' term read at the
         same exits with no walk traced, the object's own light); the old transport answers
-        edits until the new one replaces it, and a cancel keeps it. Returns seconds (and per
-        stage), rays, own_light_rays, walks_traced."""
+        edits until the new one replaces it, and a cancel keeps it. When every light's (and
+        the world's) emission only changed by one factor per channel, a rescale: no ray, and
+        `rescaled` gives the factor (else None). Returns seconds (and per stage), rays,
+        own_light_rays, walks_traced, rescaled."""
     @property
     def report(self) -> dict[str, float | int | bool | list[float]]:
         """What the precompute did and left out: samples, support_radius [unit], knots,
