@@ -640,6 +640,7 @@ impl PyPrt {
         d.set_item("far_field_distance_bound", r.far_field_distance_bound)?;
         d.set_item("seconds_irradiance", r.seconds_irradiance)?;
         d.set_item("interreflection_rays", r.interreflection_rays)?;
+        d.set_item("interreflection_bytes", r.interreflection_bytes)?;
         d.set_item("interreflection_share", r.interreflection_share)?;
         d.set_item("seconds_interreflection", r.seconds_interreflection)?;
         d.set_item("shadow_edge_triangles", r.shadow_edge_triangles)?;

@@ -10,7 +10,9 @@
 //! the mesh, or meet the inside of a surface, bring nothing.
 //!
 //! A pass casts vertices x strata^2 rays, refused up front beyond `limits::OWN_LIGHT_RAYS`;
-//! it hears its progress callback every row of strata (a cancel stops it within one row).
+//! it hears its progress callback every row of strata (a cancel stops it within one row). The
+//! hits are kept (`Gather`): every later bounce, and the object's own light under a new light,
+//! is gathered over them without a ray.
 
 use crate::error::Result;
 use crate::limits::OWN_LIGHT_RAYS;
@@ -43,6 +45,7 @@ pub fn check_rays(vertices: usize, strata: usize) -> Result<()> {
 /// Irradiance per vertex from the mesh's own outgoing light, the sum of `sources`; `strata` x
 /// `strata` rays per vertex. Refused beyond `limits::OWN_LIGHT_RAYS` (`check_rays`);
 /// `progress` hears the share of rays cast, and a false from it is `Error::Cancelled`.
+#[cfg(test)]
 pub fn indirect_irradiance(
     mesh: &Mesh,
     tracer: &Tracer,
@@ -50,31 +53,68 @@ pub fn indirect_irradiance(
     strata: usize,
     progress: Option<&ProgressFn>,
 ) -> Result<Vec<[f32; 3]>> {
+    Ok(gather(mesh, tracer, strata, progress)?.irradiance(mesh, sources))
+}
+
+/// Where a vertex's ray met the outside of a surface: the triangle, the barycentrics in units
+/// of 1/65535 and the cosine there in units of 1/65535 (12 bytes a hit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Hit {
+    triangle: u32,
+    w: [u16; 2],
+    cos: u16,
+}
+
+/// Every vertex's rays of the object's own light, kept: the form factors of the mesh toward
+/// itself as the hits they found. Whatever the mesh sends out later (another light, another
+/// bounce) is gathered over the same hits without a ray (issue 29: the own light as a stored
+/// operator).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gather {
+    /// Hits of vertex v: `hits[starts[v]..starts[v + 1]]`.
+    starts: Vec<u32>,
+    hits: Vec<Hit>,
+    /// Rays cast per vertex (those that met nothing bring nothing, but count).
+    rays_per_vertex: u32,
+}
+
+/// Weights tabulated on this many view cosines in [0, 1] (linear between): the sources'
+/// weights are smooth in the cosine (Fresnel, the specular layer's albedo, the view factor).
+const WEIGHT_TABLE: usize = 256;
+
+/// Casts `strata` x `strata` cosine-weighted rays from every vertex (a stratified grid rotated
+/// per vertex) and keeps what they met. Refused beyond `limits::OWN_LIGHT_RAYS`; `progress`
+/// as `indirect_irradiance`.
+pub fn gather(
+    mesh: &Mesh,
+    tracer: &Tracer,
+    strata: usize,
+    progress: Option<&ProgressFn>,
+) -> Result<Gather> {
     check_rays(mesh.vertex_count(), strata)?;
     let strata = strata.max(1);
-    let rays = (strata * strata) as f32;
     let ticker = Ticker::new(
         progress,
         mesh.vertex_count() as u64 * (strata * strata) as u64,
     );
-    let out = mesh
+    let per_vertex: Vec<Vec<Hit>> = mesh
         .positions()
         .par_iter()
         .zip(mesh.normals().par_iter())
         .enumerate()
         .map(|(v, (&p, &n))| {
+            let mut hits = Vec::new();
             if n == Vec3::ZERO || ticker.stopped() {
-                return [0.0; 3];
+                return hits;
             }
             let (t, b) = n.any_orthonormal_pair();
             let origin = tracer.offset_origin(p, n);
             // A per-vertex rotation of the strata (a hash of the index): no shared pattern.
             let shift = (v as u32).wrapping_mul(2_654_435_761) as f32 / u32::MAX as f32;
-            let mut sum = [0f32; 3];
             for i in 0..strata {
                 // A row of strata at a time (at most 1000 rays: milliseconds).
                 if !ticker.add(strata as u64) {
-                    return [0.0; 3];
+                    return Vec::new();
                 }
                 for j in 0..strata {
                     // Cosine-weighted: r = sqrt(u), phi = 2 pi v (Malley's method).
@@ -83,34 +123,89 @@ pub fn indirect_irradiance(
                     let (r, phi) = (u.sqrt(), 2.0 * PI * w);
                     let z = (1.0 - u).max(0.0).sqrt();
                     let dir = (t * (r * phi.cos()) + b * (r * phi.sin()) + n * z).normalize();
-                    if let Some(l) = radiance_along(mesh, tracer, sources, origin, dir) {
-                        for c in 0..3 {
-                            sum[c] += l[c];
-                        }
+                    if let Some(h) = hit_along(mesh, tracer, origin, dir) {
+                        hits.push(h);
                     }
                 }
             }
-            sum.map(|s| PI * s / rays)
+            hits
         })
         .collect();
     ticker.check()?;
-    Ok(out)
+    let mut starts = Vec::with_capacity(per_vertex.len() + 1);
+    starts.push(0u32);
+    let mut hits = Vec::with_capacity(per_vertex.iter().map(Vec::len).sum());
+    for h in per_vertex {
+        hits.extend(h);
+        starts.push(hits.len() as u32);
+    }
+    Ok(Gather {
+        starts,
+        hits,
+        rays_per_vertex: (strata * strata) as u32,
+    })
 }
 
-/// The radiance arriving at `origin` along `dir` from the mesh, if the ray meets the outside
-/// of a surface.
-fn radiance_along(
-    mesh: &Mesh,
-    tracer: &Tracer,
-    sources: &[Source],
-    origin: Vec3,
-    dir: Vec3,
-) -> Option<[f32; 3]> {
+impl Gather {
+    /// Rays cast to build it.
+    pub fn rays(&self) -> u64 {
+        (self.starts.len().saturating_sub(1)) as u64 * u64::from(self.rays_per_vertex)
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.starts.len() * 4 + self.hits.len() * std::mem::size_of::<Hit>()
+    }
+
+    /// E_ind per vertex from `sources` over the kept hits: pi times the mean radiance the rays
+    /// brought (cosine-weighted directions). No ray is cast.
+    pub fn irradiance(&self, mesh: &Mesh, sources: &[Source]) -> Vec<[f32; 3]> {
+        // Each source's weight / pi on a table of view cosines.
+        let tables: Vec<Vec<[f32; 3]>> = sources
+            .iter()
+            .map(|s| {
+                (0..=WEIGHT_TABLE)
+                    .map(|k| {
+                        let w = (s.weight)(k as f64 / WEIGHT_TABLE as f64);
+                        w.map(|x| x as f32 / PI)
+                    })
+                    .collect()
+            })
+            .collect();
+        let rays = self.rays_per_vertex.max(1) as f32;
+        let triangles = mesh.triangles();
+        (0..self.starts.len() - 1)
+            .into_par_iter()
+            .map(|v| {
+                let mut sum = [0f32; 3];
+                for h in &self.hits[self.starts[v] as usize..self.starts[v + 1] as usize] {
+                    let tri = triangles[h.triangle as usize];
+                    let (bv, bw) = (f32::from(h.w[0]) / 65535.0, f32::from(h.w[1]) / 65535.0);
+                    let bu = (1.0 - bv - bw).max(0.0);
+                    let x = f32::from(h.cos) / 65535.0 * WEIGHT_TABLE as f32;
+                    let k = (x as usize).min(WEIGHT_TABLE - 1);
+                    let f = x - k as f32;
+                    for (source, table) in sources.iter().zip(&tables) {
+                        let [ra, rb, rc] = tri.map(|i| source.values[i as usize]);
+                        let (w0, w1) = (table[k], table[k + 1]);
+                        for c in 0..3 {
+                            let w = w0[c] + f * (w1[c] - w0[c]);
+                            sum[c] += w * (bu * ra[c] + bv * rb[c] + bw * rc[c]);
+                        }
+                    }
+                }
+                sum.map(|s| PI * s / rays)
+            })
+            .collect()
+    }
+}
+
+/// What the ray from `origin` along `dir` meets, if it meets the outside of a surface.
+fn hit_along(mesh: &Mesh, tracer: &Tracer, origin: Vec3, dir: Vec3) -> Option<Hit> {
     let hit = tracer.intersect(origin, dir, f32::INFINITY)?;
     let tri = mesh.triangles()[hit.triangle as usize];
     let corners = tri.map(|i| mesh.positions()[i as usize]);
     let y = origin + dir * hit.t;
-    let [bu, bv, bw] = barycentric(&corners, y)?;
+    let [_, bv, bw] = barycentric(&corners, y)?;
     let (e1, e2) = (corners[1] - corners[0], corners[2] - corners[0]);
     let flat = e1.cross(e2).normalize_or_zero();
     let normal = interpolated_normal(&tri.map(|i| mesh.normals()[i as usize]), bv, bw, flat);
@@ -118,15 +213,12 @@ fn radiance_along(
     if cos <= 0.0 || flat.dot(dir) >= 0.0 {
         return None; // the inside of a surface: no light leaves it toward the origin
     }
-    let mut l = [0f32; 3];
-    for source in sources {
-        let w = (source.weight)(f64::from(cos));
-        let [ra, rb, rc] = tri.map(|i| source.values[i as usize]);
-        for k in 0..3 {
-            l[k] += w[k] as f32 / PI * (bu * ra[k] + bv * rb[k] + bw * rc[k]);
-        }
-    }
-    Some(l)
+    let q = |x: f32| (x.clamp(0.0, 1.0) * 65535.0).round() as u16;
+    Some(Hit {
+        triangle: hit.triangle,
+        w: [q(bv), q(bw)],
+        cos: q(cos),
+    })
 }
 
 #[cfg(test)]

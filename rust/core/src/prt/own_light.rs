@@ -1,21 +1,19 @@
 //! The object's own light falling back on it (`interreflection`): what it adds per vertex,
 //! carried to any edit by the ratio of the slab albedos the material sends on.
 
-use super::interreflection::{indirect_irradiance, Source};
+use super::interreflection::{gather, Gather, Source};
 use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::profiles::Resolved;
 use crate::progress::{cancel_only, ProgressFn};
 use crate::raytrace::Tracer;
 use crate::walks::WalkTerm;
+use std::sync::Arc;
 
 /// Bounces of the object's own light: each returns a fraction (albedo x the view factor of
 /// what a point sees of the object, 0.2-0.3 in a concave character) of the one before, so
 /// three leave about a percent of the series.
 pub const INTERREFLECTION_BOUNCES: usize = 3;
-/// Bounces after the first cast this share of the first one's strata per side (they carry a
-/// few per cent of B; 2/3: 64 rays per vertex instead of 144, 1.3 s less on the 10 cm bunny).
-pub(super) const LATER_BOUNCE_STRATA: (usize, usize) = (2, 3);
 /// Share of the walks' ray budget (and walked vertices) spent on the object's own light.
 pub const INDIRECT_WALK_SHARE: f64 = 0.2;
 
@@ -33,6 +31,8 @@ pub(super) struct Bounce {
     pub(super) source_albedo: [f64; 3],
     /// What the walks through the mesh make of E_ind beyond its local conversion.
     pub(super) walked: Option<WalkTerm>,
+    /// The rays' hits, kept: a new light is gathered over them without a ray.
+    pub(super) gather: Arc<Gather>,
 }
 
 /// What the surface sends out, per vertex: the half-space B, the irradiance (for the light
@@ -48,13 +48,15 @@ pub(super) struct Sent<'a> {
 pub(super) struct Cast {
     pub(super) irradiance: Vec<[f32; 3]>,
     pub(super) rays: u64,
+    pub(super) gather: Arc<Gather>,
 }
 
 /// Bounce after bounce: the light sent out is the direct B plus what the indirect irradiance
 /// of the previous pass returns, (R_total + point mass) E_ind, and what the surface reflects
 /// of either. The cast is linear in what is sent, so E_ind = cast(B, E) + cast(E_ind of the
-/// pass before): the first bounce with every ray (`strata` x `strata` per vertex), the later
-/// (a few per cent of B) with fewer.
+/// pass before): the rays (`strata` x `strata` per vertex) are cast once and every bounce is
+/// gathered over their hits (`interreflection::Gather`), as is the own light under a new light
+/// (`Prt::relight`): no ray then.
 ///
 /// The light sent out is B with the walks' term: the far side of a lit ear glows, and lights
 /// what faces it (the half-space B would leave it dark). Cycles 5.0.1 does the same: a 2 mm
@@ -69,6 +71,7 @@ pub(super) fn cast(
     rep: &Resolved,
     sent: Sent<'_>,
     strata: usize,
+    kept: Option<Arc<Gather>>,
     progress: Option<&ProgressFn>,
 ) -> Result<Cast> {
     // Asked only whether to go on: the precompute's bar moves with the walks after it.
@@ -99,32 +102,40 @@ pub(super) fn cast(
             weight: &exit_plain,
         });
     }
-    let first = indirect_irradiance(mesh, tracer, &sources, strata, ask)?;
+    // The rays are cast once (or were, for an earlier light): every bounce is gathered over
+    // their hits.
+    let (gather, rays) = match kept {
+        Some(g) => (g, 0),
+        None => {
+            let g = gather(mesh, tracer, strata, ask)?;
+            let rays = g.rays();
+            (Arc::new(g), rays)
+        }
+    };
+    let first = gather.irradiance(mesh, &sources);
     // The later passes send E_ind on: its lobes' share W (R_total + point mass) and the
     // specular layer's.
     let onward = |cos: f64| rep.sent_on(cos);
-    let later = (strata * LATER_BOUNCE_STRATA.0 / LATER_BOUNCE_STRATA.1).max(1);
     let mut irradiance = first.clone();
     for _ in 1..INTERREFLECTION_BOUNCES {
-        let more = indirect_irradiance(
+        let more = gather.irradiance(
             mesh,
-            tracer,
             &[Source {
                 values: &irradiance,
                 weight: &onward,
             }],
-            later,
-            ask,
-        )?;
+        );
         irradiance = first
             .iter()
             .zip(&more)
             .map(|(a, b)| std::array::from_fn(|c| a[c] + b[c]))
             .collect();
     }
-    let rays = (mesh.vertex_count()
-        * (strata * strata + (INTERREFLECTION_BOUNCES - 1) * later * later)) as u64;
-    Ok(Cast { irradiance, rays })
+    Ok(Cast {
+        irradiance,
+        rays,
+        gather,
+    })
 }
 
 /// The share of B the own light adds: area-weighted over the vertices, the worst channel of

@@ -197,13 +197,13 @@ impl Prt {
         progress: Option<&ProgressFn>,
     ) -> Result<()> {
         self.cast_own_light(
-            mesh, tracer, rep, halfspace, strata, settings, None, progress,
+            mesh, tracer, rep, halfspace, strata, settings, None, None, progress,
         )
     }
 
     /// `add_own_light`; with `walked_before` (the own light's walk term of an earlier light,
     /// kept relightable) its walks are read under the new indirect light instead of walked
-    /// again.
+    /// again, and with `gather_before` (its rays' hits) no ray is cast.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn cast_own_light(
         &mut self,
@@ -214,6 +214,7 @@ impl Prt {
         strata: usize,
         settings: &PrtSettings,
         walked_before: Option<WalkTerm>,
+        gather_before: Option<std::sync::Arc<super::interreflection::Gather>>,
         progress: Option<&ProgressFn>,
     ) -> Result<()> {
         let t_bounce = Instant::now();
@@ -239,11 +240,17 @@ impl Prt {
                 walked: walked_part.as_deref(),
             },
             strata,
+            gather_before,
             progress,
         )?;
+        self.report.interreflection_bytes = cast.gather.bytes();
         self.report.interreflection_share =
             own_light::share(&cast.irradiance, &direct, mesh.vertex_areas(), &receiving);
-        self.report.interreflection_rays = cast.rays;
+        if cast.rays > 0 {
+            // The precompute's rays (a new light gathers over their hits: none).
+            self.report.interreflection_rays = cast.rays;
+        }
+        self.report.last_own_light_rays = cast.rays;
         self.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();
         let irradiance = cast.irradiance;
         // The indirect light enters through the real geometry too (what falls on the
@@ -282,6 +289,7 @@ impl Prt {
             irradiance,
             source_albedo,
             walked,
+            gather: cast.gather,
         });
         Ok(())
     }

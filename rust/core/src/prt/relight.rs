@@ -203,9 +203,10 @@ impl Prt {
                 strata,
                 &settings,
                 bounce.walked,
+                Some(bounce.gather),
                 walk_progress.as_ref().map(|f| f as _),
             )?;
-            out.own_light_rays = self.report.interreflection_rays;
+            out.own_light_rays = self.report.last_own_light_rays;
             if !relit {
                 out.walks_traced += self.report.walks_indirect.as_ref().map_or(0, |w| w.walks);
             }

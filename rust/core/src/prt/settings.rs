@@ -114,6 +114,10 @@ pub struct PrtReport {
     /// Rays cast for the object's own light (0 when interreflection is off), and the share of
     /// the representative's B it adds (area-weighted mean over the vertices, worst channel).
     pub interreflection_rays: u64,
+    /// Bytes of the own light's rays' hits, kept for its later bounces and a new light.
+    pub interreflection_bytes: usize,
+    /// Rays the own light cast at the last precompute or relight (0 when its hits were reused).
+    pub last_own_light_rays: u64,
     pub interreflection_share: f64,
     pub seconds_interreflection: f64,
     pub seconds_tree: f64,
