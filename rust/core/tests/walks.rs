@@ -172,18 +172,9 @@ fn half_space_medium() -> (Material, [f64; 3]) {
     (m, albedo)
 }
 
-#[test]
-fn walks_on_a_half_lit_plane_follow_the_half_space_table() {
-    // sigma_t 100 per metre (mean free path 1 cm), a 1 m box 0.5 m deep: a half-space for the
-    // walks. Irradiance 1 for x < 0 and 0 beyond, on a 4 mm grid (the ramp between the two is
-    // odd about the edge and costs under 0.1 % at >= 1 cm from it). Both sides of the edge,
-    // for three albedos, against the table's profile integrated over the lit half-plane.
-    let (m, albedo) = half_space_medium();
-    let profiles = ProfileKind::Cycles.profiles(&m).unwrap();
-    let mesh = grid_box(1.0, 0.5, 251);
-    let tracer = Tracer::new(&mesh);
-    let e: Vec<[f32; 3]> = mesh
-        .positions()
+/// Irradiance 1 for x < 0 on the box's top face, 0 beyond and below (0.5 on the edge itself).
+fn half_lit(mesh: &Mesh) -> Vec<[f32; 3]> {
+    mesh.positions()
         .iter()
         .map(|p| {
             let lit = if p.z < -1e-6 {
@@ -197,7 +188,20 @@ fn walks_on_a_half_lit_plane_follow_the_half_space_table() {
             };
             [lit; 3]
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn walks_on_a_half_lit_plane_follow_the_half_space_table() {
+    // sigma_t 100 per metre (mean free path 1 cm), a 1 m box 0.5 m deep: a half-space for the
+    // walks. Irradiance 1 for x < 0 and 0 beyond, on a 4 mm grid (the ramp between the two is
+    // odd about the edge and costs under 0.1 % at >= 1 cm from it). Both sides of the edge,
+    // for three albedos, against the table's profile integrated over the lit half-plane.
+    let (m, albedo) = half_space_medium();
+    let profiles = ProfileKind::Cycles.profiles(&m).unwrap();
+    let mesh = grid_box(1.0, 0.5, 251);
+    let tracer = Tracer::new(&mesh);
+    let e = half_lit(&mesh);
     let xs = [-0.03f32, -0.012, 0.012, 0.03, 0.06];
     let receivers: Vec<u32> = xs.iter().map(|&x| nearest(&mesh, x, 0.0)).collect();
     let settings = MeshWalkSettings {
@@ -605,22 +609,7 @@ fn recorded_walks_relit_follow_the_half_space_table() {
         .iter()
         .map(|p| [if top(p) { 1.0 } else { 0.0 }; 3])
         .collect();
-    let half: Vec<[f32; 3]> = mesh
-        .positions()
-        .iter()
-        .map(|p| {
-            let lit = if !top(p) {
-                0.0
-            } else if p.x.abs() < 1e-6 {
-                0.5
-            } else if p.x < 0.0 {
-                1.0
-            } else {
-                0.0
-            };
-            [lit; 3]
-        })
-        .collect();
+    let half = half_lit(&mesh);
     let xs = [-0.03f32, -0.012, 0.012, 0.03];
     let receivers: Vec<u32> = xs.iter().map(|&x| nearest(&mesh, x, 0.0)).collect();
     let settings = MeshWalkSettings {

@@ -136,13 +136,15 @@ impl Prt {
         }
         if let (Some(strata), Some(tracer)) = (bounce_strata, &tracer) {
             let walk_progress = progress.map(|p| move |f: f32| p(0.85 + 0.14 * f));
-            prt.add_own_light(
+            prt.cast_own_light(
                 mesh,
                 tracer,
                 rep,
                 &halfspace,
                 strata,
                 settings,
+                None,
+                None,
                 walk_progress.as_ref().map(|f| f as _),
             )?;
             prt.report.seconds_total = start.elapsed().as_secs_f64();
@@ -184,26 +186,9 @@ impl Prt {
 
     /// The object's own light (`own_light`): the indirect irradiance its direct B (the walks'
     /// term included) casts back on it, and, with the walks, what walks through the mesh make
-    /// of that light beyond its local conversion.
-    #[allow(clippy::too_many_arguments)]
-    fn add_own_light(
-        &mut self,
-        mesh: &Mesh,
-        tracer: &Tracer,
-        rep: &Resolved,
-        halfspace: &[[f32; 3]],
-        strata: usize,
-        settings: &PrtSettings,
-        progress: Option<&ProgressFn>,
-    ) -> Result<()> {
-        self.cast_own_light(
-            mesh, tracer, rep, halfspace, strata, settings, None, None, progress,
-        )
-    }
-
-    /// `add_own_light`; with `walked_before` (the own light's walk term of an earlier light,
-    /// kept relightable) its walks are read under the new indirect light instead of walked
-    /// again, and with `gather_before` (its rays' hits) no ray is cast.
+    /// of that light beyond its local conversion. With `walked_before` (the own light's walk
+    /// term of an earlier light, kept relightable) its walks are read under the new indirect
+    /// light instead of walked again, and with `gather_before` (its rays' hits) no ray is cast.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn cast_own_light(
         &mut self,

@@ -14,6 +14,7 @@
 //! (`allocation::more_where_noisy`) keeps each pass with its share of the merged mean.
 
 use super::radiosity::ExitLight;
+use super::twin::controlled_mean;
 use crate::mesh::Mesh;
 use crate::optics::CHANNELS;
 use glam::Vec3;
@@ -87,29 +88,7 @@ impl PassRecord {
             sums[3] += y * y;
             sums[4] += x * y;
         }
-        let k = self.walks.len() as f64;
-        if k == 0.0 {
-            return (0.0, 0.0);
-        }
-        let (mx, my) = (sums[0] / k, sums[1] / k);
-        let (vx, vy, cxy) = (
-            (sums[2] / k - mx * mx).max(0.0),
-            (sums[3] / k - my * my).max(0.0),
-            sums[4] / k - mx * my,
-        );
-        let beta = if vy > 0.0 {
-            (cxy / vy).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let mean = (mx - beta * my).max(0.0);
-        let var = (vx - 2.0 * beta * cxy + beta * beta * vy).max(0.0);
-        let se = if k > 1.0 {
-            (var / (k - 1.0)).sqrt()
-        } else {
-            0.0
-        };
-        (mean, se)
+        controlled_mean(&sums, self.walks.len())
     }
 }
 

@@ -126,27 +126,7 @@ impl Walker<'_> {
             }
         }
         ticker.add((s.walks % WALK_TICK) as u64);
-        let k = s.walks as f64;
-        let (mx, my) = (sums[0] / k, sums[1] / k);
-        let (vx, vy, cxy) = (
-            (sums[2] / k - mx * mx).max(0.0),
-            (sums[3] / k - my * my).max(0.0),
-            sums[4] / k - mx * my,
-        );
-        let beta = if vy > 0.0 {
-            (cxy / vy).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        // B >= 0: the control can take a few walks' mean below it (a nearly transparent
-        // medium, 8 walks: -2e-4 where B is 0.3).
-        let mean = (mx - beta * my).max(0.0);
-        let var = (vx - 2.0 * beta * cxy + beta * beta * vy).max(0.0);
-        let se = if s.walks > 1 {
-            (var / (k - 1.0)).sqrt()
-        } else {
-            0.0
-        };
+        let (mean, se) = controlled_mean(&sums, s.walks);
         let record = record.then_some(PassRecord {
             share: 1.0,
             exits,
@@ -271,6 +251,37 @@ pub(super) fn tangent_gradients(mesh: &Mesh, irradiance: &[[f32; 3]]) -> Vec<[[f
             out
         })
         .collect()
+}
+
+/// The walks' mean with the control variate subtracted, and its standard error, from the
+/// sums of x (mesh), y (control, less its known mean), x^2, y^2 and xy over `walks` walks: the
+/// coefficient beta = cov(x, y) / var(y) fitted to the walks (in [0, 1]).
+pub(super) fn controlled_mean(sums: &[f64; 5], walks: usize) -> (f64, f64) {
+    if walks == 0 {
+        return (0.0, 0.0);
+    }
+    let k = walks as f64;
+    let (mx, my) = (sums[0] / k, sums[1] / k);
+    let (vx, vy, cxy) = (
+        (sums[2] / k - mx * mx).max(0.0),
+        (sums[3] / k - my * my).max(0.0),
+        sums[4] / k - mx * my,
+    );
+    let beta = if vy > 0.0 {
+        (cxy / vy).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    // B >= 0: the control can take a few walks' mean below it (a nearly transparent medium,
+    // 8 walks: -2e-4 where B is 0.3).
+    let mean = (mx - beta * my).max(0.0);
+    let var = (vx - 2.0 * beta * cxy + beta * beta * vy).max(0.0);
+    let se = if walks > 1 {
+        (var / (k - 1.0)).sqrt()
+    } else {
+        0.0
+    };
+    (mean, se)
 }
 
 #[cfg(test)]

@@ -1,0 +1,102 @@
+//! What a hierarchy is asked to do (`HierarchySettings`, Mertens 2003's thresholds and modes,
+//! §5.5) and what its last evaluation did (`HierarchyReport`).
+
+use crate::error::{Error, Result};
+use crate::profiles::ProfileKind;
+
+/// Which of Mertens' three modes (§5.5) an evaluation runs in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    OnTheFly,
+    Incremental,
+    Render,
+}
+
+impl Mode {
+    pub fn parse(name: &str) -> Result<Mode> {
+        match name {
+            "on_the_fly" => Ok(Mode::OnTheFly),
+            "incremental" => Ok(Mode::Incremental),
+            "render" => Ok(Mode::Render),
+            other => Err(Error::InvalidArgument(format!(
+                "mode {other:?}: choose 'on_the_fly', 'incremental' or 'render'"
+            ))),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::OnTheFly => "on_the_fly",
+            Mode::Incremental => "incremental",
+            Mode::Render => "render",
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct HierarchySettings {
+    /// ε₁: largest change of an emitter's solid angle [sr] across a receiver's children.
+    pub eps_receiver: f64,
+    /// ε₂: largest solid angle [sr] an emitter may subtend at a far link.
+    pub eps_emitter: f64,
+    pub profile: ProfileKind,
+    pub mode: Mode,
+    /// Share of the profile's total left out beyond its support radius.
+    pub support_tolerance: f64,
+    pub world_samples: u32,
+    /// The world shadowed by the mesh (`world_samples` rays per point) rather than by its
+    /// nine spherical-harmonic coefficients unshadowed (Mertens 2003 §5.3, no rays: the
+    /// paper's choice and the default).
+    pub world_shadows: bool,
+    pub area_samples: u32,
+    pub seed: u64,
+    /// Faces whose radiosity the error estimate recomputes with ε/4.
+    pub estimate_receivers: usize,
+}
+
+impl Default for HierarchySettings {
+    fn default() -> Self {
+        Self {
+            eps_receiver: 0.005,
+            eps_emitter: 0.5,
+            profile: ProfileKind::Cycles,
+            mode: Mode::OnTheFly,
+            support_tolerance: 1e-4,
+            world_samples: 64,
+            world_shadows: false,
+            area_samples: 16,
+            seed: 1,
+            estimate_receivers: 32,
+        }
+    }
+}
+
+/// What the last evaluation did and how long each phase took [s].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct HierarchyReport {
+    pub mode: &'static str,
+    pub faces: usize,
+    pub clusters: usize,
+    pub depth: usize,
+    /// Links of the last evaluation (on-the-fly: used, not stored; dark emitters skipped).
+    pub far_links: u64,
+    pub near_links: u64,
+    pub oracle_tests: u64,
+    pub dropped_beyond_support: u64,
+    /// Whether links were refined (on-the-fly, first build, incremental re-check).
+    pub relinked: bool,
+    pub rays: u64,
+    pub seconds_build: f64,
+    pub seconds_refit: f64,
+    pub seconds_irradiance: f64,
+    pub seconds_pull: f64,
+    /// Refinement and gather (they run together in one traversal).
+    pub seconds_links: f64,
+    pub seconds_push: f64,
+    pub seconds_estimate: f64,
+    pub seconds: f64,
+    /// Area-weighted relative RMS per channel between the faces' radiosity and the same
+    /// recomputed with ε/4 on `estimate_receivers` faces; None when `estimate_receivers` is 0
+    /// (no estimate computed, never a made-up zero).
+    pub error_estimate: Option<[f64; 3]>,
+}
