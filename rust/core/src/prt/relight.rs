@@ -138,7 +138,9 @@ impl Prt {
             .map(|m| Resolved::new(self.profile, m))
             .collect::<Result<Vec<_>>>()?;
         let mut out = RelightReport::default();
-        let lit = SampledLight::lit(mesh, self.spacing, self.samples.clone(), irradiance)?;
+        // `self` is `relit`'s private copy (dropped on any error): its samples move in and out.
+        let samples = std::mem::take(&mut self.samples);
+        let lit = SampledLight::lit(mesh, self.spacing, samples, irradiance)?;
         out.seconds_irradiance = start.elapsed().as_secs_f64();
         tick(0.2)?;
         let t = Instant::now();
@@ -154,6 +156,7 @@ impl Prt {
         )?;
         out.seconds_transport = t.elapsed().as_secs_f64();
         self.vertex_irradiance = lit.vertex_irradiance;
+        self.samples = lit.samples;
         self.report = report;
         let rep = &resolved[0];
         let tracer = (self.walks.is_some() || self.bounce.is_some()).then(|| Tracer::new(mesh));

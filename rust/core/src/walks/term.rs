@@ -137,7 +137,7 @@ pub struct WalkTerm {
     pub(super) noise: [f64; 3],
     pub report: WalkTermReport,
     /// What a new light needs (`relight`), when the walks kept their records.
-    pub(super) layout: Option<Box<Layout>>,
+    pub(super) layout: Option<std::sync::Arc<Layout>>,
 }
 
 /// Diffusion length 1 / sigma_tr of each channel's profile (capped at a large multiple of the
@@ -198,7 +198,7 @@ impl WalkTerm {
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let per_albedo = per_albedo(&smoothed, &albedo);
         let layout = match (Kept::of(&main.walked, &main.walks), settings.record) {
-            (Some(main_kept), true) => Some(Box::new(Layout {
+            (Some(main_kept), true) => Some(std::sync::Arc::new(Layout {
                 candidates: main.candidates.clone(),
                 main: main_kept,
                 sharp: sharp.kept.clone().unwrap_or_default(),
