@@ -126,14 +126,14 @@ pub(super) fn transport_row(
         Degree::Quadratic => 3,
     };
     let mut acc = vec![0f64; channels * n];
-    let add = |c: usize, r: f64, w: f64, acc: &mut [f64]| {
-        let (first, values) = basis.eval(r);
+    let add_values = |c: usize, (first, values): (usize, [f64; 3]), w: f64, acc: &mut [f64]| {
         for (k, v) in values.iter().take(degree_terms).enumerate() {
             if first + k < n {
                 acc[c * n + first + k] += w * v;
             }
         }
     };
+    let add = |c: usize, r: f64, w: f64, acc: &mut [f64]| add_values(c, basis.eval(r), w, acc);
     let mut counters = Counters::default();
     let mut stack = Vec::with_capacity(64);
     stack.push(0usize);
@@ -157,8 +157,10 @@ pub(super) fn transport_row(
                     continue;
                 }
                 counters.exact += 1;
+                // The basis at r once for every channel.
+                let values = basis.eval(r);
                 for c in 0..channels {
-                    add(c, r, f64::from(s.weight[c]), &mut acc);
+                    add_values(c, values, f64::from(s.weight[c]), &mut acc);
                 }
             }
         } else if gap >= exclusion && far.accepts(node.radius, d) {

@@ -61,6 +61,11 @@ pub struct Basis {
     degree: Degree,
     /// Knot vector with each boundary knot repeated `degree + 1` times (Cox–de Boor).
     extended: Vec<f64>,
+    /// Per interval i, the `degree + 1` functions non-zero on it as polynomials in
+    /// t = r - k_i: `pieces[i][k] = [a, b, c]`, phi_(i+k) = a + b t + c t^2 (from Cox–de Boor
+    /// at three points of the interval, once). `eval`, the transport's hot path, is then a
+    /// search and nine multiply-adds instead of the recursion's three divisions.
+    pieces: Vec<[[f64; 3]; 3]>,
 }
 
 impl Basis {
@@ -91,11 +96,29 @@ impl Basis {
         let mut extended = vec![knots[0]; p];
         extended.extend_from_slice(&knots);
         extended.extend(std::iter::repeat_n(knots[knots.len() - 1], p));
-        Ok(Basis {
+        let mut basis = Basis {
             knots,
             degree,
             extended,
-        })
+            pieces: Vec::new(),
+        };
+        basis.pieces = (0..basis.knots.len() - 1)
+            .map(|i| {
+                let h = basis.knots[i + 1] - basis.knots[i];
+                let at = |t: f64| basis.cox_de_boor(i, basis.knots[i] + t);
+                let (y0, y1, y2) = (at(0.0), at(0.5 * h), at(h));
+                // The interpolating quadratic through t = 0, h/2, h (exact: the pieces are
+                // polynomials of degree <= 2; for the linear basis c comes out 0).
+                std::array::from_fn(|k| {
+                    [
+                        y0[k],
+                        (4.0 * y1[k] - 3.0 * y0[k] - y2[k]) / h,
+                        2.0 * (y0[k] - 2.0 * y1[k] + y2[k]) / (h * h),
+                    ]
+                })
+            })
+            .collect();
+        Ok(basis)
     }
 
     /// Number of basis functions = number of coefficients of the dot product.
@@ -136,12 +159,24 @@ impl Basis {
 
     /// The basis functions that may be non-zero at r: the index of the first and the values of
     /// `degree + 1` consecutive functions (unused slots 0). All zero outside the domain.
-    /// Cox–de Boor recursion (The NURBS Book, A2.2) on the extended knot vector after an
-    /// O(log m) binary search for the interval; no allocation (the per-vertex hot path).
+    /// An O(log m) binary search for the interval, then that interval's polynomial pieces;
+    /// no allocation (the per-vertex hot path).
     pub fn eval(&self, r: f64) -> (usize, [f64; 3]) {
         let Some(i) = self.interval(r) else {
             return (0, [0.0; 3]);
         };
+        let t = r - self.knots[i];
+        let piece = &self.pieces[i];
+        (
+            i,
+            std::array::from_fn(|k| piece[k][0] + t * (piece[k][1] + t * piece[k][2])),
+        )
+    }
+
+    /// The `degree + 1` functions non-zero on interval `i`, at r (any r: the interval's
+    /// polynomials continued). Cox–de Boor recursion (The NURBS Book, A2.2) on the extended
+    /// knot vector.
+    fn cox_de_boor(&self, i: usize, r: f64) -> [f64; 3] {
         let p = self.degree.as_int();
         let u = &self.extended;
         let s = i + p; // span in the extended knot vector
@@ -160,7 +195,7 @@ impl Basis {
             }
             n[j] = saved;
         }
-        (i, n)
+        n
     }
 
     /// int_a^b phi_j(r) 2 pi r dr for every j; [a, b] is clamped to the domain and may be
