@@ -247,6 +247,7 @@ impl Light {
     /// spot's cone, behind an area light, at the light itself). The same `u` at every point
     /// of one line toward the light gives the same direction: single scattering finds where a
     /// ray enters the medium and asks again there.
+    #[inline]
     pub fn incident(&self, x: Vec3, u: [f32; 2]) -> Option<Incident> {
         use std::f32::consts::PI;
         let toward = |pos: Vec3| {

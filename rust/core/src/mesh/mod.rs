@@ -1,10 +1,12 @@
 //! A validated triangle mesh: positions, triangles, vertex normals, areas, and the
 //! area-uniform surface samples every integration over the surface starts from.
 
+mod order;
 pub mod topology;
 
 use crate::error::{Error, Result};
 use glam::Vec3;
+pub use order::morton_order;
 pub use topology::Topology;
 
 /// The largest coordinate magnitude a mesh may have [scene units]. The methods work in single

@@ -218,16 +218,20 @@ pub(super) fn transport_rows(
     let channels = colour.channels;
     let stride = basis.len() + 1;
     let vcount = mesh.vertex_count();
-    let mut rows = vec![0f32; vcount * channels * stride];
+    let row_len = channels * stride;
+    let mut rows = vec![0f32; vcount * row_len];
     let mut counters = Counters::default();
+    // Vertices in Morton order, so the rows computed together walk the same parts of the
+    // sample tree (its nodes stay in cache); each row is written back at its vertex.
+    let order = crate::mesh::morton_order(mesh.positions());
     let chunk = 512; // vertices per progress tick and cancel check
-    for (ci, rows_chunk) in rows.chunks_mut(chunk * channels * stride).enumerate() {
-        let first = ci * chunk;
-        let chunk_counters = rows_chunk
-            .par_chunks_mut(channels * stride)
-            .enumerate()
-            .map(|(k, row)| {
-                let v = first + k;
+    let mut buffer = vec![0f32; chunk * row_len];
+    for (ci, vertices) in order.chunks(chunk).enumerate() {
+        let chunk_counters = buffer[..vertices.len() * row_len]
+            .par_chunks_mut(row_len)
+            .zip(vertices.par_iter())
+            .map(|(row, &v)| {
+                let v = v as usize;
                 let (area, weight) = disc.excluded[v];
                 let full = std::f64::consts::PI * exclusion * exclusion;
                 let (ring_outer, cover) = match disc.coverage[v] {
@@ -256,8 +260,13 @@ pub(super) fn transport_rows(
                 transport_row(tree, basis, far, exclusion, near_radius, &receiver, row)
             })
             .reduce(Counters::default, Counters::sum);
+        for (k, &v) in vertices.iter().enumerate() {
+            let v = v as usize;
+            rows[v * row_len..(v + 1) * row_len]
+                .copy_from_slice(&buffer[k * row_len..(k + 1) * row_len]);
+        }
         counters = counters.sum(chunk_counters);
-        tick((first + chunk).min(vcount) as f32 / vcount as f32)?;
+        tick(((ci + 1) * chunk).min(vcount) as f32 / vcount as f32)?;
     }
     let transport = Transport::from_rows(&rows, vcount, channels, stride, colour.scale);
     Ok((transport, counters))
