@@ -55,6 +55,26 @@ def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting,
     return session
 
 
+FIRST_PREVIEW_MESSAGE = "first preview after {:.2f} s (the half-space profile alone): refining with the walks"
+
+
+def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, lighting) -> Session | None:
+    """The job's first preview (`jobs.Job.first`) shown while its full precompute runs: a
+    session of its own (edits work on it), replaced by `finish` when the job is done. None
+    when the job has none (yet)."""
+    if job.first is None:
+        return None
+    session = Session(job.first, info, objects, lighting, material.translucent.eta, profile=job.profile)
+    session.chosen_for = job.chosen_for
+    session.method = "prt"
+    session.method_message = FIRST_PREVIEW_MESSAGE.format(job.first_seconds)
+    session.remap = nearest_original_vertices(objects, info)
+    SESSIONS[material.name] = session
+    edit(material)
+    viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
+    return session
+
+
 def in_background(name: str, job: jobs.Job, objects, info, lighting, failed, method_message: str = "") -> None:
     """`job` run off the UI thread (`jobs.in_background`); its transport is shown when done."""
     jobs.in_background(name, job, lambda mat: finish(mat, job, objects, info, lighting, method_message), failed)

@@ -50,7 +50,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
 
     _timer = None
 
-    def _prepare(self, context):
+    def _prepare(self, context, first_preview: bool = False):
         mat = _resolve(self, context, needs_preview=True)
         if mat is None:
             return None
@@ -60,7 +60,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             return None
         try:
             method, self._method_message = jobs.resolve_method(mat.translucent.method, "precompute")
-            job, objects, info, lighting = jobs.start(mat, context.scene, method=method)
+            job, objects, info, lighting = jobs.start(mat, context.scene, method=method, first_preview=first_preview)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return None
@@ -73,6 +73,11 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
         job = self._job
         if job.error is not None:
             import translucent
+
+            first = SESSIONS.get(self._mat)
+            if getattr(self, "_first_shown", False) and first is not None and first.transport is job.first:
+                # The first preview stays up; the panel no longer says it is refining.
+                first.method_message = "first preview (the half-space profile alone): the full precompute stopped"
 
             if isinstance(job.error, translucent.Cancelled):
                 self.report({"INFO"}, "precompute cancelled")
@@ -97,7 +102,9 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
     def invoke(self, context, event):
         if bpy.app.background:
             return self.execute(context)
-        job = self._prepare(context)
+        # Interactive: a first preview within a second while the walks run (Cycles' profile).
+        job = self._prepare(context, first_preview=True)
+        self._first_shown = False
         if job is None:
             return {"CANCELLED"}
         JOBS[self._mat] = job
@@ -114,6 +121,11 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             self._job.cancel = True
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
+        if not self._first_shown and self._job.first is not None:
+            mat = bpy.data.materials.get(self._mat)
+            if mat is not None:
+                edits.show_first(mat, self._job, self._objects, self._info, self._lighting)
+            self._first_shown = True
         wm.progress_update(int(100 * self._job.progress))
         context.workspace.status_text_set(f"Translucent: precompute {100 * self._job.progress:.0f} % (Esc cancels)")
         if not self._job.done:

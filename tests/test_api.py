@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import translucent
-from helpers import centre_index, fresnel_t, plane, plane_limit, sun_plane
+from helpers import centre_index, fresnel_t, plane, plane_limit, sphere, sun_plane
 
 
 # ---------------------------------------------------------------- bad input -> clear errors
@@ -174,3 +174,37 @@ def test_precompute_releases_the_gil():
         done.set()
         th.join()
     assert ticks > 1000
+
+
+def test_a_first_preview_is_the_half_space_answer_on_fewer_samples_and_says_what_it_leaves_out():
+    """`Prt(first_preview=True)`: the half-space profile alone on at most 150,000 samples. On a
+    sun-lit plane (where the half-space answer is the exact one) it meets the dipole's closed
+    form as the full precompute does; with Cycles' profile it reports the walks and the own
+    light left out for the full precompute, and asking for them with it is refused."""
+    p, t = plane(81, 0.4)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), irradiance=3.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    first = translucent.Prt(s, m, profile="dipole", first_preview=True)
+    assert first.report["first_preview"] and first.report["samples"] <= 150_000
+    b = first.radiosity(m)
+    v = centre_index(p)
+    sp, sa = (2.19, 2.62, 3.00), (0.0021, 0.0041, 0.0071)
+    for c in range(3):
+        assert b[v, c] == pytest.approx(plane_limit(sa[c], sp[c], 1.3, 1.0, 3.0), rel=0.01)
+    # Cycles' profile: no walk and no own light, each named as left out for the full precompute.
+    q, ts = sphere(12, 0.05)
+    sc = translucent.Scene(q, ts)
+    sc.add_sun((0.2, 0.1, -1.0), 2.0)
+    skin = translucent.Material.preset("skin1")
+    c = translucent.Prt(sc, skin, backend="cpu", first_preview=True)
+    assert c.report["walks"] is None and c.report["interreflection_rays"] == 0 and not c.report["single_scattering"]
+    c.radiance(skin)
+    skipped = {k["what"]: k["why"] for k in c.last_eval["skipped"]}
+    assert "first preview" in skipped["walks through the mesh"], skipped
+    assert "first preview" in skipped["the object's own light"], skipped
+    assert not translucent.Prt(sc, skin, backend="cpu").report["first_preview"]
+    with pytest.raises(ValueError, match="first_preview"):
+        translucent.Prt(sc, skin, first_preview=True, walks=8)
+    with pytest.raises(ValueError, match="first_preview"):
+        translucent.Prt(sc, skin, first_preview=True, interreflection=True)

@@ -162,7 +162,8 @@ impl PyPrt {
         tolerance = 1e-5, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
         backend = "auto", fit_tolerance = None, profile = "cycles", interreflection = None,
         interreflection_rays = 144, walks = None, walk_vertices = 1000, walk_rays = None,
-        single_scattering = None, single_coefficients = 16, single_steps = 32))]
+        single_scattering = None, single_coefficients = 16, single_steps = 32,
+        first_preview = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -187,6 +188,7 @@ impl PyPrt {
         single_scattering: Option<bool>,
         #[pyo3(from_py_with = crate::convert::int)] single_coefficients: i64,
         #[pyo3(from_py_with = crate::convert::int)] single_steps: i64,
+        first_preview: bool,
     ) -> PyResult<Self> {
         let model = crate::material::profile_kind(profile)?;
         let single_coefficients: usize = non_negative("single_coefficients", single_coefficients)?;
@@ -211,6 +213,7 @@ impl PyPrt {
             walk_rays: walk_rays
                 .map(|r| non_negative("walk_rays", r))
                 .transpose()?,
+            first_preview,
         };
         let world_samples: u32 = non_negative("world_samples", world_samples)?;
         let area_samples: u32 = non_negative("area_samples", area_samples)?;
@@ -219,6 +222,8 @@ impl PyPrt {
             .settings(&materials, scene.scene.mesh.vertex_count())
             .map_err(to_py)?;
         let eta = settings.eta;
+        // A first preview leaves single scattering out too unless it is asked for.
+        let single_scattering = single_scattering.or(first_preview.then_some(false));
         let single = single::decide(model, &materials, single_scattering).map_err(to_py)?;
         let single_settings = single::SingleSettings {
             coefficients: single_coefficients,
@@ -631,6 +636,7 @@ impl PyPrt {
             }
             None => d.set_item("single", py.None())?,
         }
+        d.set_item("first_preview", r.first_preview)?;
         d.set_item("stored_channels", r.stored_channels)?;
         d.set_item("transport_bytes", r.transport_bytes)?;
         d.set_item("exact_samples", r.exact_samples)?;

@@ -243,7 +243,13 @@ impl Prt {
     /// when they were not precomputed or the caller left them out.
     fn skipped(&self, bounce: bool, walks: bool) -> Vec<Skipped> {
         let mut out = Vec::new();
+        // A first preview says so: its estimate covers the fit alone, not what it left out.
+        let first = self.report.first_preview;
         match (&self.bounce, bounce) {
+            (None, _) if first => out.push(Skipped::new(
+                "the object's own light",
+                "first preview: the full precompute adds it",
+            )),
             (None, _) => out.push(Skipped::new(
                 "the object's own light",
                 "not precomputed (interreflection off)",
@@ -255,6 +261,10 @@ impl Prt {
             _ => {}
         }
         match (&self.walks, walks) {
+            (None, _) if first && self.profile == ProfileKind::Cycles => out.push(Skipped::new(
+                "walks through the mesh",
+                "first preview: the full precompute adds them",
+            )),
             (None, _) => out.push(Skipped::new(
                 "walks through the mesh",
                 match self.profile {

@@ -13,17 +13,22 @@ pub const BASIS_SIZES: [usize; 10] = [4, 6, 8, 12, 16, 24, 32, 48, 64, 96];
 /// Half the shortest length over which any representative's profile changes (`LengthScales`:
 /// the dipole's source depth z_r or decay length 1/sigma_tr), so the sample sum resolves the
 /// profile; bounded by the sample counts `PrtSettings::samples` documents.
-pub(super) fn default_spacing(mesh: &Mesh, profiles: &[Profile]) -> f32 {
+pub(super) fn default_spacing(
+    mesh: &Mesh,
+    profiles: &[Profile],
+    max_samples: Option<usize>,
+) -> f32 {
+    let most = max_samples.unwrap_or(DEFAULT_MAX_SAMPLES).max(1);
     let shortest = profiles
         .iter()
         .filter(|p| !p.is_zero())
         .map(|p| p.length_scales().shortest())
         .fold(f64::INFINITY, f64::min);
-    let least = (4 * mesh.vertex_count()).max(20_000);
+    let least = (4 * mesh.vertex_count()).max(20_000).min(most);
     let spacing = (0.5 * shortest).min(f64::from(mesh.diagonal())) as f32;
     let count = mesh.sample_count(spacing);
-    if count > DEFAULT_MAX_SAMPLES {
-        mesh.spacing_for_sample_count(DEFAULT_MAX_SAMPLES)
+    if count > most {
+        mesh.spacing_for_sample_count(most)
     } else if count < least {
         mesh.spacing_for_sample_count(least)
     } else {

@@ -68,6 +68,7 @@ impl Prt {
 
         let lit = SampledLight::new(mesh, &profiles, settings, irradiance)?;
         report.samples = lit.samples.len();
+        report.first_preview = settings.first_preview;
         report.sample_spacing = f64::from(lit.spacing);
         report.seconds_irradiance = start.elapsed().as_secs_f64();
         tick(0.1)?;
@@ -336,7 +337,13 @@ impl SampledLight {
     ) -> Result<Self> {
         let spacing = match settings.samples {
             Some(count) => mesh.spacing_for_sample_count(count),
-            None => default_spacing(mesh, profiles),
+            None => default_spacing(
+                mesh,
+                profiles,
+                settings
+                    .first_preview
+                    .then_some(super::request::FIRST_PREVIEW_SAMPLES),
+            ),
         };
         Self::lit(mesh, spacing, mesh.surface_samples(spacing)?, irradiance)
     }

@@ -41,6 +41,9 @@ pub struct PrtSettings {
     /// shortest length (z_r or 1/sigma_tr), between 4 per vertex (at least 20 000) and
     /// `DEFAULT_MAX_SAMPLES`.
     pub samples: Option<usize>,
+    /// A first preview (`PrtRequest::first_preview`): the default spacing takes at most
+    /// `FIRST_PREVIEW_SAMPLES` samples (else `DEFAULT_MAX_SAMPLES`).
+    pub first_preview: bool,
     /// Fraction of the profile's total that may fall beyond the support radius. 1e-5 by
     /// default: a receiver lit only from afar (the far side of a sun-lit 20 mm marble sphere,
     /// B a thousandth of the lit side's) gets its light from that tail; at 1e-3 Cycles' profile
@@ -69,6 +72,7 @@ impl Default for PrtSettings {
             fit_tolerance: None,
             degree: Degree::Linear,
             samples: None,
+            first_preview: false,
             tolerance: 1e-5,
             far_field: 0.25,
             eta: 1.3,
@@ -127,6 +131,9 @@ pub struct PrtReport {
     /// own light (when interreflection is on too).
     pub walks: Option<WalkTermReport>,
     pub walks_indirect: Option<WalkTermReport>,
+    /// A first preview (`PrtRequest::first_preview`): the half-space profile alone on at most
+    /// `FIRST_PREVIEW_SAMPLES` samples, no walks and no own light, whatever the profile.
+    pub first_preview: bool,
     /// The last `Prt::relight`, if any.
     pub last_relight: Option<super::relight::RelightReport>,
     /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
