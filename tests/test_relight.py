@@ -132,3 +132,38 @@ def test_a_power_or_colour_change_of_every_light_is_a_rescale_with_no_ray():
     moved = translucent.Scene(p, t)
     moved.add_point_light((0.0, -0.03, 0.01), 1.5)
     assert dipole.update(lights=moved)["rescaled"] is None
+
+
+def test_moving_one_light_of_several_casts_that_lights_rays_only():
+    """The irradiance is kept light by light (and the world) between updates: after a first
+    update, moving the point light again under the same sun and world casts exactly the rays a
+    precompute lit by that point light alone casts (the same samples and vertices), and the
+    preview is a fresh precompute's under the moved scene (the dipole: nothing else depends on
+    the light, and the sources add in the same order)."""
+    marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    p, t = sphere(16, 0.01)
+
+    def scene(point, sun=True, world=True):
+        s = translucent.Scene(p, t)
+        if sun:
+            s.add_sun((0.0, 1.0, -0.2), 2.0)
+        s.add_point_light(point, 0.5)
+        if world:
+            s.set_world(color=(0.05, 0.05, 0.05))
+        return s
+
+    prt = translucent.Prt(scene((0.0, 0.03, 0.01)), marble, profile="dipole", backend="cpu", world_samples=16)
+    first = prt.update(lights=scene((0.03, 0.0, 0.01)))
+    moved = scene((0.0, -0.03, -0.01))
+    second = prt.update(lights=moved)
+    alone = translucent.Prt(scene((0.0, -0.03, -0.01), sun=False, world=False), marble, profile="dipole",
+                            backend="cpu", world_samples=16)
+    assert second["rays"] == alone.report["rays"] < first["rays"], (second["rays"], alone.report["rays"], first["rays"])
+    fresh = translucent.Prt(moved, marble, profile="dipole", backend="cpu", world_samples=16)
+    np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=1e-6, atol=1e-12)
+    # Only the latest lights are kept (memory: one layer a source): the point light put back
+    # where it was casts its own rays again, and still none for the sun or the world.
+    third = prt.update(lights=scene((0.03, 0.0, 0.01)))
+    back = translucent.Prt(scene((0.03, 0.0, 0.01), sun=False, world=False), marble, profile="dipole",
+                           backend="cpu", world_samples=16)
+    assert third["rays"] == back.report["rays"], (third["rays"], back.report["rays"])

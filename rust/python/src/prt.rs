@@ -546,9 +546,10 @@ impl PyPrt {
         // call, leaves the old light in place).
         let (next, report, single_seconds) = run(py, progress, |tick| {
             let inner = lock.read().unwrap_or_else(|e| e.into_inner());
-            let ask = cancel_only(Some(tick));
-            let irradiance_fn = Self::lit_by(scene, &tracer, irr, &lighting, &ask);
-            let (mut next, report) = inner.relit(&scene.mesh, &irradiance_fn, Some(tick))?;
+            // The core keeps the irradiance source by source between updates: only the
+            // lights (or world) that changed cast rays.
+            let (mut next, report, lit) = inner.relit_scene(scene, &tracer, irr, Some(tick))?;
+            *held(&lighting) = lit;
             let t = std::time::Instant::now();
             if single_on {
                 let materials = next.representatives().to_vec();

@@ -351,6 +351,20 @@ impl PerSource {
         normals: &[Vec3],
         settings: &IrradianceSettings,
     ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+        self.evaluate_with_progress(scene, tracer, points, normals, settings, None)
+    }
+
+    /// `evaluate`, each source's estimate calling `progress` and stopping on a false
+    /// (`Error::Cancelled`; the sources done so far stay kept).
+    pub fn evaluate_with_progress(
+        &mut self,
+        scene: &Scene,
+        tracer: &Tracer,
+        points: &[Vec3],
+        normals: &[Vec3],
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
         if self.settings.as_ref() != Some(settings) {
             self.clear();
             self.settings = Some(settings.clone());
@@ -377,8 +391,9 @@ impl PerSource {
                         Source::Light(l) => (std::slice::from_ref(l), &World::Black),
                         Source::World(w) => (&[][..], w),
                     };
-                    let (v, r) =
-                        irradiance_of(bounds, lights, world, tracer, points, normals, settings)?;
+                    let (v, r) = estimate(
+                        bounds, lights, world, tracer, points, normals, settings, progress,
+                    )?;
                     rays += r.rays;
                     v
                 }

@@ -90,6 +90,10 @@ pub struct Prt {
     /// Every light's emission times this since the transport was lit (`rescale_light`): B is
     /// linear in the light, so it scales each evaluation.
     light_scale: [f32; 3],
+    /// The irradiance at the samples and at the vertices kept source by source across
+    /// `relit_scene` calls (shared with the transports relit from this one: the samples and
+    /// vertices are the same), so an update casts rays only for the lights that changed.
+    kept_irradiance: std::sync::Arc<std::sync::Mutex<relight::KeptIrradiance>>,
 }
 
 impl Prt {

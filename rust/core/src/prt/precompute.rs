@@ -109,6 +109,7 @@ impl Prt {
             settings: settings.clone(),
             representatives: representatives.to_vec(),
             light_scale: [1.0; 3],
+            kept_irradiance: Default::default(),
         };
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);
@@ -346,6 +347,25 @@ impl SampledLight {
             ),
         };
         Self::lit(mesh, spacing, mesh.surface_samples(spacing)?, irradiance)
+    }
+
+    /// The `samples` (at `spacing`) and the vertices with their irradiance already estimated
+    /// (`sample_irradiance` per sample, `vertex_irradiance` per vertex of `mesh`).
+    pub(super) fn from_values(
+        mesh: &Mesh,
+        spacing: f32,
+        samples: Vec<SurfaceSample>,
+        sample_irradiance: Vec<[f32; 3]>,
+        vertex_irradiance: Vec<[f32; 3]>,
+    ) -> Result<Self> {
+        check_irradiance(&sample_irradiance, samples.len())?;
+        check_irradiance(&vertex_irradiance, mesh.vertex_count())?;
+        Ok(Self {
+            spacing,
+            samples,
+            sample_irradiance,
+            vertex_irradiance,
+        })
     }
 
     /// The `samples` (at `spacing`) and the vertices lit by `irradiance`.

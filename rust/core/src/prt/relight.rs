@@ -8,12 +8,28 @@
 use super::precompute::{transport_under, SampledLight};
 use super::{Density, IrradianceFn, ProgressFn, Prt};
 use crate::error::{Error, Result};
-use crate::mesh::Mesh;
+use crate::irradiance::{
+    irradiance_with_progress, IrradianceReport, IrradianceSettings, PerSource,
+};
+use crate::mesh::{Mesh, SurfaceSample};
 use crate::profiles::Resolved;
+use crate::progress::cancel_only;
 use crate::raytrace::Tracer;
+use crate::scene::Scene;
 use crate::shadow_edges::ShadowEdges;
 use crate::walks::ExitLight;
+use glam::Vec3;
+use std::sync::Mutex;
 use std::time::Instant;
+
+/// The irradiance at a transport's samples and at its vertices, kept light by light (and the
+/// world) between updates (`irradiance::PerSource`): moving one light of several, or the key
+/// light under an unchanged world, casts the rays of what changed only.
+#[derive(Debug, Default)]
+pub struct KeptIrradiance {
+    samples: PerSource,
+    vertices: PerSource,
+}
 
 /// What a relight did and cost.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -27,8 +43,11 @@ pub struct RelightReport {
     pub seconds_walks: f64,
     /// The object's own light cast again (its walks read anew).
     pub seconds_own_light: f64,
-    /// Rays of the object's own light (the irradiance's rays are the caller's to count).
+    /// Rays of the object's own light (the irradiance's rays are the caller's to count, but
+    /// `relit_scene` counts them: `irradiance_rays`).
     pub own_light_rays: u64,
+    /// The irradiance's rays, where `relit_scene` estimated it (0 from `relit`).
+    pub irradiance_rays: u64,
     /// Walks traced: 0 when every walk term kept its records (none is walked again).
     pub walks_traced: u64,
     /// What was dropped and must be attached again: the GPU copy of the transport, single
@@ -79,6 +98,20 @@ impl Prt {
         irradiance: &IrradianceFn,
         progress: Option<&ProgressFn>,
     ) -> Result<(Prt, RelightReport)> {
+        let spacing = self.spacing;
+        let sampled =
+            |samples: Vec<SurfaceSample>| SampledLight::lit(mesh, spacing, samples, irradiance);
+        self.relit_with(mesh, irradiance, &sampled, progress)
+    }
+
+    /// `relit` with the samples' and vertices' irradiance from `sampled`.
+    fn relit_with(
+        &self,
+        mesh: &Mesh,
+        irradiance: &IrradianceFn,
+        sampled: &dyn Fn(Vec<SurfaceSample>) -> Result<SampledLight>,
+        progress: Option<&ProgressFn>,
+    ) -> Result<(Prt, RelightReport)> {
         let mut next = Prt {
             fitter: self.fitter.clone(),
             transport: self.transport.clone(),
@@ -99,8 +132,9 @@ impl Prt {
             settings: self.settings.clone(),
             representatives: self.representatives.clone(),
             light_scale: [1.0; 3],
+            kept_irradiance: self.kept_irradiance.clone(),
         };
-        let mut out = next.relight_steps(mesh, irradiance, progress)?;
+        let mut out = next.relight_steps(mesh, irradiance, sampled, progress)?;
         if self.gpu.is_some() {
             out.dropped.push("the GPU copy of the transport");
         }
@@ -111,10 +145,78 @@ impl Prt {
         Ok((next, out))
     }
 
+    /// `relit` under the lights and world of `scene` (the precomputed mesh), estimated here
+    /// with `settings`: the irradiance at the samples and the vertices is kept source by source
+    /// (`KeptIrradiance`), so only the lights (or world) not seen at an earlier update cast
+    /// rays; the first update after a precompute casts them all. Also returns what the
+    /// irradiance cost (its rays: those cast now).
+    pub fn relit_scene(
+        &self,
+        scene: &Scene,
+        tracer: &Tracer,
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<(Prt, RelightReport, IrradianceReport)> {
+        let mesh = &scene.mesh;
+        let ask = cancel_only(progress);
+        let lighting = Mutex::new(IrradianceReport::default());
+        let merge = |r: &IrradianceReport| {
+            let mut total = lighting.lock().unwrap_or_else(|e| e.into_inner());
+            *total = total.merge(r);
+        };
+        // Elsewhere (the shadow edges' points, a walk term traced anew): every source at once.
+        let irradiance = |p: &[Vec3], n: &[Vec3], d: Density| {
+            let (v, r) = irradiance_with_progress(
+                scene,
+                tracer,
+                p,
+                n,
+                &settings.for_density(d),
+                Some(&ask),
+            )?;
+            merge(&r);
+            Ok(v)
+        };
+        let kept = &self.kept_irradiance;
+        let spacing = self.spacing;
+        let sampled = |samples: Vec<SurfaceSample>| {
+            let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+            let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
+            let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
+            let dense = settings.for_density(Density::Dense);
+            let (at_samples, r) = kept.samples.evaluate_with_progress(
+                scene,
+                tracer,
+                &points,
+                &normals,
+                &dense,
+                Some(&ask),
+            )?;
+            merge(&r);
+            let receivers = settings.for_density(Density::Receivers);
+            let (at_vertices, r) = kept.vertices.evaluate_with_progress(
+                scene,
+                tracer,
+                mesh.positions(),
+                mesh.normals(),
+                &receivers,
+                Some(&ask),
+            )?;
+            merge(&r);
+            SampledLight::from_values(mesh, spacing, samples, at_samples, at_vertices)
+        };
+        let (mut next, mut out) = self.relit_with(mesh, &irradiance, &sampled, progress)?;
+        let report = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
+        out.irradiance_rays = report.rays;
+        next.report.last_relight = Some(out.clone());
+        Ok((next, out, report))
+    }
+
     fn relight_steps(
         &mut self,
         mesh: &Mesh,
         irradiance: &IrradianceFn,
+        sampled: &dyn Fn(Vec<SurfaceSample>) -> Result<SampledLight>,
         progress: Option<&ProgressFn>,
     ) -> Result<RelightReport> {
         let start = Instant::now();
@@ -140,7 +242,7 @@ impl Prt {
         let mut out = RelightReport::default();
         // `self` is `relit`'s private copy (dropped on any error): its samples move in and out.
         let samples = std::mem::take(&mut self.samples);
-        let lit = SampledLight::lit(mesh, self.spacing, samples, irradiance)?;
+        let lit = sampled(samples)?;
         out.seconds_irradiance = start.elapsed().as_secs_f64();
         tick(0.2)?;
         let t = Instant::now();
