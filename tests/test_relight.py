@@ -167,3 +167,26 @@ def test_moving_one_light_of_several_casts_that_lights_rays_only():
     back = translucent.Prt(scene((0.03, 0.0, 0.01), sun=False, world=False), marble, profile="dipole",
                            backend="cpu", world_samples=16)
     assert third["rays"] == back.report["rays"], (third["rays"], back.report["rays"])
+
+
+def test_one_lights_power_among_several_is_a_rescale_of_its_own_layer():
+    """The point light's power and colour changed, the sun and the world as they were: after a
+    first update has kept the irradiance light by light, no ray at all, and the answer a fresh
+    precompute gives (the dipole: nothing else depends on the light)."""
+    marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    p, t = sphere(16, 0.01)
+
+    def scene(power, color=None):
+        s = translucent.Scene(p, t)
+        s.add_sun((0.0, 1.0, -0.2), 2.0)
+        s.add_point_light((0.03, 0.0, 0.01), power, color=color)
+        s.set_world(color=(0.05, 0.05, 0.05))
+        return s
+
+    prt = translucent.Prt(scene(0.5), marble, profile="dipole", backend="cpu", world_samples=16)
+    assert prt.update(lights=scene(0.8))["rays"] > 0  # the first update keeps each light's layer
+    brighter = scene(1.5, color=(1.0, 0.5, 0.2))
+    r = prt.update(lights=brighter)
+    assert r["rays"] == 0 and r["rescaled"] is None, r  # not every light by one factor
+    fresh = translucent.Prt(brighter, marble, profile="dipole", backend="cpu", world_samples=16)
+    np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=1e-5, atol=1e-12)

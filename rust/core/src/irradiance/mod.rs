@@ -334,6 +334,24 @@ enum Source {
     World(World),
 }
 
+impl Source {
+    /// The factor per channel that takes this source's emission to `other`'s when the two are
+    /// the same light (or world) but for it; None otherwise.
+    fn scale_to(&self, other: &Source) -> Option<[f32; 3]> {
+        use crate::light_scale::common_scale;
+        match (self, other) {
+            (Source::Light(a), Source::Light(b)) => common_scale(
+                std::slice::from_ref(a),
+                &World::Black,
+                std::slice::from_ref(b),
+                &World::Black,
+            ),
+            (Source::World(a), Source::World(b)) => common_scale(&[], a, &[], b),
+            _ => None,
+        }
+    }
+}
+
 impl PerSource {
     /// Forgets every light's values (the points moved).
     pub fn clear(&mut self) {
@@ -384,9 +402,25 @@ impl PerSource {
             let kept = old
                 .iter()
                 .position(|(s, v)| *s == src && v.len() == points.len());
-            let values = match kept {
-                Some(i) => old.swap_remove(i).1,
-                None => {
+            // The same light (or world) but for its power or colour: its values scaled, no
+            // ray (the irradiance is linear in the emission: `light_scale::common_scale`).
+            let rescaled = || {
+                old.iter().enumerate().find_map(|(i, (s, v))| {
+                    (v.len() == points.len())
+                        .then(|| s.scale_to(&src))
+                        .flatten()
+                        .map(|k| (i, k))
+                })
+            };
+            let values = match (kept, kept.is_none().then(rescaled).flatten()) {
+                (Some(i), _) => old.swap_remove(i).1,
+                (None, Some((i, k))) => {
+                    let mut v = old.swap_remove(i).1;
+                    v.par_iter_mut()
+                        .for_each(|x| *x = std::array::from_fn(|c| x[c] * k[c]));
+                    v
+                }
+                (None, None) => {
                     let (lights, world) = match &src {
                         Source::Light(l) => (std::slice::from_ref(l), &World::Black),
                         Source::World(w) => (&[][..], w),

@@ -79,6 +79,21 @@ fn per_source_casts_rays_only_for_the_lights_that_changed() {
         }
     }
     assert!(a.iter().zip(&b).any(|(x, y)| (x[0] - y[0]).abs() > 0.01));
+    // The point light's power and colour alone: its values rescaled, no ray.
+    s.lights[1] = Light::point(Vec3::new(-0.5, 0.4, 2.0), [80.0, 20.0, 5.0]).unwrap();
+    let (brighter, rs) = cache
+        .evaluate(&s, &tracer, &pts, &normals, &settings)
+        .unwrap();
+    assert_eq!(rs.rays, 0, "a power or colour change casts no ray");
+    let (fresh, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+    for (x, y) in brighter.iter().zip(&fresh) {
+        for c in 0..3 {
+            assert!(
+                (x[c] - y[c]).abs() <= 1e-6 * y[c].abs().max(1.0),
+                "{x:?} vs {y:?}"
+            );
+        }
+    }
     // Nothing changed: no rays; a light removed: no rays and its share gone.
     let (_, rc) = cache
         .evaluate(&s, &tracer, &pts, &normals, &settings)
