@@ -128,22 +128,6 @@ pub fn irradiance_with_progress(
     )
 }
 
-/// The same from `lights` and `world` alone; `bounds` is the mesh's box (lights that cannot
-/// reach it are left out).
-pub fn irradiance_of(
-    bounds: (Vec3, Vec3),
-    lights: &[Light],
-    world: &World,
-    tracer: &Tracer,
-    points: &[Vec3],
-    normals: &[Vec3],
-    settings: &IrradianceSettings,
-) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
-    estimate(
-        bounds, lights, world, tracer, points, normals, settings, None,
-    )
-}
-
 #[allow(clippy::too_many_arguments)]
 fn estimate(
     bounds: (Vec3, Vec3),

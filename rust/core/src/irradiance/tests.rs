@@ -39,6 +39,18 @@ fn eval(s: &Scene, pts: &[Vec3], eta: f64) -> (Vec<[f32; 3]>, IrradianceReport) 
     irradiance(s, &tracer, pts, &vec![Vec3::Z; pts.len()], &settings).unwrap()
 }
 
+/// Every channel of `a` within 1e-6 (relative, absolute below 1) of `b`'s.
+fn assert_close(a: &[[f32; 3]], b: &[[f32; 3]]) {
+    for (x, y) in a.iter().zip(b) {
+        for c in 0..3 {
+            assert!(
+                (x[c] - y[c]).abs() <= 1e-6 * y[c].abs().max(1.0),
+                "{x:?} vs {y:?}"
+            );
+        }
+    }
+}
+
 #[test]
 fn per_source_casts_rays_only_for_the_lights_that_changed() {
     let mut s = scene(4.0, true);
@@ -70,14 +82,7 @@ fn per_source_casts_rays_only_for_the_lights_that_changed() {
         .unwrap();
     assert_eq!(rb.rays, 25, "only the moved light casts rays");
     let (fresh, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
-    for (x, y) in b.iter().zip(&fresh) {
-        for c in 0..3 {
-            assert!(
-                (x[c] - y[c]).abs() <= 1e-6 * y[c].abs().max(1.0),
-                "{x:?} vs {y:?}"
-            );
-        }
-    }
+    assert_close(&b, &fresh);
     assert!(a.iter().zip(&b).any(|(x, y)| (x[0] - y[0]).abs() > 0.01));
     // The point light's power and colour alone: its values rescaled, no ray.
     s.lights[1] = Light::point(Vec3::new(-0.5, 0.4, 2.0), [80.0, 20.0, 5.0]).unwrap();
@@ -86,14 +91,7 @@ fn per_source_casts_rays_only_for_the_lights_that_changed() {
         .unwrap();
     assert_eq!(rs.rays, 0, "a power or colour change casts no ray");
     let (fresh, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
-    for (x, y) in brighter.iter().zip(&fresh) {
-        for c in 0..3 {
-            assert!(
-                (x[c] - y[c]).abs() <= 1e-6 * y[c].abs().max(1.0),
-                "{x:?} vs {y:?}"
-            );
-        }
-    }
+    assert_close(&brighter, &fresh);
     // Nothing changed: no rays; a light removed: no rays and its share gone.
     let (_, rc) = cache
         .evaluate(&s, &tracer, &pts, &normals, &settings)

@@ -379,14 +379,7 @@ impl SampledLight {
         let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
         let sample_irradiance = irradiance(&points, &normals, Density::Dense)?;
         let vertex_irradiance = irradiance(mesh.positions(), mesh.normals(), Density::Receivers)?;
-        check_irradiance(&sample_irradiance, points.len())?;
-        check_irradiance(&vertex_irradiance, mesh.vertex_count())?;
-        Ok(Self {
-            spacing,
-            samples,
-            sample_irradiance,
-            vertex_irradiance,
-        })
+        Self::from_values(mesh, spacing, samples, sample_irradiance, vertex_irradiance)
     }
 
     /// The samples weighted by their projected irradiance times their area, in a moment tree.
