@@ -12,6 +12,7 @@ pub mod lights; // Blender/Cycles lights and the world
 pub mod limits; // the stated limits on request sizes, refused up front
 pub mod mesh; // validated triangle meshes, surface samples, vertex areas
 pub mod metrics; // area-weighted relative error
+pub mod occluders; // the rest of the scene: shadow casters that do not scatter, culled per light
 pub mod optics; // material, Fresnel, measured data, Principled layers
 pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated
 pub mod progress; // progress and cancelling of long loops (a Ticker over an atomic counter)

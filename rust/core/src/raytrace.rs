@@ -1,5 +1,7 @@
-//! Ray casts against the mesh for shadowed irradiance (and, later, single-scattering paths):
-//! a compressed wide BVH from obvhs over the mesh's triangles.
+//! Ray casts against the mesh for shadowed irradiance, the walks and the object's own light: a
+//! compressed wide BVH from obvhs over the mesh's triangles, and optionally a second one over the
+//! rest of the scene (`with_occluders`): what shadow rays see besides the mesh (issue 30), while
+//! the walks and the own light's hits see the mesh alone (Cycles' local intersection).
 
 use crate::mesh::Mesh;
 use glam::{Vec3, Vec3A};
@@ -8,6 +10,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// The closest intersection along a ray.
@@ -17,11 +20,44 @@ pub struct Hit {
     pub triangle: u32,
 }
 
-/// A BVH over one mesh. Immutable and `Sync`: cast rays from any number of threads.
-pub struct Tracer {
+/// A BVH over triangles in the tracer's unit frame.
+struct Bvh {
     bvh: CwBvh,
     /// Triangles in BVH order, so leaf visits read memory in sequence.
     triangles: Vec<Triangle>,
+}
+
+impl Bvh {
+    fn build(tris: Vec<Triangle>) -> Bvh {
+        let bvh = build_cwbvh_from_tris(
+            &tris,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        let triangles = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| tris[i as usize])
+            .collect();
+        Bvh { bvh, triangles }
+    }
+
+    fn occluded(&self, ray: Ray) -> bool {
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |ray, id| intersect(&self.triangles[id], ray))
+    }
+}
+
+/// A BVH over one mesh (and, `with_occluders`, one over the rest of the scene). Immutable and
+/// `Sync`: cast rays from any number of threads.
+pub struct Tracer {
+    own: Arc<Bvh>,
+    /// The rest of the scene: seen by `occluded` (shadow rays) and `occluded_by_rest`, never
+    /// by `intersect` and the walks' casts.
+    rest: Option<Arc<Bvh>>,
+    /// Triangles in `rest`.
+    rest_triangles: usize,
     /// How far ray origins are pushed off the surface: relative to the mesh size, so that
     /// meshes from 1e-4 to 1e4 units neither self-shadow nor leak.
     epsilon: f32,
@@ -59,23 +95,42 @@ impl Tracer {
                 v2: Vec3A::from(p[t[2] as usize]),
             })
             .collect();
-        let bvh = build_cwbvh_from_tris(
-            &tris,
-            BvhBuildParams::medium_build(),
-            &mut Duration::default(),
-        );
-        let triangles = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| tris[i as usize])
-            .collect();
         Tracer {
-            bvh,
-            triangles,
+            own: Arc::new(Bvh::build(tris)),
+            rest: None,
+            rest_triangles: 0,
             epsilon: EPSILON * scale,
             centre,
             scale,
         }
+    }
+
+    /// This tracer's mesh (shared, not rebuilt) with `occluders` as the rest of the scene,
+    /// built in the mesh's frame (so the offsets stay the mesh's): shadow rays (`occluded`)
+    /// then stop at either. An empty list gives the mesh alone.
+    pub fn with_occluders(&self, occluders: &[[Vec3; 3]]) -> Tracer {
+        let to_frame = |x: Vec3| Vec3A::from((x - self.centre) / self.scale);
+        let tris: Vec<Triangle> = occluders
+            .iter()
+            .map(|t| Triangle {
+                v0: to_frame(t[0]),
+                v1: to_frame(t[1]),
+                v2: to_frame(t[2]),
+            })
+            .collect();
+        Tracer {
+            own: self.own.clone(),
+            rest: (!tris.is_empty()).then(|| Arc::new(Bvh::build(tris))),
+            rest_triangles: occluders.len(),
+            epsilon: self.epsilon,
+            centre: self.centre,
+            scale: self.scale,
+        }
+    }
+
+    /// Triangles of the rest of the scene this tracer holds (0: the mesh alone).
+    pub fn occluder_triangles(&self) -> usize {
+        self.rest_triangles
     }
 
     /// The offset used for ray origins and t_min.
@@ -101,18 +156,27 @@ impl Tracer {
         Ray::new(o.into(), direction.into(), EPSILON, t_max)
     }
 
-    /// Whether anything lies along `direction` (unit) from `origin` within (epsilon, t_max).
+    /// Whether anything (the mesh or the rest of the scene) lies along `direction` (unit)
+    /// from `origin` within (epsilon, t_max): a shadow ray.
     pub fn occluded(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
         if t_max <= self.epsilon {
             return false;
         }
         let ray = self.ray(origin, direction, t_max);
-        !self
-            .bvh
-            .ray_traverse_miss(ray, |ray, id| intersect(&self.triangles[id], ray))
+        self.own.occluded(ray) || self.rest.as_ref().is_some_and(|r| r.occluded(ray))
     }
 
-    /// The closest hit along `direction` (unit) from `origin` within (epsilon, t_max).
+    /// Whether the rest of the scene (not the mesh) lies along `direction` (unit) from
+    /// `origin` within (epsilon, t_max). False without occluders.
+    pub fn occluded_by_rest(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
+        match &self.rest {
+            Some(r) if t_max > self.epsilon => r.occluded(self.ray(origin, direction, t_max)),
+            _ => false,
+        }
+    }
+
+    /// The closest hit on the mesh (never the rest of the scene) along `direction` (unit)
+    /// from `origin` within (epsilon, t_max).
     pub fn intersect(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
         self.closest(self.ray(origin, direction, t_max))
     }
@@ -160,13 +224,14 @@ impl Tracer {
 
     fn closest(&self, ray: Ray) -> Option<Hit> {
         let mut hit = RayHit::none();
-        if self
+        let own = &*self.own;
+        if own
             .bvh
-            .ray_traverse(ray, &mut hit, |ray, id| intersect(&self.triangles[id], ray))
+            .ray_traverse(ray, &mut hit, |ray, id| intersect(&own.triangles[id], ray))
         {
             Some(Hit {
                 t: hit.t * self.scale,
-                triangle: self.bvh.primitive_indices[hit.primitive_id as usize],
+                triangle: own.bvh.primitive_indices[hit.primitive_id as usize],
             })
         } else {
             None

@@ -1,7 +1,10 @@
-//! A scene: one mesh carrying the translucent material, the lights and the world around it.
+//! A scene: one mesh carrying the translucent material, the lights and the world around it, and
+//! the rest of the scene that shadows it (`Occluders`).
 
 use crate::lights::{Light, World};
 use crate::mesh::Mesh;
+use crate::occluders::{OccluderReport, Occluders};
+use crate::raytrace::Tracer;
 
 /// Everything a method needs besides the material.
 #[derive(Debug, Clone)]
@@ -9,6 +12,8 @@ pub struct Scene {
     pub mesh: Mesh,
     pub lights: Vec<Light>,
     pub world: World,
+    /// Other objects: they cast shadows on `mesh`, and do not scatter.
+    pub occluders: Occluders,
 }
 
 impl Scene {
@@ -17,6 +22,22 @@ impl Scene {
             mesh,
             lights: Vec::new(),
             world: World::Black,
+            occluders: Occluders::default(),
         }
+    }
+
+    /// The tracer shadow rays of this scene are cast with: `mesh_tracer` (built over `mesh`)
+    /// with the occluders that can shadow the mesh under the current lights and world, and
+    /// what was kept of them. The mesh's BVH is shared, not rebuilt.
+    pub fn shadow_tracer(&self, mesh_tracer: &Tracer) -> (Tracer, OccluderReport) {
+        let (kept, report) = self
+            .occluders
+            .relevant(self.mesh.bounds(), &self.lights, &self.world);
+        (mesh_tracer.with_occluders(&kept), report)
+    }
+
+    /// `shadow_tracer` over a BVH of the mesh built here.
+    pub fn tracer(&self) -> Tracer {
+        self.shadow_tracer(&Tracer::new(&self.mesh)).0
     }
 }

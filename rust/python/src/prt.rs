@@ -44,12 +44,15 @@ pub struct PyPrt {
     /// `update`) began.
     scene_lighting: Mutex<std::sync::Arc<std::sync::atomic::AtomicU64>>,
     lighting_version: std::sync::atomic::AtomicU64,
-    /// The lights and world the transport holds (a power or colour change of all of them
-    /// together is a rescale: `light_scale::common_scale`).
+    /// The lights, world and occluders the transport holds (a power or colour change of all
+    /// the lights together is a rescale: `light_scale::common_scale`; other occluders are not).
     lit_with: Mutex<(
         Vec<translucent_core::lights::Light>,
         translucent_core::lights::World,
+        translucent_core::occluders::Occluders,
     )>,
+    /// What the tracer kept of the occluders at the precompute or the last update.
+    occluders: Mutex<translucent_core::occluders::OccluderReport>,
 }
 
 /// A lock's value, whether or not a panic (caught by `call::run`) poisoned it.
@@ -251,8 +254,11 @@ impl PyPrt {
             // The irradiance's rays stop on a cancel too.
             let ask = cancel_only(Some(tick));
             let irradiance_fn = Self::lit_by(core_scene, &tracer, &irr, &lighting, &ask);
-            let mut prt = Prt::precompute(
+            // The walks and the own light through the scene's tracer: the own light's rays stop
+            // at the rest of the scene (the walks never see it).
+            let mut prt = Prt::precompute_traced(
                 &core_scene.mesh,
+                Some(&tracer),
                 &materials,
                 &settings,
                 &irradiance_fn,
@@ -283,7 +289,12 @@ impl PyPrt {
             last_single: Mutex::new(None),
             scene_lighting: Mutex::new(scene_lighting),
             lighting_version: std::sync::atomic::AtomicU64::new(lighting_version),
-            lit_with: Mutex::new((core_scene.lights.clone(), core_scene.world.clone())),
+            lit_with: Mutex::new((
+                core_scene.lights.clone(),
+                core_scene.world.clone(),
+                core_scene.occluders.clone(),
+            )),
+            occluders: Mutex::new(scene.occluder_report()),
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -488,15 +499,21 @@ impl PyPrt {
         let counter = lights.lighting_counter();
         let version = counter.load(std::sync::atomic::Ordering::Relaxed);
         let scene = &lights.scene;
-        let scale = {
-            let (old_lights, old_world) = &*held(&self.lit_with);
-            translucent_core::light_scale::common_scale(
+        let (scale, same_occluders) = {
+            let (old_lights, old_world, old_occluders) = &*held(&self.lit_with);
+            let same = *old_occluders == scene.occluders;
+            let scale = translucent_core::light_scale::common_scale(
                 old_lights,
                 old_world,
                 &scene.lights,
                 &scene.world,
-            )
+            );
+            (scale.filter(|_| same), same)
         };
+        if !same_occluders {
+            // Another rest of the scene: no kept shadow holds, every source casts its rays.
+            self.read()?.forget_kept_irradiance();
+        }
         let same_mesh = {
             let inner = self.read()?;
             inner.vertex_count() == scene.mesh.vertex_count()
@@ -515,7 +532,11 @@ impl PyPrt {
                 }
                 inner.rescale_light(k)
             })?;
-            *held(&self.lit_with) = (scene.lights.clone(), scene.world.clone());
+            *held(&self.lit_with) = (
+                scene.lights.clone(),
+                scene.world.clone(),
+                scene.occluders.clone(),
+            );
             *held(&self.scene_lighting) = counter;
             self.lighting_version
                 .store(version, std::sync::atomic::Ordering::Relaxed);
@@ -564,7 +585,12 @@ impl PyPrt {
             Ok((next, report, t.elapsed().as_secs_f64()))
         })?;
         *self.inner.write().unwrap_or_else(|e| e.into_inner()) = next;
-        *held(&self.lit_with) = (scene.lights.clone(), scene.world.clone());
+        *held(&self.lit_with) = (
+            scene.lights.clone(),
+            scene.world.clone(),
+            scene.occluders.clone(),
+        );
+        *held(&self.occluders) = lights.occluder_report();
         *held(&self.lighting) = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
         *held(&self.scene_lighting) = counter;
         self.lighting_version
@@ -610,6 +636,11 @@ impl PyPrt {
         d.set_item("lights_skipped_black", held(&self.lighting).lights_skipped)?;
         d.set_item("lights_unreached", held(&self.lighting).lights_unreached)?;
         d.set_item("world_skipped", held(&self.lighting).world_skipped)?;
+        // The rest of the scene: what of it could shadow the mesh and was kept.
+        d.set_item(
+            "occluders",
+            crate::scene::occluder_dict(py, &held(&self.occluders))?,
+        )?;
         // Single scattering (Xu 2007 eqs. 12-15): whether it was computed, on what share and
         // why; none of its work when it is off.
         d.set_item("single_scattering", self.single.on)?;

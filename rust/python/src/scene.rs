@@ -11,6 +11,7 @@ use std::sync::{Arc, OnceLock};
 use translucent_core::irradiance::{irradiance_with_progress, IrradianceSettings};
 use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
+use translucent_core::occluders::OccluderReport;
 use translucent_core::raytrace::Tracer;
 use translucent_core::scene::Scene;
 
@@ -18,7 +19,11 @@ use translucent_core::scene::Scene;
 #[pyclass(name = "Scene", module = "translucent")]
 pub struct PyScene {
     pub scene: Scene,
-    tracer: OnceLock<Arc<Tracer>>,
+    /// The BVH over the mesh, built on first use (the mesh never changes).
+    mesh_tracer: OnceLock<Arc<Tracer>>,
+    /// The mesh's BVH with the occluders that can shadow it under the current lights and world
+    /// (`Scene::shadow_tracer`), and what was kept of them: rebuilt after a change of either.
+    tracer: OnceLock<(Arc<Tracer>, OccluderReport)>,
     /// Bumped by every change of lights or world: what a `Prt` compares with the version it
     /// was precomputed under to say its lighting is stale.
     lighting: Arc<AtomicU64>,
@@ -30,15 +35,33 @@ impl PyScene {
         self.lighting.clone()
     }
 
-    fn lighting_changed(&self) {
+    fn lighting_changed(&mut self) {
         self.lighting.fetch_add(1, Ordering::Relaxed);
+        self.tracer = OnceLock::new();
     }
 
-    /// The ray tracer over the mesh, built on first use (the mesh never changes).
+    /// The ray tracer of this scene: the mesh, and for shadow rays the occluders that can
+    /// shadow it (`Scene::shadow_tracer`); built on first use after a change.
     pub fn tracer(&self) -> Arc<Tracer> {
-        self.tracer
-            .get_or_init(|| Arc::new(Tracer::new(&self.scene.mesh)))
-            .clone()
+        self.traced().0.clone()
+    }
+
+    fn traced(&self) -> &(Arc<Tracer>, OccluderReport) {
+        self.tracer.get_or_init(|| {
+            let mesh = self
+                .mesh_tracer
+                .get_or_init(|| Arc::new(Tracer::new(&self.scene.mesh)));
+            if self.scene.occluders.is_empty() {
+                return (mesh.clone(), OccluderReport::default());
+            }
+            let (t, r) = self.scene.shadow_tracer(mesh);
+            (Arc::new(t), r)
+        })
+    }
+
+    /// What the tracer kept of the occluders under the current lights and world.
+    pub fn occluder_report(&self) -> OccluderReport {
+        self.traced().1.clone()
     }
 }
 
@@ -62,6 +85,7 @@ impl PyScene {
         let mesh = run(py, None, |_| Mesh::new(positions, triangles, normals))?;
         Ok(Self {
             scene: Scene::new(mesh),
+            mesh_tracer: OnceLock::new(),
             tracer: OnceLock::new(),
             lighting: Arc::new(AtomicU64::new(0)),
         })
@@ -206,6 +230,38 @@ impl PyScene {
         Ok(())
     }
 
+    /// Another object of the scene that casts shadows on the mesh and does not scatter (a
+    /// floor, a wall, a prop): world-space `positions` (N, 3) and `triangles` (M, 3) indexing
+    /// them, either winding. Shadow rays toward every light and the world stop at it; the walks
+    /// and the object's own light never enter it. Only triangles that can shadow the mesh
+    /// under the scene's lights are kept (all of them under a world): see `occluders`.
+    /// Zero-area triangles are dropped. ValueError names what is wrong.
+    #[pyo3(signature = (positions, triangles, name = "occluder"))]
+    fn add_occluder(
+        &mut self,
+        positions: &Bound<'_, PyAny>,
+        triangles: &Bound<'_, PyAny>,
+        name: &str,
+    ) -> PyResult<()> {
+        let positions = vec3_array("positions", positions)?;
+        let triangles = triangle_array("triangles", triangles)?;
+        self.scene
+            .occluders
+            .add(name, &positions, &triangles)
+            .map_err(to_py)?;
+        self.lighting_changed();
+        Ok(())
+    }
+
+    /// The occluders under the current lights and world: "objects", "triangles",
+    /// "triangles_kept" (on some light's shadow volume of the mesh, or all under a world),
+    /// "objects_skipped" (names of objects that can shadow nothing: left out whole) and
+    /// "degenerate" (zero-area triangles dropped).
+    #[getter]
+    fn occluders<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        occluder_dict(py, &self.traced().1)
+    }
+
     #[getter]
     fn vertex_count(&self) -> usize {
         self.scene.mesh.vertex_count()
@@ -315,12 +371,24 @@ impl PyScene {
 
     fn __repr__(&self) -> String {
         format!(
-            "Scene({} vertices, {} triangles, {} lights)",
+            "Scene({} vertices, {} triangles, {} lights, {} occluders)",
             self.scene.mesh.vertex_count(),
             self.scene.mesh.triangles().len(),
-            self.scene.lights.len()
+            self.scene.lights.len(),
+            self.scene.occluders.object_count()
         )
     }
+}
+
+/// An `OccluderReport` as a dict (the keys `Scene.occluders` documents).
+pub fn occluder_dict<'py>(py: Python<'py>, r: &OccluderReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("objects", r.objects)?;
+    d.set_item("triangles", r.triangles)?;
+    d.set_item("triangles_kept", r.triangles_kept)?;
+    d.set_item("objects_skipped", r.objects_skipped.clone())?;
+    d.set_item("degenerate", r.degenerate)?;
+    Ok(d)
 }
 
 pub fn check_eta(eta: f64) -> PyResult<()> {

@@ -166,7 +166,8 @@ impl Hierarchy {
         )?;
         tick(progress, 0.7)?;
         let faces = faces_of(&scene.mesh);
-        let tracer = Tracer::new(&scene.mesh);
+        // Shadow rays see the rest of the scene too (`Scene::shadow_tracer`).
+        let tracer = scene.tracer();
         tick(progress, 0.9)?;
         tree.refit(&faces);
         let rim: Vec<u32> = (scene.mesh.vertex_coverage().iter().enumerate())
@@ -238,9 +239,9 @@ impl Hierarchy {
             )));
         }
         let mesh = Mesh::new(positions, self.scene.mesh.triangles().to_vec(), normals)?;
-        self.tracer = Tracer::new(&mesh);
         self.faces = faces_of(&mesh);
         self.scene.mesh = mesh;
+        self.tracer = self.scene.tracer();
         self.geometry_changed = true;
         self.face_irradiance = None;
         self.vertex_irradiance = None;
@@ -254,6 +255,11 @@ impl Hierarchy {
     pub fn set_lights(&mut self, lights: Vec<Light>, world: World) {
         self.scene.lights = lights;
         self.scene.world = world;
+        if !self.scene.occluders.is_empty() {
+            // The occluders that can shadow the mesh under the new lights (the mesh's BVH
+            // shared): a light kept keeps its own, so its kept irradiance stays right.
+            self.tracer = self.scene.shadow_tracer(&self.tracer).0;
+        }
         self.face_irradiance = None;
         self.vertex_irradiance = None;
     }

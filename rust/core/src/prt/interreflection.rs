@@ -213,6 +213,9 @@ fn hit_along(mesh: &Mesh, tracer: &Tracer, origin: Vec3, dir: Vec3) -> Option<Hi
     if cos <= 0.0 || flat.dot(dir) >= 0.0 {
         return None; // the inside of a surface: no light leaves it toward the origin
     }
+    if tracer.occluded_by_rest(origin, dir, hit.t) {
+        return None; // another object stands between (issue 30): its own light is not this
+    }
     let q = |x: f32| (x.clamp(0.0, 1.0) * 65535.0).round() as u16;
     Some(Hit {
         triangle: hit.triangle,

@@ -32,6 +32,20 @@ impl Prt {
         irradiance: &IrradianceFn,
         progress: Option<&ProgressFn>,
     ) -> Result<Prt> {
+        Self::precompute_traced(mesh, None, representatives, settings, irradiance, progress)
+    }
+
+    /// `precompute` with the walks and the object's own light cast through `tracer` (a tracer
+    /// over `mesh`, such as the scene's shadow tracer: the own light's rays then stop at the
+    /// rest of the scene) instead of one built here.
+    pub fn precompute_traced(
+        mesh: &Mesh,
+        tracer: Option<&Tracer>,
+        representatives: &[Material],
+        settings: &PrtSettings,
+        irradiance: &IrradianceFn,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Prt> {
         let start = Instant::now();
         check_settings(representatives, settings)?;
         // The object's own light beyond its limit is refused now, not after the transport.
@@ -113,8 +127,13 @@ impl Prt {
         };
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);
-        let tracer = (settings.walks.is_some() || bounce_strata.is_some())
-            .then(|| crate::raytrace::Tracer::new(mesh));
+        let needed = settings.walks.is_some() || bounce_strata.is_some();
+        let built = (needed && tracer.is_none()).then(|| Tracer::new(mesh));
+        let tracer = if needed {
+            tracer.or(built.as_ref())
+        } else {
+            None
+        };
         // The first representative's half-space B (no walks, no own light): what the walks
         // correct, and the part of B the own light sends under the view factor.
         let rep = &resolved[0];

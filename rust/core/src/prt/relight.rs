@@ -145,6 +145,16 @@ impl Prt {
         Ok((next, out))
     }
 
+    /// Drops the irradiance kept source by source: the next `relit_scene` casts every light's
+    /// and the world's rays. For a changed rest of the scene (`Scene::occluders`), under
+    /// which no kept shadow holds.
+    pub fn forget_kept_irradiance(&self) {
+        *self
+            .kept_irradiance
+            .lock()
+            .unwrap_or_else(|e| e.into_inner()) = Default::default();
+    }
+
     /// `relit` under the lights and world of `scene` (the precomputed mesh), estimated here
     /// with `settings`: the irradiance at the samples and the vertices is kept source by source
     /// (`KeptIrradiance`), so only the lights (or world) not seen at an earlier update cast

@@ -126,6 +126,15 @@ class Scene:
         self, color: RGB | None = None, strength: float = 1.0, image: npt.ArrayLike | None = None
     ) -> None:
         """Uniform radiance `color` x `strength`, or an (H, W, 3) equirectangular radiance image."""
+    def add_occluder(self, positions: npt.ArrayLike, triangles: npt.ArrayLike, name: str = "occluder") -> None:
+        """Another object that casts shadows on the mesh and does not scatter (a floor, a wall,
+        a prop): world-space (N, 3) positions and (M, 3) triangles, either winding. Shadow rays
+        stop at it; the walks and the object's own light never enter it. ValueError names
+        what is wrong (NaN, an index out of range, an empty object)."""
+    @property
+    def occluders(self) -> dict[str, object]:
+        """What the shadow rays keep of the occluders under the current lights and world:
+        objects, triangles, triangles_kept, objects_skipped (names), degenerate."""
     def irradiance(
         self,
         eta: float = 1.0,

@@ -1,0 +1,385 @@
+//! The rest of the scene (issue 30): objects that do not carry the previewed material but cast
+//! shadows on the mesh that does, as Cycles' shadow rays see every object visible to them. They
+//! block the lights and the world for the previewed mesh; they do not scatter, and the walks
+//! never see them (Cycles' walk intersects its own object only, `scene_intersect_local`).
+//!
+//! Only what can lie on a shadow ray from the mesh to a light is kept (`Occluders::relevant`):
+//! a triangle outside every light's shadow volume of the mesh's bounding box blocks nothing, and
+//! costs no memory in the BVH and no time in a traversal. Under a world (light from every
+//! direction) every triangle is kept.
+
+use crate::error::{Error, Result};
+use crate::lights::{Light, World, POINT_LIMIT};
+use glam::Vec3;
+
+/// Occluder triangles in all, beyond which a request is refused: 2^26 = 6.7e7 triangles,
+/// 4.8 GB of triangle soup before the BVH; a production set dressing is a few million.
+pub const OCCLUDER_TRIANGLES: f64 = (1u64 << 26) as f64;
+
+/// One object of the rest of the scene: its name (for the report) and its triangles' range.
+#[derive(Debug, Clone, PartialEq)]
+struct Object {
+    name: String,
+    start: usize,
+    end: usize,
+}
+
+/// Triangles of the rest of the scene, object by object, world space (the mesh's units).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Occluders {
+    triangles: Vec<[Vec3; 3]>,
+    objects: Vec<Object>,
+    /// Zero-area triangles dropped on the way in (they block no ray).
+    degenerate: usize,
+}
+
+/// What `Occluders::relevant` kept and left out.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct OccluderReport {
+    pub objects: usize,
+    pub triangles: usize,
+    /// Triangles on some light's shadow volume of the mesh (or all, under a world).
+    pub triangles_kept: usize,
+    /// Objects none of whose triangles can shadow the mesh: left out whole.
+    pub objects_skipped: Vec<String>,
+    /// Zero-area triangles dropped when the objects were added.
+    pub degenerate: usize,
+}
+
+impl Occluders {
+    /// Adds one object: `positions` (finite, within `lights::POINT_LIMIT`) and `triangles`
+    /// indexing them. Winding does not matter (a shadow is cast by either side); zero-area
+    /// triangles are dropped and counted. Errors name `name` and what is wrong.
+    pub fn add(&mut self, name: &str, positions: &[Vec3], triangles: &[[u32; 3]]) -> Result<()> {
+        let bad = |why: String| Err(Error::InvalidArgument(format!("occluder {name:?}: {why}")));
+        if positions.is_empty() || triangles.is_empty() {
+            return bad(format!(
+                "{} positions and {} triangles: an occluder needs both",
+                positions.len(),
+                triangles.len()
+            ));
+        }
+        if let Some((i, p)) = positions
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.is_finite() || p.abs().max_element() > POINT_LIMIT)
+        {
+            return bad(format!(
+                "position {i} = {p:?} is not finite or beyond {POINT_LIMIT:e}"
+            ));
+        }
+        if let Some((i, t)) = triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&v| v as usize >= positions.len()))
+        {
+            return bad(format!(
+                "triangle {i} = {t:?} indexes beyond the {} positions",
+                positions.len()
+            ));
+        }
+        let total = (self.triangles.len() + triangles.len()) as f64;
+        if total > OCCLUDER_TRIANGLES {
+            return bad(format!(
+                "{total} occluder triangles in all: at most {OCCLUDER_TRIANGLES:e}"
+            ));
+        }
+        let start = self.triangles.len();
+        for t in triangles {
+            let [a, b, c] = t.map(|v| positions[v as usize]);
+            if (b - a).cross(c - a).length_squared() > 0.0 {
+                self.triangles.push([a, b, c]);
+            } else {
+                self.degenerate += 1;
+            }
+        }
+        self.objects.push(Object {
+            name: name.to_string(),
+            start,
+            end: self.triangles.len(),
+        });
+        Ok(())
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    pub fn object_count(&self) -> usize {
+        self.objects.len()
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// The triangles that can lie on a shadow ray from the box `bounds` (the previewed mesh's)
+    /// to one of `lights` that emits and reaches it, or every triangle under a world that is
+    /// not black; and what was kept and left out.
+    pub fn relevant(
+        &self,
+        bounds: (Vec3, Vec3),
+        lights: &[Light],
+        world: &World,
+    ) -> (Vec<[Vec3; 3]>, OccluderReport) {
+        let (lo, hi) = bounds;
+        let volumes: Vec<Volume> = lights
+            .iter()
+            .filter(|l| !l.is_black() && l.can_reach(lo, hi))
+            .map(|l| Volume::of(l, lo, hi))
+            .collect();
+        let everything = !world.is_black();
+        let mut kept = Vec::new();
+        let mut skipped = Vec::new();
+        for o in &self.objects {
+            let before = kept.len();
+            kept.extend(
+                self.triangles[o.start..o.end]
+                    .iter()
+                    .filter(|t| everything || volumes.iter().any(|v| v.may_hold(t))),
+            );
+            if kept.len() == before {
+                skipped.push(o.name.clone());
+            }
+        }
+        let report = OccluderReport {
+            objects: self.objects.len(),
+            triangles: self.triangles.len(),
+            triangles_kept: kept.len(),
+            objects_skipped: skipped,
+            degenerate: self.degenerate,
+        };
+        (kept, report)
+    }
+}
+
+/// A conservative bound of the region shadow rays from the mesh's box to one light cross.
+enum Volume {
+    /// The box swept toward a sun (against its travel), in the sun's frame: the box's extent
+    /// across the sun, `lo[0]..hi[0]` along `u` and `lo[1]..hi[1]` along `v`, and from the
+    /// box's nearest depth `lo[2]` on toward the sun along `w`.
+    Swept {
+        u: Vec3,
+        v: Vec3,
+        w: Vec3,
+        lo: [f32; 3],
+        hi: [f32; 2],
+    },
+    /// The bounding box of the mesh's box and the light (its point or its rectangle's
+    /// corners): the convex hull of the two, which every ray between them lies in, is inside.
+    Boxed { lo: Vec3, hi: Vec3 },
+}
+
+impl Volume {
+    fn of(light: &Light, lo: Vec3, hi: Vec3) -> Volume {
+        // A relative margin: a triangle touching the box (a floor the mesh stands on) stays.
+        let pad = 1e-4 * (hi - lo).length() + 1e-6;
+        let (lo, hi) = (lo - pad, hi + pad);
+        let grow = |extra: &[Vec3]| {
+            let (a, b) = extra
+                .iter()
+                .fold((lo, hi), |(a, b), p| (a.min(*p), b.max(*p)));
+            Volume::Boxed { lo: a, hi: b }
+        };
+        match light {
+            Light::Sun { direction, .. } => {
+                let w = -direction.normalize();
+                let (u, v) = w.any_orthonormal_pair();
+                let corners: [Vec3; 8] = std::array::from_fn(|k| {
+                    Vec3::new(
+                        if k & 1 == 0 { lo.x } else { hi.x },
+                        if k & 2 == 0 { lo.y } else { hi.y },
+                        if k & 4 == 0 { lo.z } else { hi.z },
+                    )
+                });
+                let (low, high) = (span(&corners, u), span(&corners, v));
+                Volume::Swept {
+                    u,
+                    v,
+                    w,
+                    lo: [low.0, high.0, span(&corners, w).0],
+                    hi: [low.1, high.1],
+                }
+            }
+            Light::Point { position, .. } | Light::Spot { position, .. } => grow(&[*position]),
+            Light::Area {
+                position,
+                direction,
+                axis_u,
+                size_u,
+                size_v,
+                ..
+            } => {
+                let axis_v = direction.cross(*axis_u).normalize_or_zero();
+                let (du, dv) = (*axis_u * (0.5 * size_u), axis_v * (0.5 * size_v));
+                grow(&[
+                    *position + du + dv,
+                    *position + du - dv,
+                    *position - du + dv,
+                    *position - du - dv,
+                ])
+            }
+        }
+    }
+
+    /// Whether the triangle may meet the volume (false only when it certainly does not).
+    fn may_hold(&self, t: &[Vec3; 3]) -> bool {
+        match self {
+            Volume::Boxed { lo, hi } => {
+                let tlo = t[0].min(t[1]).min(t[2]);
+                let thi = t[0].max(t[1]).max(t[2]);
+                tlo.cmple(*hi).all() && thi.cmpge(*lo).all()
+            }
+            Volume::Swept { u, v, w, lo, hi } => {
+                let (ulo, uhi) = span(t, *u);
+                let (vlo, vhi) = span(t, *v);
+                ulo <= hi[0]
+                    && uhi >= lo[0]
+                    && vlo <= hi[1]
+                    && vhi >= lo[1]
+                    && span(t, *w).1 >= lo[2]
+            }
+        }
+    }
+}
+
+/// The interval the points cover along `axis`.
+fn span(points: &[Vec3], axis: Vec3) -> (f32, f32) {
+    points
+        .iter()
+        .map(|p| p.dot(axis))
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), d| {
+            (a.min(d), b.max(d))
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::irradiance::{irradiance, IrradianceSettings};
+    use crate::mesh::test_meshes::plane;
+    use crate::raytrace::Tracer;
+    use crate::scene::Scene;
+
+    /// A horizontal square of half-size `h` centred at `c` (two triangles).
+    fn square(c: Vec3, h: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let p = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            .map(|(x, y)| c + Vec3::new(x * h, y * h, 0.0))
+            .to_vec();
+        (p, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    fn with(objects: &[(&str, Vec3, f32)]) -> Occluders {
+        let mut o = Occluders::default();
+        for (name, c, h) in objects {
+            let (p, t) = square(*c, *h);
+            o.add(name, &p, &t).unwrap();
+        }
+        o
+    }
+
+    /// The box of a unit square at z = 0 (the previewed mesh's bounds).
+    const BOX: (Vec3, Vec3) = (Vec3::new(-0.5, -0.5, 0.0), Vec3::new(0.5, 0.5, 0.0));
+
+    fn kept_names(o: &Occluders, lights: &[Light], world: &World) -> Vec<String> {
+        let (_, r) = o.relevant(BOX, lights, world);
+        let skipped = r.objects_skipped;
+        o.objects
+            .iter()
+            .map(|x| x.name.clone())
+            .filter(|n| !skipped.contains(n))
+            .collect()
+    }
+
+    #[test]
+    fn a_sun_keeps_what_lies_toward_it_over_the_mesh_and_nothing_else() {
+        let o = with(&[
+            ("above", Vec3::new(0.2, 0.0, 2.0), 0.3),
+            ("above, aside", Vec3::new(3.0, 0.0, 2.0), 0.3),
+            ("below", Vec3::new(0.0, 0.0, -1.0), 5.0),
+        ]);
+        let down = [Light::sun(Vec3::new(0.0, 0.0, -1.0), [1.0; 3]).unwrap()];
+        assert_eq!(kept_names(&o, &down, &World::Black), ["above"]);
+        // Slanted 45 degrees toward +x (travelling to -x): the square 2 up and 2 along +x
+        // lies on the swept box; the one right above at x = 0.2 still overlaps it.
+        let slant = [Light::sun(Vec3::new(-1.0, 0.0, -1.0), [1.0; 3]).unwrap()];
+        let o2 = with(&[
+            ("toward the sun", Vec3::new(2.0, 0.0, 2.0), 0.2),
+            ("away from it", Vec3::new(-2.0, 0.0, 2.0), 0.2),
+        ]);
+        assert_eq!(kept_names(&o2, &slant, &World::Black), ["toward the sun"]);
+        // Under a world every triangle is kept; with no light and no world, none.
+        let all = kept_names(&o, &down, &World::uniform([0.1; 3]).unwrap());
+        assert_eq!(all.len(), 3);
+        let (kept, r) = o.relevant(BOX, &[], &World::Black);
+        assert!(kept.is_empty());
+        assert_eq!(r.objects_skipped.len(), 3);
+        assert_eq!((r.objects, r.triangles, r.triangles_kept), (3, 6, 0));
+    }
+
+    #[test]
+    fn a_point_light_keeps_what_lies_between_it_and_the_mesh() {
+        let o = with(&[
+            ("between", Vec3::new(0.0, 0.0, 1.0), 0.2),
+            ("beyond the light", Vec3::new(0.0, 0.0, 4.0), 0.2),
+            ("aside", Vec3::new(3.0, 0.0, 1.0), 0.2),
+        ]);
+        let lamp = [Light::point(Vec3::new(0.0, 0.0, 2.0), [1.0; 3]).unwrap()];
+        assert_eq!(kept_names(&o, &lamp, &World::Black), ["between"]);
+    }
+
+    #[test]
+    fn bad_objects_are_refused_naming_them() {
+        let mut o = Occluders::default();
+        let (p, t) = square(Vec3::ZERO, 1.0);
+        let err = |r: Result<()>| r.unwrap_err().to_string();
+        let mut nan = p.clone();
+        nan[2].y = f32::NAN;
+        assert!(err(o.add("wall", &nan, &t)).contains("\"wall\": position 2"));
+        assert!(err(o.add("wall", &p, &[[0, 1, 4]])).contains("triangle 0"));
+        assert!(err(o.add("wall", &[], &[])).contains("needs both"));
+        // A zero-area triangle is dropped and counted; the object stays.
+        o.add("sliver", &p, &[[0, 1, 1], [0, 1, 2]]).unwrap();
+        assert_eq!((o.triangle_count(), o.degenerate), (1, 1));
+    }
+
+    #[test]
+    fn a_blocker_shadows_the_plane_below_it_exactly() {
+        // A 2 x 2 plane under a sun straight down, a square blocker of half-size 0.5 at
+        // z = 0.3 over the quarter x, y > 0 (centred at (0.5, 0.5)): E is 0 beneath it and
+        // the sun's 2 W/m^2 elsewhere (away from the blocker's edges, by a cell).
+        let mut scene = Scene::new(plane(21, 2.0));
+        scene.lights = vec![Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap()];
+        let (p, t) = square(Vec3::new(0.5, 0.5, 0.3), 0.5);
+        scene.occluders.add("blocker", &p, &t).unwrap();
+        let (tracer, report) = scene.shadow_tracer(&Tracer::new(&scene.mesh));
+        assert_eq!(report.triangles_kept, 2);
+        let mesh = &scene.mesh;
+        let (e, _) = irradiance(
+            &scene,
+            &tracer,
+            mesh.positions(),
+            mesh.normals(),
+            &IrradianceSettings::default(),
+        )
+        .unwrap();
+        let mut shadowed = 0;
+        for (x, e) in mesh.positions().iter().zip(&e) {
+            let inside = x.x > 0.1 && x.x < 0.9 && x.y > 0.1 && x.y < 0.9;
+            let outside = x.x < -0.1 || x.y < -0.1 || x.x > 1.1 || x.y > 1.1;
+            if inside {
+                assert_eq!(e[0], 0.0, "{x:?} lies beneath the blocker");
+                shadowed += 1;
+            } else if outside {
+                assert!((e[0] - 2.0).abs() < 1e-5, "{x:?}: {e:?}");
+            }
+        }
+        assert!(shadowed > 10);
+        // The walks' casts never see the blocker: a ray up from beneath it meets nothing.
+        let below = Vec3::new(0.5, 0.5, 0.0);
+        assert!(tracer.intersect(below, Vec3::Z, f32::INFINITY).is_none());
+        assert!(tracer.occluded(below, Vec3::Z, f32::INFINITY));
+        assert!(tracer.occluded_by_rest(below, Vec3::Z, 1.0));
+        assert!(!tracer.occluded_by_rest(below, Vec3::Z, 0.2));
+    }
+}

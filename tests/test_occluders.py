@@ -1,0 +1,80 @@
+"""The rest of the scene (issue 30 point 1): occluders cast shadows on the previewed mesh and are
+left out where they can shadow nothing. Expected values: the sun's closed form (E = 0 beneath a
+blocker, E = strength elsewhere) and the dipole's half-plane integral of its own closed-form
+disc integral (helpers.disc_integral), independent of the code under test."""
+
+import math
+
+import numpy as np
+import pytest
+
+import translucent
+from helpers import disc_integral, entering, plane, rd_total
+
+
+def square(cx, cy, z, h):
+    p = np.array([[cx - h, cy - h, z], [cx + h, cy - h, z], [cx + h, cy + h, z], [cx - h, cy + h, z]], np.float32)
+    return p, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def test_a_blocker_shadows_the_irradiance_and_what_cannot_shadow_is_left_out():
+    p, t = plane(41, 2.0)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), irradiance=2.0)
+    s.add_occluder(*square(0.5, 0.5, 0.3, 0.5), name="blocker")
+    s.add_occluder(*square(0.0, 0.0, -1.0, 5.0), name="floor below")
+    e = s.irradiance()[:, 0]
+    inside = (p[:, 0] > 0.1) & (p[:, 0] < 0.9) & (p[:, 1] > 0.1) & (p[:, 1] < 0.9)
+    outside = (p[:, 0] < -0.1) | (p[:, 1] < -0.1) | (p[:, 0] > 1.1) | (p[:, 1] > 1.1)
+    assert inside.sum() > 50 and np.all(e[inside] == 0.0)
+    np.testing.assert_allclose(e[outside], 2.0, rtol=1e-5)
+    r = s.occluders
+    assert (r["objects"], r["triangles"], r["triangles_kept"]) == (2, 4, 2)
+    assert r["objects_skipped"] == ["floor below"]
+    # Under a world every triangle can shadow: all are kept.
+    s.set_world(color=(0.1, 0.1, 0.1))
+    assert s.occluders["triangles_kept"] == 4 and s.occluders["objects_skipped"] == []
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda p, t: (np.where(np.arange(12).reshape(4, 3) == 4, np.nan, p), t), "position"),
+    (lambda p, t: (p, t + 3), "triangle"),
+    (lambda p, t: (p[:0], t[:0]), "positions"),
+])
+def test_bad_occluders_are_refused_by_name(bad, match):
+    p, t = plane(5, 1.0)
+    s = translucent.Scene(p, t)
+    with pytest.raises(ValueError, match=match):
+        s.add_occluder(*bad(*square(0, 0, 1, 1)), name="wall")
+
+
+def half_plane(m, c, d):
+    """int over the half-plane at distance d of the dipole's R_d: int_d^inf acos(d/r)/pi dM(r)."""
+    r = d * np.geomspace(1.0, 2000.0, 4000) if d > 0 else np.geomspace(1e-7, 0.4, 4000)
+    mm = np.array([disc_integral(m, c, x) for x in r])
+    w = np.arccos(np.clip(d / r, -1, 1)) / math.pi
+    mid = 0.5 * (w[1:] + w[:-1])
+    return float(np.sum(mid * np.diff(mm)))
+
+
+def test_prt_under_a_blockers_straight_shadow_edge_meets_the_dipoles_half_plane_integral():
+    # A 40 cm marble plane under a sun straight down; a blocker 5 cm up covers x > 0: B at a
+    # distance d from the edge is E_in (R_total - H(d)) on the lit side and E_in H(d) beneath.
+    p, t = plane(81, 0.4)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), irradiance=3.0)
+    s.add_occluder(*square(0.15, 0.0, 0.05, 0.15), name="blocker")
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    b = translucent.Prt(s, m, profile="dipole").radiosity(m)
+    e_in = entering(1.3, 1.0, 3.0)
+    row = np.flatnonzero(np.abs(p[:, 1]) < 1e-6)
+    for c in range(3):
+        sp = (1 - m.g) * m.sigma_s[c]
+        total = rd_total(m.sigma_a[c], sp, m.eta)
+        for v in row:
+            x = float(p[v, 0])
+            if abs(x) < 1e-3 or abs(x) > 0.12:
+                continue  # the edge itself, and the far side of the blocker
+            h = half_plane(m, c, abs(x))
+            expect = e_in * (h if x > 0 else total - h)
+            assert abs(b[v, c] - expect) < 0.02 * e_in * total, (c, x, b[v, c], expect)
