@@ -78,3 +78,25 @@ def test_prt_under_a_blockers_straight_shadow_edge_meets_the_dipoles_half_plane_
             h = half_plane(m, c, abs(x))
             expect = e_in * (h if x > 0 else total - h)
             assert abs(b[v, c] - expect) < 0.02 * e_in * total, (c, x, b[v, c], expect)
+
+
+def test_an_update_under_a_new_occluder_recasts_the_light_and_meets_a_fresh_precompute():
+    p, t = plane(41, 0.2)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+
+    def scene(blocked):
+        s = translucent.Scene(p, t)
+        s.add_sun((0.0, 0.0, -1.0), irradiance=3.0)
+        if blocked:
+            s.add_occluder(*square(0.05, 0.0, 0.05, 0.05), name="blocker")
+        return s
+
+    prt = translucent.Prt(scene(False), m, profile="dipole")
+    r = prt.update(lights=scene(True))
+    assert r["rays"] > 0 and r["rescaled"] is None  # the same sun, another shadow: rays again
+    fresh = translucent.Prt(scene(True), m, profile="dipole").radiosity(m)
+    b = prt.radiosity(m)
+    assert translucent.relative_error(b, fresh, scene(True).vertex_areas[:, 0])["rms"][0] < 0.01
+    assert prt.report["occluders"]["triangles_kept"] == 2
+    beneath = (p[:, 0] > 0.02) & (p[:, 0] < 0.08) & (np.abs(p[:, 1]) < 0.03)
+    assert np.all(b[beneath, 0] < 0.5 * b[p[:, 0] < -0.06, 0].mean())
