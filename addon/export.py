@@ -37,6 +37,8 @@ class ExportInfo:
     skipped_lights: list[str] = field(default_factory=list)
     # Mesh objects left out because they do not carry the previewed material.
     skipped_objects: list[str] = field(default_factory=list)
+    # Other objects exported as occluders (they shadow the previewed ones; issue 30).
+    occluders: list[str] = field(default_factory=list)
     world: str = "black"
 
 
@@ -165,6 +167,43 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
         info.lights.append(obj.name)
 
 
+# Object types Cycles renders as surfaces: their evaluated mesh casts the shadow.
+_SURFACES = {"MESH", "CURVE", "FONT", "META", "SURFACE"}
+
+
+def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: ExportInfo) -> None:
+    """Every other object Cycles' shadow rays see (visible to shadow rays, not hidden from render;
+    meshes, curves, text, metaballs, instances and geometry-nodes output by their evaluated
+    mesh) as an occluder of `scene`, in world space. The previewed objects themselves (not their
+    instanced copies) are left out. Evaluated meshes are freed again."""
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        original = obj.original
+        if obj.type not in _SURFACES or (not inst.is_instance and original.name in previewed):
+            continue
+        if original.hide_render or not getattr(original, "visible_shadow", True):
+            continue
+        try:
+            mesh = obj.to_mesh()
+        except RuntimeError:
+            continue
+        try:
+            n = len(mesh.vertices)
+            mesh.calc_loop_triangles()
+            if n == 0 or len(mesh.loop_triangles) == 0:
+                continue
+            co = np.empty(n * 3, dtype=np.float32)
+            mesh.attributes["position"].data.foreach_get("vector", co)
+            tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
+            mesh.loop_triangles.foreach_get("vertices", tris)
+        finally:
+            obj.to_mesh_clear()
+        m = np.array(inst.matrix_world, dtype=np.float64)
+        co = (co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+        scene.add_occluder(co, tris.reshape(-1, 3), name=original.name)
+        info.occluders.append(original.name)
+
+
 def set_world(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: ExportInfo) -> None:
     """The world's Background: a uniform colour, or an Environment Texture image (radiance)."""
     world = bl_scene.world
@@ -216,6 +255,7 @@ def export_scene(
     if not parts_p:
         raise ValueError("no objects to export")
     scene = translucent.Scene(np.concatenate(parts_p), np.concatenate(parts_t), np.concatenate(parts_n))
+    add_occluders(scene, depsgraph, {o.name for o in objects}, info)
     add_lights(scene, bl_scene, info)
     set_world(scene, bl_scene, info)
     return scene, info

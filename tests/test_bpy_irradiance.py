@@ -81,3 +81,29 @@ def test_irradiance_matches_a_cycles_diffuse_bake(empty_blend):
     dark = smooth.ravel() & (e[:, 0] < 1e-6)
     if dark.any():
         assert np.all(baked[dark] < 0.05 * e[:, 0].max())
+
+
+def test_another_object_shadows_the_previewed_one_as_in_a_cycles_bake(empty_blend):
+    """Issue 30 point 1: the blocker does not carry the previewed plane's material; exported as
+    an occluder, it shadows the plane as Cycles' bake of the same scene shows."""
+    bpy = empty_blend
+    from addon import export
+
+    plane, blocker = build(bpy)
+    scene, info = export.export_scene([plane])
+    assert info.occluders == [blocker.name] and scene.vertex_count == 41 * 41
+    e = scene.irradiance(eta=1.0)
+    baked = math.pi * bake_direct_diffuse(bpy, plane, samples=64)
+    n = 41
+    grid = e[:, 0].reshape(n, n)
+    smooth = np.ones((n, n), bool)
+    for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        shifted = np.roll(grid, (dy, dx), axis=(0, 1))
+        smooth &= np.abs(shifted - grid) <= 0.02 * np.maximum(grid, 1e-6)
+    smooth[0, :] = smooth[-1, :] = smooth[:, 0] = smooth[:, -1] = False
+    lit = smooth.ravel() & (e[:, 0] > 0.05 * e[:, 0].max())
+    rel = np.abs(baked[lit] - e[lit]) / e[lit]
+    assert np.median(rel) < 0.03 and np.mean(rel) < 0.03, (np.median(rel), np.mean(rel))
+    dark = smooth.ravel() & (e[:, 0] < 1e-6)
+    assert dark.sum() > 10, "the blocker's shadow falls on the plane"
+    assert np.all(baked[dark] < 0.05 * e[:, 0].max())
