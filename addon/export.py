@@ -56,11 +56,12 @@ def object_geometry_key(obj: bpy.types.Object, depsgraph=None) -> str:
     return _evaluate(obj, depsgraph, triangles=False)[3]
 
 
-def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool):
+def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool, instance=None):
     """The one place the add-on evaluates a mesh: world-space positions, then (if `triangles`)
     triangles and unit normals, and the geometry key (vertex, corner and face counts and the
-    positions' digest: equal keys, same exported mesh up to a re-triangulation)."""
-    eval_obj = obj.evaluated_get(depsgraph)
+    positions' digest: equal keys, same exported mesh up to a re-triangulation). `instance`: a
+    depsgraph object instance whose evaluated object and matrix are used instead."""
+    eval_obj = obj.evaluated_get(depsgraph) if instance is None else instance.object
     mesh = eval_obj.to_mesh()
     tris = nrm = None
     try:
@@ -78,7 +79,7 @@ def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool):
             tris = tris.reshape(-1, 3)
     finally:
         eval_obj.to_mesh_clear()
-    m = np.array(obj.matrix_world, dtype=np.float64)
+    m = np.array(obj.matrix_world if instance is None else instance.matrix_world, dtype=np.float64)
     co = (co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
     key = f"{counts}:{hashlib.blake2b(co.tobytes(), digest_size=16).hexdigest()}"
     if tris is not None and np.linalg.det(m[:3, :3]) < 0.0:
@@ -184,23 +185,12 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
         if original.hide_render or not getattr(original, "visible_shadow", True):
             continue
         try:
-            mesh = obj.to_mesh()
+            co, tris, _, _ = _evaluate(original, depsgraph, triangles=True, instance=inst)
         except RuntimeError:
             continue
-        try:
-            n = len(mesh.vertices)
-            mesh.calc_loop_triangles()
-            if n == 0 or len(mesh.loop_triangles) == 0:
-                continue
-            co = np.empty(n * 3, dtype=np.float32)
-            mesh.attributes["position"].data.foreach_get("vector", co)
-            tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
-            mesh.loop_triangles.foreach_get("vertices", tris)
-        finally:
-            obj.to_mesh_clear()
-        m = np.array(inst.matrix_world, dtype=np.float64)
-        co = (co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
-        scene.add_occluder(co, tris.reshape(-1, 3), name=original.name)
+        if len(co) == 0 or len(tris) == 0:
+            continue
+        scene.add_occluder(co, tris, name=original.name)
         info.occluders.append(original.name)
 
 
