@@ -52,6 +52,20 @@ def bake_direct_diffuse(bpy, obj, samples: int) -> np.ndarray:
     return bake_diffuse_vertex_colors(obj, {"DIRECT"})
 
 
+def smooth_masks(e: np.ndarray, n: int = 41) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices to compare with a bake, away from shadow edges: interior vertices of the
+    n x n grid whose neighbours all have an irradiance within 2 % of their own (a vertex bake and
+    a point estimate differ at a hard edge). Returns (lit: above 5 % of the brightest, dark)."""
+    grid = e[:, 0].reshape(n, n)
+    smooth = np.ones((n, n), bool)
+    for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        shifted = np.roll(grid, (dy, dx), axis=(0, 1))
+        smooth &= np.abs(shifted - grid) <= 0.02 * np.maximum(grid, 1e-6)
+    smooth[0, :] = smooth[-1, :] = smooth[:, 0] = smooth[:, -1] = False
+    smooth = smooth.ravel()
+    return smooth & (e[:, 0] > 0.05 * e[:, 0].max()), smooth & (e[:, 0] < 1e-6)
+
+
 def test_irradiance_matches_a_cycles_diffuse_bake(empty_blend):
     bpy = empty_blend
     from addon import export
@@ -62,23 +76,13 @@ def test_irradiance_matches_a_cycles_diffuse_bake(empty_blend):
     e = scene.irradiance(eta=1.0)[: info.objects[0].count]
     baked = math.pi * bake_direct_diffuse(bpy, plane, samples=64)
 
-    # Compare away from shadow edges: vertices whose grid neighbours all have an irradiance
-    # within 2 % of their own (a vertex bake and a point estimate differ at a hard edge).
-    n = 41
-    grid = e[:, 0].reshape(n, n)
-    smooth = np.ones((n, n), bool)
-    for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
-        shifted = np.roll(grid, (dy, dx), axis=(0, 1))
-        smooth &= np.abs(shifted - grid) <= 0.02 * np.maximum(grid, 1e-6)
-    smooth[0, :] = smooth[-1, :] = smooth[:, 0] = smooth[:, -1] = False
-    lit = smooth.ravel() & (e[:, 0] > 0.05 * e[:, 0].max())
+    lit, dark = smooth_masks(e)
     assert lit.sum() > 500, "enough lit, smooth vertices to compare"
     rel = np.abs(baked[lit] - e[lit]) / e[lit]
     print(f"compared {lit.sum()} vertices: median {np.median(rel):.4f}, mean {np.mean(rel):.4f}, max {rel.max():.4f}; bake range {baked.min():.3f}..{baked.max():.3f}, ours {e.min():.3f}..{e.max():.3f}, dark {int((e[:, 0] < 1e-6).sum())}")
     assert np.median(rel) < 0.03, f"median relative difference {np.median(rel):.4f}"
     assert np.mean(rel) < 0.03, f"mean relative difference {np.mean(rel):.4f}"
     # The shadow itself: both agree on which vertices are dark.
-    dark = smooth.ravel() & (e[:, 0] < 1e-6)
     if dark.any():
         assert np.all(baked[dark] < 0.05 * e[:, 0].max())
 
@@ -94,16 +98,8 @@ def test_another_object_shadows_the_previewed_one_as_in_a_cycles_bake(empty_blen
     assert info.occluders == [blocker.name] and scene.vertex_count == 41 * 41
     e = scene.irradiance(eta=1.0)
     baked = math.pi * bake_direct_diffuse(bpy, plane, samples=64)
-    n = 41
-    grid = e[:, 0].reshape(n, n)
-    smooth = np.ones((n, n), bool)
-    for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
-        shifted = np.roll(grid, (dy, dx), axis=(0, 1))
-        smooth &= np.abs(shifted - grid) <= 0.02 * np.maximum(grid, 1e-6)
-    smooth[0, :] = smooth[-1, :] = smooth[:, 0] = smooth[:, -1] = False
-    lit = smooth.ravel() & (e[:, 0] > 0.05 * e[:, 0].max())
+    lit, dark = smooth_masks(e)
     rel = np.abs(baked[lit] - e[lit]) / e[lit]
     assert np.median(rel) < 0.03 and np.mean(rel) < 0.03, (np.median(rel), np.mean(rel))
-    dark = smooth.ravel() & (e[:, 0] < 1e-6)
     assert dark.sum() > 10, "the blocker's shadow falls on the plane"
     assert np.all(baked[dark] < 0.05 * e[:, 0].max())

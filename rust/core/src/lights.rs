@@ -230,6 +230,20 @@ impl Light {
     }
 }
 
+/// The point at `u` in [0, 1]^2 of an area light's rectangle (centred at `position`, edges
+/// `size_u` along `axis_u` and `size_v` along `direction` x `axis_u`).
+pub fn rectangle_point(
+    position: Vec3,
+    direction: Vec3,
+    axis_u: Vec3,
+    size_u: f32,
+    size_v: f32,
+    u: [f32; 2],
+) -> Vec3 {
+    let axis_v = direction.cross(axis_u);
+    position + axis_u * ((u[0] - 0.5) * size_u) + axis_v * ((u[1] - 0.5) * size_v)
+}
+
 /// Light arriving at a point from one sample of a light (pbrt-v4's `SampleLi`): the unit
 /// direction toward the light, how far it is (infinite for a sun), and the radiance integrated
 /// over the sample's solid angle [W/unit^2 at normal incidence]. A surface facing it receives
@@ -303,10 +317,7 @@ impl Light {
                 size_v,
                 power,
             } => {
-                let axis_v = direction.cross(*axis_u);
-                let q = *position
-                    + *axis_u * ((u[0] - 0.5) * size_u)
-                    + axis_v * ((u[1] - 0.5) * size_v);
+                let q = rectangle_point(*position, *direction, *axis_u, *size_u, *size_v, u);
                 let (l, d, d2) = toward(q)?;
                 let cos_l = direction.dot(-l);
                 if cos_l <= 0.0 {

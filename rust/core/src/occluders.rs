@@ -9,7 +9,7 @@
 //! direction) every triangle is kept.
 
 use crate::error::{Error, Result};
-use crate::lights::{Light, World, POINT_LIMIT};
+use crate::lights::{rectangle_point, Light, World, POINT_LIMIT};
 use glam::Vec3;
 
 /// Occluder triangles in all, beyond which a request is refused: 2^26 = 6.7e7 triangles,
@@ -192,13 +192,13 @@ impl Volume {
                         if k & 4 == 0 { lo.z } else { hi.z },
                     )
                 });
-                let (low, high) = (span(&corners, u), span(&corners, v));
+                let (along_u, along_v) = (span(&corners, u), span(&corners, v));
                 Volume::Swept {
                     u,
                     v,
                     w,
-                    lo: [low.0, high.0, span(&corners, w).0],
-                    hi: [low.1, high.1],
+                    lo: [along_u.0, along_v.0, span(&corners, w).0],
+                    hi: [along_u.1, along_v.1],
                 }
             }
             Light::Point { position, .. } | Light::Spot { position, .. } => grow(&[*position]),
@@ -210,14 +210,13 @@ impl Volume {
                 size_v,
                 ..
             } => {
-                let axis_v = direction.cross(*axis_u).normalize_or_zero();
-                let (du, dv) = (*axis_u * (0.5 * size_u), axis_v * (0.5 * size_v));
-                grow(&[
-                    *position + du + dv,
-                    *position + du - dv,
-                    *position - du + dv,
-                    *position - du - dv,
-                ])
+                let corner =
+                    |u| rectangle_point(*position, *direction, *axis_u, *size_u, *size_v, u);
+                grow(
+                    &[0.0, 1.0]
+                        .map(|a| [0.0, 1.0].map(|b| corner([a, b])))
+                        .concat(),
+                )
             }
         }
     }

@@ -56,8 +56,6 @@ pub struct Tracer {
     /// The rest of the scene: seen by `occluded` (shadow rays) and `occluded_by_rest`, never
     /// by `intersect` and the walks' casts.
     rest: Option<Arc<Bvh>>,
-    /// Triangles in `rest`.
-    rest_triangles: usize,
     /// How far ray origins are pushed off the surface: relative to the mesh size, so that
     /// meshes from 1e-4 to 1e4 units neither self-shadow nor leak.
     epsilon: f32,
@@ -98,7 +96,6 @@ impl Tracer {
         Tracer {
             own: Arc::new(Bvh::build(tris)),
             rest: None,
-            rest_triangles: 0,
             epsilon: EPSILON * scale,
             centre,
             scale,
@@ -121,16 +118,10 @@ impl Tracer {
         Tracer {
             own: self.own.clone(),
             rest: (!tris.is_empty()).then(|| Arc::new(Bvh::build(tris))),
-            rest_triangles: occluders.len(),
             epsilon: self.epsilon,
             centre: self.centre,
             scale: self.scale,
         }
-    }
-
-    /// Triangles of the rest of the scene this tracer holds (0: the mesh alone).
-    pub fn occluder_triangles(&self) -> usize {
-        self.rest_triangles
     }
 
     /// The offset used for ray origins and t_min.
