@@ -39,6 +39,9 @@ class ExportInfo:
     skipped_objects: list[str] = field(default_factory=list)
     # Other objects exported as occluders (they shadow the previewed ones; issue 30).
     occluders: list[str] = field(default_factory=list)
+    # "occluder NAME" -> its geometry key(s) at the export (`occluder_keys`): the add-on
+    # compares them to notice a prop moved, deformed, added, hidden or removed.
+    occluder_keys: dict[str, str] = field(default_factory=dict)
     world: str = "black"
 
 
@@ -172,11 +175,11 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
 _SURFACES = {"MESH", "CURVE", "FONT", "META", "SURFACE"}
 
 
-def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: ExportInfo) -> None:
-    """Every other object Cycles' shadow rays see (visible to shadow rays, not hidden from render;
-    meshes, curves, text, metaballs, instances and geometry-nodes output by their evaluated
-    mesh) as an occluder of `scene`, in world space. The previewed objects themselves (not their
-    instanced copies) are left out. Evaluated meshes are freed again."""
+def _occluder_instances(depsgraph, previewed: set):
+    """The depsgraph's instances that Cycles' shadow rays see (visible to shadow rays, not
+    hidden from render; meshes, curves, text, metaballs, instances and geometry-nodes output),
+    the previewed objects themselves (not their instanced copies) left out: (original, instance)
+    pairs, valid while the iteration runs."""
     for inst in depsgraph.object_instances:
         obj = inst.object
         original = obj.original
@@ -184,10 +187,38 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
             continue
         if original.hide_render or not getattr(original, "visible_shadow", True):
             continue
+        yield original, inst
+
+
+def _add_key(keys: dict, name: str, key: str) -> None:
+    # An object instanced several times: its instances' keys in the depsgraph's order.
+    keys[f"occluder {name}"] = keys.get(f"occluder {name}", "") + key + ";"
+
+
+def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
+    """What `add_occluders` would export now, as `ExportInfo.occluder_keys` holds it: each
+    occluder's geometry key (world-space positions hashed, no triangles): about 10 ms per 100k
+    vertices, so the follow check computes it only when something besides the previewed objects
+    changed."""
+    keys: dict[str, str] = {}
+    for original, inst in _occluder_instances(depsgraph, previewed):
         try:
-            co, tris, _, _ = _evaluate(original, depsgraph, triangles=True, instance=inst)
+            _add_key(keys, original.name, _evaluate(original, depsgraph, triangles=False, instance=inst)[3])
         except RuntimeError:
             continue
+    return keys
+
+
+def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: ExportInfo) -> None:
+    """Every other object Cycles' shadow rays see (`_occluder_instances`) as an occluder of
+    `scene`, in world space, its key kept in `info.occluder_keys`. Evaluated meshes are freed
+    again."""
+    for original, inst in _occluder_instances(depsgraph, previewed):
+        try:
+            co, tris, _, key = _evaluate(original, depsgraph, triangles=True, instance=inst)
+        except RuntimeError:
+            continue
+        _add_key(info.occluder_keys, original.name, key)
         if len(co) == 0 or len(tris) == 0:
             continue
         scene.add_occluder(co, tris, name=original.name)

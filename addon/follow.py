@@ -16,8 +16,10 @@ from . import edits, export, jobs
 from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, view_dependent
 
 DEBOUNCE_S = 0.3
-# material name -> (clock at the last change noticed, objects whose geometry may have changed)
+# material name -> (clock at the last change noticed, objects whose geometry may have changed;
+# REST among them: the rest of the scene may have, so the occluders are checked too)
 PENDING: dict[str, tuple[float, set]] = {}
+REST = "\x00the rest of the scene"
 _clock = time.monotonic  # tests may replace it
 
 
@@ -38,6 +40,8 @@ def _describe(s: Session, lighting: str) -> str:
     parts = [f"{name} {'changed topology' if what == 'topology' else what}" for name, what in sorted(s.deformed.items())]
     if s.members_changed:
         parts.append(s.members_changed)
+    if s.occluders_changed:
+        parts.append(s.occluders_changed)
     if lighting:
         parts.append(lighting)
     return ", ".join(parts)
@@ -58,18 +62,19 @@ def _is_lighting(id_) -> bool:
 
 @bpy.app.handlers.persistent
 def follow_scene(scene, depsgraph) -> None:
-    """depsgraph_update_post: notes which previewed objects deformed or moved (geometry or
-    transform tagged: armature, shape keys, modifiers, edit mode) and whether a light or the
-    world changed, and schedules the debounced check. Evaluates no mesh."""
+    """depsgraph_update_post: notes which objects deformed or moved (geometry or transform
+    tagged: armature, shape keys, modifiers, edit mode; a previewed object, or a prop that
+    shadows it) and whether a light or the world changed, and schedules the debounced check.
+    Evaluates no mesh."""
     if not SESSIONS:
         return
     tagged, lighting, linked = set(), False, False
     for u in depsgraph.updates:
         id_ = u.id.original
-        if isinstance(id_, bpy.types.Object) and id_.type == "MESH" and (u.is_updated_geometry or u.is_updated_transform):
-            tagged.add(id_.name)
-        elif _is_lighting(id_):
+        if _is_lighting(id_):
             lighting = True
+        elif isinstance(id_, bpy.types.Object) and (u.is_updated_geometry or u.is_updated_transform):
+            tagged.add(id_.name)
         # Objects linked, unlinked or given a material: which objects carry it may differ.
         linked = linked or isinstance(id_, (bpy.types.Scene, bpy.types.Collection))
     _follow(scene, tagged, lighting, linked)
@@ -89,13 +94,14 @@ def _follow(scene, tagged: set | None, lighting: bool, linked: bool = True) -> N
         if bpy.data.materials.get(name) is None:
             continue
         moved = set(s.objects) if tagged is None else tagged & set(s.objects)
-        others = linked or (tagged is not None and bool(tagged - moved))
+        # Another object moved, deformed, linked or unlinked: it may shadow differently.
+        others = linked or tagged is None or bool(tagged - moved)
         lit = ""
         if keys is not None:
             lit = _lighting_difference(s.lighting, keys)
             s.changed = _describe(s, lit)  # the panel says "stale" at once; geometry after the check
         if moved or lit or others:
-            _note(name, moved)
+            _note(name, moved | {REST} if others else moved)
 
 
 def follow_again(material: bpy.types.Material) -> None:
@@ -141,9 +147,10 @@ def follow_now(names=None) -> None:
 
 
 def _check(s: Session, mat: bpy.types.Material, suspects: set, bl_scene) -> None:
-    """Compares the tagged objects' evaluated geometry, which objects carry the material, and
-    the lights and world with what the transport was built from, and keeps the result on the
-    session (`deformed`, `members_changed`, `changed`)."""
+    """Compares the tagged objects' evaluated geometry, which objects carry the material, the
+    occluders (when `REST` is among the suspects), and the lights and world with what the
+    transport was built from, and keeps the result on the session (`deformed`,
+    `members_changed`, `occluders_changed`, `changed`)."""
     members = {o.name for o in objects_with(mat, bl_scene)}
     gained, lost = sorted(members - set(s.objects)), sorted(set(s.objects) - members)
     s.members_changed = ", ".join([f"{n} took the material" for n in gained] + [f"{n} lost it" for n in lost])
@@ -162,6 +169,8 @@ def _check(s: Session, mat: bpy.types.Material, suspects: set, bl_scene) -> None
             s.deformed[r.name] = "topology"
         else:
             s.deformed[r.name] = "deformed"
+    if REST in suspects:
+        s.occluders_changed = _lighting_difference(s.info.occluder_keys, export.occluder_keys(depsgraph, set(s.objects)))
     s.changed = _describe(s, _lighting_difference(s.lighting, export.lighting_keys(bl_scene)))
 
 

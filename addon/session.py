@@ -49,6 +49,8 @@ class Session:
     changed: str = ""
     # Mesh objects that took or lost the material since ("" when none), in words.
     members_changed: str = ""
+    # Occluders moved, deformed, added or removed since ("occluder Box changed"; "" when none).
+    occluders_changed: str = ""
     # What following the scene is doing ("refreshing: light Key changed", ...).
     follow_message: str = ""
     # The viewport's eye point the preview is drawn toward (world space), when the transport

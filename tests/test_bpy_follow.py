@@ -481,3 +481,55 @@ def test_the_preview_follows_the_view_where_single_scattering_makes_it_depend_on
     np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material(), eye_view), rtol=1e-6)
     assert follow.set_eye(mat, None)
     np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(mat.translucent.material()), rtol=1e-6)
+
+
+def test_a_prop_added_then_moved_into_the_light_shadows_the_preview_by_itself(addon):
+    # Issue 30: another object is an occluder; adding it, and moving it between the key light
+    # and the sphere, each refresh the preview by themselves (relit: no walk traced), as
+    # pressing Precompute for the changed scene would show it. The prop's mesh is never written.
+    import bpy
+
+    from addon import follow, session
+
+    mat, obj, light = lit_sphere(bpy)
+    first, user_mesh = read_preview(obj), mesh_hash(obj.data)
+    bpy.ops.mesh.primitive_cube_add(size=0.05, location=(0.4, 0.0, 0.0))  # beside: no shadow
+    box = bpy.context.active_object
+    box_mesh = mesh_hash(box.data)
+    bpy.context.view_layer.update()
+    assert mat.name in follow.PENDING
+    follow.follow_now([mat.name])
+    sess = session.SESSIONS[mat.name]
+    assert session.state(mat) == "ready" and sess.info.occluders == [box.name]
+    assert sess.follow_message.startswith("relit:")
+    aside = relit_like_a_precompute(bpy, session, mat, obj)
+    np.testing.assert_allclose(aside, first, rtol=0.05, atol=1e-6)  # nothing in the light's way
+    # Between the light (0, -0.15, 0.15) and the sphere, smaller than the sphere seen from the
+    # light: the middle of the lit side falls in its shadow, the rim stays lit.
+    box.scale = (0.2, 0.2, 0.2)
+    box.location = (0.0, -0.1, 0.1)
+    bpy.context.view_layer.update()
+    follow.follow_now([mat.name])
+    assert session.state(mat) == "ready" and session.SESSIONS[mat.name].follow_message.startswith("relit:")
+    shadowed = relit_like_a_precompute(bpy, session, mat, obj)
+    p = np.array([v.co for v in obj.data.vertices])
+    toward = p @ np.array([0.0, -1.0, 1.0]) / (np.sqrt(2.0) * np.linalg.norm(p, axis=1))
+    middle = toward > 0.97
+    assert middle.sum() >= 1 and np.all(shadowed[middle].sum(axis=1) < 0.2 * aside[middle].sum(axis=1))
+    assert shadowed.sum() < 0.8 * aside.sum() and shadowed.max() > 0.5 * aside.max()
+    assert mesh_hash(box.data) == box_mesh and mesh_hash(obj.data) == user_mesh
+
+
+def test_a_moved_prop_is_stale_until_the_check_and_the_panel_says_which(addon):
+    import bpy
+
+    from addon import follow, session
+
+    mat, obj, _ = lit_sphere(bpy)
+    bpy.ops.mesh.primitive_cube_add(size=0.05, location=(0.4, 0.0, 0.0))
+    box = bpy.context.active_object
+    mat.translucent.follow_scene = False
+    bpy.context.view_layer.update()
+    follow.follow_now()
+    assert session.SESSIONS[mat.name].changed == f"occluder {box.name} added" and session.state(mat) == "stale"
+    assert any(f"occluder {box.name} added" in t for t in draw_panel(addon, mat))

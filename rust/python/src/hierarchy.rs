@@ -137,9 +137,9 @@ impl PyHierarchy {
 
     /// The scene changed: `positions` (N, 3) of the same mesh deformed (same vertex count and
     /// triangles; normals recomputed unless `normals` is given), and/or `lights`: a Scene whose
-    /// lights and world replace these. The next evaluation follows the mode: render keeps the
-    /// links, incremental re-checks them, on-the-fly starts again. A topology change needs a
-    /// new Hierarchy.
+    /// lights, world and occluders replace these (other occluders: every light cast again).
+    /// The next evaluation follows the mode: render keeps the links, incremental re-checks
+    /// them, on-the-fly starts again. A topology change needs a new Hierarchy.
     #[pyo3(signature = (positions = None, lights = None, normals = None))]
     fn update(
         &self,
@@ -153,13 +153,17 @@ impl PyHierarchy {
         }
         let p = positions.map(|p| vec3_array("positions", p)).transpose()?;
         let n = normals.map(|n| vec3_array("normals", n)).transpose()?;
-        let lights = lights.map(|s| (s.scene.lights.clone(), s.scene.world.clone()));
+        let lights = lights.map(|s| {
+            let s = &s.scene;
+            (s.lights.clone(), s.world.clone(), s.occluders.clone())
+        });
         run(py, None, |_| {
             let mut inner = self.lock();
             if let Some(p) = p {
                 inner.set_positions(p, n)?;
             }
-            if let Some((l, w)) = lights {
+            if let Some((l, w, o)) = lights {
+                inner.set_occluders(o);
                 inner.set_lights(l, w);
             }
             Ok(())

@@ -32,6 +32,7 @@ use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
 use crate::irradiance::{Density, IrradianceSettings, PerSource};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
+use crate::occluders::Occluders;
 use crate::optics::Material;
 use crate::profiles::table::{walk_table_with_progress, TableKey};
 use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile};
@@ -262,6 +263,21 @@ impl Hierarchy {
         }
         self.face_irradiance = None;
         self.vertex_irradiance = None;
+    }
+
+    /// A new rest of the scene (a prop moved, added or hidden): every light's shadows change,
+    /// so the irradiance kept light by light is dropped and the next evaluation casts every
+    /// source's rays again. The same occluders change nothing.
+    pub fn set_occluders(&mut self, occluders: Occluders) {
+        if occluders == self.scene.occluders {
+            return;
+        }
+        self.scene.occluders = occluders;
+        self.tracer = self.scene.shadow_tracer(&self.tracer).0;
+        self.face_irradiance = None;
+        self.vertex_irradiance = None;
+        self.face_sources.clear();
+        self.vertex_sources.clear();
     }
 
     fn irradiance_settings(&self, eta: f64, density: Density) -> IrradianceSettings {

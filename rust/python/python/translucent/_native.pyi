@@ -347,8 +347,9 @@ class Hierarchy:
         lights: Scene | None = None,
         normals: npt.ArrayLike | None = None,
     ) -> None:
-        """The mesh deformed (same vertex count and triangles) and/or the lights and world are
-        now those of the Scene `lights`. Evaluated at the next `radiosity`/`radiance`."""
+        """The mesh deformed (same vertex count and triangles) and/or the lights, world and
+        occluders are now those of the Scene `lights` (other occluders: every light's rays
+        cast again). Evaluated at the next `radiosity`/`radiance`."""
     mode: Literal["on_the_fly", "incremental", "render"]
     @property
     def profile(self) -> Profile: ...
