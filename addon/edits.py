@@ -24,7 +24,7 @@ def nearest_original_vertices(objects: list[str], info: export.ExportInfo) -> di
     out = {}
     for r in info.objects:
         obj = bpy.data.objects.get(r.name)
-        if obj is None or r.name not in objects or len(obj.data.vertices) == r.count:
+        if obj is None or r.name not in objects or len(obj.data.vertices) == r.evaluated_count:
             continue
         evaluated, _, _ = export.evaluated_mesh_arrays(obj, depsgraph)
         tree = kdtree.KDTree(len(evaluated))
@@ -140,7 +140,7 @@ def edit(material: bpy.types.Material) -> None:
     s.last_seconds = s.last_eval["seconds"]
     s.refresh_advised = bool(s.last_eval["refresh_advised"])
     s.not_shown = []
-    for name, values in writeback.split(colors, s.info).items():
+    for name, values in writeback.per_object(colors, s.info).items():
         obj = bpy.data.objects.get(name)
         if obj is None:
             continue

@@ -25,9 +25,15 @@ class ObjectRange:
     name: str
     start: int
     count: int
-    # What the exported geometry was (world-space positions and triangles, hashed): the
-    # add-on compares it to notice a deformation, and to tell it from its own colour writes.
+    # What the exported geometry was (counts, faces' material slots and world-space positions,
+    # hashed): the add-on compares it to notice a deformation, and to tell it from its own
+    # colour writes.
     geometry_key: str = ""
+    # Which of the evaluated mesh's vertices were exported, in order (those of the faces of
+    # the previewed material; None: all of them).
+    vertices: np.ndarray | None = None
+    # The evaluated mesh's vertex count.
+    evaluated_count: int = 0
 
 
 @dataclass
@@ -37,18 +43,24 @@ class ExportInfo:
     skipped_lights: list[str] = field(default_factory=list)
     # Mesh objects left out because they do not carry the previewed material.
     skipped_objects: list[str] = field(default_factory=list)
-    # Other objects exported as occluders (they shadow the previewed ones; issue 30).
+    # Other objects exported as occluders (they shadow the previewed ones; issue 30), and the
+    # faces of other materials of the previewed objects ("Head [other materials]").
     occluders: list[str] = field(default_factory=list)
+    # Objects that hold the material in a slot but on none of their faces: left out.
+    without_faces: list[str] = field(default_factory=list)
     # "occluder NAME" -> its geometry key(s) at the export (`occluder_keys`): the add-on
     # compares them to notice a prop moved, deformed, added, hidden or removed.
     occluder_keys: dict[str, str] = field(default_factory=dict)
     world: str = "black"
+    # The exported vertices' world-space positions, (N, 3) float32: what a hierarchy of the same
+    # topology is updated to.
+    positions: np.ndarray | None = None
 
 
 def evaluated_mesh_arrays(obj: bpy.types.Object, depsgraph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World-space positions (N,3), triangles (M,3) and unit vertex normals (N,3) of the
     evaluated object (modifiers applied)."""
-    p, t, n, _ = _evaluate(obj, depsgraph, triangles=True)
+    p, t, n, _, _ = _evaluate(obj, depsgraph, triangles=True)
     return p, t, n
 
 
@@ -61,18 +73,23 @@ def object_geometry_key(obj: bpy.types.Object, depsgraph=None) -> str:
 
 def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool, instance=None):
     """The one place the add-on evaluates a mesh: world-space positions, then (if `triangles`)
-    triangles and unit normals, and the geometry key (vertex, corner and face counts and the
-    positions' digest: equal keys, same exported mesh up to a re-triangulation). `instance`: a
-    depsgraph object instance whose evaluated object and matrix are used instead."""
+    triangles, unit normals and each triangle's material slot, and the geometry key (vertex,
+    corner and face counts, the faces' material slots' digest and the positions' digest: equal
+    keys, same exported mesh up to a re-triangulation; `same_topology` compares the first
+    four). `instance`: a depsgraph object instance whose evaluated object and matrix are used
+    instead."""
     eval_obj = obj.evaluated_get(depsgraph) if instance is None else instance.object
     mesh = eval_obj.to_mesh()
-    tris = nrm = None
+    tris = nrm = slots = None
     try:
         n = len(mesh.vertices)
         co = np.empty(n * 3, dtype=np.float32)
         # The position attribute reads as one block (vertices' "co" goes item by item).
         mesh.attributes["position"].data.foreach_get("vector", co)
-        counts = f"{n}:{len(mesh.loops)}:{len(mesh.polygons)}"
+        face_slots = np.empty(len(mesh.polygons), dtype=np.int32)
+        mesh.polygons.foreach_get("material_index", face_slots)
+        counts = (f"{n}:{len(mesh.loops)}:{len(mesh.polygons)}:"
+                  f"{hashlib.blake2b(face_slots.tobytes(), digest_size=8).hexdigest()}")
         if triangles:
             mesh.calc_loop_triangles()
             nrm = np.empty(n * 3, dtype=np.float32)
@@ -80,6 +97,8 @@ def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool, instance=None):
             tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
             mesh.loop_triangles.foreach_get("vertices", tris)
             tris = tris.reshape(-1, 3)
+            slots = np.empty(len(mesh.loop_triangles), dtype=np.int32)
+            mesh.loop_triangles.foreach_get("material_index", slots)
     finally:
         eval_obj.to_mesh_clear()
     m = np.array(obj.matrix_world if instance is None else instance.matrix_world, dtype=np.float64)
@@ -94,7 +113,13 @@ def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool, instance=None):
         nrm = nrm.reshape(-1, 3) @ np.linalg.inv(m[:3, :3])
         lengths = np.linalg.norm(nrm, axis=1, keepdims=True)
         nrm = np.where(lengths > 0, nrm / np.maximum(lengths, 1e-30), nrm).astype(np.float32)
-    return co, tris, nrm, key
+    return co, tris, nrm, key, slots
+
+
+def same_topology(key: str, other: str) -> bool:
+    """Whether two geometry keys have the same vertex, corner and face counts and the same
+    faces' material slots (only the positions may differ: a deformation)."""
+    return key.split(":")[:4] == other.split(":")[:4]
 
 
 def lighting_keys(bl_scene: bpy.types.Scene) -> dict[str, str]:
@@ -215,7 +240,7 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
     again."""
     for original, inst in _occluder_instances(depsgraph, previewed):
         try:
-            co, tris, _, key = _evaluate(original, depsgraph, triangles=True, instance=inst)
+            co, tris, _, key, _ = _evaluate(original, depsgraph, triangles=True, instance=inst)
         except RuntimeError:
             continue
         _add_key(info.occluder_keys, original.name, key)
@@ -254,29 +279,59 @@ def set_world(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: ExportI
         info.world = "uniform"
 
 
+def material_slots(obj: bpy.types.Object, material: bpy.types.Material) -> set[int]:
+    """The indices of `obj`'s material slots that hold `material`."""
+    return {i for i, slot in enumerate(obj.material_slots) if slot.material == material}
+
+
 def export_scene(
-    objects: list[bpy.types.Object], depsgraph=None, bl_scene: bpy.types.Scene | None = None
+    objects: list[bpy.types.Object], depsgraph=None, bl_scene: bpy.types.Scene | None = None,
+    material: bpy.types.Material | None = None,
 ) -> tuple[translucent.Scene, ExportInfo]:
     """One `translucent.Scene` from `objects` (their evaluated meshes merged) with the lights and
-    world of `bl_scene`. `info.objects` says which vertex range belongs to which object."""
+    world of `bl_scene`. With `material`, only the faces of that material scatter and receive
+    (their vertices are exported, `ObjectRange.vertices`); each object's faces of other
+    materials cast shadows as an occluder ("NAME [other materials]"), and an object with none of
+    its faces in the material is left out (`info.without_faces`). `info.objects` says which
+    vertex range belongs to which object."""
     bl_scene = bl_scene or bpy.context.scene
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     info = ExportInfo()
-    parts_p, parts_t, parts_n = [], [], []
+    parts_p, parts_t, parts_n, others = [], [], [], []
     offset = 0
     for obj in objects:
         if obj.type != "MESH":
             raise ValueError(f"{obj.name} is a {obj.type}, not a mesh")
-        p, t, n, key = _evaluate(obj, depsgraph, triangles=True)
+        p, t, n, key, slots = _evaluate(obj, depsgraph, triangles=True)
+        evaluated_count, vertices = len(p), None
+        if material is not None:
+            mine = np.isin(slots, list(material_slots(obj, material)))
+            if not mine.any():
+                info.without_faces.append(obj.name)
+                continue
+            if not mine.all():
+                others.append((obj.name, p, t[~mine]))
+                vertices, t = np.unique(t[mine], return_inverse=True)
+                t = t.reshape(-1, 3)
+                p, n = p[vertices], n[vertices]
         parts_p.append(p)
         parts_t.append(t + offset)
         parts_n.append(n)
-        info.objects.append(ObjectRange(obj.name, offset, len(p), key))
+        info.objects.append(ObjectRange(obj.name, offset, len(p), key, vertices, evaluated_count))
         offset += len(p)
     if not parts_p:
-        raise ValueError("no objects to export")
-    scene = translucent.Scene(np.concatenate(parts_p), np.concatenate(parts_t), np.concatenate(parts_n))
+        what = f"the faces of material {material.name!r}" if material is not None else "objects"
+        raise ValueError(f"no {what} to export: " + (", ".join(info.without_faces) or "no objects")
+                         + (" hold it in a slot but on none of their faces" if info.without_faces else ""))
+    info.positions = np.concatenate(parts_p)
+    scene = translucent.Scene(info.positions, np.concatenate(parts_t), np.concatenate(parts_n))
+    for name, p, t in others:
+        # Faces of other materials (eyes, teeth, clothes) shadow the previewed faces as Cycles'
+        # shadow rays see them; they neither scatter nor receive the preview.
+        scene.add_occluder(p, t, name=f"{name} [other materials]")
+        info.occluders.append(f"{name} [other materials]")
     add_occluders(scene, depsgraph, {o.name for o in objects}, info)
     add_lights(scene, bl_scene, info)
     set_world(scene, bl_scene, info)
     return scene, info
+

@@ -152,7 +152,9 @@ def _check(s: Session, mat: bpy.types.Material, suspects: set, bl_scene) -> None
     transport was built from, and keeps the result on the session (`deformed`,
     `members_changed`, `occluders_changed`, `changed`)."""
     members = {o.name for o in objects_with(mat, bl_scene)}
-    gained, lost = sorted(members - set(s.objects)), sorted(set(s.objects) - members)
+    # An object holding the material on none of its faces was left out of the export on purpose.
+    gained = sorted(members - set(s.objects) - set(s.info.without_faces))
+    lost = sorted(set(s.objects) - members)
     s.members_changed = ", ".join([f"{n} took the material" for n in gained] + [f"{n} lost it" for n in lost])
     depsgraph = bpy.context.evaluated_depsgraph_get()
     for r in s.info.objects:
@@ -165,7 +167,7 @@ def _check(s: Session, mat: bpy.types.Material, suspects: set, bl_scene) -> None
         key = export.object_geometry_key(obj, depsgraph)
         if key == r.geometry_key:
             s.deformed.pop(r.name, None)  # the add-on's own colour write, or moved back
-        elif key.split(":")[0] != str(r.count):
+        elif not export.same_topology(key, r.geometry_key):
             s.deformed[r.name] = "topology"
         else:
             s.deformed[r.name] = "deformed"

@@ -7,7 +7,6 @@ import threading
 import time
 
 import bpy
-import numpy as np
 
 from . import export
 from .session import JOBS, objects_with, params
@@ -164,17 +163,14 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
     objects = objects_with(material, bl_scene)
     if not objects:
         raise ValueError(f"no mesh object uses material {material.name!r}")
-    scene, info = export.export_scene(objects, bl_scene=bl_scene)
+    scene, info = export.export_scene(objects, bl_scene=bl_scene, material=material)
     info.skipped_objects = [o.name for o in bl_scene.objects if o.type == "MESH" and o not in objects]
     s = material.translucent
     if method == "hierarchy":
         same = (previous is not None and previous.method == "hierarchy"
                 and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
-        positions = None
-        if same:
-            depsgraph = bpy.context.evaluated_depsgraph_get()
-            positions = np.concatenate([export.evaluated_mesh_arrays(o, depsgraph)[0] for o in objects])
-        job = HierarchyJob(scene, s.material(), previous=previous.transport if same else None, positions=positions,
+        job = HierarchyJob(scene, s.material(), previous=previous.transport if same else None,
+                           positions=info.positions if same else None,
                            profile=s.profile_name())
     else:
         kwargs = dict(coefficients=s.coefficients, degree=int(s.degree), backend=s.backend, profile=s.profile_name())
@@ -190,7 +186,7 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
     job.method = method
     job.chosen_for = params(s)
     job.profile = s.profile_name()
-    return job, [o.name for o in objects], info, export.lighting_keys(bl_scene)
+    return job, [r.name for r in info.objects], info, export.lighting_keys(bl_scene)
 
 
 def in_background(name: str, job: Job, done, failed) -> None:

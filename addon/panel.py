@@ -18,6 +18,10 @@ def summary(sess: Session) -> str:
     export's part, then the method's own report as it gives it."""
     r, info = sess.transport.report, sess.info
     scene = f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped)"
+    if info.without_faces:
+        scene += f", {', '.join(info.without_faces)} holding it on no face left out"
+    if info.occluders:
+        scene += f", {len(info.occluders)} occluder(s)"
     if sess.method == "hierarchy":
         own = ", ".join([f"{r[k]} {label}" for k, label in HIERARCHY_SHOWN if k in r] + [f"{r['seconds']:.2f} s"])
         return (f"{scene}, {len(info.lights)} light(s), {len(info.skipped_lights)} dark skipped, "

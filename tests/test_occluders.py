@@ -3,13 +3,12 @@ left out where they can shadow nothing. Expected values: the sun's closed form (
 blocker, E = strength elsewhere) and the dipole's half-plane integral of its own closed-form
 disc integral (helpers.disc_integral), independent of the code under test."""
 
-import math
 
 import numpy as np
 import pytest
 
 import translucent
-from helpers import disc_integral, entering, plane, rd_total
+from helpers import entering, half_plane, plane, rd_total
 
 
 def square(cx, cy, z, h):
@@ -46,15 +45,6 @@ def test_bad_occluders_are_refused_by_name(bad, match):
     s = translucent.Scene(p, t)
     with pytest.raises(ValueError, match=match):
         s.add_occluder(*bad(*square(0, 0, 1, 1)), name="wall")
-
-
-def half_plane(m, c, d):
-    """int over the half-plane at distance d of the dipole's R_d: int_d^inf acos(d/r)/pi dM(r)."""
-    r = d * np.geomspace(1.0, 2000.0, 4000) if d > 0 else np.geomspace(1e-7, 0.4, 4000)
-    mm = np.array([disc_integral(m, c, x) for x in r])
-    w = np.arccos(np.clip(d / r, -1, 1)) / math.pi
-    mid = 0.5 * (w[1:] + w[:-1])
-    return float(np.sum(mid * np.diff(mm)))
 
 
 def test_prt_under_a_blockers_straight_shadow_edge_meets_the_dipoles_half_plane_integral():
