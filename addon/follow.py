@@ -4,11 +4,19 @@ light or the world changing; a debounced timer checks and refreshes the transpor
 The handler only takes notes (which previewed objects' geometry or transform was tagged; a
 changed light or world is compared at once, it is cheap); a timer runs once the scene has been
 still for DEBOUNCE_S, evaluates the tagged objects to tell a deformation from the add-on's own
-colour writes (those tag the mesh too), and refreshes in the background."""
+colour writes (those tag the mesh too), and refreshes in the background.
+
+A light being dragged is not waited for: where a light or the world changed and nothing but the
+previewed meshes was tagged besides (the add-on's own writes tag them), the check runs
+LIGHT_INTERVAL_S after the first change noticed, still or not; if the meshes did not deform, it
+relights at once, and the next relight starts as soon as that one is done: the preview follows
+the drag at the relight's own pace (`Prt.update`: no walk traced). A mesh that did deform
+sends the check back to waiting for the scene to be still."""
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import bpy
 
@@ -16,10 +24,37 @@ from . import edits, export, jobs
 from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, view_dependent
 
 DEBOUNCE_S = 0.3
-# material name -> (clock at the last change noticed, objects whose geometry may have changed;
-# REST among them: the rest of the scene may have, so the occluders are checked too)
-PENDING: dict[str, tuple[float, set]] = {}
+# Light-only changes: how long after the first one the relight starts, dragging or not [s].
+LIGHT_INTERVAL_S = 0.05
 REST = "\x00the rest of the scene"
+
+
+@dataclass
+class Pending:
+    """What the handler noted for a material since its last check."""
+
+    first: float  # clock at the first change noticed
+    last: float  # clock at the last one
+    # Objects whose geometry may have changed; REST among them: the rest of the scene may have,
+    # so the occluders are checked too.
+    suspects: set = field(default_factory=set)
+    lit: bool = False  # a light or the world changed
+    others: bool = False  # something besides the lights and the previewed meshes changed
+
+    @property
+    def dragging(self) -> bool:
+        """A light change the relight follows at once (see the module's docstring)."""
+        return self.lit and not self.others
+
+    def due_in(self, now: float) -> float:
+        """Seconds until the check is due (<= 0: due)."""
+        if self.dragging:
+            return LIGHT_INTERVAL_S - (now - self.first)
+        return DEBOUNCE_S - (now - self.last)
+
+
+# material name -> what was noted
+PENDING: dict[str, Pending] = {}
 _clock = time.monotonic  # tests may replace it
 
 
@@ -47,11 +82,16 @@ def _describe(s: Session, lighting: str) -> str:
     return ", ".join(parts)
 
 
-def _note(name: str, objects=()) -> None:
-    _, suspects = PENDING.get(name, (0.0, set()))
-    PENDING[name] = (_clock(), suspects | set(objects))
-    if not bpy.app.timers.is_registered(follow_tick):
-        bpy.app.timers.register(follow_tick, first_interval=DEBOUNCE_S)
+def _note(name: str, objects=(), lit: bool = False, others: bool = True) -> None:
+    now = _clock()
+    p = PENDING.setdefault(name, Pending(now, now))
+    p.last = now
+    p.suspects |= set(objects)
+    p.lit, p.others = p.lit or lit, p.others or others
+    # (Re)started to run when the earliest pending check is due: a light change's comes sooner.
+    if bpy.app.timers.is_registered(follow_tick):
+        bpy.app.timers.unregister(follow_tick)
+    bpy.app.timers.register(follow_tick, first_interval=max(0.0, min(q.due_in(now) for q in PENDING.values())))
 
 
 def _is_lighting(id_) -> bool:
@@ -101,7 +141,7 @@ def _follow(scene, tagged: set | None, lighting: bool, linked: bool = True) -> N
             lit = _lighting_difference(s.lighting, keys)
             s.changed = _describe(s, lit)  # the panel says "stale" at once; geometry after the check
         if moved or lit or others:
-            _note(name, moved | {REST} if others else moved)
+            _note(name, moved | {REST} if others else moved, lit=bool(lit), others=others)
 
 
 def follow_again(material: bpy.types.Material) -> None:
@@ -113,24 +153,28 @@ def follow_again(material: bpy.types.Material) -> None:
 
 
 def follow_tick() -> float | None:
-    """The timer: once a material's scene has been still for DEBOUNCE_S, `follow_now` for it.
-    Returns when to run again (None: nothing pending)."""
+    """The timer: once a material's scene has been still for DEBOUNCE_S (LIGHT_INTERVAL_S after
+    the first light change, still or not: `Pending.due_in`), `follow_now` for it. Returns when
+    to run again (None: nothing pending)."""
     now = _clock()
-    due = [n for n, (t, _) in PENDING.items() if now - t >= DEBOUNCE_S]
-    follow_now(due)
+    due = [n for n, p in PENDING.items() if p.due_in(now) <= 0.0]
+    follow_now(due, dragging={n for n in due if PENDING[n].dragging and now - PENDING[n].last < DEBOUNCE_S})
     if not PENDING:
         return None
-    return max(0.05, min(DEBOUNCE_S - (now - t) for t, _ in PENDING.values()))
+    return max(LIGHT_INTERVAL_S, min(p.due_in(now) for p in PENDING.values()))
 
 
-def follow_now(names=None) -> None:
+def follow_now(names=None, dragging: set = frozenset()) -> None:
     """Checks what the handler noted (all pending materials, or `names`) and refreshes the
     transport of those that changed, in the background: PRT again, or the hierarchy (see
-    `jobs.resolve_method`). A material whose job still runs stays pending: checked when it is done."""
+    `jobs.resolve_method`). A material whose job still runs stays pending: checked when it is done.
+    `dragging`: materials checked while a light is still changing; where a mesh deformed too,
+    they go back to waiting for the scene to be still."""
     for name in list(PENDING if names is None else names):
         if name not in PENDING or name in JOBS or name in PREPARING:
             continue
-        _, suspects = PENDING.pop(name)
+        pending = PENDING.pop(name)
+        suspects = pending.suspects
         s, mat = SESSIONS.get(name), bpy.data.materials.get(name)
         if s is None or mat is None:
             continue
@@ -141,6 +185,10 @@ def follow_now(names=None) -> None:
             s.follow_message = "in Edit Mode: the preview follows when you leave it"
             continue
         _check(s, mat, suspects, bpy.context.scene)
+        if name in dragging and s.deformed:
+            pending.others = True  # a deformation as well: debounced as one
+            PENDING[name] = pending
+            continue
         settings = mat.translucent
         if s.changed and settings.enabled and settings.follow_scene:
             _follow_refresh(mat, s)

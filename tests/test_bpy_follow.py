@@ -533,3 +533,51 @@ def test_a_moved_prop_is_stale_until_the_check_and_the_panel_says_which(addon):
     follow.follow_now()
     assert session.SESSIONS[mat.name].changed == f"occluder {box.name} added" and session.state(mat) == "stale"
     assert any(f"occluder {box.name} added" in t for t in draw_panel(addon, mat))
+
+
+def test_a_dragged_light_is_relit_while_it_moves_and_a_deformation_still_waits(addon, monkeypatch):
+    # Issue 29 point 5: a light dragged (a change every frame, the scene never still) is relit
+    # LIGHT_INTERVAL_S after the first change, and again after each relight, though its own
+    # colour write tags the mesh; the last relight equals pressing Precompute for the light where
+    # it stopped. A deformation during the drag waits for the scene to be still (DEBOUNCE_S).
+    import bpy
+
+    from addon import follow, session
+
+    mat, obj, light = lit_sphere(bpy)
+    first = read_preview(obj)
+    clock = [100.0]
+    monkeypatch.setattr(follow, "_clock", lambda: clock[0])
+    bpy.context.view_layer.update()  # the precompute's own write, as Blender shows it at once
+    follow.follow_now()
+    relits = []
+    for frame in range(24):  # 0.4 s at 60 Hz, never still for DEBOUNCE_S
+        light.location.x += 0.01
+        bpy.context.view_layer.update()
+        before = session.SESSIONS[mat.name]
+        follow.follow_tick()
+        if session.SESSIONS[mat.name] is not before:
+            relits.append(frame)
+            assert session.SESSIONS[mat.name].follow_message.startswith("relit:")
+        clock[0] += 1.0 / 60.0
+    # Due LIGHT_INTERVAL_S (3 frames) after the first change, and as long again after the first
+    # change following each relight: every 4-5 frames (waiting for stillness: never).
+    assert len(relits) >= 4 and relits[0] <= 4, relits
+    assert not np.allclose(read_preview(obj), first)
+    # The drag stops; the last change is relit as a precompute would show it.
+    clock[0] += 1.0
+    follow.follow_tick()
+    assert not follow.PENDING or follow.follow_tick() is None
+    relit_like_a_precompute(bpy, session, mat, obj)
+    # A deformation while the light moves: not relit until the scene is still.
+    sess = session.SESSIONS[mat.name]
+    obj.modifiers["Displace"].strength = 0.01
+    light.location.x += 0.01
+    bpy.context.view_layer.update()
+    clock[0] += 0.1
+    follow.follow_tick()
+    assert session.SESSIONS[mat.name] is sess and mat.name in follow.PENDING
+    assert session.SESSIONS[mat.name].deformed == {obj.name: "deformed"}
+    clock[0] += follow.DEBOUNCE_S
+    follow.follow_tick()
+    assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
