@@ -16,6 +16,7 @@ import bpy
 import numpy as np
 
 import translucent
+from translucent import cycles
 
 
 @dataclass
@@ -234,20 +235,31 @@ def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
     return keys
 
 
+def _add_parts(scene: translucent.Scene, obj, name: str, co, tris, slots, info: ExportInfo) -> None:
+    """`tris` of `obj` as occluders, one per material slot they use, each sending light back by
+    its material's diffuse albedo (`translucent.cycles.diffuse_albedo`): named `name` where they
+    use one slot, "OBJECT [Material]" for each where several."""
+    used = np.unique(slots)
+    for k in used:
+        mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+        label = name if len(used) == 1 else f"{obj.name} [{mat.name if mat is not None else 'no material'}]"
+        scene.add_occluder(co, tris[slots == k], name=label, albedo=cycles.diffuse_albedo(mat))
+        info.occluders.append(label)
+
+
 def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: ExportInfo) -> None:
     """Every other object Cycles' shadow rays see (`_occluder_instances`) as an occluder of
-    `scene`, in world space, its key kept in `info.occluder_keys`. Evaluated meshes are freed
-    again."""
+    `scene`, in world space, sending light back by its materials' albedo (`_add_parts`), its key
+    kept in `info.occluder_keys`. Evaluated meshes are freed again."""
     for original, inst in _occluder_instances(depsgraph, previewed):
         try:
-            co, tris, _, key, _ = _evaluate(original, depsgraph, triangles=True, instance=inst)
+            co, tris, _, key, slots = _evaluate(original, depsgraph, triangles=True, instance=inst)
         except RuntimeError:
             continue
         _add_key(info.occluder_keys, original.name, key)
         if len(co) == 0 or len(tris) == 0:
             continue
-        scene.add_occluder(co, tris, name=original.name)
-        info.occluders.append(original.name)
+        _add_parts(scene, original, original.name, co, tris, slots, info)
 
 
 def set_world(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: ExportInfo) -> None:
@@ -310,7 +322,7 @@ def export_scene(
                 info.without_faces.append(obj.name)
                 continue
             if not mine.all():
-                others.append((obj.name, p, t[~mine]))
+                others.append((obj, p, t[~mine], slots[~mine]))
                 vertices, t = np.unique(t[mine], return_inverse=True)
                 t = t.reshape(-1, 3)
                 p, n = p[vertices], n[vertices]
@@ -325,11 +337,10 @@ def export_scene(
                          + (" hold it in a slot but on none of their faces" if info.without_faces else ""))
     info.positions = np.concatenate(parts_p)
     scene = translucent.Scene(info.positions, np.concatenate(parts_t), np.concatenate(parts_n))
-    for name, p, t in others:
+    for obj, p, t, slots in others:
         # Faces of other materials (eyes, teeth, clothes) shadow the previewed faces as Cycles'
-        # shadow rays see them; they neither scatter nor receive the preview.
-        scene.add_occluder(p, t, name=f"{name} [other materials]")
-        info.occluders.append(f"{name} [other materials]")
+        # shadow rays see them, and send light back; they neither scatter nor receive the preview.
+        _add_parts(scene, obj, f"{obj.name} [other materials]", p, t, slots, info)
     add_occluders(scene, depsgraph, {o.name for o in objects}, info)
     add_lights(scene, bl_scene, info)
     set_world(scene, bl_scene, info)

@@ -8,6 +8,8 @@ machine; timings live here, never in tests.
    subdivided once; budget: 5 ms on the CPU), Cycles' profile.
 3. Single scattering (Xu 2007 eqs. 12-15, the dipole): the MS + SS precompute of that mesh and
    one MS + SS edit (radiance toward an eye: L_d + L^(1), exact HG), beside MS alone.
+4. The bunny on a floor: the dipole's precompute with the floor a shadow only and sending light
+   back (one diffuse bounce).
 
 Run: `make bench` (or .venv/bin/python blender_scripts/bench_prt.py [--runs N]).
 """
@@ -80,6 +82,7 @@ def main() -> int:
         )
         kept[profile] = (prt, statistics.median(times))
     relight(p, t, marble, kept, args)
+    floor_bounce(p, t, marble, args)
 
     # Growth: the same surface with 4x the vertices and 4x the samples. Brute force (Xu 2007
     # §6.1) would take 16x; the clustered far field should take a little over 4x.
@@ -212,6 +215,26 @@ def gpu_edits(label, edit, prt, edits) -> None:
         f"{med['upload_seconds']:.3f}, dispatch+wait {med['dispatch_seconds']:.2f}, readback "
         f"{med['readback_seconds']:.2f} ms) over {edits} edits"
     )
+
+
+def floor_bounce(p, t, marble, args) -> None:
+    """The rest of the scene (issue 30): the bunny on a 1 m floor just below it, the floor a
+    shadow only (albedo 0) and sending light back (albedo 0.5, one diffuse bounce); the dipole's
+    precompute, so the irradiance is most of what differs."""
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    c, z = 0.5 * (lo + hi), float(lo[2]) - 1e-3
+    floor = np.array([[c[0] - 0.5, c[1] - 0.5, z], [c[0] + 0.5, c[1] - 0.5, z],
+                      [c[0] + 0.5, c[1] + 0.5, z], [c[0] - 0.5, c[1] + 0.5, z]], np.float32)
+    for albedo in (0.0, 0.5):
+        scene = models.standard_scene(p, t)
+        scene.add_occluder(floor, np.array([[0, 1, 2], [0, 2, 3]]), name="floor", albedo=albedo)
+        times, r = [], None
+        for _ in range(args.runs):
+            t0 = time.perf_counter()
+            r = translucent.Prt(scene, marble, coefficients=32, profile="dipole", single_scattering=False).report
+            times.append(time.perf_counter() - t0)
+        print(f"bunny on a floor of albedo {albedo}: dipole precompute median {statistics.median(times):.2f} s over "
+              f"{args.runs} runs (irradiance {r['seconds_irradiance']:.2f} s, {r['rays'] / 1e6:.1f} M rays)")
 
 
 def single_scattering(big, positions, marble, skin, args) -> None:

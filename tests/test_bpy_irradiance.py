@@ -103,3 +103,59 @@ def test_another_object_shadows_the_previewed_one_as_in_a_cycles_bake(empty_blen
     assert np.median(rel) < 0.03 and np.mean(rel) < 0.03, (np.median(rel), np.mean(rel))
     assert dark.sum() > 10, "the blocker's shadow falls on the plane"
     assert np.all(baked[dark] < 0.05 * e[:, 0].max())
+
+
+def test_a_floors_bounce_and_the_walls_shadow_on_it_match_a_cycles_bake_of_one_bounce(empty_blend):
+    """Issue 30 point 1: a wall lit from behind (its face unlit by the sun) receives what the
+    floor in front of it sends back, one diffuse bounce off the floor's own Diffuse BSDF colour,
+    less where the wall's own shadow darkens the floor; as a Cycles bake limited to one diffuse
+    bounce shows it (direct + indirect, no colour)."""
+    bpy = empty_blend
+    from addon import export
+
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=40, y_subdivisions=40, size=0.4, location=(0.0, 0.0, 0.21))
+    wall = bpy.context.active_object
+    wall.rotation_euler = (0.0, math.radians(90.0), 0.0)  # the grid's +Z normal turned to +X
+    bpy.ops.object.transform_apply(rotation=True)
+    bpy.ops.mesh.primitive_plane_add(size=40.0)
+    floor = bpy.context.active_object
+    colour = (0.5, 0.25, 0.8)
+    for obj, c in ((wall, (1.0, 1.0, 1.0)), (floor, colour)):
+        mat = bpy.data.materials.new(obj.name)
+        nodes = mat.node_tree.nodes
+        nodes.clear()
+        diffuse = nodes.new("ShaderNodeBsdfDiffuse")
+        diffuse.inputs["Color"].default_value = (*c, 1.0)
+        out = nodes.new("ShaderNodeOutputMaterial")
+        mat.node_tree.links.new(diffuse.outputs["BSDF"], out.inputs["Surface"])
+        obj.data.materials.append(mat)
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy, sun.data.angle = 2.0, 0.0
+    sun.rotation_euler = (0.0, math.radians(-45.0), 0.0)  # from above and behind the wall (-X)
+    bpy.context.scene.collection.objects.link(sun)
+    world = bpy.data.worlds.new("Black")
+    bpy.context.scene.world = world
+    world.color = (0.0, 0.0, 0.0)
+    if world.node_tree is not None:
+        next(n for n in world.node_tree.nodes if n.type == "BACKGROUND").inputs["Color"].default_value = (0, 0, 0, 1)
+    scene, info = export.export_scene([wall])
+    assert info.occluders == [floor.name]
+    n = np.array([v.normal for v in wall.data.vertices])
+    assert np.allclose(n, (1.0, 0.0, 0.0), atol=1e-6)
+    e = scene.irradiance(eta=1.0)
+
+    from blender_scripts.lib.cycles_reference import bake_diffuse_vertex_colors, use_cycles
+
+    use_cycles(256)
+    bpy.context.scene.cycles.max_bounces = 1
+    bpy.context.scene.cycles.diffuse_bounces = 1
+    baked = math.pi * bake_diffuse_vertex_colors(wall, {"DIRECT", "INDIRECT"})
+    assert baked.mean() > 0.05, "the floor lights the wall"
+    z = np.array([(wall.matrix_world @ v.co).z for v in wall.data.vertices])
+    for lo, hi in ((0.0, 0.21), (0.21, 0.5)):  # the lower half sees more of the shadowed floor
+        band = (z >= lo) & (z < hi)
+        ours, theirs = e[band].mean(axis=0), baked[band].mean(axis=0)
+        print(f"z {lo}..{hi}: ours {ours}, Cycles {theirs}")
+        np.testing.assert_allclose(ours, theirs, rtol=0.04)
+    # The floor's shadow: the wall's lower half gets less than its upper half, in both.
+    assert baked[z < 0.21].mean() < 0.9 * baked[z >= 0.21].mean()

@@ -7,6 +7,11 @@
 //! a triangle outside every light's shadow volume of the mesh's bounding box blocks nothing, and
 //! costs no memory in the BVH and no time in a traversal. Under a world (light from every
 //! direction) every triangle is kept.
+//!
+//! An object with a diffuse albedo (its Principled Base Color) also sends light back: one
+//! diffuse bounce, as Cycles' indirect light gives it (`bouncing`, `irradiance`'s bounce term).
+//! For that every triangle takes part, culled or not: the floor beside a character lights it,
+//! and a prop's shadow on the floor darkens what the floor sends.
 
 use crate::error::{Error, Result};
 use crate::lights::{rectangle_point, Light, World, POINT_LIMIT};
@@ -16,12 +21,14 @@ use glam::Vec3;
 /// 4.8 GB of triangle soup before the BVH; a production set dressing is a few million.
 pub const OCCLUDER_TRIANGLES: f64 = (1u64 << 26) as f64;
 
-/// One object of the rest of the scene: its name (for the report) and its triangles' range.
+/// One object of the rest of the scene: its name (for the report), its triangles' range and
+/// its diffuse albedo per channel (0: it sends no light back).
 #[derive(Debug, Clone, PartialEq)]
 struct Object {
     name: String,
     start: usize,
     end: usize,
+    albedo: [f32; 3],
 }
 
 /// Triangles of the rest of the scene, object by object, world space (the mesh's units).
@@ -31,6 +38,13 @@ pub struct Occluders {
     objects: Vec<Object>,
     /// Zero-area triangles dropped on the way in (they block no ray).
     degenerate: usize,
+}
+
+/// The rest of the scene as the bounce sees it: every triangle and its albedo per channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bouncing {
+    pub triangles: Vec<[Vec3; 3]>,
+    pub albedo: Vec<[f32; 3]>,
 }
 
 /// What `Occluders::relevant` kept and left out.
@@ -44,14 +58,28 @@ pub struct OccluderReport {
     pub objects_skipped: Vec<String>,
     /// Zero-area triangles dropped when the objects were added.
     pub degenerate: usize,
+    /// Objects that send light back (albedo > 0 in some channel), culled or not.
+    pub objects_bouncing: Vec<String>,
 }
 
 impl Occluders {
     /// Adds one object: `positions` (finite, within `lights::POINT_LIMIT`) and `triangles`
-    /// indexing them. Winding does not matter (a shadow is cast by either side); zero-area
-    /// triangles are dropped and counted. Errors name `name` and what is wrong.
-    pub fn add(&mut self, name: &str, positions: &[Vec3], triangles: &[[u32; 3]]) -> Result<()> {
+    /// indexing them, and its diffuse `albedo` per channel in [0, 1] (0: a shadow only).
+    /// Winding does not matter (a shadow is cast, and light sent back, by either side);
+    /// zero-area triangles are dropped and counted. Errors name `name` and what is wrong.
+    pub fn add(
+        &mut self,
+        name: &str,
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        albedo: [f32; 3],
+    ) -> Result<()> {
         let bad = |why: String| Err(Error::InvalidArgument(format!("occluder {name:?}: {why}")));
+        if !albedo.iter().all(|a| (0.0..=1.0).contains(a)) {
+            return bad(format!(
+                "albedo {albedo:?}: each channel must lie in [0, 1]"
+            ));
+        }
         if positions.is_empty() || triangles.is_empty() {
             return bad(format!(
                 "{} positions and {} triangles: an occluder needs both",
@@ -97,6 +125,7 @@ impl Occluders {
             name: name.to_string(),
             start,
             end: self.triangles.len(),
+            albedo,
         });
         Ok(())
     }
@@ -111,6 +140,28 @@ impl Occluders {
 
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
+    }
+
+    /// Every triangle with its object's albedo, when some object sends light back (None when
+    /// none does: no bounce, no work). All triangles, those of black objects too: they shadow
+    /// the bounce's light and hide what lies behind them.
+    pub fn bouncing(&self) -> Option<Bouncing> {
+        if !self
+            .objects
+            .iter()
+            .any(|o| o.albedo.iter().any(|&a| a > 0.0))
+        {
+            return None;
+        }
+        let albedo = self
+            .objects
+            .iter()
+            .flat_map(|o| std::iter::repeat_n(o.albedo, o.end - o.start))
+            .collect();
+        Some(Bouncing {
+            triangles: self.triangles.clone(),
+            albedo,
+        })
     }
 
     /// The triangles that can lie on a shadow ray from the box `bounds` (the previewed mesh's)
@@ -148,6 +199,10 @@ impl Occluders {
             triangles_kept: kept.len(),
             objects_skipped: skipped,
             degenerate: self.degenerate,
+            objects_bouncing: (self.objects.iter())
+                .filter(|o| o.albedo.iter().any(|&a| a > 0.0))
+                .map(|o| o.name.clone())
+                .collect(),
         };
         (kept, report)
     }
@@ -272,7 +327,7 @@ mod tests {
         let mut o = Occluders::default();
         for (name, c, h) in objects {
             let (p, t) = square(*c, *h);
-            o.add(name, &p, &t).unwrap();
+            o.add(name, &p, &t, [0.0; 3]).unwrap();
         }
         o
     }
@@ -334,11 +389,14 @@ mod tests {
         let err = |r: Result<()>| r.unwrap_err().to_string();
         let mut nan = p.clone();
         nan[2].y = f32::NAN;
-        assert!(err(o.add("wall", &nan, &t)).contains("\"wall\": position 2"));
-        assert!(err(o.add("wall", &p, &[[0, 1, 4]])).contains("triangle 0"));
-        assert!(err(o.add("wall", &[], &[])).contains("needs both"));
+        assert!(err(o.add("wall", &nan, &t, [0.0; 3])).contains("\"wall\": position 2"));
+        assert!(err(o.add("wall", &p, &[[0, 1, 4]], [0.0; 3])).contains("triangle 0"));
+        assert!(err(o.add("wall", &[], &[], [0.0; 3])).contains("needs both"));
         // A zero-area triangle is dropped and counted; the object stays.
-        o.add("sliver", &p, &[[0, 1, 1], [0, 1, 2]]).unwrap();
+        assert!(err(o.add("wall", &p, &t, [0.5, 1.5, 0.0])).contains("albedo"));
+        assert!(err(o.add("wall", &p, &t, [f32::NAN, 0.5, 0.0])).contains("albedo"));
+        o.add("sliver", &p, &[[0, 1, 1], [0, 1, 2]], [0.0; 3])
+            .unwrap();
         assert_eq!((o.triangle_count(), o.degenerate), (1, 1));
     }
 
@@ -350,7 +408,7 @@ mod tests {
         let mut scene = Scene::new(plane(21, 2.0));
         scene.lights = vec![Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap()];
         let (p, t) = square(Vec3::new(0.5, 0.5, 0.3), 0.5);
-        scene.occluders.add("blocker", &p, &t).unwrap();
+        scene.occluders.add("blocker", &p, &t, [0.0; 3]).unwrap();
         let (tracer, report) = scene.shadow_tracer(&Tracer::new(&scene.mesh));
         assert_eq!(report.triangles_kept, 2);
         let mesh = &scene.mesh;
@@ -380,5 +438,44 @@ mod tests {
         assert!(tracer.occluded(below, Vec3::Z, f32::INFINITY));
         assert!(tracer.occluded_by_rest(below, Vec3::Z, 1.0));
         assert!(!tracer.occluded_by_rest(below, Vec3::Z, 0.2));
+    }
+
+    #[test]
+    fn a_wall_on_a_lit_floor_receives_half_the_floors_radiosity() {
+        // A 2 x 2 wall standing at x = 0 (normal +x), 0.1 above a 200 x 200 floor of albedo
+        // (0.5, 0.25, 0.75) under a sun straight down that grazes the wall: the floor fills
+        // half of the wall's cosine-weighted hemisphere, so E = rho E_sun / 2 (the closed form
+        // of the view factor to an infinite plane); a black floor sends nothing.
+        let flat = plane(21, 2.0);
+        let p: Vec<Vec3> = (flat.positions().iter())
+            .map(|v| Vec3::new(v.z, v.x, v.y + 1.1))
+            .collect();
+        let wall = crate::mesh::Mesh::new(p, flat.triangles().to_vec(), None).unwrap();
+        assert!((wall.normals()[0] - Vec3::X).length() < 1e-6);
+        for albedo in [[0.5, 0.25, 0.75], [0.0; 3]] {
+            let mut scene = Scene::new(wall.clone());
+            scene.lights = vec![Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap()];
+            let (fp, ft) = square(Vec3::ZERO, 100.0);
+            scene.occluders.add("floor", &fp, &ft, albedo).unwrap();
+            let mesh = &scene.mesh;
+            let (e, r) = irradiance(
+                &scene,
+                &scene.tracer(),
+                mesh.positions(),
+                mesh.normals(),
+                &IrradianceSettings::default(),
+            )
+            .unwrap();
+            for c in 0..3 {
+                let mean = e.iter().map(|x| f64::from(x[c])).sum::<f64>() / e.len() as f64;
+                let expect = f64::from(albedo[c]) * 2.0 / 2.0;
+                assert!(
+                    (mean - expect).abs() <= 0.02 * expect,
+                    "{c}: {mean} vs {expect}"
+                );
+            }
+            // 16 bounce rays per vertex, and a shadow ray toward the sun per floor hit.
+            assert_eq!(r.rays > 0, albedo[0] > 0.0);
+        }
     }
 }

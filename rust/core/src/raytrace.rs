@@ -1,9 +1,12 @@
 //! Ray casts against the mesh for shadowed irradiance, the walks and the object's own light: a
 //! compressed wide BVH from obvhs over the mesh's triangles, and optionally a second one over the
 //! rest of the scene (`with_occluders`): what shadow rays see besides the mesh (issue 30), while
-//! the walks and the own light's hits see the mesh alone (Cycles' local intersection).
+//! the walks and the own light's hits see the mesh alone (Cycles' local intersection); and, where
+//! some occluder sends light back (`with_bounce`), a third over every occluder with its albedo,
+//! for the one diffuse bounce the irradiance gathers from the rest of the scene.
 
 use crate::mesh::Mesh;
+use crate::occluders::Bouncing;
 use glam::{Vec3, Vec3A};
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::CwBvh;
@@ -47,6 +50,30 @@ impl Bvh {
             .bvh
             .ray_traverse_miss(ray, |ray, id| intersect(&self.triangles[id], ray))
     }
+
+    /// The closest hit: its distance (in the unit frame) and the triangle's place in BVH order.
+    fn closest(&self, ray: Ray) -> Option<(f32, usize)> {
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |ray, id| intersect(&self.triangles[id], ray))
+            .then_some((hit.t, hit.primitive_id as usize))
+    }
+}
+
+/// Every occluder with its diffuse albedo (in BVH order): what the irradiance's bounce meets.
+struct Bounce {
+    bvh: Bvh,
+    albedo: Vec<[f32; 3]>,
+}
+
+/// Where a bounce ray from the mesh first meets the rest of the scene, on a surface that sends
+/// light back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BounceHit {
+    pub point: Vec3,
+    /// The surface's unit normal on the side the ray came from.
+    pub normal: Vec3,
+    pub albedo: [f32; 3],
 }
 
 /// A BVH over one mesh (and, `with_occluders`, one over the rest of the scene). Immutable and
@@ -56,6 +83,8 @@ pub struct Tracer {
     /// The rest of the scene: seen by `occluded` (shadow rays) and `occluded_by_rest`, never
     /// by `intersect` and the walks' casts.
     rest: Option<Arc<Bvh>>,
+    /// Every occluder with its albedo, where some sends light back (`with_bounce`).
+    bounce: Option<Arc<Bounce>>,
     /// How far ray origins are pushed off the surface: relative to the mesh size, so that
     /// meshes from 1e-4 to 1e4 units neither self-shadow nor leak.
     epsilon: f32,
@@ -96,6 +125,7 @@ impl Tracer {
         Tracer {
             own: Arc::new(Bvh::build(tris)),
             rest: None,
+            bounce: None,
             epsilon: EPSILON * scale,
             centre,
             scale,
@@ -106,22 +136,79 @@ impl Tracer {
     /// built in the mesh's frame (so the offsets stay the mesh's): shadow rays (`occluded`)
     /// then stop at either. An empty list gives the mesh alone.
     pub fn with_occluders(&self, occluders: &[[Vec3; 3]]) -> Tracer {
+        let tris = self.in_frame(occluders);
+        Tracer {
+            own: self.own.clone(),
+            rest: (!tris.is_empty()).then(|| Arc::new(Bvh::build(tris))),
+            bounce: self.bounce.clone(),
+            epsilon: self.epsilon,
+            centre: self.centre,
+            scale: self.scale,
+        }
+    }
+
+    /// This tracer with every occluder and its albedo per triangle (`Occluders::bouncing`) for
+    /// the bounce; None: no bounce.
+    pub fn with_bounce(mut self, bouncing: Option<Bouncing>) -> Tracer {
+        self.bounce = bouncing.map(|Bouncing { triangles, albedo }| {
+            let bvh = Bvh::build(self.in_frame(&triangles));
+            let albedo = (bvh.bvh.primitive_indices.iter())
+                .map(|&i| albedo[i as usize])
+                .collect();
+            Arc::new(Bounce { bvh, albedo })
+        });
+        self
+    }
+
+    fn in_frame(&self, triangles: &[[Vec3; 3]]) -> Vec<Triangle> {
         let to_frame = |x: Vec3| Vec3A::from((x - self.centre) / self.scale);
-        let tris: Vec<Triangle> = occluders
-            .iter()
+        (triangles.iter())
             .map(|t| Triangle {
                 v0: to_frame(t[0]),
                 v1: to_frame(t[1]),
                 v2: to_frame(t[2]),
             })
-            .collect();
-        Tracer {
-            own: self.own.clone(),
-            rest: (!tris.is_empty()).then(|| Arc::new(Bvh::build(tris))),
-            epsilon: self.epsilon,
-            centre: self.centre,
-            scale: self.scale,
+            .collect()
+    }
+
+    /// Whether the rest of the scene sends light back (`with_bounce`).
+    pub fn bounces(&self) -> bool {
+        self.bounce.is_some()
+    }
+
+    /// Where the ray from `origin` along `direction` (unit) first meets the rest of the scene,
+    /// when that is nearer than the mesh and sends light back (albedo > 0); None otherwise.
+    pub fn bounce_hit(&self, origin: Vec3, direction: Vec3) -> Option<BounceHit> {
+        let bounce = self.bounce.as_ref()?;
+        let ray = self.ray(origin, direction, f32::INFINITY);
+        let (t, i) = bounce.bvh.closest(ray)?;
+        if self.own.closest(Ray { tmax: t, ..ray }).is_some() {
+            return None; // the mesh itself lies in front
         }
+        let albedo = bounce.albedo[i];
+        if albedo == [0.0; 3] {
+            return None;
+        }
+        let tri = &bounce.bvh.triangles[i];
+        let n = Vec3::from((tri.v1 - tri.v0).cross(tri.v2 - tri.v0)).normalize_or_zero();
+        Some(BounceHit {
+            point: origin + direction * (t * self.scale),
+            normal: if n.dot(direction) > 0.0 { -n } else { n },
+            albedo,
+        })
+    }
+
+    /// A shadow ray from a point of the rest of the scene (a bounce's): whether the mesh or
+    /// any occluder, culled or not, lies along `direction` within (epsilon, t_max).
+    pub fn occluded_from_rest(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
+        let Some(bounce) = &self.bounce else {
+            return self.occluded(origin, direction, t_max);
+        };
+        if t_max <= self.epsilon {
+            return false;
+        }
+        let ray = self.ray(origin, direction, t_max);
+        self.own.occluded(ray) || bounce.bvh.occluded(ray)
     }
 
     /// The offset used for ray origins and t_min.
@@ -214,19 +301,10 @@ impl Tracer {
     }
 
     fn closest(&self, ray: Ray) -> Option<Hit> {
-        let mut hit = RayHit::none();
-        let own = &*self.own;
-        if own
-            .bvh
-            .ray_traverse(ray, &mut hit, |ray, id| intersect(&own.triangles[id], ray))
-        {
-            Some(Hit {
-                t: hit.t * self.scale,
-                triangle: own.bvh.primitive_indices[hit.primitive_id as usize],
-            })
-        } else {
-            None
-        }
+        self.own.closest(ray).map(|(t, i)| Hit {
+            t: t * self.scale,
+            triangle: self.own.bvh.primitive_indices[i],
+        })
     }
 }
 

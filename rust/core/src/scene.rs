@@ -12,7 +12,8 @@ pub struct Scene {
     pub mesh: Mesh,
     pub lights: Vec<Light>,
     pub world: World,
-    /// Other objects: they cast shadows on `mesh`, and do not scatter.
+    /// Other objects: they cast shadows on `mesh` and send light back by their albedo, and do
+    /// not scatter.
     pub occluders: Occluders,
 }
 
@@ -28,12 +29,16 @@ impl Scene {
 
     /// The tracer shadow rays of this scene are cast with: `mesh_tracer` (built over `mesh`)
     /// with the occluders that can shadow the mesh under the current lights and world, and
-    /// what was kept of them. The mesh's BVH is shared, not rebuilt.
+    /// every occluder with its albedo where some sends light back (the irradiance's bounce),
+    /// and what was kept of them. The mesh's BVH is shared, not rebuilt.
     pub fn shadow_tracer(&self, mesh_tracer: &Tracer) -> (Tracer, OccluderReport) {
         let (kept, report) = self
             .occluders
             .relevant(self.mesh.bounds(), &self.lights, &self.world);
-        (mesh_tracer.with_occluders(&kept), report)
+        let tracer = mesh_tracer
+            .with_occluders(&kept)
+            .with_bounce(self.occluders.bouncing());
+        (tracer, report)
     }
 
     /// `shadow_tracer` over a BVH of the mesh built here.

@@ -235,19 +235,31 @@ impl PyScene {
     /// them, either winding. Shadow rays toward every light and the world stop at it; the walks
     /// and the object's own light never enter it. Only triangles that can shadow the mesh
     /// under the scene's lights are kept (all of them under a world): see `occluders`.
-    /// Zero-area triangles are dropped. ValueError names what is wrong.
-    #[pyo3(signature = (positions, triangles, name = "occluder"))]
+    /// Zero-area triangles are dropped. `albedo` (a float or RGB, each in [0, 1]): its diffuse
+    /// reflectance (Principled Base Color); above 0 it sends light back to the mesh by one
+    /// diffuse bounce, every triangle taking part, culled or not. ValueError names what is wrong.
+    #[pyo3(signature = (positions, triangles, name = "occluder", albedo = None))]
     fn add_occluder(
         &mut self,
         positions: &Bound<'_, PyAny>,
         triangles: &Bound<'_, PyAny>,
         name: &str,
+        albedo: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         let positions = vec3_array("positions", positions)?;
         let triangles = triangle_array("triangles", triangles)?;
+        let albedo = albedo
+            .map(|a| rgb("albedo", a))
+            .transpose()?
+            .unwrap_or([0.0; 3]);
+        if !albedo.iter().all(|a| (0.0..=1.0).contains(a)) {
+            return Err(PyValueError::new_err(format!(
+                "albedo {albedo:?}: each channel must lie in [0, 1]"
+            )));
+        }
         self.scene
             .occluders
-            .add(name, &positions, &triangles)
+            .add(name, &positions, &triangles, albedo.map(|a| a as f32))
             .map_err(to_py)?;
         self.lighting_changed();
         Ok(())
@@ -388,6 +400,7 @@ pub fn occluder_dict<'py>(py: Python<'py>, r: &OccluderReport) -> PyResult<Bound
     d.set_item("triangles_kept", r.triangles_kept)?;
     d.set_item("objects_skipped", r.objects_skipped.clone())?;
     d.set_item("degenerate", r.degenerate)?;
+    d.set_item("objects_bouncing", r.objects_bouncing.clone())?;
     Ok(d)
 }
 

@@ -1,5 +1,6 @@
 //! Irradiance entering the surface, I(x) = ∫ F_t(eta, w) L(x, w) (n·w) dw, shadowed
-//! (Xu 2007 eq. 3), from the scene's lights and world in Blender/Cycles units.
+//! (Xu 2007 eq. 3), from the scene's lights and world in Blender/Cycles units, and the light
+//! the rest of the scene sends back by one diffuse bounce (`Estimator::bounce`).
 //! Deterministic: every random number comes from a hash of (seed, point, sample).
 
 use crate::error::{Error, Result};
@@ -62,6 +63,11 @@ pub enum Density {
 
 /// How many times fewer world rays a dense point gets.
 pub const DENSE_WORLD_DIVISOR: u32 = 8;
+
+/// How many times fewer bounce rays a point casts than world rays (`world_samples`): 16 for a
+/// receiver, 2 for a dense point at the defaults. Each finds a point of the rest of the scene
+/// and casts one shadow ray per light (and one world ray) from it.
+pub const BOUNCE_DIVISOR: u32 = 4;
 
 impl IrradianceSettings {
     /// These settings for points of the given density.
@@ -254,8 +260,17 @@ fn estimate_point(
     } else if let Some(w) = world {
         add(&mut sum, est.world(w, settings.world_samples.max(1)));
     }
+    if tracer.bounces() {
+        // A stream of its own: the lights' and the world's draws stay as they were.
+        let mut rng = Rng::new(settings.seed ^ BOUNCE_STREAM, i as u64);
+        let rays = (settings.world_samples / BOUNCE_DIVISOR).max(1);
+        add(&mut sum, est.bounce(reaching, world, rays, &mut rng));
+    }
     (sum, est.rays)
 }
+
+/// Seeds the bounce's random stream apart from the lights' and the world's.
+const BOUNCE_STREAM: u64 = 0x6A09_E667_F3BC_C908;
 
 /// The shadow rays `points` points ask for (as the ticks count them), within the limits
 /// (`limits::WORLD_SAMPLES`, `AREA_SAMPLES`, `IRRADIANCE_RAYS`) or refused naming them.
@@ -508,10 +523,7 @@ impl Estimator<'_> {
                 // Stratified over the unit square, mapped to a cosine-weighted direction.
                 let u1 = (a as f32 + self.rng.next()) / k as f32;
                 let u2 = (c as f32 + self.rng.next()) / k as f32;
-                let r = u1.sqrt();
-                let phi = 2.0 * PI * u2;
-                let cos = (1.0 - u1).max(0.0).sqrt();
-                let dir = t * (r * phi.cos()) + b * (r * phi.sin()) + self.n * cos;
+                let (dir, cos) = cosine_direction(t, b, self.n, u1, u2);
                 if !self.visible(dir, f32::INFINITY) {
                     continue;
                 }
@@ -521,6 +533,70 @@ impl Estimator<'_> {
         }
         scaled(&sum, PI / count as f32)
     }
+}
+
+impl Estimator<'_> {
+    /// One diffuse bounce off the rest of the scene (issue 30): `rays` cosine-weighted rays
+    /// from the point; where one meets an occluder with albedo rho before the mesh, that
+    /// surface's radiance rho E(y) / pi (E(y) its direct irradiance from `lights` and the
+    /// world, shadowed by the mesh and every occluder) enters with F_t. With the cosine-
+    /// weighted pdf cos / pi the estimate is I = (1 / N) sum F_t(cos) rho E(y): the rendering
+    /// equation's first indirect term for a Lambertian rest of the scene (Kajiya 1986), what
+    /// Cycles' diffuse bounce off another object gives. Each light is sampled once per hit
+    /// (an area light at a random point), the world by one cosine-weighted ray.
+    fn bounce(
+        &mut self,
+        lights: &[&Light],
+        world: Option<&World>,
+        rays: u32,
+        rng: &mut Rng,
+    ) -> [f32; 3] {
+        let (t, b) = self.n.any_orthonormal_pair();
+        let origin = self.tracer.offset_origin(self.p, self.n);
+        let mut sum = [0.0f32; 3];
+        for _ in 0..rays {
+            let (dir, cos) = cosine_direction(t, b, self.n, rng.next(), rng.next());
+            self.rays += 1;
+            let Some(hit) = self.tracer.bounce_hit(origin, dir) else {
+                continue;
+            };
+            let y = self.tracer.offset_origin(hit.point, hit.normal);
+            let mut e = [0.0f32; 3];
+            for l in lights {
+                let Some(inc) = l.incident(hit.point, [rng.next(), rng.next()]) else {
+                    continue;
+                };
+                let c = hit.normal.dot(inc.direction);
+                if c > 0.0 {
+                    self.rays += 1;
+                    let dist = inc.distance * (1.0 - 1e-5);
+                    if !self.tracer.occluded_from_rest(y, inc.direction, dist) {
+                        add(&mut e, scaled(&inc.value, c));
+                    }
+                }
+            }
+            if let Some(w) = world {
+                let (u, v) = hit.normal.any_orthonormal_pair();
+                let (d, _) = cosine_direction(u, v, hit.normal, rng.next(), rng.next());
+                self.rays += 1;
+                if !self.tracer.occluded_from_rest(y, d, f32::INFINITY) {
+                    add(&mut e, scaled(&w.radiance(d), PI));
+                }
+            }
+            let f = self.fresnel(cos);
+            add(&mut sum, std::array::from_fn(|c| f * hit.albedo[c] * e[c]));
+        }
+        scaled(&sum, 1.0 / rays as f32)
+    }
+}
+
+/// A cosine-weighted direction about `n` (with `t`, `b` completing its frame) from two uniform
+/// numbers (Malley's method), and its cosine.
+fn cosine_direction(t: Vec3, b: Vec3, n: Vec3, u1: f32, u2: f32) -> (Vec3, f32) {
+    let r = u1.sqrt();
+    let phi = 2.0 * PI * u2;
+    let cos = (1.0 - u1).max(0.0).sqrt();
+    (t * (r * phi.cos()) + b * (r * phi.sin()) + n * cos, cos)
 }
 
 /// A small counter-based generator (SplitMix64 over (seed, point)): reproducible in parallel.

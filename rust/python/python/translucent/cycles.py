@@ -134,6 +134,35 @@ def apply_to_principled(node, p: Principled) -> None:
         node.inputs[socket].default_value = getattr(p, field)
 
 
+# The colour Cycles gives a surface with no material, and the default viewport colour.
+DEFAULT_SURFACE = (0.8, 0.8, 0.8)
+
+
+def diffuse_albedo(material) -> tuple[float, float, float]:
+    """The albedo one diffuse bounce off a surface of `material` (a bpy Material, or None)
+    takes: of the node the Material Output's Surface takes, a Principled BSDF's Base Color x
+    (1 - Metallic) x (1 - Transmission Weight) (what its diffuse and subsurface lobes reflect
+    in all; unconnected values), a Diffuse BSDF's Color; no material: Cycles' default surface
+    (grey 0.8); any other shader, or a connected colour: the material's viewport colour
+    (Viewport Display), an approximation. Specular, sheen and coat layers are left out.
+    Clamped to [0, 1]."""
+    if material is None:
+        return DEFAULT_SURFACE
+    fallback = tuple(float(x) for x in material.diffuse_color[:3])
+    tree = material.node_tree if getattr(material, "use_nodes", True) else None
+    out = None if tree is None else next((n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output),
+                                         None)
+    link = None if out is None or not out.inputs["Surface"].is_linked else out.inputs["Surface"].links[0]
+    node = None if link is None else link.from_node
+    colour = fallback
+    if node is not None and node.type == "BSDF_PRINCIPLED" and not node.inputs["Base Color"].is_linked:
+        k = (1.0 - node.inputs["Metallic"].default_value) * (1.0 - node.inputs["Transmission Weight"].default_value)
+        colour = tuple(float(x) * k for x in node.inputs["Base Color"].default_value[:3])
+    elif node is not None and node.type == "BSDF_DIFFUSE" and not node.inputs["Color"].is_linked:
+        colour = tuple(float(x) for x in node.inputs["Color"].default_value[:3])
+    return tuple(min(max(x, 0.0), 1.0) for x in colour)
+
+
 def read_principled(node) -> Principled:
     """Every input of a Principled BSDF node that changes Cycles' subsurface answer
     (unconnected values)."""

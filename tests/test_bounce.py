@@ -1,0 +1,79 @@
+"""The light the rest of the scene sends back (issue 30 point 1): one diffuse bounce off every
+occluder with an albedo. Expected values from closed forms, independent of the code under test:
+a vertical wall standing on an infinite Lambertian floor of albedo rho under a sun straight
+down sees the floor over half of its cosine-weighted hemisphere, so E = rho E_sun / 2, and what
+enters it is (rho E_sun / 2)(1 - F_dr) (F_dr by quadrature of the Fresnel reflectance written
+out in helpers); the dipole then gives B = E_in R_total far from the wall's edges."""
+
+import numpy as np
+import pytest
+
+import translucent
+from helpers import fresnel_t, plane, rd_total
+
+FLOOR_ALBEDO = (0.5, 0.25, 0.8)
+
+
+def floor(half=50.0):
+    p = np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]], np.float32)
+    return p, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def wall(n=41, size=0.2, lift=0.01):
+    """A square grid standing at x = 0 (normal +X), `lift` above the floor."""
+    p, t = plane(n, size)
+    return np.stack([p[:, 2], p[:, 0], p[:, 1] + size / 2 + lift], axis=1).astype(np.float32), t
+
+
+def scene(albedo=FLOOR_ALBEDO, n=41):
+    s = translucent.Scene(*wall(n))
+    s.add_sun((0.0, 0.0, -1.0), irradiance=2.0)
+    s.add_occluder(*floor(), name="floor", albedo=albedo)
+    return s
+
+
+def f_dr(eta):
+    """Hemispherical-diffuse Fresnel reflectance 2 int_0^1 F_r(mu) mu dmu (Gauss-Legendre)."""
+    x, w = np.polynomial.legendre.leggauss(200)
+    mu = 0.5 * (x + 1.0)
+    return float(np.sum(0.5 * w * 2.0 * (1.0 - np.array([fresnel_t(eta, m) for m in mu])) * mu))
+
+
+def test_a_wall_on_a_lit_floor_receives_half_the_floors_radiosity():
+    s = scene()
+    e = s.irradiance(eta=1.0)
+    np.testing.assert_allclose(e.mean(axis=0), np.array(FLOOR_ALBEDO) * 2.0 / 2.0, rtol=0.02)
+    assert s.occluders["objects_bouncing"] == ["floor"]
+    # The sun grazes the wall (cos = 0): without the floor's albedo nothing reaches it.
+    assert np.all(scene(albedo=0.0).irradiance(eta=1.0) == 0.0)
+
+
+def test_a_prop_shadowing_the_floor_darkens_what_the_floor_sends():
+    # A roof over the floor in front of the wall (x in 0..3, any y): the floor there is in its
+    # shadow and sends nothing; the wall sees that shadowed floor under most of its lower
+    # hemisphere, so it gets much less than rho E / 2 (still something: the floor beyond x = 3).
+    s = scene()
+    roof = np.array([[0.001, -50, 1.0], [3.0, -50, 1.0], [3.0, 50, 1.0], [0.001, 50, 1.0]], np.float32)
+    s.add_occluder(roof, np.array([[0, 1, 2], [0, 2, 3]]), name="roof")
+    e = s.irradiance(eta=1.0)
+    assert np.all(e.mean(axis=0) < 0.2 * np.array(FLOOR_ALBEDO))
+
+
+def test_prt_with_the_dipole_gathers_the_bounce_as_the_closed_form_says():
+    s = scene(n=81)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    b = translucent.Prt(s, m, profile="dipole").radiosity(m)
+    p, _ = wall(81)
+    inner = (np.abs(p[:, 1]) < 0.06) & (p[:, 2] > 0.05) & (p[:, 2] < 0.17)
+    e_in = np.array(FLOOR_ALBEDO) * 2.0 / 2.0 * (1.0 - f_dr(m.eta))
+    for c in range(3):
+        expect = e_in[c] * rd_total(m.sigma_a[c], (1 - m.g) * m.sigma_s[c], m.eta)
+        assert abs(b[inner, c].mean() / expect - 1.0) < 0.03, (c, b[inner, c].mean(), expect)
+        assert np.all(np.abs(b[inner, c] / expect - 1.0) < 0.15), c
+
+
+@pytest.mark.parametrize("bad", [(0.5, 1.5, 0.0), -0.1, (np.nan, 0.5, 0.5), (0.1, 0.2)])
+def test_an_albedo_outside_0_1_is_refused_naming_it(bad):
+    s = translucent.Scene(*wall(5))
+    with pytest.raises(ValueError, match="albedo"):
+        s.add_occluder(*floor(), name="floor", albedo=bad)
