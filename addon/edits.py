@@ -140,17 +140,29 @@ def edit(material: bpy.types.Material) -> None:
     s.last_seconds = s.last_eval["seconds"]
     s.refresh_advised = bool(s.last_eval["refresh_advised"])
     s.not_shown = []
+    users: dict[str, list[str]] = {}  # mesh name -> the objects written into it, in order
     for name, values in writeback.per_object(colors, s.info).items():
         obj = bpy.data.objects.get(name)
         if obj is None:
             continue
-        if len(obj.data.vertices) == len(values):
+        users.setdefault(obj.data.name, []).append(name)
+        if not obj.data.is_editable:
+            # Linked library data is read-only: never written, the panel says how to see it.
+            lib = obj.data.library.filepath if obj.data.library is not None else "a library"
+            s.not_shown.append(f"{name}: its mesh is linked from {lib} (read-only); make it local or a "
+                               "library override to see the preview")
+        elif len(obj.data.vertices) == len(values):
             writeback.write_colors(obj.data, values)
         elif name in s.remap and len(s.remap[name]) == len(obj.data.vertices):
             writeback.write_colors(obj.data, values[s.remap[name]])
         else:
             # The mesh changed since the precompute: the attribute cannot hold the values.
-            s.not_shown.append(name)
+            s.not_shown.append(f"{name}: mesh changed since the precompute, not shown")
+    for mesh, names in users.items():
+        if len(names) > 1:
+            # Linked duplicates (Alt+D): one mesh, one attribute, the last object's light in it.
+            s.not_shown.append(f"{len(names)} objects share the mesh {mesh}: it shows {names[-1]}'s preview "
+                               "(Object > Relations > Make Single User to see each)")
     if s.refresh_advised:
         refresh(material)
 

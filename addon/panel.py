@@ -91,8 +91,7 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
             text = sess.refresh_message if st == "running" or sess.refresh_message.startswith("refresh failed") else (
                 "Material outside the basis' range: precompute again")
             lines.append((text, "ERROR"))
-        for name in sess.not_shown:
-            lines.append((f"{name}: mesh changed since the precompute, not shown", "ERROR"))
+        lines += [(why, "ERROR") for why in sess.not_shown]
     return lines
 
 

@@ -31,6 +31,7 @@ class Session:
     # panel then says so and never shows a number for it).
     last_error: list[float] | None = None
     last_seconds: float = 0.0
+    # Objects whose preview could not be written, each "NAME: why" (the panel shows them).
     not_shown: list[str] = field(default_factory=list)
     # Objects whose modifiers change the vertex count: for each original vertex, the evaluated
     # vertex nearest to it (the modifier stack then interpolates the attribute for display).
