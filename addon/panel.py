@@ -123,6 +123,10 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
                 col = layout.column(align=True)
                 for line in principled.input_lines(p):
                     col.label(text=line)
+                connected = principled.connected_inputs(mat)
+                if connected:
+                    col.label(text=f"Connected, not followed: {', '.join(connected)}; the socket's own value is "
+                                   "used everywhere", icon="ERROR")
         else:
             layout.prop(s, "preset")
         col = layout.column()

@@ -12,6 +12,23 @@ def principled_node(mat):
     return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
 
 
+# The Principled inputs the preview reads (`cycles.read_principled`), by Blender's socket names.
+READ = ("Base Color", "Subsurface Radius", "Subsurface Scale", "Subsurface Anisotropy", "IOR", "Roughness",
+        "Subsurface Weight", "Metallic", "Transmission Weight", "Specular IOR Level")
+
+
+def connected_inputs(mat) -> list[str]:
+    """The inputs the preview reads that a link drives (an image texture, a colour attribute, a
+    procedural), each with the node it comes from: the preview takes the socket's own value
+    there, uniformly, where Cycles evaluates the link per point (not followed yet; the panel
+    says so)."""
+    node = principled_node(mat)
+    if node is None:
+        return []
+    return [f"{name} ({node.inputs[name].links[0].from_node.bl_label})" for name in READ
+            if name in node.inputs and node.inputs[name].is_linked]
+
+
 def principled_inputs(mat):
     """The Principled BSDF inputs Cycles' subsurface answer depends on (`cycles.Principled`),
     or None when the material has no Principled BSDF."""

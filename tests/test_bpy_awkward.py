@@ -90,3 +90,20 @@ def test_a_material_used_by_fifty_objects_is_previewed_on_each(addon):
     np.testing.assert_allclose(read_preview(first), ranges[-1], rtol=1e-6)
     assert sess.not_shown == [f"50 objects share the mesh {first.data.name}: it shows {balls[-1].name}'s preview "
                               "(Object > Relations > Make Single User to see each)"]
+
+
+def test_a_textured_base_color_is_named_as_not_followed(addon):
+    # Issue 30 point 2 is not built: where a link drives an input the preview reads, the panel
+    # says so instead of showing the socket's stale value silently.
+    import bpy
+
+    mat = bpy.data.materials.new("Skin")
+    node = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    node.inputs["Subsurface Weight"].default_value = 1.0
+    mat.translucent.enabled = True
+    mat.translucent.source = "PRINCIPLED"
+    assert not any("not followed" in t for t in draw_panel(addon, mat))
+    tex = mat.node_tree.nodes.new("ShaderNodeTexNoise")
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
+    labels = " ".join(draw_panel(addon, mat))
+    assert "Connected, not followed: Base Color (Noise Texture)" in labels
