@@ -336,7 +336,10 @@ def export_scene(
         raise ValueError(f"no {what} to export: " + (", ".join(info.without_faces) or "no objects")
                          + (" hold it in a slot but on none of their faces" if info.without_faces else ""))
     info.positions = np.concatenate(parts_p)
-    scene = translucent.Scene(info.positions, np.concatenate(parts_t), np.concatenate(parts_n))
+    # Each object its own medium: no light scatters from one into another (Cycles' walk stays
+    # in its object), though they share the material and one transport.
+    owners = np.repeat(np.arange(len(parts_p)), [len(p) for p in parts_p]) if len(parts_p) > 1 else None
+    scene = translucent.Scene(info.positions, np.concatenate(parts_t), np.concatenate(parts_n), objects=owners)
     for obj, p, t, slots in others:
         # Faces of other materials (eyes, teeth, clothes) shadow the previewed faces as Cycles'
         # shadow rays see them, and send light back; they neither scatter nor receive the preview.

@@ -78,6 +78,24 @@ def half_plane(m, c, d):
     return float(np.sum(mid * np.diff(mm)))
 
 
+def assert_own_half_plane(b, co, m, e_in, keep=None, tol=0.02) -> int:
+    """Every vertex on the row y = 0 between 1 mm and 12 cm from the seam x = 0 (and where
+    `keep(x)`) gathers only its own side's light: B = E_in (R_total - H(d)) per channel within
+    `tol` of E_in R_total (the dipole's half-plane integral, `half_plane`). `b` (N, 3) and `co`
+    (N, 3) world positions of the same vertices. Returns how many values were checked."""
+    checked = 0
+    for c in range(3):
+        total = rd_total(m.sigma_a[c], (1 - m.g) * m.sigma_s[c], m.eta)
+        for v in np.flatnonzero(np.abs(co[:, 1]) < 1e-6):
+            x = float(co[v, 0])
+            if abs(x) < 1e-3 or abs(x) > 0.12 or (keep is not None and not keep(x)):
+                continue
+            expect = e_in * (total - half_plane(m, c, abs(x)))
+            assert abs(b[v, c] - expect) < tol * e_in * total, (c, x, b[v, c], expect)
+            checked += 1
+    return checked
+
+
 # ---------------------------------------------------------------- measured in Cycles
 
 # Blender 5.0.1, 128 spp: a 1 x 1 x 0.5 m slab under a white world seen from above, sigma_a

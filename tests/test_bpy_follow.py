@@ -503,7 +503,11 @@ def test_a_prop_added_then_moved_into_the_light_shadows_the_preview_by_itself(ad
     assert session.state(mat) == "ready" and sess.info.occluders == [box.name]
     assert sess.follow_message.startswith("relit:")
     aside = relit_like_a_precompute(bpy, session, mat, obj)
-    np.testing.assert_allclose(aside, first, rtol=0.05, atol=1e-6)  # nothing in the light's way
+    # Nothing in the light's way: the lit side as it was; the grey box (Cycles' default surface,
+    # albedo 0.8) only sends a little light back, also into the sphere's unlit side.
+    lit = first.sum(axis=1) > 0.1 * first.sum(axis=1).max()
+    np.testing.assert_allclose(aside[lit], first[lit], rtol=0.05)
+    assert np.abs(aside - first).max() < 0.03 * first.max()
     # Between the light (0, -0.15, 0.15) and the sphere, smaller than the sphere seen from the
     # light: the middle of the lit side falls in its shadow, the rim stays lit.
     box.scale = (0.2, 0.2, 0.2)

@@ -16,6 +16,16 @@ def square(cx, cy, z, h):
     return p, np.array([[0, 1, 2], [0, 2, 3]])
 
 
+def sunlit(p, t, blocker=None):
+    """The mesh under a sun straight down (3 W/m^2), with `blocker` (positions, triangles) as
+    an occluder named "blocker" when given."""
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), irradiance=3.0)
+    if blocker is not None:
+        s.add_occluder(*blocker, name="blocker")
+    return s
+
+
 def test_a_blocker_shadows_the_irradiance_and_what_cannot_shadow_is_left_out():
     p, t = plane(41, 2.0)
     s = translucent.Scene(p, t)
@@ -75,11 +85,7 @@ def test_an_update_under_a_new_occluder_recasts_the_light_and_meets_a_fresh_prec
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)
 
     def scene(blocked):
-        s = translucent.Scene(p, t)
-        s.add_sun((0.0, 0.0, -1.0), irradiance=3.0)
-        if blocked:
-            s.add_occluder(*square(0.05, 0.0, 0.05, 0.05), name="blocker")
-        return s
+        return sunlit(p, t, square(0.05, 0.0, 0.05, 0.05) if blocked else None)
 
     prt = translucent.Prt(scene(False), m, profile="dipole")
     r = prt.update(lights=scene(True))
@@ -100,11 +106,7 @@ def test_a_hierarchy_update_under_a_new_occluder_shadows_as_the_half_plane_integ
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)
 
     def scene(blocked):
-        s = translucent.Scene(p, t)
-        s.add_sun((0.0, 0.0, -1.0), irradiance=3.0)
-        if blocked:
-            s.add_occluder(*square(0.15, 0.0, 0.05, 0.15), name="blocker")
-        return s
+        return sunlit(p, t, square(0.15, 0.0, 0.05, 0.15) if blocked else None)
 
     h = translucent.Hierarchy(scene(False), m, profile="dipole", mode=mode, estimate_receivers=0)
     e_in = entering(1.3, 1.0, 3.0)

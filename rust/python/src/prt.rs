@@ -675,6 +675,7 @@ impl PyPrt {
         d.set_item("far_clusters", r.far_clusters)?;
         d.set_item("skipped_beyond_support", r.skipped_beyond_support)?;
         d.set_item("skipped_dark", r.skipped_dark)?;
+        d.set_item("skipped_other_object", r.skipped_other_object)?;
         d.set_item("far_field_distance_bound", r.far_field_distance_bound)?;
         d.set_item("seconds_irradiance", r.seconds_irradiance)?;
         d.set_item("interreflection_rays", r.interreflection_rays)?;

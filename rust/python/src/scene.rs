@@ -65,6 +65,29 @@ impl PyScene {
     }
 }
 
+/// Per vertex its object, (N,) integers in [0, 2^32 - 1): `objects` as `Scene` takes it.
+fn object_indices(value: &Bound<'_, PyAny>) -> PyResult<Vec<u32>> {
+    let np = value.py().import("numpy")?;
+    let a = np.call_method1("asarray", (value,))?;
+    let bad =
+        || PyValueError::new_err("objects must be one non-negative integer per vertex, shape (N,)");
+    let ndim: usize = a.getattr("ndim")?.extract()?;
+    let kind: String = a.getattr("dtype")?.getattr("kind")?.extract()?;
+    if ndim != 1 || !(kind == "i" || kind == "u") {
+        return Err(bad());
+    }
+    let v: Vec<i64> = a.call_method0("tolist")?.extract().map_err(|_| bad())?;
+    // u32::MAX stays free: the sample tree marks a node of several objects with it.
+    v.into_iter()
+        .map(|x| {
+            u32::try_from(x)
+                .ok()
+                .filter(|&x| x != u32::MAX)
+                .ok_or_else(bad)
+        })
+        .collect()
+}
+
 fn colour(power: f64, color: &Bound<'_, PyAny>) -> PyResult<[f32; 3]> {
     Ok(rgb("color", color)?.map(|c| (c * power) as f32))
 }
@@ -72,17 +95,25 @@ fn colour(power: f64, color: &Bound<'_, PyAny>) -> PyResult<[f32; 3]> {
 #[pymethods]
 impl PyScene {
     #[new]
-    #[pyo3(signature = (positions, triangles, normals = None))]
+    #[pyo3(signature = (positions, triangles, normals = None, objects = None))]
     fn new(
         py: Python<'_>,
         positions: &Bound<'_, PyAny>,
         triangles: &Bound<'_, PyAny>,
         normals: Option<&Bound<'_, PyAny>>,
+        objects: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let positions = vec3_array("positions", positions)?;
         let triangles = triangle_array("triangles", triangles)?;
         let normals = normals.map(|n| vec3_array("normals", n)).transpose()?;
-        let mesh = run(py, None, |_| Mesh::new(positions, triangles, normals))?;
+        let objects = objects.map(|o| object_indices(o)).transpose()?;
+        let mesh = run(py, None, |_| {
+            let mesh = Mesh::new(positions, triangles, normals)?;
+            match objects {
+                Some(o) => mesh.with_objects(o),
+                None => Ok(mesh),
+            }
+        })?;
         Ok(Self {
             scene: Scene::new(mesh),
             mesh_tracer: OnceLock::new(),

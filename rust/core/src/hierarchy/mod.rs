@@ -239,7 +239,10 @@ impl Hierarchy {
                 positions.len()
             )));
         }
-        let mesh = Mesh::new(positions, self.scene.mesh.triangles().to_vec(), normals)?;
+        let mut mesh = Mesh::new(positions, self.scene.mesh.triangles().to_vec(), normals)?;
+        if let Some(objects) = self.scene.mesh.objects() {
+            mesh = mesh.with_objects(objects.to_vec())?;
+        }
         self.faces = faces_of(&mesh);
         self.scene.mesh = mesh;
         self.tracer = self.scene.tracer();

@@ -25,6 +25,9 @@ pub struct Mesh {
     triangle_areas: Vec<f32>,
     vertex_areas: Vec<f32>,
     report: MeshReport,
+    /// Per vertex, the object it belongs to (`with_objects`): light never scatters from one
+    /// object into another, as Cycles' walk stays in its own object. None: one object.
+    objects: Option<Vec<u32>>,
 }
 
 /// What validation found that is not fatal.
@@ -207,7 +210,47 @@ impl Mesh {
             triangle_areas,
             vertex_areas,
             report,
+            objects: None,
         })
+    }
+
+    /// This mesh as several objects (issue 30 point 4): `objects[v]` is the object vertex `v`
+    /// belongs to. Every triangle's corners must belong to one object; errors name the first
+    /// triangle that mixes two, or a count that is not one per vertex.
+    pub fn with_objects(mut self, objects: Vec<u32>) -> Result<Self> {
+        if objects.len() != self.positions.len() {
+            return Err(Error::InvalidMesh(format!(
+                "{} object indices for {} vertices: give one per vertex",
+                objects.len(),
+                self.positions.len()
+            )));
+        }
+        if let Some((t, tri)) = (self.triangles.iter().enumerate()).find(|(_, t)| {
+            t.iter()
+                .any(|&v| objects[v as usize] != objects[t[0] as usize])
+        }) {
+            return Err(Error::InvalidMesh(format!(
+                "triangle {t} joins vertices of objects {:?}: a triangle belongs to one object",
+                tri.map(|v| objects[v as usize])
+            )));
+        }
+        self.objects = Some(objects);
+        Ok(self)
+    }
+
+    /// The object vertex `v` belongs to (0 when the mesh is one object).
+    pub fn object_of_vertex(&self, v: usize) -> u32 {
+        self.objects.as_ref().map_or(0, |o| o[v])
+    }
+
+    /// The object triangle `t` belongs to.
+    pub fn object_of_triangle(&self, t: usize) -> u32 {
+        self.object_of_vertex(self.triangles[t][0] as usize)
+    }
+
+    /// Per vertex its object, where the mesh holds several (`with_objects`).
+    pub fn objects(&self) -> Option<&[u32]> {
+        self.objects.as_deref()
     }
 
     pub fn positions(&self) -> &[Vec3] {

@@ -314,7 +314,7 @@ pub(super) fn transport_under(
 ) -> Result<Transport> {
     let colour = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
     let t_tree = Instant::now();
-    let tree = lit.tree(&colour);
+    let tree = lit.tree(mesh, &colour);
     report.seconds_tree = t_tree.elapsed().as_secs_f64();
     let disc = ReceiverDisc::new(mesh, &tree, lit.spacing);
     let t_transport = Instant::now();
@@ -334,6 +334,7 @@ pub(super) fn transport_under(
     report.far_clusters = counters.far;
     report.skipped_beyond_support = counters.beyond;
     report.skipped_dark = counters.dark;
+    report.skipped_other_object = counters.other_object;
     report.transport_bytes = transport.bytes();
     report.stored_channels = colour.channels;
     report.seconds_transport = t_transport.elapsed().as_secs_f64();
@@ -401,8 +402,9 @@ impl SampledLight {
         Self::from_values(mesh, spacing, samples, sample_irradiance, vertex_irradiance)
     }
 
-    /// The samples weighted by their projected irradiance times their area, in a moment tree.
-    fn tree(&self, colour: &Projection) -> SampleTree {
+    /// The samples weighted by their projected irradiance times their area, in a moment tree,
+    /// each on its triangle's object of `mesh`.
+    fn tree(&self, mesh: &Mesh, colour: &Projection) -> SampleTree {
         let weighted: Vec<WeightedSample> = self
             .samples
             .iter()
@@ -411,6 +413,7 @@ impl SampledLight {
                 position: s.position,
                 area: s.area,
                 weight: colour.project(i).map(|x| x * s.area),
+                object: mesh.object_of_triangle(s.triangle as usize),
             })
             .collect();
         SampleTree::build(weighted, colour.channels)
@@ -468,7 +471,8 @@ impl ReceiverDisc {
         let excluded: Vec<(f64, [f64; 3])> = mesh
             .positions()
             .par_iter()
-            .map(|p| within(tree, p.as_dvec3(), exclusion))
+            .enumerate()
+            .map(|(v, p)| within(tree, p.as_dvec3(), exclusion, mesh.object_of_vertex(v)))
             .collect();
         Self {
             exclusion,

@@ -10,9 +10,9 @@ use crate::mesh::Mesh;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// Geometric area of the samples within `radius` of `p`, and the sum of their weights
-/// (irradiance x area) per stored channel.
-pub(super) fn within(tree: &SampleTree, p: DVec3, radius: f64) -> (f64, [f64; 3]) {
+/// Geometric area of the samples of `object` within `radius` of `p`, and the sum of their
+/// weights (irradiance x area) per stored channel.
+pub(super) fn within(tree: &SampleTree, p: DVec3, radius: f64, object: u32) -> (f64, [f64; 3]) {
     let ch = tree.channels;
     let mut area = 0.0;
     let mut weight = [0.0f64; 3];
@@ -20,17 +20,17 @@ pub(super) fn within(tree: &SampleTree, p: DVec3, radius: f64) -> (f64, [f64; 3]
     while let Some(ni) = stack.pop() {
         let node = &tree.nodes[ni];
         let d = (node.center - p).length();
-        if d - node.radius >= radius {
+        if d - node.radius >= radius || node.foreign(object) {
             continue;
         }
-        if d + node.radius < radius {
+        if d + node.radius < radius && node.own(object) {
             area += node.area;
             for (c, w) in weight.iter_mut().enumerate().take(ch) {
                 *w += tree.moments[ni * ch + c].w;
             }
         } else if node.first_child == 0 {
             for s in &tree.samples[node.start as usize..node.end as usize] {
-                if (s.position.as_dvec3() - p).length() < radius {
+                if s.object == object && (s.position.as_dvec3() - p).length() < radius {
                     area += f64::from(s.area);
                     for (c, w) in weight.iter_mut().enumerate().take(ch) {
                         *w += f64::from(s.weight[c]);
@@ -86,6 +86,8 @@ pub(super) struct Receiver {
     /// vertex_coverage`), so a rim vertex sees the half disc that is there, not a whole one.
     pub(super) ring_outer: f64,
     pub(super) coverage: f64,
+    /// The object the receiver belongs to: it gathers from that object's samples only.
+    pub(super) object: u32,
 }
 
 #[derive(Debug, Default, Clone, Copy)]
@@ -94,6 +96,8 @@ pub(super) struct Counters {
     pub(super) far: u64,
     pub(super) beyond: u64,
     pub(super) dark: u64,
+    /// Nodes of another object, skipped whole.
+    pub(super) other_object: u64,
 }
 
 impl Counters {
@@ -103,6 +107,7 @@ impl Counters {
             far: self.far + o.far,
             beyond: self.beyond + o.beyond,
             dark: self.dark + o.dark,
+            other_object: self.other_object + o.other_object,
         }
     }
 }
@@ -146,6 +151,10 @@ pub(super) fn transport_row(
             counters.beyond += 1;
             continue;
         }
+        if node.foreign(rx.object) {
+            counters.other_object += 1;
+            continue;
+        }
         if gap >= exclusion && node.dark {
             counters.dark += 1;
             continue;
@@ -153,7 +162,7 @@ pub(super) fn transport_row(
         if node.first_child == 0 {
             for s in &tree.samples[node.start as usize..node.end as usize] {
                 let r = (s.position.as_dvec3() - rx.position).length();
-                if r < exclusion || r >= support {
+                if r < exclusion || r >= support || s.object != rx.object {
                     continue;
                 }
                 counters.exact += 1;
@@ -163,7 +172,7 @@ pub(super) fn transport_row(
                     add_values(c, values, f64::from(s.weight[c]), &mut acc);
                 }
             }
-        } else if gap >= exclusion && far.accepts(node.radius, d) {
+        } else if gap >= exclusion && node.own(rx.object) && far.accepts(node.radius, d) {
             // Two pseudo-samples at mean +- deviation of the cluster's distances reproduce
             // sum w, sum w r and sum w r^2: exact for any profile quadratic in r over the
             // cluster's range. sum w r^2 is exact from the moments; sum w r is the Taylor
@@ -256,6 +265,7 @@ pub(super) fn transport_rows(
                     },
                     ring_outer,
                     coverage: cover,
+                    object: mesh.object_of_vertex(v),
                 };
                 transport_row(tree, basis, far, exclusion, near_radius, &receiver, row)
             })

@@ -111,6 +111,9 @@ pub struct PrtReport {
     pub far_clusters: u64,
     pub skipped_beyond_support: u64,
     pub skipped_dark: u64,
+    /// Sample-tree nodes of another object than the receiver's, skipped whole (no light
+    /// between objects).
+    pub skipped_other_object: u64,
     /// Bound on the relative error of one cluster's mean distance, rho^3 / (2 (d - rho)^2 d),
     /// at the chosen opening ratio (Taylor remainder of |x_o - x| about the cluster centre).
     pub far_field_distance_bound: f64,

@@ -1,6 +1,10 @@
 //! A kd-tree over the irradiance samples whose nodes carry irradiance-weighted moments of
 //! position. It lets the transport precompute sum far samples by cluster: the n log n part of
 //! the PRT precompute that Xu 2007 §6.1 does by brute force (O(vertices x samples)).
+//!
+//! Where the mesh holds several objects, the top of the tree splits them apart first: every
+//! node below holds one object's samples (`Node::object`), so a receiver skips other objects'
+//! nodes whole and sums its own by cluster as before (no light between objects, issue 30).
 
 use glam::{DVec3, Vec3};
 
@@ -15,7 +19,12 @@ pub(crate) struct WeightedSample {
     pub area: f32,
     /// Irradiance times area per stored channel [W] (only the first `channels` are used).
     pub weight: [f32; 3],
+    /// The object the sample lies on (`Mesh::object_of_triangle`).
+    pub object: u32,
 }
+
+/// `Node::object` of a node holding samples of several objects.
+pub(crate) const MIXED: u32 = u32::MAX;
 
 /// Zeroth, first and second moments of the weights about the node centre:
 /// W = sum w, S = sum w d, C = sum w d d^T with d = x - centre.
@@ -78,6 +87,20 @@ pub(crate) struct Node {
     pub first_child: u32,
     /// Whether all weights of all channels are zero (nothing to transport).
     pub dark: bool,
+    /// The object all the node's samples lie on, or `MIXED`.
+    pub object: u32,
+}
+
+impl Node {
+    /// Whether a receiver on `object` gathers nothing from this node.
+    pub fn foreign(&self, object: u32) -> bool {
+        self.object != object && self.object != MIXED
+    }
+
+    /// Whether every sample of the node lies on `object` (it may be summed whole).
+    pub fn own(&self, object: u32) -> bool {
+        self.object == object
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -99,6 +122,8 @@ impl SampleTree {
         };
         let n = samples.len();
         tree.nodes.push(placeholder(0, n));
+        // Only a mesh of several objects splits by object (one object: the check is skipped).
+        let several = samples.iter().any(|s| s.object != samples[0].object);
         // Iterative split: nodes are appended in pairs so a node's children are adjacent.
         let mut stack = vec![0usize];
         while let Some(ni) = stack.pop() {
@@ -107,13 +132,21 @@ impl SampleTree {
                 continue;
             }
             let slice = &mut samples[start..end];
-            let (lo, hi) = slice.iter().fold(
-                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-                |(lo, hi), s| (lo.min(s.position), hi.max(s.position)),
-            );
-            let axis = (hi - lo).max_position();
-            let mid = slice.len() / 2;
-            slice.select_nth_unstable_by(mid, |a, b| a.position[axis].total_cmp(&b.position[axis]));
+            let mid = match several.then(|| split_objects(slice)).flatten() {
+                Some(mid) => mid,
+                None => {
+                    let (lo, hi) = slice.iter().fold(
+                        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                        |(lo, hi), s| (lo.min(s.position), hi.max(s.position)),
+                    );
+                    let axis = (hi - lo).max_position();
+                    let mid = slice.len() / 2;
+                    slice.select_nth_unstable_by(mid, |a, b| {
+                        a.position[axis].total_cmp(&b.position[axis])
+                    });
+                    mid
+                }
+            };
             let first = tree.nodes.len();
             tree.nodes[ni].first_child = first as u32;
             tree.nodes.push(placeholder(start, start + mid));
@@ -173,13 +206,43 @@ impl SampleTree {
                 }
             }
         }
+        let object = if first == 0 {
+            let s = &self.samples[self.nodes[ni].start as usize..self.nodes[ni].end as usize];
+            match s.first() {
+                Some(x) if s.iter().all(|y| y.object == x.object) => x.object,
+                Some(_) => MIXED,
+                None => 0,
+            }
+        } else if self.nodes[first].object == self.nodes[first + 1].object {
+            self.nodes[first].object
+        } else {
+            MIXED
+        };
         let node = &mut self.nodes[ni];
+        node.object = object;
         node.center = center;
         node.radius = radius;
         node.area = area;
         node.dark = m.iter().all(|x| x.w == 0.0);
         self.moments[ni * ch..(ni + 1) * ch].copy_from_slice(&m);
     }
+}
+
+/// Where samples of several objects split by object: sorted by it, cut at the object boundary
+/// nearest the middle. None where all lie on one object (the spatial split goes on).
+fn split_objects(slice: &mut [WeightedSample]) -> Option<usize> {
+    let first = slice.first()?.object;
+    if slice.iter().all(|s| s.object == first) {
+        return None;
+    }
+    slice.sort_unstable_by_key(|s| s.object);
+    let middle = slice[slice.len() / 2].object;
+    let at = slice.partition_point(|s| s.object < middle);
+    Some(if at > 0 {
+        at
+    } else {
+        slice.partition_point(|s| s.object <= middle)
+    })
 }
 
 fn placeholder(start: usize, end: usize) -> Node {
@@ -191,6 +254,7 @@ fn placeholder(start: usize, end: usize) -> Node {
         end: end as u32,
         first_child: 0,
         dark: true,
+        object: 0,
     }
 }
 
@@ -208,6 +272,7 @@ mod tests {
                     position: Vec3::new(t.sin() * 3.0, (t * 1.3).cos(), t * 0.01),
                     area: 1.0 + (i % 3) as f32,
                     weight: [(i % 7) as f32, 1.0, 0.5],
+                    object: 0,
                 }
             })
             .collect();

@@ -91,12 +91,18 @@ class Scene:
     """A triangle mesh with its lights and world."""
 
     def __init__(
-        self, positions: ArrayN3, triangles: npt.ArrayLike, normals: ArrayN3 | None = None
+        self,
+        positions: ArrayN3,
+        triangles: npt.ArrayLike,
+        normals: ArrayN3 | None = None,
+        objects: npt.ArrayLike | None = None,
     ) -> None:
         """`positions` (N, 3) in scene units, held in single precision; `triangles` (M, 3) vertex
         indices of an integer dtype. ValueError for NaN/Inf or out-of-range values (beyond f32, or
         whose squared lengths or cross products overflow it), bad indices, empty meshes or zero
-        total area; TypeError for triangles that are not integers."""
+        total area; TypeError for triangles that are not integers. `objects` (N,) integers: the
+        object each vertex belongs to; PRT's transport gathers no light from another object
+        (Cycles' walk stays in its own). ValueError names a triangle joining two objects."""
     def add_sun(self, direction: Vec3, irradiance: float, color: RGB | None = None) -> None:
         """`direction`: the way the light travels; `irradiance`: Blender's Strength [W/m^2]."""
     def add_point_light(self, position: Vec3, power: float, color: RGB | None = None) -> None:
@@ -294,7 +300,7 @@ class Prt:
         """What the precompute did and left out: samples, support_radius [unit], knots,
         coefficients, basis_size_by_tolerance, representative_error, stored_channels, rays,
         lights_used, lights_skipped_black, lights_unreached, world_skipped, skipped_beyond_support,
-        skipped_dark, single_scattering (bool), single_scattering_share,
+        skipped_dark, skipped_other_object, single_scattering (bool), single_scattering_share,
         single_scattering_tolerance, single_scattering_reason, single (None, or coefficients,
         steps, knots, step_length, groups, spread_groups, legendre_order, transport_bytes,
         quantization_error, on_gpu, rays, bounded_paths, seconds), walks and walks_indirect

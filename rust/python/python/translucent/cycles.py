@@ -149,7 +149,9 @@ def diffuse_albedo(material) -> tuple[float, float, float]:
     if material is None:
         return DEFAULT_SURFACE
     fallback = tuple(float(x) for x in material.diffuse_color[:3])
-    tree = material.node_tree if getattr(material, "use_nodes", True) else None
+    # Blender 5 always has nodes (use_nodes is deprecated); a tree-less material reads its
+    # viewport colour.
+    tree = material.node_tree
     out = None if tree is None else next((n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output),
                                          None)
     link = None if out is None or not out.inputs["Surface"].is_linked else out.inputs["Surface"].links[0]
