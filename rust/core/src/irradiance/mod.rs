@@ -260,8 +260,9 @@ fn estimate_point(
     } else if let Some(w) = world {
         add(&mut sum, est.world(w, settings.world_samples.max(1)));
     }
-    if tracer.bounces() {
-        // A stream of its own: the lights' and the world's draws stay as they were.
+    if tracer.bounces() && (!reaching.is_empty() || world.is_some()) {
+        // A stream of its own: the lights' and the world's draws stay as they were. With no
+        // source there is nothing to send back: no ray.
         let mut rng = Rng::new(settings.seed ^ BOUNCE_STREAM, i as u64);
         let rays = (settings.world_samples / BOUNCE_DIVISOR).max(1);
         add(&mut sum, est.bounce(reaching, world, rays, &mut rng));
