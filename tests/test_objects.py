@@ -43,6 +43,12 @@ def test_two_touching_objects_gather_no_light_from_each_other():
     e_in = entering(m.eta, 1.0, 3.0)
     row = np.abs(p[:, 1]) < 1e-6
     assert assert_own_half_plane(b, p, m, e_in) > 80
+    # On the seam itself each object's vertex is on its own rim: half the plane's, H(0) = R_total / 2.
+    seam = np.flatnonzero(row & (np.abs(p[:, 0]) < 1e-6))
+    assert len(seam) == 2
+    for c in range(3):
+        half = 0.5 * e_in * rd_total(m.sigma_a[c], (1 - m.g) * m.sigma_s[c], m.eta)
+        np.testing.assert_allclose(b[seam, c], half, rtol=0.02)
     # One object: light crosses the seam, the vertices beside it gather the whole plane's.
     whole = translucent.Prt(lit(p, t), m, profile="dipole").radiosity(m)
     near = row & (np.abs(p[:, 0]) > 1e-3) & (np.abs(p[:, 0]) < 0.006)

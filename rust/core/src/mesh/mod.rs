@@ -326,19 +326,19 @@ impl Mesh {
         weld.iter().map(|&w| boundary[w as usize]).collect()
     }
 
-    /// Per vertex the first vertex at its position (a seam split by an exporter is not a
-    /// boundary), and per such welded vertex whether an edge exactly one triangle of positive
-    /// area uses ends there.
+    /// Per vertex the first vertex at its position on its object (a seam split by an exporter
+    /// is not a boundary; where two objects meet, each has its own), and per such welded vertex
+    /// whether an edge exactly one triangle of positive area uses ends there.
     fn welded_open_edges(&self) -> (Vec<u32>, Vec<bool>) {
         use std::collections::HashMap;
-        let mut canonical: HashMap<[u32; 3], u32> = HashMap::new();
+        let mut canonical: HashMap<([u32; 3], u32), u32> = HashMap::new();
         let weld: Vec<u32> = self
             .positions
             .iter()
             .enumerate()
             .map(|(i, p)| {
                 *canonical
-                    .entry(p.to_array().map(f32::to_bits))
+                    .entry((p.to_array().map(f32::to_bits), self.object_of_vertex(i)))
                     .or_insert(i as u32)
             })
             .collect();
