@@ -58,6 +58,20 @@ impl Bvh {
             .ray_traverse(ray, &mut hit, |ray, id| intersect(&self.triangles[id], ray))
             .then_some((hit.t, hit.primitive_id as usize))
     }
+
+    /// `closest` among the triangles whose object (`objects`, in BVH order) is `object`.
+    fn closest_of(&self, ray: Ray, objects: &[u32], object: u32) -> Option<(f32, usize)> {
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |ray, id| {
+                if objects[id] == object {
+                    intersect(&self.triangles[id], ray)
+                } else {
+                    f32::INFINITY
+                }
+            })
+            .then_some((hit.t, hit.primitive_id as usize))
+    }
 }
 
 /// Every occluder with its diffuse albedo (in BVH order): what the irradiance's bounce meets.
@@ -80,6 +94,9 @@ pub struct BounceHit {
 /// `Sync`: cast rays from any number of threads.
 pub struct Tracer {
     own: Arc<Bvh>,
+    /// Per triangle of `own`, in BVH order, its object, where the mesh holds several
+    /// (`Mesh::with_objects`): the walks' rays see their own object only.
+    objects: Option<Arc<Vec<u32>>>,
     /// The rest of the scene: seen by `occluded` (shadow rays) and `occluded_by_rest`, never
     /// by `intersect` and the walks' casts.
     rest: Option<Arc<Bvh>>,
@@ -122,8 +139,15 @@ impl Tracer {
                 v2: Vec3A::from(p[t[2] as usize]),
             })
             .collect();
+        let own = Bvh::build(tris);
+        let objects = mesh.objects().map(|_| {
+            let of =
+                (own.bvh.primitive_indices.iter()).map(|&t| mesh.object_of_triangle(t as usize));
+            Arc::new(of.collect())
+        });
         Tracer {
-            own: Arc::new(Bvh::build(tris)),
+            own: Arc::new(own),
+            objects,
             rest: None,
             bounce: None,
             epsilon: EPSILON * scale,
@@ -139,6 +163,7 @@ impl Tracer {
         let tris = self.in_frame(occluders);
         Tracer {
             own: self.own.clone(),
+            objects: self.objects.clone(),
             rest: (!tris.is_empty()).then(|| Arc::new(Bvh::build(tris))),
             bounce: self.bounce.clone(),
             epsilon: self.epsilon,
@@ -256,7 +281,19 @@ impl Tracer {
     /// The closest hit on the mesh (never the rest of the scene) along `direction` (unit)
     /// from `origin` within (epsilon, t_max).
     pub fn intersect(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        self.closest(self.ray(origin, direction, t_max))
+        self.closest(self.ray(origin, direction, t_max), None)
+    }
+
+    /// `intersect` on `object`'s triangles alone, where the mesh holds several objects (Cycles'
+    /// local intersection: a walk sees its own object); all triangles where it holds one.
+    pub fn intersect_in(
+        &self,
+        origin: Vec3,
+        direction: Vec3,
+        t_max: f32,
+        object: u32,
+    ) -> Option<Hit> {
+        self.closest(self.ray(origin, direction, t_max), Some(object))
     }
 
     /// As `intersect` from `t` = 0: for a point strictly inside a closed mesh (a subsurface
@@ -266,11 +303,18 @@ impl Tracer {
     /// within that of a flat part of the surface saw no surface and walked on outside
     /// (measured: 7e-5 below the top of a unit box, rays straight up missed it). The ray
     /// starts `INSIDE_BACKOFF` behind the point instead and counts hits from the point on.
-    pub fn intersect_from_inside(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
+    /// On `object`'s triangles alone where the mesh holds several (`intersect_in`).
+    pub fn intersect_from_inside(
+        &self,
+        origin: Vec3,
+        direction: Vec3,
+        t_max: f32,
+        object: u32,
+    ) -> Option<Hit> {
         let back = INSIDE_BACKOFF * self.scale;
         let mut ray = self.ray(origin - direction * back, direction, t_max + back);
         ray.tmin = INSIDE_BACKOFF;
-        self.closest(ray).map(|h| Hit {
+        self.closest(ray, Some(object)).map(|h| Hit {
             t: (h.t - back).max(0.0),
             triangle: h.triangle,
         })
@@ -278,14 +322,20 @@ impl Tracer {
 
     /// Whether the ray from `p` along `direction` (the outward normal of the surface `p` lies
     /// on) first meets a surface of `mesh` from behind: `p` lies inside a closed part of the
-    /// mesh (an eyeball sunk into a head), where no light from outside reaches it.
-    pub fn inside_a_part(&self, mesh: &Mesh, p: Vec3, direction: Vec3) -> bool {
-        self.intersect(self.offset_origin(p, direction), direction, f32::INFINITY)
-            .is_some_and(|h| {
-                let [a, b, c] =
-                    mesh.triangles()[h.triangle as usize].map(|i| mesh.positions()[i as usize]);
-                (b - a).cross(c - a).dot(direction) > 0.0
-            })
+    /// mesh (an eyeball sunk into a head), where no light from outside reaches it. Parts of
+    /// `object` alone, where the mesh holds several objects (another object is not its medium).
+    pub fn inside_a_part(&self, mesh: &Mesh, p: Vec3, direction: Vec3, object: u32) -> bool {
+        self.intersect_in(
+            self.offset_origin(p, direction),
+            direction,
+            f32::INFINITY,
+            object,
+        )
+        .is_some_and(|h| {
+            let [a, b, c] =
+                mesh.triangles()[h.triangle as usize].map(|i| mesh.positions()[i as usize]);
+            (b - a).cross(c - a).dot(direction) > 0.0
+        })
     }
 
     /// Per vertex of `mesh`: `inside_a_part` along its normal (false where it has none).
@@ -295,13 +345,18 @@ impl Tracer {
             .into_par_iter()
             .map(|v| {
                 let n = mesh.normals()[v];
-                n != Vec3::ZERO && self.inside_a_part(mesh, mesh.positions()[v], n)
+                n != Vec3::ZERO
+                    && self.inside_a_part(mesh, mesh.positions()[v], n, mesh.object_of_vertex(v))
             })
             .collect()
     }
 
-    fn closest(&self, ray: Ray) -> Option<Hit> {
-        self.own.closest(ray).map(|(t, i)| Hit {
+    fn closest(&self, ray: Ray, object: Option<u32>) -> Option<Hit> {
+        let hit = match (&self.objects, object) {
+            (Some(objects), Some(o)) => self.own.closest_of(ray, objects, o),
+            _ => self.own.closest(ray),
+        };
+        hit.map(|(t, i)| Hit {
             t: t * self.scale,
             triangle: self.own.bvh.primitive_indices[i],
         })
@@ -402,11 +457,11 @@ mod tests {
             (0.9, 0.9, false),
         ] {
             let q = Vec3::new(1.0, y, z);
-            assert_eq!(tracer.inside_a_part(&mesh, q, Vec3::X), inside, "{q:?}");
+            assert_eq!(tracer.inside_a_part(&mesh, q, Vec3::X, 0), inside, "{q:?}");
         }
         let q = Vec3::new(0.7, 0.1, 0.1);
-        assert!(tracer.inside_a_part(&mesh, q, -Vec3::X));
-        assert!(!tracer.inside_a_part(&mesh, Vec3::new(1.3, 0.1, 0.1), Vec3::X));
+        assert!(tracer.inside_a_part(&mesh, q, -Vec3::X, 0));
+        assert!(!tracer.inside_a_part(&mesh, Vec3::new(1.3, 0.1, 0.1), Vec3::X, 0));
     }
 
     /// Two parallel unit squares at z = 0 and z = h, scaled by `s`.

@@ -105,6 +105,7 @@ impl Walker<'_> {
                 &mut streams,
                 true,
                 record.then_some(&mut exits),
+                self.mesh.object_of_vertex(v as usize),
             );
             let y = eq * twin.total + g.dot(twin.offset) - eq * plane;
             if record {
@@ -187,9 +188,19 @@ impl Walker<'_> {
                 let mut streams = Streams::new(key);
                 (0..PLANE_CHUNK)
                     .map(|_| {
-                        self.walk(Vec3::ZERO, Vec3::Z, None, 0, m, &mut streams, false, None)
-                            .1
-                            .total
+                        self.walk(
+                            Vec3::ZERO,
+                            Vec3::Z,
+                            None,
+                            0,
+                            m,
+                            &mut streams,
+                            false,
+                            None,
+                            0,
+                        )
+                        .1
+                        .total
                     })
                     .sum()
             })

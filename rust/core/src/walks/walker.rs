@@ -248,6 +248,7 @@ impl Walker<'_> {
         streams: &mut Streams,
         mesh: bool,
         mut exits: Option<&mut Vec<ExitRecord>>,
+        object: u32,
     ) -> (f64, PlaneScore, u64) {
         let Streams {
             flights: rng,
@@ -302,6 +303,7 @@ impl Walker<'_> {
                     inside.pos.as_vec3(),
                     dir.as_vec3(),
                     reach as f32,
+                    object,
                 );
                 let s = hit.map_or(f64::INFINITY, |h| f64::from(h.t));
                 let mut far_hit = None;
@@ -312,6 +314,7 @@ impl Walker<'_> {
                         from.as_vec3(),
                         dir.as_vec3(),
                         f32::INFINITY,
+                        object,
                     );
                     far_hit.map(|h| f64::from(h.t))
                 });
@@ -423,7 +426,8 @@ impl Walker<'_> {
             Placement::Crossed => {
                 let outward = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
                 if let Some(n) = outward.try_normalize() {
-                    if self.tracer.inside_a_part(self.mesh, y.as_vec3(), n) {
+                    let object = self.mesh.object_of_triangle(triangle as usize);
+                    if self.tracer.inside_a_part(self.mesh, y.as_vec3(), n, object) {
                         return Exit::Inside;
                     }
                 }
@@ -482,7 +486,11 @@ impl Walker<'_> {
         let d = (t * (r * phi.cos()) + b * (r * phi.sin()) + lobe * (1.0 - u.0).max(0.0).sqrt())
             .normalize();
         let origin = self.tracer.offset_origin(y.as_vec3(), lobe.as_vec3());
-        let Some(hit) = self.tracer.intersect(origin, d.as_vec3(), f32::INFINITY) else {
+        let object = self.mesh.object_of_triangle(triangle as usize);
+        let Some(hit) = self
+            .tracer
+            .intersect_in(origin, d.as_vec3(), f32::INFINITY, object)
+        else {
             return (None, 1);
         };
         let z = origin.as_dvec3() + d * f64::from(hit.t);
@@ -498,7 +506,7 @@ impl Walker<'_> {
             rays += 1;
             if !self
                 .tracer
-                .inside_a_part(self.mesh, z.as_vec3(), d.as_vec3())
+                .inside_a_part(self.mesh, z.as_vec3(), d.as_vec3(), object)
             {
                 return (None, rays);
             }

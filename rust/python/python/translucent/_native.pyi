@@ -101,8 +101,8 @@ class Scene:
         indices of an integer dtype. ValueError for NaN/Inf or out-of-range values (beyond f32, or
         whose squared lengths or cross products overflow it), bad indices, empty meshes or zero
         total area; TypeError for triangles that are not integers. `objects` (N,) integers: the
-        object each vertex belongs to; PRT's transport gathers no light from another object
-        (Cycles' walk stays in its own). ValueError names a triangle joining two objects."""
+        object each vertex belongs to; PRT's transport and its walks gather no light from another
+        object (Cycles' walk stays in its own). ValueError names a triangle joining two objects."""
     def add_sun(self, direction: Vec3, irradiance: float, color: RGB | None = None) -> None:
         """`direction`: the way the light travels; `irradiance`: Blender's Strength [W/m^2]."""
     def add_point_light(self, position: Vec3, power: float, color: RGB | None = None) -> None:
