@@ -94,3 +94,17 @@ def test_the_walks_stay_in_their_object():
     inner = row & (np.abs(p[:, 0]) > 0.03) & (np.abs(p[:, 0]) < 0.06)
     assert np.all(one[seam] > 0.95 * one[inner].mean(axis=0))
     assert np.all(b[seam] < 0.75 * b[inner].mean(axis=0)), (b[seam], b[inner].mean(axis=0))
+
+
+def test_the_reference_integrates_each_receivers_own_object():
+    # The ground truth honours objects too: on the seam row it meets the dipole's half-plane
+    # integral, E_in (R_total - H(d)), and E_in R_total / 2 on the seam itself.
+    p, t, objects = two_grids(n=21)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    row = np.flatnonzero((np.abs(p[:, 1]) < 1e-6) & (np.abs(p[:, 0]) < 0.05))
+    b = translucent.reference_radiosity(lit(p, t, objects), m, rel_tol=1e-3, receivers=row, profile="dipole")
+    e_in = entering(m.eta, 1.0, 3.0)
+    for c in range(3):
+        total = rd_total(m.sigma_a[c], (1 - m.g) * m.sigma_s[c], m.eta)
+        expect = np.array([e_in * (total - half_plane(m, c, abs(float(p[v, 0])))) for v in row])
+        np.testing.assert_allclose(b[:, c], expect, rtol=0.01)

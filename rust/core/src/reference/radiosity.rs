@@ -74,6 +74,8 @@ const TAIL_SHARE: f64 = 0.1;
 
 /// The mesh at one level: sub-triangles grouped by triangle, with their irradiance.
 struct Level {
+    /// Per triangle its object (`Mesh::object_of_triangle`): a receiver integrates its own.
+    objects: Vec<u32>,
     triangles: Vec<Patch>,
     /// Sub-triangles of triangle t: subs[first[t]..first[t + 1]].
     first: Vec<usize>,
@@ -177,6 +179,9 @@ fn build_level(mesh: &Mesh, level: u32, irradiance: &IrradianceFn) -> Result<Lev
         })
         .collect();
     Ok(Level {
+        objects: (0..mesh.triangles().len())
+            .map(|t| mesh.object_of_triangle(t))
+            .collect(),
         triangles,
         first,
         subs,
@@ -193,10 +198,19 @@ fn curvature_scale(dip: &Profile, r: f64) -> f64 {
     1.0 / s.decay + 2.0 / r.max(s.near)
 }
 
-fn radiosity_at(x: DVec3, lv: &Level, dips: &[Profile; 3], support: &[f64; 3]) -> ([f64; 3], u64) {
+fn radiosity_at(
+    x: DVec3,
+    object: u32,
+    lv: &Level,
+    dips: &[Profile; 3],
+    support: &[f64; 3],
+) -> ([f64; 3], u64) {
     let mut b = [0.0f64; 3];
     let mut skipped = 0u64;
     for (t, tri) in lv.triangles.iter().enumerate() {
+        if lv.objects[t] != object {
+            continue; // another object: no light between objects (Cycles' local walk)
+        }
         let d = (x - tri.centroid).length();
         // The receiver is a corner of this triangle (by position, so duplicated vertices count).
         let fan = tri.corners.iter().position(|p| *p == x);
@@ -343,6 +357,7 @@ pub fn reference_radiosity(
                     }
                     let (b, s) = radiosity_at(
                         mesh.positions()[v as usize].as_dvec3(),
+                        mesh.object_of_vertex(v as usize),
                         &lv,
                         &dips,
                         &support,
