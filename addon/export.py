@@ -216,9 +216,11 @@ def _occluder_instances(depsgraph, previewed: set):
         yield original, inst
 
 
-def _add_key(keys: dict, name: str, key: str) -> None:
-    # An object instanced several times: its instances' keys in the depsgraph's order.
-    keys[f"occluder {name}"] = keys.get(f"occluder {name}", "") + key + ";"
+def _add_key(keys: dict, obj, key: str) -> None:
+    # The geometry and what the object sends back (its slots' albedo: a colour edit relights);
+    # an object instanced several times: its instances' keys in the depsgraph's order.
+    albedo = [cycles.diffuse_albedo(s.material) for s in obj.material_slots] or [cycles.DEFAULT_SURFACE]
+    keys[f"occluder {obj.name}"] = keys.get(f"occluder {obj.name}", "") + f"{key}:{albedo!r};"
 
 
 def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
@@ -229,7 +231,7 @@ def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
     keys: dict[str, str] = {}
     for original, inst in _occluder_instances(depsgraph, previewed):
         try:
-            _add_key(keys, original.name, _evaluate(original, depsgraph, triangles=False, instance=inst)[3])
+            _add_key(keys, original, _evaluate(original, depsgraph, triangles=False, instance=inst)[3])
         except RuntimeError:
             continue
     return keys
@@ -256,7 +258,7 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
             co, tris, _, key, slots = _evaluate(original, depsgraph, triangles=True, instance=inst)
         except RuntimeError:
             continue
-        _add_key(info.occluder_keys, original.name, key)
+        _add_key(info.occluder_keys, original, key)
         if len(co) == 0 or len(tris) == 0:
             continue
         _add_parts(scene, original, original.name, co, tris, slots, info)

@@ -88,10 +88,10 @@ def _note(name: str, objects=(), lit: bool = False, others: bool = True) -> None
     p.last = now
     p.suspects |= set(objects)
     p.lit, p.others = p.lit or lit, p.others or others
-    # (Re)started to run when the earliest pending check is due: a light change's comes sooner.
-    if bpy.app.timers.is_registered(follow_tick):
-        bpy.app.timers.unregister(follow_tick)
-    bpy.app.timers.register(follow_tick, first_interval=max(0.0, min(q.due_in(now) for q in PENDING.values())))
+    # A timer already waiting runs within DEBOUNCE_S and then comes back as soon as the
+    # earliest pending check is due (`follow_tick`'s return).
+    if not bpy.app.timers.is_registered(follow_tick):
+        bpy.app.timers.register(follow_tick, first_interval=max(0.0, p.due_in(now)))
 
 
 def _is_lighting(id_) -> bool:
@@ -115,8 +115,10 @@ def follow_scene(scene, depsgraph) -> None:
             lighting = True
         elif isinstance(id_, bpy.types.Object) and (u.is_updated_geometry or u.is_updated_transform):
             tagged.add(id_.name)
-        # Objects linked, unlinked or given a material: which objects carry it may differ.
-        linked = linked or isinstance(id_, (bpy.types.Scene, bpy.types.Collection))
+        # Objects linked, unlinked or given a material: which objects carry it may differ; a
+        # material or its nodes edited: what an occluder sends back may have.
+        linked = linked or isinstance(id_, (bpy.types.Scene, bpy.types.Collection, bpy.types.Material,
+                                            bpy.types.NodeTree))
     _follow(scene, tagged, lighting, linked)
 
 

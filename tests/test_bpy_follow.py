@@ -585,3 +585,32 @@ def test_a_dragged_light_is_relit_while_it_moves_and_a_deformation_still_waits(a
     clock[0] += follow.DEBOUNCE_S
     follow.follow_tick()
     assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
+
+
+def test_a_floors_colour_edit_relights_what_it_sends_back(addon):
+    # Issue 30: the floor under the sphere sends light back by its Base Color; painting it black
+    # is followed (relit, no walk traced), and the sphere's underside, lit by the floor alone,
+    # goes dark.
+    import bpy
+
+    from addon import follow, session
+
+    mat, obj, _ = lit_sphere(bpy)
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, -0.045))
+    floor = bpy.context.active_object
+    paint = bpy.data.materials.new("Floor paint")
+    node = next(n for n in paint.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    node.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    floor.data.materials.append(paint)
+    bpy.context.view_layer.update()
+    follow.follow_now()
+    lit_floor = read_preview(obj).copy()
+    p = np.array([v.co for v in obj.data.vertices])
+    under = p[:, 2] < -0.03
+    assert np.all(lit_floor[under].sum(axis=1) > 0)
+    node.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bpy.context.view_layer.update()
+    follow.follow_now()
+    assert session.SESSIONS[mat.name].follow_message.startswith("relit:")
+    dark = relit_like_a_precompute(bpy, session, mat, obj)
+    assert np.all(dark[under].sum(axis=1) < 0.2 * lit_floor[under].sum(axis=1))
