@@ -163,8 +163,7 @@ impl PyHierarchy {
                 inner.set_positions(p, n)?;
             }
             if let Some((l, w, o)) = lights {
-                inner.set_occluders(o);
-                inner.set_lights(l, w);
+                inner.set_lighting(l, w, Some(o));
             }
             Ok(())
         })

@@ -257,30 +257,30 @@ impl Hierarchy {
     /// New lights and world: the next evaluation samples the irradiance again, for the lights
     /// that changed only (`irradiance::PerSource`).
     pub fn set_lights(&mut self, lights: Vec<Light>, world: World) {
+        self.set_lighting(lights, world, None);
+    }
+
+    /// New lights and world, and a new rest of the scene where `occluders` is given and differs
+    /// (a prop moved, added or hidden): then every light's shadows change, so the irradiance
+    /// kept light by light is dropped and the next evaluation casts every source's rays again.
+    /// The shadow tracer is rebuilt once, for both.
+    pub fn set_lighting(&mut self, lights: Vec<Light>, world: World, occluders: Option<Occluders>) {
         self.scene.lights = lights;
         self.scene.world = world;
-        if !self.scene.occluders.is_empty() {
+        let new_rest = occluders.filter(|o| *o != self.scene.occluders);
+        let changed = new_rest.is_some();
+        if let Some(o) = new_rest {
+            self.scene.occluders = o;
+            self.face_sources.clear();
+            self.vertex_sources.clear();
+        }
+        if changed || !self.scene.occluders.is_empty() {
             // The occluders that can shadow the mesh under the new lights (the mesh's BVH
             // shared): a light kept keeps its own, so its kept irradiance stays right.
             self.tracer = self.scene.shadow_tracer(&self.tracer).0;
         }
         self.face_irradiance = None;
         self.vertex_irradiance = None;
-    }
-
-    /// A new rest of the scene (a prop moved, added or hidden): every light's shadows change,
-    /// so the irradiance kept light by light is dropped and the next evaluation casts every
-    /// source's rays again. The same occluders change nothing.
-    pub fn set_occluders(&mut self, occluders: Occluders) {
-        if occluders == self.scene.occluders {
-            return;
-        }
-        self.scene.occluders = occluders;
-        self.tracer = self.scene.shadow_tracer(&self.tracer).0;
-        self.face_irradiance = None;
-        self.vertex_irradiance = None;
-        self.face_sources.clear();
-        self.vertex_sources.clear();
     }
 
     fn irradiance_settings(&self, eta: f64, density: Density) -> IrradianceSettings {
