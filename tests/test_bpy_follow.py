@@ -596,6 +596,7 @@ def test_a_floors_colour_edit_relights_what_it_sends_back(addon):
     from addon import follow, session
 
     mat, obj, _ = lit_sphere(bpy)
+    alone = read_preview(obj).copy()
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, -0.045))
     floor = bpy.context.active_object
     paint = bpy.data.materials.new("Floor paint")
@@ -607,10 +608,14 @@ def test_a_floors_colour_edit_relights_what_it_sends_back(addon):
     lit_floor = read_preview(obj).copy()
     p = np.array([v.co for v in obj.data.vertices])
     under = p[:, 2] < -0.03
-    assert np.all(lit_floor[under].sum(axis=1) > 0)
+    # Summed over the underside: a vertex at the edge of the sphere's own shadow on the floor
+    # gets a few rays' worth, which Monte Carlo may leave at 0 on another machine.
+    assert lit_floor[under].sum() > 100.0 * alone[under].sum()
+    seen = lit_floor[under].sum(axis=1) > 0.1 * lit_floor[under].sum(axis=1).max()
     node.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
     bpy.context.view_layer.update()
     follow.follow_now()
     assert session.SESSIONS[mat.name].follow_message.startswith("relit:")
     dark = relit_like_a_precompute(bpy, session, mat, obj)
-    assert np.all(dark[under].sum(axis=1) < 0.2 * lit_floor[under].sum(axis=1))
+    assert dark[under].sum() < 0.2 * lit_floor[under].sum()
+    assert np.all(dark[under][seen].sum(axis=1) < 0.2 * lit_floor[under][seen].sum(axis=1))
