@@ -8,7 +8,7 @@ import threading
 import bpy
 import numpy as np
 
-from . import export, jobs, viewport, writeback
+from . import export, jobs, textures, viewport, writeback
 from .principled import principled_key, show_medium
 from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, params, view_dependent
 
@@ -49,10 +49,41 @@ def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting,
     # What the follow refresh did ("relit: ... no walk traced"), for the panel.
     session.follow_message = getattr(job, "stage_message", "")
     session.remap = nearest_original_vertices(objects, info)
+    _take_texture(session, job)
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
     return session
+
+
+def _take_texture(session: Session, job: jobs.Job) -> None:
+    """The Base Color the job read per vertex (`jobs.start`), kept with the session."""
+    session.base_color = getattr(job, "base_color", None)
+    session.texture_key = getattr(job, "texture_key", "")
+    session.texture_message = getattr(job, "texture_message", "")
+
+
+def follow_texture(material: bpy.types.Material, s: Session, force: bool = False) -> None:
+    """Read the Base Color per vertex again when what drives it changed (its node tree's key,
+    or `force`: an image it reads was edited), when a link now drives it, or drop it when none
+    does. PRT only (the hierarchy says it shows the socket's value)."""
+    if material.translucent.source != "PRINCIPLED" or not textures.linked_base_color(material):
+        s.base_color, s.texture_key = None, ""
+        s.texture_message = ""
+        return
+    if s.method != "prt":
+        s.texture_message = (f"Base Color from {textures.base_color_source(material)}: not followed by the "
+                             "hierarchy yet, its socket's value shown (PRT follows it)")
+        return
+    key = textures.tree_key(material)
+    if not force and s.base_color is not None and key == s.texture_key:
+        return
+    try:
+        s.base_color, s.texture_message = textures.for_export(material, s.info)
+        s.texture_key = key
+    except ValueError as e:
+        s.base_color, s.texture_key = None, ""
+        s.texture_message = f"Base Color not read per vertex ({e}): its socket's value shown"
 
 
 FIRST_PREVIEW_MESSAGE = "first preview after {:.2f} s (the half-space profile alone): refining with the walks"
@@ -69,6 +100,7 @@ def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, light
     session.method = "prt"
     session.method_message = FIRST_PREVIEW_MESSAGE.format(job.first_seconds)
     session.remap = nearest_original_vertices(objects, info)
+    _take_texture(session, job)
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
@@ -111,6 +143,7 @@ def edit(material: bpy.types.Material) -> None:
     settings = material.translucent
     if settings.source == "PRINCIPLED":
         s.principled_key = principled_key(material)
+        follow_texture(material, s)
     try:
         m = settings.material()
     except ValueError as e:
@@ -128,8 +161,11 @@ def edit(material: bpy.types.Material) -> None:
     transport = s.transport
     # Radiance leaving along each normal (a view-independent viewport colour), or toward the
     # viewport's eye where single scattering makes it depend on the view.
+    # A Base Color read per vertex (`follow_texture`): each vertex scatters as its own medium.
+    textured = {"base_color": s.base_color} if s.base_color is not None and s.method == "prt" else {}
     try:
-        colors = transport.radiance(m, s.eye) if s.eye is not None and view_dependent(s) else transport.radiance(m)
+        eye = s.eye if s.eye is not None and view_dependent(s) else None
+        colors = transport.radiance(m, eye, **textured)
     except ValueError as e:
         s.edit_message = f"not shown: {e}"
         return
@@ -213,15 +249,30 @@ def _prepare_tables(material: bpy.types.Material, m) -> bool:
 
 
 @bpy.app.handlers.persistent
-def follow_principled(*_args) -> None:
+def follow_principled(_scene=None, depsgraph=None) -> None:
     """depsgraph_update_post: a previewed material that follows its Principled BSDF is shown
-    again when any input it reads has changed (cheap when none did)."""
+    again when any input it reads has changed (cheap when none did), its Base Color read again
+    when what drives it changed (`follow_texture`)."""
+    if textures.BAKING:
+        return  # the bake's own temporary data
     for name, s in list(SESSIONS.items()):
         mat = bpy.data.materials.get(name)
         if mat is None or not mat.translucent.enabled or mat.translucent.source != "PRINCIPLED":
             continue
-        if principled_key(mat) != s.principled_key:
+        images = textures.images_of(mat) if s.base_color is not None else set()
+        painted = bool(images) and any(isinstance(u.id.original, bpy.types.Image) and u.id.original.name in images
+                                       for u in getattr(depsgraph, "updates", ()))
+        if painted:
+            follow_texture(mat, s, force=True)
+        if (painted or principled_key(mat) != s.principled_key
+                or (s.method == "prt" and _texture_changed(mat, s))):
             edit(mat)
+
+
+def _texture_changed(mat: bpy.types.Material, s: Session) -> bool:
+    """A link now drives the Base Color, or no longer does, or what drives it changed."""
+    linked = textures.linked_base_color(mat)
+    return linked != (s.base_color is not None) or (linked and textures.tree_key(mat) != s.texture_key)
 
 
 def refresh(material: bpy.types.Material) -> None:

@@ -19,9 +19,9 @@ READ = ("Base Color", "Subsurface Radius", "Subsurface Scale", "Subsurface Aniso
 
 def connected_inputs(mat) -> list[str]:
     """The inputs the preview reads that a link drives (an image texture, a colour attribute, a
-    procedural), each with the node it comes from: the preview takes the socket's own value
-    there, uniformly, where Cycles evaluates the link per point (not followed yet; the panel
-    says so)."""
+    procedural), each with the node it comes from. PRT follows a linked Base Color per vertex
+    (`textures`); for the others the preview takes the socket's own value, uniformly, where
+    Cycles evaluates the link per point (the panel says so)."""
     node = principled_node(mat)
     if node is None:
         return []

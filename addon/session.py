@@ -57,6 +57,11 @@ class Session:
     # The viewport's eye point the preview is drawn toward (world space), when the transport
     # holds single scattering (view dependent, Xu 2007 eq. 5); None: along each normal.
     eye: tuple | None = None
+    # The Base Color per exported vertex where a link drives it (`textures`), None where it is
+    # uniform; the node tree's key it was baked for; and the panel's line about it.
+    base_color: object = None
+    texture_key: str = ""
+    texture_message: str = ""
 
 
 # material name -> Session

@@ -6,7 +6,7 @@ is previewed on all of them, each from its own vertex range, at the irradiance a
 import numpy as np
 import pytest
 
-from helpers import draw_panel, mesh_hash, read_preview
+from helpers import draw_panel, key_light, mesh_hash, read_preview
 
 pytestmark = pytest.mark.bpy
 
@@ -92,18 +92,32 @@ def test_a_material_used_by_fifty_objects_is_previewed_on_each(addon):
                               "(Object > Relations > Make Single User to see each)"]
 
 
-def test_a_textured_base_color_is_named_as_not_followed(addon):
-    # Issue 30 point 2 is not built: where a link drives an input the preview reads, the panel
-    # says so instead of showing the socket's stale value silently.
+def test_a_textured_base_color_is_followed_and_other_links_are_named(addon):
+    # Issue 30 point 2: PRT reads a linked Base Color per vertex (the panel says from which
+    # node); a link into another input the preview reads is named as not followed instead of
+    # showing the socket's stale value silently.
     import bpy
 
     mat = bpy.data.materials.new("Skin")
     node = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     node.inputs["Subsurface Weight"].default_value = 1.0
+    node.inputs["Subsurface Scale"].default_value = 0.01
     mat.translucent.enabled = True
     mat.translucent.source = "PRINCIPLED"
     assert not any("not followed" in t for t in draw_panel(addon, mat))
     tex = mat.node_tree.nodes.new("ShaderNodeTexNoise")
     mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     labels = " ".join(draw_panel(addon, mat))
-    assert "Connected, not followed: Base Color (Noise Texture)" in labels
+    assert "Connected, not followed: Base Color (Noise Texture)" in labels  # nothing precomputed yet
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=16, ring_count=8)
+    bpy.context.active_object.data.materials.append(mat)
+    key_light(bpy)
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    labels = " ".join(draw_panel(addon, mat))
+    assert "Base Color from Noise Texture: read by Cycles at 114 vertices" in labels
+    assert "not followed" not in labels
+    value = mat.node_tree.nodes.new("ShaderNodeValue")
+    value.outputs[0].default_value = 0.01
+    mat.node_tree.links.new(value.outputs[0], node.inputs["Subsurface Scale"])
+    labels = " ".join(draw_panel(addon, mat))
+    assert "Connected, not followed: Subsurface Scale (Value)" in labels

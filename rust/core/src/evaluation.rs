@@ -68,17 +68,29 @@ pub fn radiance_from_radiosity(
     exit_weights: &(dyn Fn(f64) -> [f64; 3] + Sync),
 ) {
     let along_normal = exit_weights(1.0);
+    let weights = |_: usize, cos_o: Option<f64>| cos_o.map_or(along_normal, exit_weights);
+    radiance_from_radiosity_each(values, positions, normals, eye, &weights);
+}
+
+/// As `radiance_from_radiosity` with a medium per vertex: `exit_weights(vertex, cos_o)`,
+/// `cos_o` None along the normal (no eye).
+pub fn radiance_from_radiosity_each(
+    values: &mut [[f32; 3]],
+    positions: &[Vec3],
+    normals: &[Vec3],
+    eye: Option<Vec3>,
+    exit_weights: &(dyn Fn(usize, Option<f64>) -> [f64; 3] + Sync),
+) {
     values
         .par_iter_mut()
         .zip(positions.par_iter().zip(normals.par_iter()))
-        .for_each(|(b, (p, n))| {
-            let k = match eye {
-                Some(eye) => {
-                    let to_eye = (eye.as_dvec3() - p.as_dvec3()).normalize_or_zero();
-                    exit_weights(n.as_dvec3().dot(to_eye))
-                }
-                None => along_normal,
-            };
+        .enumerate()
+        .for_each(|(v, (b, (p, n)))| {
+            let cos_o = eye.map(|eye| {
+                let to_eye = (eye.as_dvec3() - p.as_dvec3()).normalize_or_zero();
+                n.as_dvec3().dot(to_eye)
+            });
+            let k = exit_weights(v, cos_o);
             *b = std::array::from_fn(|c| b[c] * (k[c] / std::f64::consts::PI) as f32);
         });
 }

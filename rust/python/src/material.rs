@@ -14,6 +14,9 @@ use translucent_core::profiles::{table, ProfileKind, Resolved};
 #[derive(Clone)]
 pub struct PyMaterial {
     pub inner: Material,
+    /// The Principled inputs it was made from (`from_principled`): what a Base Color per
+    /// vertex (`Prt.radiance(base_color=...)`) varies.
+    pub principled: Option<PrincipledInputs>,
 }
 
 /// "cycles" or "dipole" as a core model.
@@ -33,7 +36,10 @@ impl PyMaterial {
     ) -> PyResult<Self> {
         let inner = Material::new(rgb("sigma_a", sigma_a)?, rgb("sigma_s", sigma_s)?, g, eta)
             .map_err(to_py)?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner,
+            principled: None,
+        })
     }
 
     /// The medium and layers Cycles 5.0 renders for a Principled BSDF with subsurface method
@@ -68,6 +74,7 @@ impl PyMaterial {
         };
         Ok(Self {
             inner: Material::from_principled(&inputs).map_err(to_py)?,
+            principled: Some(inputs),
         })
     }
 
@@ -95,6 +102,13 @@ impl PyMaterial {
         };
         Ok(Self {
             inner: self.inner.with_layers(layers).map_err(to_py)?,
+            principled: self.principled.map(|p| PrincipledInputs {
+                roughness: layers.roughness,
+                subsurface_weight: layers.subsurface_weight,
+                metallic: layers.metallic,
+                transmission: layers.transmission,
+                ..p
+            }),
         })
     }
 
@@ -104,6 +118,7 @@ impl PyMaterial {
     fn preset(name: &str, mm_per_unit: f64) -> PyResult<Self> {
         Ok(Self {
             inner: Material::preset(name, mm_per_unit).map_err(to_py)?,
+            principled: None,
         })
     }
 

@@ -12,6 +12,7 @@ use std::sync::{Mutex, MutexGuard, RwLock, RwLockReadGuard};
 use translucent_core::irradiance::{
     irradiance_with_progress, Density, IrradianceReport, IrradianceSettings,
 };
+use translucent_core::optics::principled::PrincipledInputs;
 use translucent_core::optics::Material;
 use translucent_core::progress::cancel_only;
 
@@ -334,18 +335,28 @@ impl PyPrt {
     /// `interreflection=False` leaves out the object's own light even where it was precomputed.
     /// `walks=False` leaves out the walks' geometry term: the half-space profile alone, what
     /// `reference_radiosity` integrates.
-    #[pyo3(signature = (material, interreflection = true, walks = true))]
+    /// `base_color`: an (N, 3) array of the Principled Base Color per vertex (linear RGB,
+    /// saturated to [0, 1] as Cycles does) for a material made by `Material.from_principled`:
+    /// each vertex scatters as its own Base Color's medium (a texture, a colour attribute).
+    #[pyo3(signature = (material, interreflection = true, walks = true, base_color = None))]
     fn radiosity<'py>(
         &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         interreflection: bool,
         walks: bool,
+        base_color: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
+        let varying = per_vertex_colour(&material, base_color)?;
         let e = run(py, None, |_| {
             let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
-            inner.radiosity_parts(&m, interreflection, walks)
+            match &varying {
+                Some((inputs, colours)) => {
+                    inner.radiosity_textured(inputs, colours, interreflection, walks)
+                }
+                None => inner.radiosity_parts(&m, interreflection, walks),
+            }
         })?;
         let out = rgb_array(py, &e.values);
         *held(&self.last) = Some(e);
@@ -358,20 +369,29 @@ impl PyPrt {
     /// the radiance leaving along each vertex normal (what a Cycles bake records).
     /// With single scattering (report["single_scattering"]), L_d + L^(1) (Xu 2007 eq. 1):
     /// `phase` "hg" (exact Henyey–Greenstein per light group) or "eddington" (Xu eq. 11).
-    #[pyo3(signature = (material, eye = None, phase = "hg"))]
+    /// `base_color` as `radiosity` (multiple scattering then: single scattering is not
+    /// added with a Base Color per vertex yet, and `skipped` says so).
+    #[pyo3(signature = (material, eye = None, phase = "hg", base_color = None))]
     fn radiance<'py>(
         &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         eye: Option<&Bound<'_, PyAny>>,
         phase: &str,
+        base_color: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
         let phase = Phase::parse(phase).map_err(to_py)?;
+        let varying = per_vertex_colour(&material, base_color)?;
         let (e, l1) = run(py, None, |_| {
             let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
-            inner.radiance_with(&m, eye, phase)
+            match &varying {
+                Some((inputs, colours)) => inner
+                    .radiance_textured(inputs, colours, eye)
+                    .map(|e| (e, None)),
+                None => inner.radiance_with(&m, eye, phase),
+            }
         })?;
         let out = rgb_array(py, &e.values);
         *held(&self.last) = Some(e);
@@ -745,4 +765,22 @@ impl PyPrt {
             r.seconds_total
         ))
     }
+}
+
+/// The Principled inputs and the per-vertex Base Color of a `base_color=` argument, or None
+/// without one. A material not made by `Material.from_principled` has no Base Color to vary.
+fn per_vertex_colour(
+    material: &PyMaterial,
+    base_color: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Option<(PrincipledInputs, Vec<[f32; 3]>)>> {
+    let Some(b) = base_color else {
+        return Ok(None);
+    };
+    let inputs = material.principled.ok_or_else(|| {
+        PyValueError::new_err(
+            "base_color per vertex needs a material made by Material.from_principled \
+             (the Base Color is a Principled BSDF input)",
+        )
+    })?;
+    Ok(Some((inputs, crate::convert::float_rows("base_color", b)?)))
 }

@@ -65,7 +65,7 @@ impl Prt {
     }
 
     /// The material's index of refraction is the one the irradiance was computed for.
-    fn check_eta(&self, material: &Material) -> Result<()> {
+    pub(super) fn check_eta(&self, material: &Material) -> Result<()> {
         let eta = self.profile.irradiance_eta(material);
         if (eta - self.eta).abs() > 1e-9 {
             return Err(Error::InvalidArgument(format!(
@@ -78,7 +78,7 @@ impl Prt {
     }
 
     /// `coefficients` for the material's three profiles.
-    fn coefficients_of(&self, profiles: &[Profile; 3]) -> Result<Coefficients> {
+    pub(super) fn coefficients_of(&self, profiles: &[Profile; 3]) -> Result<Coefficients> {
         let (lo, hi) = self.basis().domain();
         let mut fit_error = [0.0; 3];
         let mut estimate = [0.0; 3];
@@ -241,7 +241,7 @@ impl Prt {
 
     /// What an evaluation leaves out: the object's own light and the walks through the mesh,
     /// when they were not precomputed or the caller left them out.
-    fn skipped(&self, bounce: bool, walks: bool) -> Vec<Skipped> {
+    pub(super) fn skipped(&self, bounce: bool, walks: bool) -> Vec<Skipped> {
         let mut out = Vec::new();
         // A first preview says so: its estimate covers the fit alone, not what it left out.
         let first = self.report.first_preview;

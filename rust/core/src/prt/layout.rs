@@ -117,6 +117,62 @@ impl Transport {
     }
 }
 
+/// One vertex's medium for `Transport::dot_interpolated`: per channel, the node below its
+/// Base Color and the weight of the node above (0: the node below alone).
+pub(crate) type NodePick = [(u32, f32); 3];
+
+impl Transport {
+    /// B[v][c] = sum_j T[v][c or 0][j] ((1 - t) C_k[c][j] + t C_{k+1}[c][j]) with (k, t) =
+    /// `picks[v][c]`: the dot product with coefficients interpolated between two nodes of a
+    /// table per vertex (a medium that varies over the surface). `nodes[k]` holds node k's
+    /// coefficients per channel (None where no vertex reads it). Clamped at 0 as `dot`.
+    pub fn dot_interpolated(
+        &self,
+        nodes: &[Option<[Vec<f32>; 3]>],
+        picks: &[NodePick],
+    ) -> Vec<[f32; 3]> {
+        let stride = self.stride;
+        let channels = self.channels;
+        let scaled: Vec<Option<[Vec<f32>; 3]>> = nodes
+            .iter()
+            .map(|n| n.as_ref().map(|c| self.scaled(c)))
+            .collect();
+        let per_block = channels * stride * LANES;
+        let mut out = vec![[0f32; 3]; self.vertices];
+        out.par_chunks_mut(LANES)
+            .zip(picks.par_chunks(LANES))
+            .zip(self.values.par_chunks(per_block))
+            .for_each(|((dst, pick), block)| {
+                for (l, (d, p)) in dst.iter_mut().zip(pick).enumerate() {
+                    *d = std::array::from_fn(|c| {
+                        let base = if channels == 1 { 0 } else { c * stride * LANES };
+                        let row = |k: u32| {
+                            // Every node a pick reads was fitted (`textured::Table`).
+                            debug_assert!(scaled[k as usize].is_some());
+                            let Some(coef) = scaled[k as usize].as_ref().map(|n| &n[c]) else {
+                                return 0.0;
+                            };
+                            let mut acc = 0f32;
+                            for (j, x) in coef.iter().enumerate() {
+                                acc += x * block[base + j * LANES + l];
+                            }
+                            acc
+                        };
+                        let (k, t) = p[c];
+                        let below = row(k);
+                        let b = if t > 0.0 {
+                            below + t * (row(k + 1) - below)
+                        } else {
+                            below
+                        };
+                        b.max(0.0)
+                    });
+                }
+            });
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -135,6 +191,34 @@ mod tests {
                 let row = &rows[(vi * ch + c) * stride..(vi * ch + c + 1) * stride];
                 let expect: f32 = row.iter().zip(&coeffs[c]).map(|(a, b)| a * b).sum();
                 assert_eq!(out[vi][c], expect);
+            }
+        }
+    }
+
+    #[test]
+    fn interpolated_dot_is_the_blend_of_the_two_nodes_dots() {
+        let (v, ch, stride) = (21, 3, 4);
+        let rows: Vec<f32> = (0..v * ch * stride)
+            .map(|i| ((i * 5) % 13) as f32)
+            .collect();
+        let t = Transport::from_rows(&rows, v, ch, stride, [1.0; 3]);
+        let a = [
+            vec![1.0, 0.0, 2.0, 1.0],
+            vec![0.5; 4],
+            vec![0.0, 1.0, 0.0, 1.0],
+        ];
+        let b = [vec![3.0, 1.0, 0.0, 0.0], vec![1.0; 4], vec![2.0; 4]];
+        let nodes = vec![Some(a.clone()), Some(b.clone())];
+        let picks: Vec<NodePick> = (0..v)
+            .map(|i| std::array::from_fn(|c| (0, ((i + c) % 5) as f32 / 4.0)))
+            .collect();
+        let out = t.dot_interpolated(&nodes, &picks);
+        let (da, db) = (t.dot(&a), t.dot(&b));
+        for vi in 0..v {
+            for c in 0..3 {
+                let w = picks[vi][c].1;
+                let expect = (1.0 - w) * da[vi][c] + w * db[vi][c];
+                assert!((out[vi][c] - expect).abs() <= 1e-4 * expect.abs().max(1.0));
             }
         }
     }

@@ -15,7 +15,8 @@
 //! Rooms: `settings` (what to precompute and the report of what was done), `precompute` (the
 //! steps in order), `knots` (basis knots and the error estimate), `rows` (one vertex's
 //! transport row and the far field), `own_light` (the object's light falling back on it),
-//! `evaluate` (an edit: fit and dot product), `backend` (CPU or GPU), `layout` and `tree`.
+//! `evaluate` (an edit: fit and dot product), `textured` (an edit with a Base Color per
+//! vertex: a table of media), `backend` (CPU or GPU), `layout` and `tree`.
 
 mod backend;
 pub mod basis;
@@ -33,6 +34,7 @@ mod settings;
 pub mod single;
 #[cfg(test)]
 mod tests;
+pub mod textured;
 mod tree;
 
 use crate::profiles::ProfileKind;

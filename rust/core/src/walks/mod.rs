@@ -16,4 +16,5 @@ pub use radiosity::{
     relit_radiosity, walk_radiosity, walk_radiosity_lit, ExitLight, MeshWalkResult,
     MeshWalkSettings,
 };
+pub(crate) use term::lengths_and_albedos;
 pub use term::{WalkTerm, WalkTermReport, WalkTermSettings, FLAT_TOLERANCE, LENGTH_MARGIN};

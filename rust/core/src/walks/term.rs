@@ -147,7 +147,7 @@ pub struct WalkTerm {
 /// edit of Subsurface Weight w scales D by w; with the point mass in A it was scaled by
 /// (w T + (1 - w) Base Color) / T, and at w 0.4 the rim of an open sheet was up to 32 % too
 /// bright, `test_the_lobes_add_up_as_cycles_weighs_them`).
-pub(super) fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
+pub(crate) fn lengths_and_albedos(p: &[Profile; 3]) -> ([f64; 3], [f64; 3]) {
     let l = std::array::from_fn(|c| {
         let s = p[c].length_scales();
         s.decay.min(1e6 * s.near).max(1e-30)
@@ -268,28 +268,11 @@ impl WalkTerm {
         let mut error = self.noise;
         // Per channel: the two walked channels bracketing ln L and their weights.
         let picks: [([usize; 2], [f32; 2]); 3] = std::array::from_fn(|c| {
-            let x = lengths[c].ln();
-            let (lo, hi) = (self.lengths[0], self.lengths[self.lengths.len() - 1]);
-            if x - hi.0 > LENGTH_MARGIN.ln() || lo.0 - x > LENGTH_MARGIN.ln() {
+            let (pick, beyond) = self.pick(lengths[c].ln());
+            if beyond {
                 error[c] = 1.0;
             }
-            if x <= lo.0 {
-                return ([lo.1, lo.1], [1.0, 0.0]);
-            }
-            if x >= hi.0 {
-                return ([hi.1, hi.1], [1.0, 0.0]);
-            }
-            let i = self
-                .lengths
-                .partition_point(|l| l.0 <= x)
-                .clamp(1, self.lengths.len() - 1);
-            let (a, b) = (self.lengths[i - 1], self.lengths[i]);
-            let t = if b.0 > a.0 {
-                (x - a.0) / (b.0 - a.0)
-            } else {
-                0.0
-            } as f32;
-            ([a.1, b.1], [1.0 - t, t])
+            pick
         });
         let scale: [f32; 3] = std::array::from_fn(|c| albedo[c] as f32 * factor[c]);
         radiosity
@@ -302,6 +285,86 @@ impl WalkTerm {
                 }
             });
         error
+    }
+}
+
+impl WalkTerm {
+    /// The two walked channels bracketing `ln_length` (a diffusion length's log) and their
+    /// weights, and whether it lies beyond the walked ones by more than `LENGTH_MARGIN`.
+    fn pick(&self, x: f64) -> (([usize; 2], [f32; 2]), bool) {
+        let (lo, hi) = (self.lengths[0], self.lengths[self.lengths.len() - 1]);
+        let beyond = x - hi.0 > LENGTH_MARGIN.ln() || lo.0 - x > LENGTH_MARGIN.ln();
+        if x <= lo.0 {
+            return (([lo.1, lo.1], [1.0, 0.0]), beyond);
+        }
+        if x >= hi.0 {
+            return (([hi.1, hi.1], [1.0, 0.0]), beyond);
+        }
+        let i = self
+            .lengths
+            .partition_point(|l| l.0 <= x)
+            .clamp(1, self.lengths.len() - 1);
+        let (a, b) = (self.lengths[i - 1], self.lengths[i]);
+        let t = if b.0 > a.0 {
+            (x - a.0) / (b.0 - a.0)
+        } else {
+            0.0
+        } as f32;
+        (([a.1, b.1], [1.0 - t, t]), beyond)
+    }
+
+    /// As `add_scaled_to` with a medium per vertex (a Base Color that varies over the surface,
+    /// `Prt::radiosity_textured`): at vertex v, D/A read at `ln_length[v][c]` and scaled by
+    /// `scale[v][c]` (the vertex's slab albedo times any factor). Returns per channel the
+    /// walks' noise plus, where a vertex's length lies beyond the walked ones by more than
+    /// `LENGTH_MARGIN`, its whole term counted as error: sqrt(sum of those terms^2 / sum B^2),
+    /// the relative RMS they could be off by.
+    pub fn add_per_vertex(
+        &self,
+        radiosity: &mut [[f32; 3]],
+        ln_length: &[[f64; 3]],
+        scale: &[[f32; 3]],
+    ) -> [f64; 3] {
+        if self.lengths.is_empty() {
+            return [0.0; 3];
+        }
+        type Sums = ([f64; 3], [f64; 3]);
+        let (beyond, total): Sums = radiosity
+            .par_iter_mut()
+            .zip(self.per_albedo.par_iter())
+            .zip(ln_length.par_iter().zip(scale.par_iter()))
+            .map(|((b, d), (x, k))| {
+                let mut out: Sums = ([0.0; 3], [0.0; 3]);
+                for c in 0..3 {
+                    if k[c] != 0.0 {
+                        let (([i, j], [wi, wj]), far) = self.pick(x[c]);
+                        let term = k[c] * (wi * d[i] + wj * d[j]);
+                        b[c] = (b[c] + term).max(0.0);
+                        if far {
+                            out.0[c] = f64::from(term) * f64::from(term);
+                        }
+                    }
+                    out.1[c] = f64::from(b[c]) * f64::from(b[c]);
+                }
+                out
+            })
+            .reduce(
+                || ([0.0; 3], [0.0; 3]),
+                |a, b| {
+                    (
+                        std::array::from_fn(|c| a.0[c] + b.0[c]),
+                        std::array::from_fn(|c| a.1[c] + b.1[c]),
+                    )
+                },
+            );
+        std::array::from_fn(|c| {
+            let off = if total[c] > 0.0 {
+                (beyond[c] / total[c]).sqrt()
+            } else {
+                0.0
+            };
+            self.noise[c] + off
+        })
     }
 }
 

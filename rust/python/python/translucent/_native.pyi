@@ -246,23 +246,33 @@ class Prt:
     @property
     def backend_message(self) -> str: ...
     def radiosity(
-        self, material: Material, interreflection: bool = True, walks: bool = True
+        self,
+        material: Material,
+        interreflection: bool = True,
+        walks: bool = True,
+        base_color: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiosity B per vertex: the profile summed over the lit surface (with the
         object's own light where it was precomputed, unless `interreflection` is False, and
         the walks' geometry term where they ran, unless `walks` is False: then the half-space
-        profile alone, what `reference_radiosity` integrates)."""
+        profile alone, what `reference_radiosity` integrates).
+        `base_color`: (N, 3) Principled Base Color per vertex (linear RGB, saturated to [0, 1]
+        as Cycles does) for a `Material.from_principled` material: each vertex scatters as its
+        own Base Color's medium; the estimate adds the table's interpolation error."""
     def radiance(
         self,
         material: Material,
         eye: Vec3 | None = None,
         phase: Literal["hg", "eddington"] = "hg",
+        base_color: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiance toward the point `eye`, W(w_o) V(w_o) B / pi (W: F_t for the dipole, what
         the specular layer leaves for Cycles; V: Cycles' view factor, see `Material.slab_reflectance`,
         1 for the dipole); without an eye, along each vertex normal (a bake).
         With single scattering (report["single_scattering"]) plus L^(1) toward the eye, with
-        the Henyey-Greenstein ("hg") or Eddington (Xu eq. 11) phase function."""
+        the Henyey-Greenstein ("hg") or Eddington (Xu eq. 11) phase function.
+        `base_color` as `radiosity` (multiple scattering alone then; `last_eval["skipped"]`
+        says so)."""
     def single_radiance(
         self,
         material: Material,

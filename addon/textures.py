@@ -1,0 +1,213 @@
+"""A Base Color driven by a link (an image texture through any UV map, a colour attribute, a
+procedural, a mix of them): Blender evaluates it, per vertex, by a Cycles emission bake on
+temporary copies (issue 30, point 2); the add-on re-implements no node.
+
+The copies: the material (its Base Color's link routed into an Emission shader, the only
+output), each object's evaluated mesh (UV maps and colour attributes kept, every face on that
+material, placed where the object is so Object and Generated coordinates agree) and a scene of
+their own. They are removed again whatever happens; the user's objects, meshes, materials,
+images and scene are only read."""
+
+from __future__ import annotations
+
+import hashlib
+import time
+
+import bpy
+import numpy as np
+
+from .principled import principled_node
+
+BAKE_SCENE = "Translucent Base Color bake"
+# True while a bake runs: the add-on's depsgraph handlers ignore the updates the bake's own
+# temporary data causes.
+BAKING = False
+
+
+def linked_base_color(mat: bpy.types.Material) -> bool:
+    """Whether a link drives the material's Principled Base Color."""
+    node = principled_node(mat)
+    return node is not None and node.inputs["Base Color"].is_linked
+
+
+def _upstream(mat: bpy.types.Material) -> list:
+    """The nodes the Base Color's link reads from, directly or through other nodes (groups'
+    insides are in their own trees: a group node counts by its inputs and its tree's name)."""
+    node = principled_node(mat)
+    if node is None or not node.inputs["Base Color"].is_linked:
+        return []
+    seen, stack = {}, [node.inputs["Base Color"].links[0].from_node]
+    while stack:
+        n = stack.pop()
+        if n.name in seen:
+            continue
+        seen[n.name] = n
+        stack.extend(link.from_node for sock in n.inputs for link in sock.links)
+    return list(seen.values())
+
+
+def tree_key(mat: bpy.types.Material) -> str:
+    """What the baked colours depend on, as a digest: the nodes upstream of the Base Color
+    (`_upstream`), their inputs' values, their properties and the links between them, and the
+    state of the images they read (name, size, file, dirty flag). Equal keys, the same bake; a
+    slider of the Principled node itself leaves it as it is."""
+    parts = []
+    nodes = _upstream(mat)
+    names = {n.name for n in nodes}
+    for node in nodes:
+        parts.append((node.name, node.bl_idname))
+        for sock in node.inputs:
+            v = getattr(sock, "default_value", None)
+            parts.append((sock.identifier, tuple(v) if hasattr(v, "__len__") and not isinstance(v, str) else v))
+            parts.extend((link.from_node.name, link.from_socket.identifier, sock.identifier) for link in sock.links)
+        for prop in node.bl_rna.properties:
+            if prop.identifier in {"rna_type", "location", "width", "height", "select", "dimensions",
+                                   "location_absolute", "warning_propagation", "name", "label"}:
+                continue
+            try:
+                value = getattr(node, prop.identifier)
+            except AttributeError:
+                continue
+            if isinstance(value, bpy.types.Image):
+                # The image's pixels: reloaded, replaced or painted (the dirty flag; strokes after
+                # the first come through the depsgraph, `edits.follow_principled`).
+                parts.append((value.name, tuple(value.size), value.is_dirty, value.filepath))
+            elif isinstance(value, bpy.types.ID):
+                parts.append((prop.identifier, value.name))
+            elif isinstance(value, (int, float, str, bool)):
+                parts.append((prop.identifier, value))
+    parts.append(sorted(names))
+    return hashlib.blake2b(repr(parts).encode(), digest_size=16).hexdigest()
+
+
+def _emission_copy(mat: bpy.types.Material) -> bpy.types.Material:
+    """A copy of `mat` whose only output is an Emission of strength 1 fed by what drives its
+    Base Color: the bake's emission pass is then the Base Color itself (linear)."""
+    copy = mat.copy()
+    tree = copy.node_tree
+    node = principled_node(copy)
+    source = node.inputs["Base Color"].links[0].from_socket
+    for n in [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]:
+        tree.nodes.remove(n)
+    emit = tree.nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 1.0
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.target = "ALL"
+    tree.links.new(source, emit.inputs["Color"])
+    tree.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    return copy
+
+
+def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], depsgraph=None) -> tuple[dict, float]:
+    """The Base Color of `mat` per evaluated vertex of each of `objects` ({name: (N, 3) float32
+    linear RGB}) as Cycles evaluates it, and the bake's seconds. Raises ValueError when the Base
+    Color is not linked or the bake fails (the message says why)."""
+    if not linked_base_color(mat):
+        raise ValueError(f"the Base Color of {mat.name!r} is not driven by a link")
+    global BAKING
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    t0 = time.perf_counter()
+    made_meshes, made_objects, copy, scene = [], [], None, None
+    BAKING = True
+    try:
+        copy = _emission_copy(mat)
+        scene = bpy.data.scenes.new(BAKE_SCENE)
+        scene.render.engine = "CYCLES"
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = 1
+        scene.cycles.use_denoising = False
+        scene.cycles.use_adaptive_sampling = False
+        for obj in objects:
+            mesh = bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph), preserve_all_data_layers=True,
+                                                   depsgraph=depsgraph)
+            made_meshes.append(mesh)
+            mesh.materials.clear()
+            mesh.materials.append(copy)
+            if len(mesh.polygons):
+                mesh.polygons.foreach_set("material_index", np.zeros(len(mesh.polygons), dtype=np.int32))
+            attr = mesh.color_attributes.new("translucent_base_color", "FLOAT_COLOR", "POINT")
+            mesh.color_attributes.active_color = attr
+            tmp = bpy.data.objects.new(f"{obj.name} (Base Color bake)", mesh)
+            made_objects.append(tmp)
+            tmp.matrix_world = obj.matrix_world
+            scene.collection.objects.link(tmp)
+        layer = scene.view_layers[0]
+        with bpy.context.temp_override(scene=scene, view_layer=layer, active_object=made_objects[0],
+                                       object=made_objects[0], selected_objects=made_objects,
+                                       selected_editable_objects=made_objects):
+            for tmp in made_objects:
+                tmp.select_set(True, view_layer=layer)
+            layer.objects.active = made_objects[0]
+            result = bpy.ops.object.bake(type="EMIT", target="VERTEX_COLORS")
+        if result != {"FINISHED"}:
+            raise ValueError(f"Cycles' bake of the Base Color returned {result}")
+        out = {}
+        for obj, mesh in zip(objects, made_meshes):
+            px = np.empty(len(mesh.vertices) * 4, np.float32)
+            mesh.color_attributes["translucent_base_color"].data.foreach_get("color", px)
+            out[obj.name] = px.reshape(-1, 4)[:, :3].copy()
+        return out, time.perf_counter() - t0
+    except RuntimeError as e:
+        raise ValueError(f"Cycles' bake of the Base Color failed: {e}") from e
+    finally:
+        for tmp in made_objects:
+            bpy.data.objects.remove(tmp)
+        for mesh in made_meshes:
+            bpy.data.meshes.remove(mesh)
+        if copy is not None:
+            bpy.data.materials.remove(copy)
+        if scene is not None:
+            bpy.data.scenes.remove(scene)
+        BAKING = False
+
+
+def per_exported_vertex(baked: dict, info) -> np.ndarray:
+    """The baked colours in the exported scene's vertex order (`export.ExportInfo.objects`: each
+    object's range, the vertices of the previewed faces where only some are)."""
+    parts = []
+    for r in info.objects:
+        colours = baked[r.name]
+        parts.append(colours if r.vertices is None else colours[r.vertices])
+    return np.concatenate(parts).astype(np.float32)
+
+
+def base_color_source(mat: bpy.types.Material) -> str:
+    """The node that drives the Base Color, as the panel names it ("Image Texture")."""
+    node = principled_node(mat)
+    return node.inputs["Base Color"].links[0].from_node.bl_label if linked_base_color(mat) else ""
+
+
+def for_export(mat: bpy.types.Material, info, depsgraph=None) -> tuple[np.ndarray, str]:
+    """The Base Color per exported vertex (`per_exported_vertex`) baked for the objects of
+    `info`, and the panel's line about it. Raises ValueError when an object's evaluated mesh
+    no longer has the vertex count it was exported with (re-baking would misplace colours)."""
+    objects = [bpy.data.objects.get(r.name) for r in info.objects]
+    if any(o is None for o in objects):
+        raise ValueError("an object of the preview is gone")
+    baked, seconds = bake_base_color(mat, objects, depsgraph)
+    for r in info.objects:
+        if r.evaluated_count and len(baked[r.name]) != r.evaluated_count:
+            raise ValueError(f"{r.name} has {len(baked[r.name])} vertices now, {r.evaluated_count} at the precompute")
+    colours = per_exported_vertex(baked, info)
+    return colours, (f"Base Color from {base_color_source(mat)}: read by Cycles at {len(colours):,} vertices "
+                     f"in {1000 * seconds:.0f} ms")
+
+
+def representatives(inputs, colours: np.ndarray) -> list:
+    """The materials the transport's basis and samples are chosen for when the Base Color
+    varies: the inputs at the vertices' mean Base Color (whose walks are traced), and at the
+    per-channel brightest and darkest (so the support and knots cover every medium between;
+    `translucent.Prt` reports the table's interpolation and range in its estimate)."""
+    import dataclasses
+
+    c = np.clip(colours, 0.0, 1.0)
+    picks = (c.mean(axis=0), c.max(axis=0), c.min(axis=0))
+    return [dataclasses.replace(inputs, base_color=tuple(float(x) for x in p)).material() for p in picks]
+
+
+def images_of(mat: bpy.types.Material) -> set[str]:
+    """Names of the images the material's node tree reads (their edits re-read the colours)."""
+    tree = getattr(mat, "node_tree", None)
+    if tree is None:
+        return set()
+    return {n.image.name for n in tree.nodes if getattr(n, "image", None) is not None}

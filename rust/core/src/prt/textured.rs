@@ -1,0 +1,604 @@
+//! A Base Color that varies over the surface (issue 30, point 2): an image texture, a colour
+//! attribute or a procedural driving the Principled BSDF's Base Color.
+//!
+//! Cycles' random walk takes its medium from the point where it starts (the shading point
+//! whose closure set it up: `subsurface_random_walk` reads the BSSRDF's albedo and radius
+//! there), so B at a vertex is the profile of that vertex's own Base Color applied to the
+//! light around it (Xu 2007 eq. 9 with a coefficient vector per vertex):
+//!
+//!     B(x_o) = sum_j c_j(a(x_o)) T_j(x_o),
+//!
+//! a(x_o) the vertex's Base Color per channel. In Cycles' Principled map (`optics::principled`)
+//! the Base Color sets the single-scattering albedo alone, sigma_t = 1 / (d (1 - g)) coming
+//! from the radius, so each channel's coefficients are a curve in one variable. They are fitted
+//! at `COLOR_INTERVALS + 1` nodes x_k = k / COLOR_INTERVALS (only those the vertices read) and
+//! interpolated linearly between them; the interpolation's error is measured at the midpoint of
+//! every interval read (the fitted total there against the mean of its ends) and added to the
+//! estimate. The point mass, the walks' term (read at each vertex's diffusion length, scaled by
+//! its slab albedo) and the object's own light (received at each vertex's totals) follow the
+//! vertex's node the same way. Subsurface Radius and Scale stay uniform (the transport's
+//! samples and knots are spaced for one radius).
+
+use super::evaluate::{Coefficients, Evaluation, PrtDetails};
+use super::layout::NodePick;
+use super::Prt;
+use crate::error::{Error, Result};
+use crate::evaluation::{radiance_from_radiosity_each, Quantity, Skipped};
+use crate::optics::principled::PrincipledInputs;
+use crate::optics::Material;
+use crate::profiles::Resolved;
+use crate::walks::lengths_and_albedos;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Intervals of the Base Color's table to start from: 1/16 apart.
+pub const COLOR_INTERVALS: usize = 16;
+/// An interval whose midpoint the blend of its ends misses by more than this share of the
+/// fitted total is halved, down to 1/`FINE_BINS`.
+pub const INTERPOLATION_TOLERANCE: f64 = 0.005;
+const FINE_BINS: usize = 256;
+/// Below this share of the brightest node's total, the interpolation's miss is judged against
+/// that floor: an error of 40 % on a channel at a thousandth of the brightest is not seen.
+pub const DARK_SHARE: f64 = 0.05;
+
+/// The medium of one Base Color x in every channel, as an edit reads it.
+struct Node {
+    coefficients: Coefficients,
+    resolved: Resolved,
+    ln_length: [f64; 3],
+    walk_albedo: [f64; 3],
+    totals: [f64; 3],
+    sent: [f64; 3],
+}
+
+/// Where a Base Color channel lies among the nodes at `xs` (sorted, covering every value
+/// read): the node below and the weight of the one above. Cycles saturates the colour first
+/// (`subsurface_random_walk_coefficients`).
+fn locate(xs: &[f32], x: f32) -> (u32, f32) {
+    let x = x.clamp(0.0, 1.0);
+    let k = xs
+        .partition_point(|&n| n <= x)
+        .clamp(1, xs.len().max(2) - 1)
+        - 1;
+    if k + 1 >= xs.len() {
+        return (k as u32, 0.0);
+    }
+    let (a, b) = (xs[k], xs[k + 1]);
+    let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
+    (k as u32, t)
+}
+
+/// The Base Color per vertex checked: one finite triple per vertex.
+fn check_colors(colors: &[[f32; 3]], vertices: usize) -> Result<()> {
+    if colors.len() != vertices {
+        return Err(Error::InvalidArgument(format!(
+            "base_color has {} rows, the transport {vertices} vertices",
+            colors.len()
+        )));
+    }
+    if let Some(v) = colors.iter().position(|c| c.iter().any(|x| !x.is_finite())) {
+        return Err(Error::InvalidArgument(format!(
+            "base_color of vertex {v} is not finite: {:?}",
+            colors[v]
+        )));
+    }
+    Ok(())
+}
+
+/// The nodes the vertices read, fitted, in increasing Base Color, and each vertex's pick.
+struct Table {
+    nodes: Vec<Option<Node>>,
+    picks: Vec<NodePick>,
+    /// Per channel: the largest error of a node read plus the largest interpolation error of
+    /// an interval read.
+    error: [f64; 3],
+}
+
+impl Prt {
+    /// The medium of Base Color `x` in every channel, the other inputs as given.
+    fn node(&self, inputs: &PrincipledInputs, x: f64) -> Result<Node> {
+        let material = Material::from_principled(&PrincipledInputs {
+            base_color: [x; 3],
+            ..*inputs
+        })?;
+        let resolved = self.resolve(&material)?;
+        let coefficients = self.coefficients_of(&resolved.profiles)?;
+        let (lengths, walk_albedo) = lengths_and_albedos(&resolved.profiles);
+        Ok(Node {
+            coefficients,
+            ln_length: lengths.map(f64::ln),
+            walk_albedo,
+            totals: resolved.totals(),
+            sent: resolved.sent_on(1.0),
+            resolved,
+        })
+    }
+
+    fn table(&self, inputs: &PrincipledInputs, colors: &[[f32; 3]]) -> Result<Table> {
+        // Which fine bins of the Base Color each channel reads (Cycles saturates first).
+        let bin = |x: f32| ((x.clamp(0.0, 1.0) * FINE_BINS as f32) as usize).min(FINE_BINS - 1);
+        let mut bins = vec![[false; 3]; FINE_BINS];
+        for c in colors {
+            for ch in 0..3 {
+                bins[bin(c[ch])][ch] = true;
+            }
+        }
+        let reads = |a: f64, b: f64, ch: usize| {
+            let lo = ((a * FINE_BINS as f64) as usize).min(FINE_BINS - 1);
+            let hi = ((b * FINE_BINS as f64).ceil() as usize).clamp(lo + 1, FINE_BINS);
+            bins[lo..hi].iter().any(|r| r[ch])
+        };
+        let resolve_all = |xs: &[f64]| -> Result<Vec<Node>> {
+            xs.par_iter().map(|&x| self.node(inputs, x)).collect()
+        };
+        // The coarse nodes whose intervals any channel reads, and those intervals.
+        let coarse = |k: usize| k as f64 / COLOR_INTERVALS as f64;
+        let mut pending: Vec<(f64, f64)> = (0..COLOR_INTERVALS)
+            .map(|k| (coarse(k), coarse(k + 1)))
+            .filter(|&(a, b)| (0..3).any(|ch| reads(a, b, ch)))
+            .collect();
+        let mut ends: Vec<f64> = pending.iter().flat_map(|&(a, b)| [a, b]).collect();
+        ends.sort_by(f64::total_cmp);
+        ends.dedup();
+        let mut nodes: Vec<(f64, Node)> = ends.iter().copied().zip(resolve_all(&ends)?).collect();
+        // A midpoint is judged by the medium's own totals (no fit): what the blend of its ends'
+        // totals misses there is the interpolation's error; the fits' own errors count apart.
+        let totals_at = |xs: &[f64]| -> Result<Vec<[f64; 3]>> {
+            xs.par_iter()
+                .map(|&x| {
+                    let m = Material::from_principled(&PrincipledInputs {
+                        base_color: [x; 3],
+                        ..*inputs
+                    })?;
+                    Ok(self.resolve(&m)?.totals())
+                })
+                .collect()
+        };
+        let find = |nodes: &[(f64, Node)], x: f64| nodes.iter().position(|n| n.0 == x);
+        // Bisect, level by level, every interval read whose midpoint the blend of its ends
+        // misses by more than `INTERPOLATION_TOLERANCE` of the fitted total (floored at
+        // `DARK_SHARE` of the brightest node's, so the dark end is judged on what it shows).
+        let mut error = [0.0f64; 3];
+        let mut interpolation = [0.0f64; 3];
+        while !pending.is_empty() {
+            let mids: Vec<f64> = pending.iter().map(|&(a, b)| 0.5 * (a + b)).collect();
+            let mid_totals = totals_at(&mids)?;
+            let brightest: [f64; 3] =
+                std::array::from_fn(|ch| nodes.iter().map(|n| n.1.totals[ch]).fold(0.0, f64::max));
+            let mut next = Vec::new();
+            let mut split = Vec::new();
+            for ((&(a, b), &m), mid) in pending.iter().zip(&mids).zip(&mid_totals) {
+                let (Some(ia), Some(ib)) = (find(&nodes, a), find(&nodes, b)) else {
+                    continue;
+                };
+                let mut miss = [0.0f64; 3];
+                for (ch, miss) in miss.iter_mut().enumerate() {
+                    if !reads(a, b, ch) {
+                        continue;
+                    }
+                    let exact = mid[ch];
+                    let blend = 0.5 * (nodes[ia].1.totals[ch] + nodes[ib].1.totals[ch]);
+                    let floor = DARK_SHARE * brightest[ch];
+                    if exact.max(floor) > 0.0 {
+                        *miss = (blend - exact).abs() / exact.max(floor);
+                    }
+                }
+                let worst = miss.iter().copied().fold(0.0, f64::max);
+                if worst > INTERPOLATION_TOLERANCE && b - a > 1.5 / FINE_BINS as f64 {
+                    next.extend([(a, m), (m, b)]);
+                    split.push(m);
+                } else {
+                    for ch in 0..3 {
+                        interpolation[ch] = interpolation[ch].max(miss[ch]);
+                    }
+                }
+            }
+            nodes.extend(split.iter().copied().zip(resolve_all(&split)?));
+            nodes.sort_by(|p, q| p.0.total_cmp(&q.0));
+            pending = next;
+        }
+        for (x, node) in &nodes {
+            if node
+                .coefficients
+                .vectors
+                .iter()
+                .flatten()
+                .any(|v| !v.is_finite())
+            {
+                return Err(Error::InvalidArgument(format!(
+                    "the medium of Base Color {x} gives no finite fit"
+                )));
+            }
+        }
+        let xs: Vec<f32> = nodes.iter().map(|n| n.0 as f32).collect();
+        let picks: Vec<NodePick> = colors
+            .par_iter()
+            .map(|c| std::array::from_fn(|ch| locate(&xs, c[ch])))
+            .collect();
+        for (k, (_, node)) in nodes.iter().enumerate() {
+            for (ch, e) in error.iter_mut().enumerate() {
+                let lo = if k > 0 { nodes[k - 1].0 } else { nodes[k].0 };
+                let hi = nodes.get(k + 1).map_or(nodes[k].0, |n| n.0);
+                if reads(lo, hi.max(lo + 1e-9), ch) {
+                    *e = e.max(node.coefficients.error_estimate[ch]);
+                }
+            }
+        }
+        for ch in 0..3 {
+            error[ch] += interpolation[ch];
+        }
+        Ok(Table {
+            nodes: nodes.into_iter().map(|n| Some(n.1)).collect(),
+            picks,
+            error,
+        })
+    }
+
+    /// Multiple-scattering radiosity with the Base Color per vertex (`colors`, linear RGB;
+    /// Cycles saturates it to [0, 1]) and the rest of the Principled inputs uniform
+    /// (`inputs.base_color` is not read). `bounce` and `walks` as `radiosity_parts`. The
+    /// estimate adds the interpolation error between the table's nodes; single scattering and
+    /// a GPU copy are not read (the dot product runs on the CPU).
+    pub fn radiosity_textured(
+        &self,
+        inputs: &PrincipledInputs,
+        colors: &[[f32; 3]],
+        bounce: bool,
+        walks: bool,
+    ) -> Result<Evaluation> {
+        self.textured(inputs, colors, bounce, walks).map(|(e, _)| e)
+    }
+
+    /// `radiosity_textured` and the table it read.
+    fn textured(
+        &self,
+        inputs: &PrincipledInputs,
+        colors: &[[f32; 3]],
+        bounce: bool,
+        walks: bool,
+    ) -> Result<(Evaluation, Table)> {
+        let t0 = Instant::now();
+        check_colors(colors, self.positions.len())?;
+        let table = self.table(inputs, colors)?;
+        let fit_seconds = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let vectors: Vec<Option<[Vec<f32>; 3]>> = table
+            .nodes
+            .iter()
+            .map(|n| n.as_ref().map(|n| n.coefficients.vectors.clone()))
+            .collect();
+        let mut radiosity = self.transport.dot_interpolated(&vectors, &table.picks);
+        let node = |k: u32| table.nodes[k as usize].as_ref();
+        // Per vertex and channel, a node quantity blended as the coefficients are.
+        let blend = |p: &NodePick, c: usize, f: &dyn Fn(&Node) -> f64| -> f64 {
+            let (k, t) = p[c];
+            let below = node(k).map_or(0.0, f);
+            if t > 0.0 {
+                below + f64::from(t) * (node(k + 1).map_or(0.0, f) - below)
+            } else {
+                below
+            }
+        };
+        radiosity
+            .par_iter_mut()
+            .zip(
+                table
+                    .picks
+                    .par_iter()
+                    .zip(self.vertex_irradiance.par_iter()),
+            )
+            .for_each(|(b, (p, i))| {
+                for c in 0..3 {
+                    let m = blend(p, c, &|n| n.coefficients.point_mass[c]);
+                    b[c] += (m * f64::from(i[c])) as f32;
+                }
+            });
+        let mut error_estimate = table.error;
+        let walk_inputs = |factor: [f64; 3]| -> (Vec<[f64; 3]>, Vec<[f32; 3]>) {
+            table
+                .picks
+                .par_iter()
+                .map(|p| {
+                    let x: [f64; 3] = std::array::from_fn(|c| blend(p, c, &|n| n.ln_length[c]));
+                    let k: [f32; 3] = std::array::from_fn(|c| {
+                        (blend(p, c, &|n| n.walk_albedo[c]) * factor[c]) as f32
+                    });
+                    (x, k)
+                })
+                .unzip()
+        };
+        if let Some(g) = self.walks.as_ref().filter(|_| walks) {
+            let (x, k) = walk_inputs([1.0; 3]);
+            let added = g.add_per_vertex(&mut radiosity, &x, &k);
+            for (e, a) in error_estimate.iter_mut().zip(added) {
+                *e += a;
+            }
+        }
+        if let Some(own) = self.bounce.as_ref().filter(|_| bounce) {
+            // What the surface sends on, averaged over the vertices (each sender has its own
+            // Base Color; the gathered E_ind holds no record of who sent it), against the
+            // representative's: the indirect light's scale.
+            let n = table.picks.len().max(1) as f64;
+            let sent: [f64; 3] = std::array::from_fn(|c| {
+                table
+                    .picks
+                    .iter()
+                    .map(|p| blend(p, c, &|n| n.sent[c]))
+                    .sum::<f64>()
+                    / n
+            });
+            let ratio: [f64; 3] = std::array::from_fn(|c| {
+                if own.source_albedo[c] > 0.0 {
+                    sent[c] / own.source_albedo[c]
+                } else {
+                    0.0
+                }
+            });
+            radiosity
+                .par_iter_mut()
+                .zip(table.picks.par_iter().zip(own.irradiance.par_iter()))
+                .for_each(|(b, (p, e))| {
+                    for c in 0..3 {
+                        let receiving = blend(p, c, &|n| n.totals[c]);
+                        b[c] += (receiving * ratio[c] * f64::from(e[c])) as f32;
+                    }
+                });
+            if let Some(g) = own.walked.as_ref().filter(|_| walks) {
+                let share = self.report.interreflection_share;
+                let (x, k) = walk_inputs(ratio);
+                let added = g.add_per_vertex(&mut radiosity, &x, &k);
+                for (e, a) in error_estimate.iter_mut().zip(added) {
+                    *e += if a >= 1.0 { a } else { a * share };
+                }
+            }
+        }
+        if self.light_scale != [1.0; 3] {
+            let k = self.light_scale;
+            radiosity
+                .par_iter_mut()
+                .for_each(|b| *b = std::array::from_fn(|ch| b[ch] * k[ch]));
+        }
+        let dot_seconds = t1.elapsed().as_secs_f64();
+        let mut skipped = self.skipped(bounce, walks);
+        if self.single.is_some() {
+            skipped.push(Skipped::new(
+                "single scattering",
+                "not with a Base Color per vertex yet (multiple scattering alone)",
+            ));
+        }
+        let fit_error = std::array::from_fn(|c| {
+            table
+                .nodes
+                .iter()
+                .flatten()
+                .map(|n| n.coefficients.fit_error[c])
+                .fold(0.0, f64::max)
+        });
+        let evaluation = Evaluation {
+            values: radiosity,
+            quantity: Quantity::Radiosity,
+            error_estimate: Some(error_estimate),
+            seconds: fit_seconds + dot_seconds,
+            skipped,
+            details: PrtDetails {
+                fit_error,
+                fit_seconds,
+                dot_seconds,
+                gpu: None,
+            },
+        };
+        Ok((evaluation, table))
+    }
+
+    /// Multiple-scattering radiance toward `eye` (or along each normal) with the Base Color
+    /// per vertex: `radiosity_textured` turned into radiance by each vertex's own exit weight
+    /// (its view factor blended between its nodes as the coefficients are).
+    pub fn radiance_textured(
+        &self,
+        inputs: &PrincipledInputs,
+        colors: &[[f32; 3]],
+        eye: Option<Vec3>,
+    ) -> Result<Evaluation> {
+        crate::evaluation::check_eye(eye)?;
+        let (mut e, table) = self.textured(inputs, colors, true, true)?;
+        let t = Instant::now();
+        // Along the normals (no eye) each node's weights once; toward an eye, per vertex the
+        // shared exit weight and each channel's view factor at its two nodes.
+        let along: Vec<Option<[f64; 3]>> = table
+            .nodes
+            .iter()
+            .map(|n| n.as_ref().map(|n| n.resolved.exit_weights(1.0)))
+            .collect();
+        let weights = |v: usize, cos_o: Option<f64>| -> [f64; 3] {
+            let p = &table.picks[v];
+            std::array::from_fn(|c| {
+                let (k, t) = p[c];
+                let at = |k: u32| match cos_o {
+                    None => along[k as usize].map_or(0.0, |w| w[c]),
+                    Some(cos) => table.nodes[k as usize].as_ref().map_or(0.0, |n| {
+                        n.resolved.exit_weight(cos) * n.resolved.profiles[c].view_factor(cos)
+                    }),
+                };
+                let below = at(k);
+                if t > 0.0 {
+                    below + f64::from(t) * (at(k + 1) - below)
+                } else {
+                    below
+                }
+            })
+        };
+        radiance_from_radiosity_each(&mut e.values, &self.positions, &self.normals, eye, &weights);
+        e.quantity = Quantity::Radiance;
+        e.details.dot_seconds += t.elapsed().as_secs_f64();
+        e.seconds = e.details.fit_seconds + e.details.dot_seconds;
+        Ok(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::irradiance::Density;
+    use crate::mesh::test_meshes::oracles::rd_total;
+    use crate::mesh::test_meshes::plane;
+    use crate::optics::fresnel_transmittance;
+    use crate::prt::PrtSettings;
+
+    /// A Principled BSDF of radius (2, 1, 0.5) units, IOR 1.5: under the dipole, each
+    /// channel's medium is Cycles' map of the Base Color.
+    fn inputs() -> PrincipledInputs {
+        PrincipledInputs {
+            base_color: [0.8; 3],
+            radius: [2.0, 1.0, 0.5],
+            scale: 1.0,
+            subsurface_weight: 1.0,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn each_vertex_of_a_uniformly_lit_plane_returns_its_own_base_colours_slab_albedo() {
+        // Under uniform irradiance E on a large plane, B at a vertex is E R_d,total of its own
+        // medium whatever its neighbours' (the profile is the receiver's, Cycles' walk the
+        // starting point's): the dipole's closed form (Jensen 2001 eq. 5) per vertex, with
+        // Base Colours drawn at random so every node and interval of the table is read.
+        let mesh = plane(121, 400.0);
+        let eta = 1.5;
+        let e = fresnel_transmittance(eta, 1.0) as f32;
+        let light = move |p: &[Vec3], _: &[Vec3], _: Density| Ok(vec![[e; 3]; p.len()]);
+        // The texture's darkest and brightest Base Colours as representatives: the support
+        // and knots cover every medium between them (what the add-on passes).
+        let reps = [0.05, 0.85].map(|x| {
+            Material::from_principled(&PrincipledInputs {
+                base_color: [x; 3],
+                ..inputs()
+            })
+            .unwrap()
+        });
+        let settings = PrtSettings {
+            eta,
+            ..Default::default()
+        };
+        let prt = Prt::precompute(&mesh, &reps, &settings, &light, None).unwrap();
+        let support = prt.report().support_radius;
+        let mut seed = 7u64;
+        let mut next = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 40) as f32) / (1u64 << 24) as f32
+        };
+        let colors: Vec<[f32; 3]> = (0..mesh.vertex_count())
+            .map(|_| [0.05 + 0.8 * next(), 0.85 * next(), 0.3 + 0.55 * next()])
+            .collect();
+        let got = prt
+            .radiosity_textured(&inputs(), &colors, true, true)
+            .unwrap();
+        let estimate = got.error_estimate.unwrap();
+        let mut expected = vec![[0.0f64; 3]; colors.len()];
+        for (v, col) in colors.iter().enumerate() {
+            let m = Material::from_principled(&PrincipledInputs {
+                base_color: col.map(f64::from),
+                ..inputs()
+            })
+            .unwrap();
+            expected[v] = std::array::from_fn(|c| {
+                f64::from(e) * rd_total(m.sigma_a[c], m.sigma_s_prime()[c], eta)
+            });
+        }
+        let mut worst = [0.0f64; 3];
+        let inner = |p: &Vec3| (p.x.abs().max(p.y.abs()) as f64) < 200.0 - support;
+        let checked = mesh.positions().iter().filter(|p| inner(p)).count();
+        assert!(
+            checked > 500,
+            "{checked} vertices inside the rim (support {support})"
+        );
+        for c in 0..3 {
+            // Judged against the channel's brightest beside the darkest (`DARK_SHARE`).
+            let floor = DARK_SHARE * expected.iter().map(|x| x[c]).fold(0.0, f64::max);
+            for (v, p) in mesh.positions().iter().enumerate() {
+                if !inner(p) {
+                    continue; // the plane's rim: less surface around than the closed form's
+                }
+                let expect = expected[v][c];
+                let rel = (f64::from(got.values[v][c]) - expect).abs() / expect.max(floor);
+                worst[c] = worst[c].max(rel);
+            }
+        }
+        eprintln!(
+            "worst per-vertex error {worst:?} over {checked} vertices, estimate {estimate:?}"
+        );
+        for c in 0..3 {
+            assert!(worst[c] < 0.02, "channel {c}: {:.2} %", 100.0 * worst[c]);
+            assert!(
+                estimate[c] < 0.05 && estimate[c] > 0.0,
+                "estimate {estimate:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_uniform_base_colour_on_a_node_is_the_uniform_edit() {
+        // Base Colour 0.75 in every channel lies on a node (12/16): the table reads that node
+        // alone, so the edit is the uniform material's bit for bit up to the summation order.
+        let mesh = plane(21, 100.0);
+        let light = |p: &[Vec3], _: &[Vec3], _: Density| Ok(vec![[1.0f32; 3]; p.len()]);
+        let m = Material::from_principled(&PrincipledInputs {
+            base_color: [0.75; 3],
+            ..inputs()
+        })
+        .unwrap();
+        let settings = PrtSettings {
+            eta: 1.5,
+            ..Default::default()
+        };
+        let prt = Prt::precompute(&mesh, &[m], &settings, &light, None).unwrap();
+        let uniform = prt.radiosity(&m).unwrap().values;
+        let colors = vec![[0.75f32; 3]; mesh.vertex_count()];
+        let textured = prt
+            .radiosity_textured(&inputs(), &colors, true, true)
+            .unwrap();
+        for (a, b) in uniform.iter().zip(&textured.values) {
+            for c in 0..3 {
+                assert!(
+                    (a[c] - b[c]).abs() <= 1e-5 * a[c].abs().max(1e-6),
+                    "{a:?} {b:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bad_base_colours_are_errors_that_name_the_argument() {
+        let mesh = plane(5, 10.0);
+        let light = |p: &[Vec3], _: &[Vec3], _: Density| Ok(vec![[1.0f32; 3]; p.len()]);
+        let m = Material::from_principled(&inputs()).unwrap();
+        let settings = PrtSettings {
+            eta: 1.5,
+            ..Default::default()
+        };
+        let prt = Prt::precompute(&mesh, &[m], &settings, &light, None).unwrap();
+        let short = vec![[0.5f32; 3]; 3];
+        let e = prt
+            .radiosity_textured(&inputs(), &short, true, true)
+            .unwrap_err();
+        assert!(e.to_string().contains("base_color has 3 rows"), "{e}");
+        let mut nan = vec![[0.5f32; 3]; mesh.vertex_count()];
+        nan[4][1] = f32::NAN;
+        let e = prt
+            .radiosity_textured(&inputs(), &nan, true, true)
+            .unwrap_err();
+        assert!(e.to_string().contains("base_color of vertex 4"), "{e}");
+        // Beyond [0, 1] Cycles saturates: 1.7 is 1, -0.2 is 0.
+        let over = vec![[1.7f32, -0.2, 1.0]; mesh.vertex_count()];
+        let clamped = vec![[1.0f32, 0.0, 1.0]; mesh.vertex_count()];
+        let a = prt
+            .radiosity_textured(&inputs(), &over, true, true)
+            .unwrap();
+        let b = prt
+            .radiosity_textured(&inputs(), &clamped, true, true)
+            .unwrap();
+        assert_eq!(a.values, b.values);
+    }
+}

@@ -1,0 +1,43 @@
+"""`Prt.radiance(base_color=...)` through the Python API (issue 30, point 2): the arguments
+checked, and a uniform Base Color given per vertex is the uniform material's preview. The
+per-vertex medium's accuracy against the dipole's closed form is checked in Rust
+(`prt::textured`), against Cycles in `test_bpy_texture.py`."""
+
+import numpy as np
+import pytest
+import translucent
+
+from helpers import sun_plane
+
+
+def _inputs(base_color=0.75):
+    return translucent.Material.from_principled(base_color, (1.0, 0.5, 0.25), 0.002)
+
+
+@pytest.fixture(scope="module")
+def prt():
+    _, scene = sun_plane(n=21, size=0.1)
+    return translucent.Prt(scene, _inputs(), coefficients=16, profile="cycles", walks=0, interreflection=False)
+
+
+def test_a_uniform_base_colour_per_vertex_is_the_uniform_material(prt):
+    # 0.75 lies on a node of the table (12/16): the same coefficients as the uniform edit.
+    n = len(prt.radiance(_inputs()))
+    uniform = prt.radiance(_inputs(0.75))
+    per_vertex = prt.radiance(_inputs(0.3), base_color=np.full((n, 3), 0.75))
+    np.testing.assert_allclose(per_vertex, uniform, rtol=1e-5, atol=1e-9)
+    assert prt.last_eval["error_estimate"] is not None
+
+
+def test_base_colour_arguments_are_checked(prt):
+    n = len(prt.radiance(_inputs()))
+    with pytest.raises(ValueError, match="base_color has 3 rows"):
+        prt.radiance(_inputs(), base_color=np.full((3, 3), 0.5))
+    bad = np.full((n, 3), 0.5)
+    bad[2, 0] = np.nan
+    with pytest.raises(ValueError, match="base_color of vertex 2"):
+        prt.radiosity(_inputs(), base_color=bad)
+    with pytest.raises(ValueError, match="base_color must have shape"):
+        prt.radiance(_inputs(), base_color=np.full((n, 2), 0.5))
+    with pytest.raises(ValueError, match="Material.from_principled"):
+        prt.radiance(translucent.Material.preset("marble"), base_color=np.full((n, 3), 0.5))
