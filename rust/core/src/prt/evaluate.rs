@@ -79,10 +79,23 @@ impl Prt {
 
     /// `coefficients` for the material's three profiles.
     pub(super) fn coefficients_of(&self, profiles: &[Profile; 3]) -> Result<Coefficients> {
+        self.coefficients_for(profiles, [true; 3])
+    }
+
+    /// `coefficients_of` for the channels `wanted` only (the others left at zero: a table of
+    /// media fits a node for the channels that read it, `textured`).
+    pub(super) fn coefficients_for(
+        &self,
+        profiles: &[Profile; 3],
+        wanted: [bool; 3],
+    ) -> Result<Coefficients> {
         let (lo, hi) = self.basis().domain();
         let mut fit_error = [0.0; 3];
         let mut estimate = [0.0; 3];
         let coeffs = std::array::from_fn(|c| {
+            if !wanted[c] {
+                return vec![0.0; self.basis().len() + 1];
+            }
             let p = &profiles[c];
             let fit = self.fitter.fit(&|r| p.value(r));
             fit_error[c] = fit.rel_l2_error;

@@ -117,6 +117,28 @@ impl Transport {
     }
 }
 
+/// (row . a, row . b) in eight independent partial sums (they vectorise).
+fn dot2(row: &[f32], a: &[f32], b: &[f32]) -> (f32, f32) {
+    let (mut sa, mut sb) = ([0f32; 8], [0f32; 8]);
+    let n = row.len() / 8 * 8;
+    for ((r, x), y) in row[..n]
+        .chunks_exact(8)
+        .zip(a[..n].chunks_exact(8))
+        .zip(b[..n].chunks_exact(8))
+    {
+        for i in 0..8 {
+            sa[i] += r[i] * x[i];
+            sb[i] += r[i] * y[i];
+        }
+    }
+    let (mut ta, mut tb) = (sa.iter().sum::<f32>(), sb.iter().sum::<f32>());
+    for j in n..row.len() {
+        ta += row[j] * a[j];
+        tb += row[j] * b[j];
+    }
+    (ta, tb)
+}
+
 /// One vertex's medium for `Transport::dot_interpolated`: per channel, the node below its
 /// Base Color and the weight of the node above (0: the node below alone).
 pub(crate) type NodePick = [(u32, f32); 3];
@@ -133,42 +155,55 @@ impl Transport {
     ) -> Vec<[f32; 3]> {
         let stride = self.stride;
         let channels = self.channels;
+        // Per node and channel: its coefficients and the step to the next node's (zeros past
+        // the last, or where a node was not fitted: a pick never blends towards those).
+        let zero = vec![0f32; stride];
         let scaled: Vec<Option<[Vec<f32>; 3]>> = nodes
             .iter()
             .map(|n| n.as_ref().map(|c| self.scaled(c)))
+            .collect();
+        let steps: Vec<[Vec<f32>; 3]> = (0..nodes.len())
+            .map(|k| {
+                std::array::from_fn(|c| {
+                    match (&scaled[k], scaled.get(k + 1).and_then(|n| n.as_ref())) {
+                        (Some(a), Some(b)) => a[c].iter().zip(&b[c]).map(|(x, y)| y - x).collect(),
+                        _ => zero.clone(),
+                    }
+                })
+            })
             .collect();
         let per_block = channels * stride * LANES;
         let mut out = vec![[0f32; 3]; self.vertices];
         out.par_chunks_mut(LANES)
             .zip(picks.par_chunks(LANES))
             .zip(self.values.par_chunks(per_block))
-            .for_each(|((dst, pick), block)| {
-                for (l, (d, p)) in dst.iter_mut().zip(pick).enumerate() {
-                    *d = std::array::from_fn(|c| {
-                        let base = if channels == 1 { 0 } else { c * stride * LANES };
-                        let row = |k: u32| {
-                            // Every node a pick reads was fitted (`textured::Table`).
-                            debug_assert!(scaled[k as usize].is_some());
-                            let Some(coef) = scaled[k as usize].as_ref().map(|n| &n[c]) else {
-                                return 0.0;
-                            };
-                            let mut acc = 0f32;
-                            for (j, x) in coef.iter().enumerate() {
-                                acc += x * block[base + j * LANES + l];
+            .for_each_init(
+                || vec![0f32; channels * stride * LANES],
+                |rows, ((dst, pick), block)| {
+                    // The block transposed to one row per lane, so each lane's two dot
+                    // products (B = T.C_k + t T.(C_{k+1} - C_k)) read contiguous memory.
+                    for sc in 0..channels {
+                        for j in 0..stride {
+                            let src =
+                                &block[(sc * stride + j) * LANES..(sc * stride + j + 1) * LANES];
+                            for (l, x) in src.iter().enumerate() {
+                                rows[(sc * LANES + l) * stride + j] = *x;
                             }
-                            acc
-                        };
-                        let (k, t) = p[c];
-                        let below = row(k);
-                        let b = if t > 0.0 {
-                            below + t * (row(k + 1) - below)
-                        } else {
-                            below
-                        };
-                        b.max(0.0)
-                    });
-                }
-            });
+                        }
+                    }
+                    for (l, (d, p)) in dst.iter_mut().zip(pick).enumerate() {
+                        *d = std::array::from_fn(|c| {
+                            let sc = if channels == 1 { 0 } else { c };
+                            let row =
+                                &rows[(sc * LANES + l) * stride..(sc * LANES + l + 1) * stride];
+                            let (k, t) = p[c];
+                            let base = scaled[k as usize].as_ref().map_or(&zero[..], |n| &n[c][..]);
+                            let (lo, hi) = dot2(row, base, &steps[k as usize][c]);
+                            (lo + t * hi).max(0.0)
+                        });
+                    }
+                },
+            );
         out
     }
 }

@@ -6,15 +6,18 @@
 //! there), so B at a vertex is the profile of that vertex's own Base Color applied to the
 //! light around it (Xu 2007 eq. 9 with a coefficient vector per vertex):
 //!
-//!     B(x_o) = sum_j c_j(a(x_o)) T_j(x_o),
+//! ```text
+//! B(x_o) = sum_j c_j(a(x_o)) T_j(x_o),
+//! ```
 //!
 //! a(x_o) the vertex's Base Color per channel. In Cycles' Principled map (`optics::principled`)
 //! the Base Color sets the single-scattering albedo alone, sigma_t = 1 / (d (1 - g)) coming
 //! from the radius, so each channel's coefficients are a curve in one variable. They are fitted
-//! at `COLOR_INTERVALS + 1` nodes x_k = k / COLOR_INTERVALS (only those the vertices read) and
-//! interpolated linearly between them; the interpolation's error is measured at the midpoint of
-//! every interval read (the fitted total there against the mean of its ends) and added to the
-//! estimate. The point mass, the walks' term (read at each vertex's diffusion length, scaled by
+//! at `COLOR_INTERVALS + 1` nodes x_k = k / COLOR_INTERVALS (only those the vertices read, and
+//! only for the channels that read them) and interpolated linearly between them. Every interval
+//! read is checked at its midpoint: where the blend of its ends' slab totals misses the medium's
+//! own total there by more than `INTERPOLATION_TOLERANCE`, it is halved (down to
+//! 1/`FINE_BINS`); what is left is added to the estimate. The point mass, the walks' term (read at each vertex's diffusion length, scaled by
 //! its slab albedo) and the object's own light (received at each vertex's totals) follow the
 //! vertex's node the same way. Subsurface Radius and Scale stay uniform (the transport's
 //! samples and knots are spaced for one radius).
@@ -50,6 +53,8 @@ struct Node {
     walk_albedo: [f64; 3],
     totals: [f64; 3],
     sent: [f64; 3],
+    /// The exit weight and view factor along the normal, per channel.
+    along_normal: [f64; 3],
 }
 
 /// Where a Base Color channel lies among the nodes at `xs` (sorted, covering every value
@@ -67,6 +72,18 @@ fn locate(xs: &[f32], x: f32) -> (u32, f32) {
     let (a, b) = (xs[k], xs[k + 1]);
     let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
     (k as u32, t)
+}
+
+/// A node quantity (`per_node[k][c]`) blended at a vertex's pick for channel `c`, as the
+/// coefficients are.
+fn blend(per_node: &[[f64; 3]], p: &NodePick, c: usize) -> f64 {
+    let (k, t) = p[c];
+    let below = per_node[k as usize][c];
+    if t > 0.0 {
+        below + f64::from(t) * (per_node[k as usize + 1][c] - below)
+    } else {
+        below
+    }
 }
 
 /// The Base Color per vertex checked: one finite triple per vertex.
@@ -96,21 +113,27 @@ struct Table {
 }
 
 impl Prt {
-    /// The medium of Base Color `x` in every channel, the other inputs as given.
-    fn node(&self, inputs: &PrincipledInputs, x: f64) -> Result<Node> {
+    /// The medium of Base Color `x`, the other inputs as given, fitted for the channels
+    /// `wanted` (those that read it); what it sends on only where the own light needs it.
+    fn node(&self, inputs: &PrincipledInputs, x: f64, wanted: [bool; 3]) -> Result<Node> {
         let material = Material::from_principled(&PrincipledInputs {
             base_color: [x; 3],
             ..*inputs
         })?;
         let resolved = self.resolve(&material)?;
-        let coefficients = self.coefficients_of(&resolved.profiles)?;
+        let coefficients = self.coefficients_for(&resolved.profiles, wanted)?;
         let (lengths, walk_albedo) = lengths_and_albedos(&resolved.profiles);
         Ok(Node {
             coefficients,
             ln_length: lengths.map(f64::ln),
             walk_albedo,
             totals: resolved.totals(),
-            sent: resolved.sent_on(1.0),
+            sent: if self.bounce.is_some() {
+                resolved.sent_on(1.0)
+            } else {
+                [0.0; 3]
+            },
+            along_normal: resolved.exit_weights(1.0),
             resolved,
         })
     }
@@ -129,8 +152,10 @@ impl Prt {
             let hi = ((b * FINE_BINS as f64).ceil() as usize).clamp(lo + 1, FINE_BINS);
             bins[lo..hi].iter().any(|r| r[ch])
         };
-        let resolve_all = |xs: &[f64]| -> Result<Vec<Node>> {
-            xs.par_iter().map(|&x| self.node(inputs, x)).collect()
+        let resolve_all = |xs: &[(f64, [bool; 3])]| -> Result<Vec<Node>> {
+            xs.par_iter()
+                .map(|&(x, w)| self.node(inputs, x, w))
+                .collect()
         };
         // The coarse nodes whose intervals any channel reads, and those intervals.
         let coarse = |k: usize| k as f64 / COLOR_INTERVALS as f64;
@@ -141,7 +166,17 @@ impl Prt {
         let mut ends: Vec<f64> = pending.iter().flat_map(|&(a, b)| [a, b]).collect();
         ends.sort_by(f64::total_cmp);
         ends.dedup();
-        let mut nodes: Vec<(f64, Node)> = ends.iter().copied().zip(resolve_all(&ends)?).collect();
+        // A node is fitted for the channels that read an interval beside it.
+        let beside = |x: f64, h: f64| -> [bool; 3] {
+            std::array::from_fn(|ch| {
+                (x > 0.0 && reads((x - h).max(0.0), x, ch))
+                    || (x < 1.0 && reads(x, (x + h).min(1.0), ch))
+            })
+        };
+        let coarse_h = 1.0 / COLOR_INTERVALS as f64;
+        let wanted: Vec<(f64, [bool; 3])> =
+            ends.iter().map(|&x| (x, beside(x, coarse_h))).collect();
+        let mut nodes: Vec<(f64, Node)> = ends.iter().copied().zip(resolve_all(&wanted)?).collect();
         // A midpoint is judged by the medium's own totals (no fit): what the blend of its ends'
         // totals misses there is the interpolation's error; the fits' own errors count apart.
         let totals_at = |xs: &[f64]| -> Result<Vec<[f64; 3]>> {
@@ -187,14 +222,14 @@ impl Prt {
                 let worst = miss.iter().copied().fold(0.0, f64::max);
                 if worst > INTERPOLATION_TOLERANCE && b - a > 1.5 / FINE_BINS as f64 {
                     next.extend([(a, m), (m, b)]);
-                    split.push(m);
+                    split.push((m, std::array::from_fn(|ch| reads(a, b, ch))));
                 } else {
                     for ch in 0..3 {
                         interpolation[ch] = interpolation[ch].max(miss[ch]);
                     }
                 }
             }
-            nodes.extend(split.iter().copied().zip(resolve_all(&split)?));
+            nodes.extend(split.iter().map(|s| s.0).zip(resolve_all(&split)?));
             nodes.sort_by(|p, q| p.0.total_cmp(&q.0));
             pending = next;
         }
@@ -269,41 +304,40 @@ impl Prt {
             .map(|n| n.as_ref().map(|n| n.coefficients.vectors.clone()))
             .collect();
         let mut radiosity = self.transport.dot_interpolated(&vectors, &table.picks);
-        let node = |k: u32| table.nodes[k as usize].as_ref();
-        // Per vertex and channel, a node quantity blended as the coefficients are.
-        let blend = |p: &NodePick, c: usize, f: &dyn Fn(&Node) -> f64| -> f64 {
-            let (k, t) = p[c];
-            let below = node(k).map_or(0.0, f);
-            if t > 0.0 {
-                below + f64::from(t) * (node(k + 1).map_or(0.0, f) - below)
-            } else {
-                below
-            }
+        // Per node, the quantities a vertex blends as it blends the coefficients.
+        let per_node = |f: &dyn Fn(&Node) -> [f64; 3]| -> Vec<[f64; 3]> {
+            table
+                .nodes
+                .iter()
+                .map(|n| n.as_ref().map_or([0.0; 3], f))
+                .collect()
         };
-        radiosity
-            .par_iter_mut()
-            .zip(
-                table
-                    .picks
-                    .par_iter()
-                    .zip(self.vertex_irradiance.par_iter()),
-            )
-            .for_each(|(b, (p, i))| {
-                for c in 0..3 {
-                    let m = blend(p, c, &|n| n.coefficients.point_mass[c]);
-                    b[c] += (m * f64::from(i[c])) as f32;
-                }
-            });
+        let point_mass = per_node(&|n| n.coefficients.point_mass);
+        if point_mass.iter().flatten().any(|&m| m > 0.0) {
+            radiosity
+                .par_iter_mut()
+                .zip(
+                    table
+                        .picks
+                        .par_iter()
+                        .zip(self.vertex_irradiance.par_iter()),
+                )
+                .for_each(|(b, (p, i))| {
+                    for c in 0..3 {
+                        b[c] += (blend(&point_mass, p, c) * f64::from(i[c])) as f32;
+                    }
+                });
+        }
         let mut error_estimate = table.error;
+        let (ln_lengths, walk_albedos) = (per_node(&|n| n.ln_length), per_node(&|n| n.walk_albedo));
         let walk_inputs = |factor: [f64; 3]| -> (Vec<[f64; 3]>, Vec<[f32; 3]>) {
             table
                 .picks
                 .par_iter()
                 .map(|p| {
-                    let x: [f64; 3] = std::array::from_fn(|c| blend(p, c, &|n| n.ln_length[c]));
-                    let k: [f32; 3] = std::array::from_fn(|c| {
-                        (blend(p, c, &|n| n.walk_albedo[c]) * factor[c]) as f32
-                    });
+                    let x: [f64; 3] = std::array::from_fn(|c| blend(&ln_lengths, p, c));
+                    let k: [f32; 3] =
+                        std::array::from_fn(|c| (blend(&walk_albedos, p, c) * factor[c]) as f32);
                     (x, k)
                 })
                 .unzip()
@@ -320,11 +354,12 @@ impl Prt {
             // Base Color; the gathered E_ind holds no record of who sent it), against the
             // representative's: the indirect light's scale.
             let n = table.picks.len().max(1) as f64;
+            let sent_per_node = per_node(&|n| n.sent);
             let sent: [f64; 3] = std::array::from_fn(|c| {
                 table
                     .picks
-                    .iter()
-                    .map(|p| blend(p, c, &|n| n.sent[c]))
+                    .par_iter()
+                    .map(|p| blend(&sent_per_node, p, c))
                     .sum::<f64>()
                     / n
             });
@@ -335,12 +370,13 @@ impl Prt {
                     0.0
                 }
             });
+            let totals = per_node(&|n| n.totals);
             radiosity
                 .par_iter_mut()
                 .zip(table.picks.par_iter().zip(own.irradiance.par_iter()))
                 .for_each(|(b, (p, e))| {
                     for c in 0..3 {
-                        let receiving = blend(p, c, &|n| n.totals[c]);
+                        let receiving = blend(&totals, p, c);
                         b[c] += (receiving * ratio[c] * f64::from(e[c])) as f32;
                     }
                 });
@@ -405,20 +441,22 @@ impl Prt {
         let t = Instant::now();
         // Along the normals (no eye) each node's weights once; toward an eye, per vertex the
         // shared exit weight and each channel's view factor at its two nodes.
-        let along: Vec<Option<[f64; 3]>> = table
+        let along: Vec<[f64; 3]> = table
             .nodes
             .iter()
-            .map(|n| n.as_ref().map(|n| n.resolved.exit_weights(1.0)))
+            .map(|n| n.as_ref().map_or([0.0; 3], |n| n.along_normal))
             .collect();
         let weights = |v: usize, cos_o: Option<f64>| -> [f64; 3] {
             let p = &table.picks[v];
+            let Some(cos) = cos_o else {
+                return std::array::from_fn(|c| blend(&along, p, c));
+            };
             std::array::from_fn(|c| {
                 let (k, t) = p[c];
-                let at = |k: u32| match cos_o {
-                    None => along[k as usize].map_or(0.0, |w| w[c]),
-                    Some(cos) => table.nodes[k as usize].as_ref().map_or(0.0, |n| {
+                let at = |k: u32| {
+                    table.nodes[k as usize].as_ref().map_or(0.0, |n| {
                         n.resolved.exit_weight(cos) * n.resolved.profiles[c].view_factor(cos)
-                    }),
+                    })
                 };
                 let below = at(k);
                 if t > 0.0 {
