@@ -117,6 +117,14 @@ def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool, instance=None):
     return co, tris, nrm, key, slots
 
 
+def evaluated_copy(obj: bpy.types.Object, depsgraph) -> bpy.types.Mesh:
+    """A new mesh data-block holding `obj`'s evaluated mesh with every data layer (UV maps,
+    colour attributes), in object space: for a bake on a temporary copy (`textures`). The caller
+    removes it. The other place the add-on evaluates a mesh (`_evaluate` is the first)."""
+    return bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph), preserve_all_data_layers=True,
+                                           depsgraph=depsgraph)
+
+
 def same_topology(key: str, other: str) -> bool:
     """Whether two geometry keys have the same vertex, corner and face counts and the same
     faces' material slots (only the positions may differ: a deformation)."""

@@ -16,6 +16,7 @@ import time
 import bpy
 import numpy as np
 
+from . import export
 from .principled import principled_node
 
 BAKE_SCENE = "Translucent Base Color bake"
@@ -118,8 +119,7 @@ def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], de
         scene.cycles.use_denoising = False
         scene.cycles.use_adaptive_sampling = False
         for obj in objects:
-            mesh = bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph), preserve_all_data_layers=True,
-                                                   depsgraph=depsgraph)
+            mesh = export.evaluated_copy(obj, depsgraph)
             made_meshes.append(mesh)
             mesh.materials.clear()
             mesh.materials.append(copy)

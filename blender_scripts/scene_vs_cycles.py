@@ -2,7 +2,8 @@
 floor, a box between her and the key light casting its shadow across her, compared with a
 Cycles vertex bake of the whole scene (every sample taken). Rows split by what each part adds:
 the lone object as the preview saw it before issue 30 (no other object), the other objects as
-shadows only (black), and as shadows that send light back (their own albedo).
+shadows only (black), and as shadows that send light back (their own albedo); then the same
+scene with a textured Base Color (a checker), read per vertex and as the socket's value alone.
 
 For each material it prints the three previews against the bake and each one's precompute time
 (area-weighted relative RMS over every vertex, worst channel). Bakes are cached
@@ -57,6 +58,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--materials", nargs="+", default=["marble", "skin1"])
     ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--texture", action=argparse.BooleanOptionalAction, default=True,
+                    help="also the scene with a textured Base Color (issue 30, point 2)")
     args = ap.parse_args(argv)
     print(f"machine: {machine()}")
     obj, _ = scenes.build_scene("suzanne")
@@ -97,7 +100,50 @@ def main(argv=None) -> int:
             est = 100 * max(prt.last_eval["error_estimate"])
             print(f"{name}, {label}: {100 * rel(preview, bake, w):.2f} % from Cycles (estimate {est:.2f} %), "
                   f"precompute {seconds:.1f} s; bake {bake_s:.0f} s", flush=True)
+        if args.texture:
+            textured_row(name, m, bake_obj, scene, w, args.spp)
     return 0
+
+
+def textured_row(name: str, m, bake_obj, scene, w, spp: int) -> None:
+    """The same scene with the material's Principled BSDF given a textured Base Color (a
+    Checker Texture: its own colour and half of it, like freckles): the preview reading it per
+    vertex (`Prt.radiance(base_color=...)`, the add-on's Cycles bake of the Base Color) and the
+    socket's own value shown uniformly (before issue 30), against a Cycles bake of the textured
+    material."""
+    from addon import textures
+    from translucent import cycles
+
+    mat = cr.principled_material(m, f"{name} textured")
+    node = mat.node_tree.nodes["Principled BSDF"]
+    colour = tuple(node.inputs["Base Color"].default_value)
+    checker = mat.node_tree.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 6.0
+    checker.inputs["Color1"].default_value = colour
+    checker.inputs["Color2"].default_value = (*(0.5 * c for c in colour[:3]), 1.0)
+    mat.node_tree.links.new(checker.outputs["Color"], node.inputs["Base Color"])
+    bake_obj.data.materials.clear()
+    bake_obj.data.materials.append(mat)
+    scene_bl = cr.use_cycles(spp, 0)
+    scene_bl.cycles.use_adaptive_sampling = False
+    t0 = time.perf_counter()
+    bake = cr.bake_diffuse_vertex_colors(bake_obj, {"DIRECT", "INDIRECT", "COLOR"})
+    bake_s = time.perf_counter() - t0
+    baked, texture_s = textures.bake_base_color(mat, [bake_obj])
+    colours = baked[bake_obj.name]
+    inputs = cycles.read_principled(node)
+    t0 = time.perf_counter()
+    prt = translucent.Prt(scene, textures.representatives(inputs, colours), backend="cpu", single_scattering=False)
+    seconds = time.perf_counter() - t0
+    preview = prt.radiance(inputs.material(), base_color=colours)
+    est = 100 * max(prt.last_eval["error_estimate"])
+    print(f"{name}, textured Base Color read per vertex: {100 * rel(preview, bake, w):.2f} % from Cycles "
+          f"(estimate {est:.2f} %), precompute {seconds:.1f} s, the Base Color's bake {1000 * texture_s:.0f} ms; "
+          f"bake {bake_s:.0f} s", flush=True)
+    uniform = translucent.Prt(scene, inputs.material(), backend="cpu", single_scattering=False).radiance(inputs.material())
+    print(f"{name}, textured, the socket's value shown uniformly (before issue 30): "
+          f"{100 * rel(uniform, bake, w):.2f} % from Cycles", flush=True)
+    bake_obj.data.materials.clear()
 
 
 if __name__ == "__main__":

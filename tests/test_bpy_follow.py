@@ -236,8 +236,8 @@ def test_the_panel_draw_evaluates_no_mesh(addon, monkeypatch):
 
     from addon import export, follow
 
-    # The add-on evaluates meshes in one function only (checked here from its source), so
-    # counting that function's calls counts every evaluation.
+    # The add-on evaluates meshes in two functions only (checked here from its source: the
+    # export's and the Base Color bake's copy), so counting their calls counts every evaluation.
     callers = set()
     for path in ADDON.glob("*.py"):
         for fn in ast.walk(ast.parse(path.read_text())):
@@ -245,10 +245,11 @@ def test_the_panel_draw_evaluates_no_mesh(addon, monkeypatch):
                 for node in ast.walk(fn):
                     if isinstance(node, ast.Attribute) and node.attr in {"evaluated_get", "to_mesh"}:
                         callers.add(f"{path.stem}.{fn.name}")
-    assert callers == {"export._evaluate"}
+    assert callers == {"export._evaluate", "export.evaluated_copy"}
     calls = []
-    original = export._evaluate
+    original, copy = export._evaluate, export.evaluated_copy
     monkeypatch.setattr(export, "_evaluate", lambda *a, **k: (calls.append(a[0].name), original(*a, **k))[1])
+    monkeypatch.setattr(export, "evaluated_copy", lambda *a, **k: (calls.append(a[0].name), copy(*a, **k))[1])
 
     mat = bpy.data.materials.new("Wax")
     mat.translucent.enabled = True

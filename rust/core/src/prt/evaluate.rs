@@ -221,18 +221,10 @@ impl Prt {
                 // Its noise is relative to the indirect light, a share of B.
                 let share = self.report.interreflection_share;
                 let added = g.add_scaled_to(&mut radiosity, profiles, ratio.map(|r| r as f32));
-                for (e, a) in error_estimate.iter_mut().zip(added) {
-                    *e += if a >= 1.0 { a } else { a * share };
-                }
+                add_indirect_noise(&mut error_estimate, added, share);
             }
         }
-        if self.light_scale != [1.0; 3] {
-            // The lights were rescaled since the transport was lit (`rescale_light`).
-            let k = self.light_scale;
-            radiosity
-                .par_iter_mut()
-                .for_each(|b| *b = std::array::from_fn(|ch| b[ch] * k[ch]));
-        }
+        self.apply_light_scale(&mut radiosity);
         let dot_seconds = t1.elapsed().as_secs_f64();
         Ok((
             Evaluation {
@@ -250,6 +242,16 @@ impl Prt {
             },
             l1,
         ))
+    }
+
+    /// The lights rescaled since the transport was lit (`rescale_light`): B is linear in them.
+    pub(super) fn apply_light_scale(&self, radiosity: &mut [[f32; 3]]) {
+        if self.light_scale != [1.0; 3] {
+            let k = self.light_scale;
+            radiosity
+                .par_iter_mut()
+                .for_each(|b| *b = std::array::from_fn(|ch| b[ch] * k[ch]));
+        }
     }
 
     /// What an evaluation leaves out: the object's own light and the walks through the mesh,
@@ -371,5 +373,13 @@ impl Prt {
         e.details.dot_seconds += t.elapsed().as_secs_f64();
         e.seconds = e.details.fit_seconds + e.details.dot_seconds;
         Ok((e, l1))
+    }
+}
+
+/// The walks' term of the object's own light adds its noise relative to the indirect light,
+/// a `share` of B (an out-of-range flag, 1 or more, counts whole).
+pub(super) fn add_indirect_noise(error: &mut [f64; 3], added: [f64; 3], share: f64) {
+    for (e, a) in error.iter_mut().zip(added) {
+        *e += if a >= 1.0 { a } else { a * share };
     }
 }

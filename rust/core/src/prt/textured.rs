@@ -22,7 +22,7 @@
 //! vertex's node the same way. Subsurface Radius and Scale stay uniform (the transport's
 //! samples and knots are spaced for one radius).
 
-use super::evaluate::{Coefficients, Evaluation, PrtDetails};
+use super::evaluate::{add_indirect_noise, Coefficients, Evaluation, PrtDetails};
 use super::layout::NodePick;
 use super::Prt;
 use crate::error::{Error, Result};
@@ -384,17 +384,10 @@ impl Prt {
                 let share = self.report.interreflection_share;
                 let (x, k) = walk_inputs(ratio);
                 let added = g.add_per_vertex(&mut radiosity, &x, &k);
-                for (e, a) in error_estimate.iter_mut().zip(added) {
-                    *e += if a >= 1.0 { a } else { a * share };
-                }
+                add_indirect_noise(&mut error_estimate, added, share);
             }
         }
-        if self.light_scale != [1.0; 3] {
-            let k = self.light_scale;
-            radiosity
-                .par_iter_mut()
-                .for_each(|b| *b = std::array::from_fn(|ch| b[ch] * k[ch]));
-        }
+        self.apply_light_scale(&mut radiosity);
         let dot_seconds = t1.elapsed().as_secs_f64();
         let mut skipped = self.skipped(bounce, walks);
         if self.single.is_some() {
