@@ -67,23 +67,12 @@ def follow_texture(material: bpy.types.Material, s: Session, force: bool = False
     """Read the Base Color per vertex again when what drives it changed (its node tree's key,
     or `force`: an image it reads was edited), when a link now drives it, or drop it when none
     does. PRT only (the hierarchy says it shows the socket's value)."""
-    if material.translucent.source != "PRINCIPLED" or not textures.linked_base_color(material):
-        s.base_color, s.texture_key = None, ""
-        s.texture_message = ""
+    followed = (s.method == "prt" and material.translucent.source == "PRINCIPLED"
+                and textures.linked_base_color(material))
+    if followed and not force and s.base_color is not None and textures.tree_key(material) == s.texture_key:
         return
-    if s.method != "prt":
-        s.texture_message = (f"Base Color from {textures.base_color_source(material)}: not followed by the "
-                             "hierarchy yet, its socket's value shown (PRT follows it)")
-        return
-    key = textures.tree_key(material)
-    if not force and s.base_color is not None and key == s.texture_key:
-        return
-    try:
-        s.base_color, s.texture_message = textures.for_export(material, s.info)
-        s.texture_key = key
-    except ValueError as e:
-        s.base_color, s.texture_key = None, ""
-        s.texture_message = f"Base Color not read per vertex ({e}): its socket's value shown"
+    texture = textures.read(material, s.info, s.method)
+    s.base_color, s.texture_key, s.texture_message = texture.colours, texture.key, texture.message
 
 
 FIRST_PREVIEW_MESSAGE = "first preview after {:.2f} s (the half-space profile alone): refining with the walks"

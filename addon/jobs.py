@@ -9,7 +9,6 @@ import time
 import bpy
 
 from . import export, textures
-from .principled import principled_inputs
 from .session import JOBS, objects_with, params
 
 
@@ -169,20 +168,8 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
     s = material.translucent
     # A Base Color driven by a link (a texture): read per vertex by Cycles (PRT only), and the
     # transport chosen for the media it spans.
-    base_color, texture_message, texture_key = None, "", ""
-    materials = None
-    if s.source == "PRINCIPLED" and textures.linked_base_color(material):
-        if method == "prt":
-            try:
-                base_color, texture_message = textures.for_export(material, info)
-                texture_key = textures.tree_key(material)
-                materials = textures.representatives(principled_inputs(material), base_color)
-            except ValueError as e:
-                texture_message = f"Base Color not read per vertex ({e}): its socket's value shown"
-        else:
-            texture_message = (f"Base Color from {textures.base_color_source(material)}: not followed by the "
-                               "hierarchy yet, its socket's value shown (PRT follows it)")
-    materials = materials or [s.material()]
+    texture = textures.read(material, info, method)
+    materials = texture.materials or [s.material()]
     if method == "hierarchy":
         same = (previous is not None and previous.method == "hierarchy"
                 and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
@@ -201,7 +188,7 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
             # profile): shown within a second while the walks run.
             job = Job(scene, materials, first_preview=first_preview and s.profile_name() == "cycles", **kwargs)
     job.method = method
-    job.base_color, job.texture_key, job.texture_message = base_color, texture_key, texture_message
+    job.base_color, job.texture_key, job.texture_message = texture.colours, texture.key, texture.message
     job.chosen_for = params(s)
     job.profile = s.profile_name()
     return job, [r.name for r in info.objects], info, export.lighting_keys(bl_scene)

@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import hashlib
 import time
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
 from . import export
-from .principled import principled_node
+from .principled import principled_inputs, principled_node
 
 BAKE_SCENE = "Translucent Base Color bake"
 # True while a bake runs: the add-on's depsgraph handlers ignore the updates the bake's own
@@ -191,6 +192,35 @@ def for_export(mat: bpy.types.Material, info, depsgraph=None) -> tuple[np.ndarra
     colours = per_exported_vertex(baked, info)
     return colours, (f"Base Color from {base_color_source(mat)}: read by Cycles at {len(colours):,} vertices "
                      f"in {1000 * seconds:.0f} ms")
+
+
+@dataclass
+class Reading:
+    """What `read` found: the Base Color per exported vertex (None where it is not read), the
+    node tree's key it was read for, the panel's line, and the materials a precompute chooses
+    its transport for (empty where the Base Color is uniform)."""
+
+    colours: np.ndarray | None = None
+    key: str = ""
+    message: str = ""
+    materials: list = field(default_factory=list)
+
+
+def read(mat: bpy.types.Material, info, method: str) -> Reading:
+    """The Base Color of `mat` per vertex of the exported scene `info`, for a transport built by
+    `method`: read by Cycles (`for_export`) where a link drives it and PRT previews it; the
+    hierarchy does not read it yet, and the line says so; nothing where no link drives it."""
+    if mat.translucent.source != "PRINCIPLED" or not linked_base_color(mat):
+        return Reading()
+    if method != "prt":
+        return Reading(message=f"Base Color from {base_color_source(mat)}: not followed by the hierarchy yet, "
+                               "its socket's value shown (PRT follows it)")
+    key = tree_key(mat)
+    try:
+        colours, message = for_export(mat, info)
+        return Reading(colours, key, message, representatives(principled_inputs(mat), colours))
+    except ValueError as e:
+        return Reading(message=f"Base Color not read per vertex ({e}): its socket's value shown")
 
 
 def representatives(inputs, colours: np.ndarray) -> list:
