@@ -57,21 +57,46 @@ struct Node {
     along_normal: [f64; 3],
 }
 
-/// Where a Base Color channel lies among the nodes at `xs` (sorted, covering every value
-/// read): the node below and the weight of the one above. Cycles saturates the colour first
-/// (`subsurface_random_walk_coefficients`).
-fn locate(xs: &[f32], x: f32) -> (u32, f32) {
-    let x = x.clamp(0.0, 1.0);
-    let k = xs
-        .partition_point(|&n| n <= x)
-        .clamp(1, xs.len().max(2) - 1)
-        - 1;
-    if k + 1 >= xs.len() {
-        return (k as u32, 0.0);
+/// The fine bin of a Base Color channel (Cycles saturates the colour first:
+/// `subsurface_random_walk_coefficients`).
+fn fine_bin(x: f32) -> usize {
+    ((x.clamp(0.0, 1.0) * FINE_BINS as f32) as usize).min(FINE_BINS - 1)
+}
+
+/// Where a Base Color channel lies among the table's nodes: the node below and the weight of
+/// the one above. Every node lies on a fine bin's edge, so the node below a value is the node
+/// below its bin's lower edge: one lookup per bin, not a search per vertex.
+struct Locator {
+    xs: Vec<f32>,
+    /// 1 / (x_{k+1} - x_k), 0 at the last node.
+    inverse_widths: Vec<f32>,
+    below: [u32; FINE_BINS],
+}
+
+impl Locator {
+    /// `xs` sorted, every one a multiple of 1/`FINE_BINS`, at least one.
+    fn new(xs: Vec<f32>) -> Locator {
+        let last = xs.len().saturating_sub(2);
+        let below = std::array::from_fn(|b| {
+            let edge = b as f32 / FINE_BINS as f32;
+            (xs.partition_point(|&n| n <= edge).max(1) - 1).min(last) as u32
+        });
+        let inverse_widths = (0..xs.len())
+            .map(|k| xs.get(k + 1).map_or(0.0, |b| 1.0 / (b - xs[k])))
+            .collect();
+        Locator {
+            xs,
+            inverse_widths,
+            below,
+        }
     }
-    let (a, b) = (xs[k], xs[k + 1]);
-    let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
-    (k as u32, t)
+
+    fn locate(&self, x: f32) -> (u32, f32) {
+        let x = x.clamp(0.0, 1.0);
+        let k = self.below[fine_bin(x)];
+        let t = (x - self.xs[k as usize]) * self.inverse_widths[k as usize];
+        (k, t.clamp(0.0, 1.0))
+    }
 }
 
 /// A node quantity (`per_node[k][c]`) blended at a vertex's pick for channel `c`, as the
@@ -139,14 +164,29 @@ impl Prt {
     }
 
     fn table(&self, inputs: &PrincipledInputs, colors: &[[f32; 3]]) -> Result<Table> {
-        // Which fine bins of the Base Color each channel reads (Cycles saturates first).
-        let bin = |x: f32| ((x.clamp(0.0, 1.0) * FINE_BINS as f32) as usize).min(FINE_BINS - 1);
-        let mut bins = vec![[false; 3]; FINE_BINS];
-        for c in colors {
-            for ch in 0..3 {
-                bins[bin(c[ch])][ch] = true;
-            }
-        }
+        // Which fine bins of the Base Color each channel reads.
+        let bins = colors
+            .par_chunks(4096)
+            .map(|chunk| {
+                let mut read = [[false; 3]; FINE_BINS];
+                for c in chunk {
+                    for ch in 0..3 {
+                        read[fine_bin(c[ch])][ch] = true;
+                    }
+                }
+                read
+            })
+            .reduce(
+                || [[false; 3]; FINE_BINS],
+                |mut a, b| {
+                    for (x, y) in a.iter_mut().zip(b) {
+                        for ch in 0..3 {
+                            x[ch] |= y[ch];
+                        }
+                    }
+                    a
+                },
+            );
         let reads = |a: f64, b: f64, ch: usize| {
             let lo = ((a * FINE_BINS as f64) as usize).min(FINE_BINS - 1);
             let hi = ((b * FINE_BINS as f64).ceil() as usize).clamp(lo + 1, FINE_BINS);
@@ -246,11 +286,16 @@ impl Prt {
                 )));
             }
         }
-        let xs: Vec<f32> = nodes.iter().map(|n| n.0 as f32).collect();
-        let picks: Vec<NodePick> = colors
-            .par_iter()
-            .map(|c| std::array::from_fn(|ch| locate(&xs, c[ch])))
-            .collect();
+        let locator = Locator::new(nodes.iter().map(|n| n.0 as f32).collect());
+        let mut picks: Vec<NodePick> = vec![[(0, 0.0); 3]; colors.len()];
+        picks
+            .par_chunks_mut(4096)
+            .zip(colors.par_chunks(4096))
+            .for_each(|(picks, colors)| {
+                for (p, c) in picks.iter_mut().zip(colors) {
+                    *p = std::array::from_fn(|ch| locator.locate(c[ch]));
+                }
+            });
         for (k, (_, node)) in nodes.iter().enumerate() {
             for (ch, e) in error.iter_mut().enumerate() {
                 let lo = if k > 0 { nodes[k - 1].0 } else { nodes[k].0 };
@@ -459,7 +504,34 @@ impl Prt {
                 }
             })
         };
-        radiance_from_radiosity_each(&mut e.values, &self.positions, &self.normals, eye, &weights);
+        if eye.is_some() {
+            radiance_from_radiosity_each(
+                &mut e.values,
+                &self.positions,
+                &self.normals,
+                eye,
+                &weights,
+            );
+        } else {
+            // Along the normals: no direction to find, each node's weights over pi once.
+            let along: Vec<[f32; 3]> = along
+                .iter()
+                .map(|w| w.map(|x| (x / std::f64::consts::PI) as f32))
+                .collect();
+            e.values
+                .par_chunks_mut(4096)
+                .zip(table.picks.par_chunks(4096))
+                .for_each(|(values, picks)| {
+                    for (b, p) in values.iter_mut().zip(picks) {
+                        for c in 0..3 {
+                            let (k, t) = p[c];
+                            let below = along[k as usize][c];
+                            let above = along.get(k as usize + 1).map_or(below, |a| a[c]);
+                            b[c] *= below + t * (above - below);
+                        }
+                    }
+                });
+        }
         e.quantity = Quantity::Radiance;
         e.details.dot_seconds += t.elapsed().as_secs_f64();
         e.seconds = e.details.fit_seconds + e.details.dot_seconds;
@@ -486,6 +558,32 @@ mod tests {
             subsurface_weight: 1.0,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_base_colour_is_located_between_the_nodes_around_it() {
+        // Nodes on fine-bin edges, uneven (a table after halvings); values at, between and
+        // beyond them, against a linear scan for the last node at or below the value.
+        let xs: Vec<f32> = [0, 16, 24, 26, 32, 96, 256]
+            .iter()
+            .map(|&k| k as f32 / FINE_BINS as f32)
+            .collect();
+        let locator = Locator::new(xs.clone());
+        for i in -8..=1032 {
+            let x = i as f32 / 1024.0;
+            let v = x.clamp(0.0, 1.0);
+            let mut k = 0;
+            while k + 2 < xs.len() && xs[k + 1] <= v {
+                k += 1;
+            }
+            let t = (v - xs[k]) / (xs[k + 1] - xs[k]);
+            let (got_k, got_t) = locator.locate(x);
+            assert_eq!(got_k as usize, k, "x = {x}");
+            assert!((got_t - t).abs() < 1e-6, "x = {x}: t {got_t} against {t}");
+            assert!((0.0..=1.0).contains(&got_t));
+        }
+        let single = Locator::new(vec![0.5]);
+        assert_eq!(single.locate(0.7), (0, 0.0));
     }
 
     #[test]
