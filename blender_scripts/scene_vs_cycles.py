@@ -149,13 +149,7 @@ def textured_row(name: str, m, bake_obj, scene, w, spp: int, source: str) -> Non
         tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
         tex.image = img
     mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
-    bake_obj.data.materials.clear()
-    bake_obj.data.materials.append(mat)
-    scene_bl = cr.use_cycles(spp, 0)
-    scene_bl.cycles.use_adaptive_sampling = False
-    t0 = time.perf_counter()
-    bake = cr.bake_diffuse_vertex_colors(bake_obj, {"DIRECT", "INDIRECT", "COLOR"})
-    bake_s = time.perf_counter() - t0
+    bake, bake_s = _bake_every_sample(bake_obj, [mat], spp)
     baked, texture_s = textures.bake_base_color(mat, [bake_obj])
     colours = baked[bake_obj.name]
     inputs = cycles.read_principled(node)
@@ -189,10 +183,9 @@ def _compare(label: str, scene, info, m, bake, seconds: float, mask=None) -> Non
           f"vertices (estimate {est:.2f} %), precompute {precompute:.1f} s; bake {seconds:.0f} s", flush=True)
 
 
-def _bake(obj, materials, spp: int) -> tuple[np.ndarray, float]:
-    """A bake at `spp` of `obj`'s evaluated copy standing in for it in the whole scene, every
-    sample taken, its slots holding `materials`; then `obj` is back and the copy hidden."""
-    copy = scenes.preview_object(obj)
+def _bake_every_sample(copy, materials, spp: int) -> tuple[np.ndarray, float]:
+    """Cycles' diffuse bake (direct, indirect, colour) of `copy` (a mesh without modifiers) at
+    `spp`, every sample taken, its slots holding `materials`; and its wall time [s]."""
     copy.data.materials.clear()
     for mat in materials:
         copy.data.materials.append(mat)
@@ -200,7 +193,14 @@ def _bake(obj, materials, spp: int) -> tuple[np.ndarray, float]:
     scene_bl.cycles.use_adaptive_sampling = False
     t0 = time.perf_counter()
     bake = cr.bake_diffuse_vertex_colors(copy, {"DIRECT", "INDIRECT", "COLOR"})
-    seconds = time.perf_counter() - t0
+    return bake, time.perf_counter() - t0
+
+
+def _bake(obj, materials, spp: int) -> tuple[np.ndarray, float]:
+    """A bake at `spp` of `obj`'s evaluated copy standing in for it in the whole scene, every
+    sample taken, its slots holding `materials`; then `obj` is back and the copy hidden."""
+    copy = scenes.preview_object(obj)
+    bake, seconds = _bake_every_sample(copy, materials, spp)
     copy.hide_render = True
     obj.hide_render = False
     return bake, seconds
