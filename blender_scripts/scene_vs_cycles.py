@@ -34,29 +34,6 @@ from blender_scripts.lib import scenes  # noqa: E402
 from blender_scripts.lib.machine import describe as machine  # noqa: E402
 from blender_scripts.lib.metrics import rel  # noqa: E402
 
-FLOOR_COLOUR = (0.6, 0.55, 0.5)
-
-
-def props(suzanne: bpy.types.Object) -> list[bpy.types.Object]:
-    """A 1 m floor 1 mm under Suzanne (Principled BSDF, FLOOR_COLOUR) and a 3 cm box a third
-    of the way to the key light, beside the line to it (no material: Cycles' grey 0.8)."""
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    p, _, _ = export.evaluated_mesh_arrays(suzanne, depsgraph)
-    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, float(p[:, 2].min()) - 0.001))
-    floor = bpy.context.active_object
-    floor.name = "Floor"
-    mat = bpy.data.materials.new("Floor")
-    if mat.node_tree is None:  # Blender < 5.0
-        mat.use_nodes = True
-    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
-    bsdf.inputs["Base Color"].default_value = (*FLOOR_COLOUR, 1.0)
-    floor.data.materials.append(mat)
-    bpy.ops.mesh.primitive_cube_add(size=0.03, location=(0.062, -0.077, 0.07))
-    box = bpy.context.active_object
-    box.name = "Box"
-    return [floor, box]
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--materials", nargs="+", default=["marble", "skin1"])
@@ -71,7 +48,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     print(f"machine: {machine()}")
     obj, _ = scenes.build_scene("suzanne")
-    others = props(obj)
+    others = scenes.floor_and_box(obj)
     bpy.context.view_layer.update()
     variants = {}
     for o in others:
@@ -87,7 +64,7 @@ def main(argv=None) -> int:
     box_mat.diffuse_color = (0.0, 0.0, 0.0, 1.0)
     bpy.context.view_layer.update()
     variants["shadows only (albedo 0)"] = export.export_scene([obj])[0]
-    floor_input.default_value = (*FLOOR_COLOUR, 1.0)
+    floor_input.default_value = (*scenes.FLOOR_COLOUR, 1.0)
     others[1].data.materials.clear()
     bpy.context.view_layer.update()
     scene, info = export.export_scene([obj])
@@ -125,30 +102,12 @@ def textured_row(name: str, m, bake_obj, scene, w, spp: int, source: str) -> Non
     of it). The preview reading it per vertex (`Prt.radiance(base_color=...)`, the add-on's
     Cycles bake of the Base Color) and the socket's own value shown uniformly (before issue 30),
     against a Cycles bake of the textured material."""
-    import numpy as np
-
     from addon import textures
     from translucent import cycles
 
     mat = cr.principled_material(m, f"{name} textured ({source})")
     node = mat.node_tree.nodes["Principled BSDF"]
-    colour = tuple(node.inputs["Base Color"].default_value)
-    if source == "procedural":
-        tex = mat.node_tree.nodes.new("ShaderNodeTexChecker")
-        tex.inputs["Scale"].default_value = 6.0
-        tex.inputs["Color1"].default_value = colour
-        tex.inputs["Color2"].default_value = (*(0.5 * c for c in colour[:3]), 1.0)
-    else:
-        n = 128
-        u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
-        blotch = 0.5 + 0.25 * (np.sin(9 * np.pi * u) * np.cos(7 * np.pi * v) + 1)
-        px = np.ones((n, n, 4), np.float32)
-        px[..., :3] = blotch[..., None] * np.asarray(colour[:3], np.float32)
-        img = bpy.data.images.get("Blotches") or bpy.data.images.new("Blotches", n, n, float_buffer=True)
-        img.pixels.foreach_set(px.ravel())
-        tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
-        tex.image = img
-    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
+    scenes.texture_base_color(mat, source)
     bake, bake_s = _bake_every_sample(bake_obj, [mat], spp)
     baked, texture_s = textures.bake_base_color(mat, [bake_obj])
     colours = baked[bake_obj.name]

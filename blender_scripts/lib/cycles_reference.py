@@ -312,12 +312,13 @@ def render_image(obj: bpy.types.Object, material: translucent.Material, samples:
 
 
 def render_beside(source: bpy.types.Object, preview: bpy.types.Object, material: translucent.Material,
-                  samples: int, path: pathlib.Path) -> None:
+                  samples: int, path: pathlib.Path, bl_material: bpy.types.Material | None = None) -> None:
     """The scene's camera view in Cycles, written to `path` (PNG, 256 px, not cached): the
     source object (modifiers and all) in the Principled BSDF random walk mapped from `material`
     (`principled_material`), the preview object hidden meanwhile. Seed 0 and Blender's denoiser
-    on, as a new file has them: a picture to look at beside the preview, not a reference."""
-    mat = principled_material(material, "Cycles " + path.stem)
+    on, as a new file has them: a picture to look at beside the preview, not a reference.
+    `bl_material`, where given, is rendered instead of the mapping (a textured material)."""
+    mat = bl_material or principled_material(material, "Cycles " + path.stem)
     source.data.materials.clear()
     source.data.materials.append(mat)
     source.hide_render, preview.hide_render = False, True

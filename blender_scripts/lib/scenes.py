@@ -137,3 +137,56 @@ def sheet(n: int, size: float, origin: float) -> bpy.types.Object:
         world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     return obj
+
+
+FLOOR_COLOUR = (0.6, 0.55, 0.5)
+
+
+def floor_and_box(character: bpy.types.Object) -> list[bpy.types.Object]:
+    """Issue 30's scene around the demo's Suzanne: a 1 m floor 1 mm under `character` (a
+    Principled BSDF, FLOOR_COLOUR) and a 3 cm box a third of the way to the key light, beside
+    the line to it (no material: Cycles' grey 0.8), casting its shadow across her."""
+    from addon import export
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    p, _, _ = export.evaluated_mesh_arrays(character, depsgraph)
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, float(p[:, 2].min()) - 0.001))
+    floor = bpy.context.active_object
+    floor.name = "Floor"
+    mat = bpy.data.materials.new("Floor")
+    if mat.node_tree is None:  # Blender < 5.0
+        mat.use_nodes = True
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    bsdf.inputs["Base Color"].default_value = (*FLOOR_COLOUR, 1.0)
+    floor.data.materials.append(mat)
+    bpy.ops.mesh.primitive_cube_add(size=0.03, location=(0.062, -0.077, 0.07))
+    box = bpy.context.active_object
+    box.name = "Box"
+    return [floor, box]
+
+
+def texture_base_color(mat: bpy.types.Material, source: str) -> bpy.types.Node:
+    """Links a texture into the Base Color of `mat`'s Principled BSDF, between the socket's
+    colour and half of it: "procedural" (a Checker Texture, scale 6, in generated coordinates)
+    or "image" (a 128 px float image of soft blotches through the UV map). Returns the node."""
+    node = mat.node_tree.nodes["Principled BSDF"]
+    colour = tuple(node.inputs["Base Color"].default_value)
+    if source == "procedural":
+        tex = mat.node_tree.nodes.new("ShaderNodeTexChecker")
+        tex.inputs["Scale"].default_value = 6.0
+        tex.inputs["Color1"].default_value = colour
+        tex.inputs["Color2"].default_value = (*(0.5 * c for c in colour[:3]), 1.0)
+    elif source == "image":
+        n = 128
+        u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+        blotch = 0.5 + 0.25 * (np.sin(9 * np.pi * u) * np.cos(7 * np.pi * v) + 1)
+        px = np.ones((n, n, 4), np.float32)
+        px[..., :3] = blotch[..., None] * np.asarray(colour[:3], np.float32)
+        img = bpy.data.images.get("Blotches") or bpy.data.images.new("Blotches", n, n, float_buffer=True)
+        img.pixels.foreach_set(px.ravel())
+        tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+        tex.image = img
+    else:
+        raise ValueError(f"source must be 'procedural' or 'image', not {source!r}")
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
+    return tex
