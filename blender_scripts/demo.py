@@ -110,7 +110,7 @@ def main() -> int:
         pairs, out / "preview_vs_cycles.png",
         columns=["preview: PRT, Cycles' profile\n(vertex colours, as in the viewport)",
                  f"Cycles random walk, same material\n{args.cycles_samples} spp, denoised"],
-        rows=list(materials) + ([f"{args.scene_preset}, textured,\non a floor, a box's\nshadow"]
+        rows=list(materials) + ([f"{args.scene_preset}, textured, on a floor"]
                                 if args.scene_preset != "none" else []))
     print(f"\n{'step':58s} {'seconds':>9s}  error against ground truth (R/G/B)")
     for step, sec, note in rows:
