@@ -513,21 +513,14 @@ impl Prt {
                 &weights,
             );
         } else {
-            // Along the normals: no direction to find, each node's weights over pi once.
-            let along: Vec<[f32; 3]> = along
-                .iter()
-                .map(|w| w.map(|x| (x / std::f64::consts::PI) as f32))
-                .collect();
+            // Along the normals: no direction to find, each node's weights blended.
             e.values
                 .par_chunks_mut(4096)
                 .zip(table.picks.par_chunks(4096))
                 .for_each(|(values, picks)| {
                     for (b, p) in values.iter_mut().zip(picks) {
-                        for c in 0..3 {
-                            let (k, t) = p[c];
-                            let below = along[k as usize][c];
-                            let above = along.get(k as usize + 1).map_or(below, |a| a[c]);
-                            b[c] *= below + t * (above - below);
+                        for (c, x) in b.iter_mut().enumerate() {
+                            *x *= (blend(&along, p, c) / std::f64::consts::PI) as f32;
                         }
                     }
                 });
