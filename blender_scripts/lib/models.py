@@ -64,3 +64,28 @@ def standard_scene(positions: np.ndarray, triangles: np.ndarray) -> translucent.
     scene.add_point_light((0.6 * diag, -1.0 * diag, 1.2 * diag), power=110.0 * diag**2)
     scene.add_sun(direction=(0.5, 0.6, -0.62), irradiance=2.0)
     return scene
+
+
+def decimate(positions: np.ndarray, triangles: np.ndarray, vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh reduced to about `vertices` vertices by Blender's Decimate modifier (collapse),
+    on a temporary object that is removed again: a coarse mesh of the same shape."""
+    import bpy
+
+    me = bpy.data.meshes.new("translucent_decimate")
+    me.from_pydata(positions.tolist(), [], triangles.tolist())
+    ob = bpy.data.objects.new("translucent_decimate", me)
+    bpy.context.scene.collection.objects.link(ob)
+    try:
+        ob.modifiers.new("decimate", "DECIMATE").ratio = min(1.0, vertices / len(positions))
+        ev = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
+        out = ev.to_mesh()
+        out.calc_loop_triangles()
+        p = np.empty(3 * len(out.vertices), np.float32)
+        out.vertices.foreach_get("co", p)
+        t = np.empty(3 * len(out.loop_triangles), np.int64)
+        out.loop_triangles.foreach_get("vertices", t)
+        ev.to_mesh_clear()
+    finally:
+        bpy.data.objects.remove(ob)
+        bpy.data.meshes.remove(me)
+    return p.reshape(-1, 3), t.reshape(-1, 3)

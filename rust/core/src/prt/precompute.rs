@@ -273,6 +273,7 @@ impl Prt {
                     rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
                     vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
                     refine: false,
+                    shrink: false,
                     ..g.clone()
                 };
                 let lit = ExitLight {

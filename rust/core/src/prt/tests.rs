@@ -316,13 +316,16 @@ fn eta_mismatch_and_bad_settings_are_errors() {
 }
 
 #[test]
-fn the_default_walk_budget_is_twenty_million_rays_within_600_to_2500_per_vertex() {
+fn the_default_walk_budget_is_twenty_million_rays_within_600_to_8000_per_vertex() {
     // The bunny at 10 cm (34,834 vertices): 20 M rays, 574 per vertex -> raised to 600.
     assert_eq!(default_walk_rays(34_834), 600 * 34_834);
     // A mid-size mesh gets the flat budget.
     assert_eq!(default_walk_rays(10_000), 20_000_000);
-    // A small one at most 2500 per vertex.
-    assert_eq!(default_walk_rays(42), 2500 * 42);
+    // A coarse 3,000-vertex character the flat budget too (it was capped at 7.5 M), a
+    // smaller mesh at most 8000 per vertex.
+    assert_eq!(default_walk_rays(3_000), 20_000_000);
+    assert_eq!(default_walk_rays(2_000), 16_000_000);
+    assert_eq!(default_walk_rays(42), 8000 * 42);
 }
 
 /// A new light keeps everything the light does not hold: precomputed under a sun at the

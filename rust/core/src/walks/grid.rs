@@ -25,6 +25,11 @@ impl Grid {
         Grid { cell, cells }
     }
 
+    /// The kernel's radius (the grid's cell).
+    pub(super) fn radius(&self) -> f32 {
+        self.cell
+    }
+
     pub(super) fn visit(&self, p: Vec3, mut f: impl FnMut(usize)) {
         let k = (p / self.cell).floor().as_ivec3().to_array();
         for dx in -1..=1 {
@@ -50,27 +55,80 @@ impl Grid {
         diff: &[([f32; 3], [f32; 3])],
         class: &[bool],
     ) -> ([f32; 3], [f32; 3]) {
+        self.sums(mesh, v, candidates, diff, class).mean()
+    }
+
+    /// The kernel's weighted sums at vertex v (`average` is their mean).
+    pub(super) fn sums(
+        &self,
+        mesh: &Mesh,
+        v: u32,
+        candidates: &[u32],
+        diff: &[([f32; 3], [f32; 3])],
+        class: &[bool],
+    ) -> KernelSums {
+        self.sums_where(mesh, v, candidates, diff, class, |_| true)
+    }
+
+    /// As `sums`, over the candidates `keep` accepts (by index).
+    pub(super) fn sums_where(
+        &self,
+        mesh: &Mesh,
+        v: u32,
+        candidates: &[u32],
+        diff: &[([f32; 3], [f32; 3])],
+        class: &[bool],
+        keep: impl Fn(usize) -> bool,
+    ) -> KernelSums {
         let (p, n) = (mesh.positions()[v as usize], mesh.normals()[v as usize]);
         let own = class[v as usize];
         let r2 = self.cell * self.cell;
-        let mut wsum = 0f32;
-        let (mut acc, mut var) = ([0f32; 3], [0f32; 3]);
+        let mut sums = KernelSums::default();
         self.visit(p, |i| {
             let u = candidates[i] as usize;
             let d2 = mesh.positions()[u].distance_squared(p);
             let cos = mesh.normals()[u].dot(n);
-            if d2 < r2 && cos > 0.0 && class[u] == own {
-                let w = (1.0 - d2 / r2).powi(2) * cos;
-                wsum += w;
-                for c in 0..3 {
-                    acc[c] += w * diff[i].0[c];
-                    var[c] += w * w * diff[i].1[c];
-                }
+            if d2 < r2 && cos > 0.0 && class[u] == own && keep(i) {
+                sums.add((1.0 - d2 / r2).powi(2) * cos, diff[i]);
             }
         });
-        if wsum <= 0.0 {
+        sums
+    }
+}
+
+/// Sums of a kernel average: weights, weighted D and squared weights times D's variance.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct KernelSums {
+    pub(super) weight: f32,
+    acc: [f32; 3],
+    var: [f32; 3],
+}
+
+impl KernelSums {
+    fn add(&mut self, w: f32, (d, var): ([f32; 3], [f32; 3])) {
+        self.weight += w;
+        for c in 0..3 {
+            self.acc[c] += w * d[c];
+            self.var[c] += w * w * var[c];
+        }
+    }
+
+    /// The sums less one term of weight `w` (the receiver's own D, weight 1, for a
+    /// leave-one-out average).
+    pub(super) fn without(mut self, w: f32, (d, var): ([f32; 3], [f32; 3])) -> KernelSums {
+        self.add(-w, (d, var.map(|x| -x)));
+        self
+    }
+
+    /// The weighted mean and its variance; zero where no weight is left.
+    pub(super) fn mean(&self) -> ([f32; 3], [f32; 3]) {
+        let w = self.weight;
+        if w <= 0.0 {
             return ([0.0; 3], [0.0; 3]);
         }
-        (acc.map(|a| a / wsum), var.map(|x| x / (wsum * wsum)))
+        (
+            self.acc.map(|a| a / w),
+            self.var.map(|x| (x / (w * w)).max(0.0)),
+        )
     }
 }

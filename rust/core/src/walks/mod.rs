@@ -7,6 +7,7 @@ mod operator;
 mod passes;
 mod radiosity;
 mod relight;
+mod shrinkage;
 mod term;
 mod twin;
 mod walker;

@@ -5,6 +5,7 @@ use super::allocation::{flat_vertices, more_where_noisy, spread_where};
 use super::grid::Grid;
 use super::radiosity::{walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings};
 use super::relight::Kept;
+use super::shrinkage;
 use super::term::{Diff, WalkTermSettings, FLAT_TOLERANCE};
 use crate::bake_points::sharp_vertices;
 use crate::error::Result;
@@ -439,6 +440,7 @@ impl<'a> Passes<'a> {
         main: &Main,
         diff: &[Diff],
         grid: &Grid,
+        own_weight: &[[f32; 3]],
         sharp: &Sharp,
         refined: &Refined,
     ) -> Vec<Diff> {
@@ -448,6 +450,7 @@ impl<'a> Passes<'a> {
             &main.candidates,
             diff,
             grid,
+            own_weight,
             &sharp.own,
             &refined.points,
             &refined.near_flagged,
@@ -458,8 +461,10 @@ impl<'a> Passes<'a> {
 
 /// D and its variance at every vertex: a sharp vertex's own (`sharp_own`), near a flagged
 /// vertex (`near_flagged`) the `fine_spacing` kernel over every walked vertex (the candidates'
-/// `diff` and the `refined` points), elsewhere `grid`'s over the candidates. Linear in the
-/// walked vertices' D: the kernels' weights are the mesh's alone.
+/// `diff` and the `refined` points), at a walked candidate its own D and its neighbours'
+/// combined by `own_weight` (per candidate, `shrinkage`), elsewhere `grid`'s over the
+/// candidates. Linear in the walked vertices' D: the kernels' weights are the mesh's alone
+/// and `own_weight` is kept from the precompute.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn smooth(
     mesh: &Mesh,
@@ -467,6 +472,7 @@ pub(super) fn smooth(
     candidates: &[u32],
     diff: &[Diff],
     grid: &Grid,
+    own_weight: &[[f32; 3]],
     sharp_own: &[Option<Diff>],
     refined: &[(u32, Diff)],
     near_flagged: &[bool],
@@ -479,6 +485,10 @@ pub(super) fn smooth(
         .chain(refined.iter().copied())
         .unzip();
     let fine_grid = Grid::new(mesh, &fine_points, KERNEL_SPACINGS * fine_spacing);
+    let mut candidate_of = vec![u32::MAX; mesh.vertex_count()];
+    for (i, &v) in candidates.iter().enumerate() {
+        candidate_of[v as usize] = i as u32;
+    }
     (0..mesh.vertex_count())
         .into_par_iter()
         .map(|v| {
@@ -492,7 +502,13 @@ pub(super) fn smooth(
                     return (d, var);
                 }
             }
-            grid.average(mesh, v as u32, candidates, diff, embedded)
+            let i = candidate_of[v] as usize;
+            match own_weight.get(i) {
+                Some(&w) if w != [0.0; 3] => {
+                    shrinkage::combined(mesh, grid, candidates, diff, embedded, i, w)
+                }
+                _ => grid.average(mesh, v as u32, candidates, diff, embedded),
+            }
         })
         .collect()
 }

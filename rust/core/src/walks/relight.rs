@@ -65,6 +65,8 @@ pub(super) struct Layout {
     pub(super) fine_spacing: f32,
     pub(super) spacing: f32,
     pub(super) embedded: Vec<bool>,
+    /// Per candidate, the weight of its own walks (`shrinkage`), the precompute's.
+    pub(super) own_weight: Vec<[f32; 3]>,
 }
 
 impl Layout {
@@ -73,6 +75,7 @@ impl Layout {
             + self.sharp.bytes()
             + self.refined.bytes()
             + self.candidates.len() * 4
+            + self.own_weight.len() * 12
             + 2 * self.near_flagged.len()
     }
 }
@@ -139,6 +142,7 @@ impl WalkTerm {
             &layout.candidates,
             &diff,
             &grid,
+            &layout.own_weight,
             &sharp_own,
             &refined,
             &layout.near_flagged,

@@ -39,6 +39,7 @@ use super::grid::Grid;
 use super::passes::{Passes, KERNEL_SPACINGS};
 use super::radiosity::{ExitLight, MeshWalkSettings};
 use super::relight::{Kept, Layout};
+use super::shrinkage;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::optics::CHANNELS;
@@ -74,6 +75,9 @@ pub struct WalkTermSettings {
     /// Whether the second pass walks again where D changes faster than the spacing (the
     /// object's own light, smooth, does without).
     pub refine: bool,
+    /// Whether a walked vertex keeps as much of its own walks as D's variation around it
+    /// calls for (`shrinkage`) instead of the plain kernel average.
+    pub shrink: bool,
     /// Keep what the walks found as a function of the light, so a new light is read at the
     /// same exits (`WalkTerm::relight`) instead of walking again.
     pub record: bool,
@@ -88,6 +92,7 @@ impl Default for WalkTermSettings {
             vertices: 1000,
             seed: MeshWalkSettings::default().seed,
             refine: true,
+            shrink: true,
             record: true,
         }
     }
@@ -194,7 +199,12 @@ impl WalkTerm {
         let grid = Grid::new(mesh, &main.candidates, radius);
         let flagged = passes.flagged(&main, &diff, &grid);
         let refined = passes.refine(&main, &flagged, sharp.rays)?;
-        let smoothed = passes.smooth(&main, &diff, &grid, &sharp, &refined);
+        let own_weight = if settings.shrink {
+            shrinkage::own_weights(mesh, &grid, &main.candidates, &diff, &passes.embedded)
+        } else {
+            Vec::new()
+        };
+        let smoothed = passes.smooth(&main, &diff, &grid, &own_weight, &sharp, &refined);
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let per_albedo = per_albedo(&smoothed, &albedo);
         let layout = match (Kept::of(&main.walked, &main.walks), settings.record) {
@@ -207,6 +217,7 @@ impl WalkTerm {
                 fine_spacing: refined.fine_spacing,
                 spacing: main.spacing,
                 embedded: passes.embedded.clone(),
+                own_weight,
             })),
             _ => None,
         };

@@ -216,7 +216,7 @@ class Prt:
         off for "dipole".
         `walks`: Cycles' walk traced through the mesh itself for the geometry a half-space
         profile cannot see (thin and curved parts); None: on for "cycles" with as many walks as
-        `walk_rays` rays allow (default 20 M, at least 600 and at most 2500 per vertex: about
+        `walk_rays` rays allow (default 20 M, at least 600 and at most 8000 per vertex: about
         32 walks each at as many vertices as that buys, up to all, then half the walks evenly
         and half where they spread most; 8-10 s on 2 cores for the 10 cm bunny), off
         for "dipole"; N: exactly N walks per walked vertex and channel; 0: off. Each walk
