@@ -51,10 +51,12 @@ pub use evaluate::{Coefficients, Evaluation, PrtDetails, REFRESH_FACTOR, REFRESH
 pub use knots::BASIS_SIZES;
 pub use own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
 pub use relight::RelightReport;
-pub use request::{irradiance_eta, path_settings, PrtRequest, FIRST_PREVIEW_SAMPLES};
+pub use request::{
+    irradiance_eta, path_settings, PrtRequest, FIRST_PREVIEW_FAR_FIELD, FIRST_PREVIEW_SAMPLES,
+};
 pub use settings::{
-    default_walk_rays, PrtReport, PrtSettings, DEFAULT_MAX_SAMPLES, DEFAULT_WALK_RAYS,
-    MAX_WALK_RAYS_PER_VERTEX, MIN_WALK_RAYS_PER_VERTEX,
+    default_walk_rays, PrtReport, PrtSettings, DEFAULT_FAR_FIELD, DEFAULT_MAX_SAMPLES,
+    DEFAULT_WALK_RAYS, MAX_WALK_RAYS_PER_VERTEX, MIN_WALK_RAYS_PER_VERTEX,
 };
 
 /// The precomputed transport of one mesh under fixed lighting.

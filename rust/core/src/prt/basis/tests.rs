@@ -362,3 +362,32 @@ fn report() {
     let _ = Basis::choose(&[&f], 0.05, hi, 256, Degree::Quadratic).unwrap();
     eprintln!("choose 256 coefficients: {:.2?}", t.elapsed());
 }
+
+#[test]
+fn the_interval_is_the_last_knot_at_or_below_r_as_a_linear_scan_finds_it() {
+    // Knots dense near 0 as the fitted ones are (many within one lookup cell), uneven ones,
+    // and two knots only.
+    let dense: Vec<f64> = (0..40).map(|i| 1e-3 * (1.35f64).powi(i) - 1e-3).collect();
+    let uneven = vec![0.5, 0.5001, 0.7, 2.0, 2.0000001, 9.0];
+    for knots in [dense, uneven, vec![0.0, 1.0]] {
+        let basis = Basis::with_knots(knots.clone(), Degree::Quadratic).unwrap();
+        let (lo, hi) = basis.domain();
+        let m = knots.len() - 1;
+        let scan = |r: f64| -> Option<usize> {
+            if !(r >= lo && r <= hi) {
+                return None;
+            }
+            Some((0..m).rev().find(|&i| knots[i] <= r).unwrap_or(0))
+        };
+        let mut points: Vec<f64> = (0..=20_000)
+            .map(|k| lo - 0.01 * (hi - lo) + 1.02 * (hi - lo) * k as f64 / 20_000.0)
+            .collect();
+        for &k in &knots {
+            points.extend([k, k.next_up(), k.next_down()]);
+        }
+        points.extend([f64::NAN, f64::INFINITY, -f64::INFINITY]);
+        for r in points {
+            assert_eq!(basis.interval(r), scan(r), "r = {r}, knots {knots:?}");
+        }
+    }
+}
