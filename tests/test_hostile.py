@@ -347,3 +347,19 @@ def test_progress_must_be_callable(f, progress):
     """progress=42 was accepted and failed at the first call as "'int' object is not callable"."""
     with pytest.raises(TypeError, match="progress.*callable"):
         CALLS[f](small_scene(), progress=progress)
+
+
+# ------------------------------------------------------------------ sample counts a mesh cannot take
+
+
+@pytest.mark.parametrize("extra", [-1000, 0])
+def test_fewer_samples_than_triangles_are_refused_naming_the_argument(extra):
+    # Every triangle takes a sample at least; a count at or below the triangle count had left
+    # the sample spacing at the mesh's size: one receiver disc over the whole mesh, a preview
+    # 12 % off with an error estimate of 0.
+    p, t = plane(41, 0.01)
+    scene = translucent.Scene(p, t)
+    scene.add_sun(direction=(0.0, 0.0, -1.0), irradiance=1.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    with pytest.raises(ValueError, match=f"samples {len(t) + extra}"):
+        translucent.Prt(scene, m, samples=len(t) + extra, walks=0)

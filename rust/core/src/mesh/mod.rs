@@ -438,7 +438,15 @@ impl Mesh {
             .sum()
     }
 
-    /// The sample spacing that yields about `count` samples (bisection on `sample_count`).
+    /// The fewest samples `sample_count` gives at any spacing: one per triangle of non-zero
+    /// area. Below it `spacing_for_sample_count` has nothing to find.
+    pub fn min_sample_count(&self) -> usize {
+        self.triangle_areas.iter().filter(|a| **a > 0.0).count()
+    }
+
+    /// The sample spacing that yields about `count` samples (bisection on `sample_count`);
+    /// for `count` at or below `min_sample_count`, the mesh's diagonal (one sample per
+    /// triangle, at a spacing that says nothing of their density: callers refuse it).
     pub fn spacing_for_sample_count(&self, count: usize) -> f32 {
         let (mut lo, mut hi) = (
             self.diagonal() * 1e-6,

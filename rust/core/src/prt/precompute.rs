@@ -358,6 +358,13 @@ impl SampledLight {
         irradiance: &IrradianceFn,
     ) -> Result<Self> {
         let spacing = match settings.samples {
+            Some(count) if count <= mesh.min_sample_count() => {
+                return Err(Error::InvalidArgument(format!(
+                    "samples {count}: every triangle takes a sample at least, so this mesh \
+                     takes more than {} (ask for twice that or more, or None for the default)",
+                    mesh.min_sample_count()
+                )))
+            }
             Some(count) => mesh.spacing_for_sample_count(count),
             None => default_spacing(
                 mesh,

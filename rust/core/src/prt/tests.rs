@@ -379,3 +379,32 @@ fn relit_plane_gives_the_closed_form_at_the_new_angle() {
         .unwrap_err();
     assert!(err.to_string().contains("precomputed for"), "{err}");
 }
+
+#[test]
+fn fewer_samples_than_triangles_are_refused_and_a_low_cap_still_resolves_the_triangles() {
+    // 41 x 41 vertices over 10 mm: 3,200 triangles with sides of 0.25 mm (0.35 mm across).
+    let mesh = plane(41, 10.0);
+    let floor = mesh.min_sample_count();
+    assert_eq!(floor, 3200);
+    let m = Material::preset("marble", 1.0).unwrap();
+    let settings = PrtSettings {
+        samples: Some(floor),
+        ..Default::default()
+    };
+    match Prt::precompute(&mesh, &[m], &settings, &sun(1.0, 0.0, 1.3), None) {
+        Err(Error::InvalidArgument(msg)) => assert!(msg.contains("samples 3200"), "{msg}"),
+        other => panic!("expected a refusal, got {:?}", other.map(|_| ())),
+    }
+    // A cap on the default spacing below the triangle count (a first preview's 150,000 on a
+    // mesh of 277,804 triangles): the spacing still resolves the triangles. It had been the
+    // mesh's diagonal, one receiver disc over the whole mesh.
+    let resolved = crate::profiles::Resolved::new(ProfileKind::Dipole, &m).unwrap();
+    let spacing = super::knots::default_spacing(&mesh, &resolved.profiles, Some(1000));
+    let across = 0.25 * 2f32.sqrt();
+    assert!(
+        spacing <= 1.001 * across,
+        "spacing {spacing} > a triangle's {across}"
+    );
+    let count = mesh.sample_count(spacing);
+    assert!((floor..=8 * floor).contains(&count), "{count} samples");
+}
