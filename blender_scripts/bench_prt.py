@@ -3,7 +3,8 @@ machine; timings live here, never in tests.
 
 0. Cycles' random-walk table: the build of one table (Monte Carlo of the walk), g = 0 and 0.8.
 1. Precompute: the Stanford bunny scaled to 10 cm, marble, 32 coefficients, Cycles' profile and
-   the dipole (budget: 20 s on the 2-core CI machine).
+   the dipole (budget: 20 s on the 2-core CI machine); the first preview (budget 1 s) and the
+   relight (`update(lights=...)`).
 2. One edit (coefficient fit + dot product, 3 channels) on a >= 120k-vertex mesh (the bunny
    subdivided once; budget: 5 ms on the CPU), Cycles' profile.
 3. Single scattering (Xu 2007 eqs. 12-15, the dipole): the MS + SS precompute of that mesh and
@@ -29,6 +30,10 @@ from blender_scripts.lib import models  # noqa: E402
 from blender_scripts.lib.machine import describe as machine  # noqa: E402
 
 import translucent  # noqa: E402
+
+
+# Samples on the subdivided bunny (139,122 vertices, 277,804 triangles): about two a triangle.
+BIG_SAMPLES = 600_000
 
 
 def main() -> int:
@@ -81,6 +86,7 @@ def main() -> int:
             f"for {r['interreflection_rays']} rays{walks}) [budget 20 s]"
         )
         kept[profile] = (prt, statistics.median(times))
+    first_preview(scene, marble, kept["cycles"][0], args)
     relight(p, t, marble, kept, args)
     floor_bounce(p, t, marble, args)
 
@@ -103,7 +109,9 @@ def main() -> int:
         f"{big.vertex_count} vertices / 1M samples {grow[1]:.2f} s: x{grow[1] / grow[0]:.1f} "
         f"for x4 work (brute force would be x16)"
     )
-    prt = translucent.Prt(big, marble, coefficients=32, samples=150_000, backend="cpu")
+    # The edit's cost depends on the vertices and coefficients alone; 600k samples is about two
+    # per triangle (each of the 277,804 triangles takes one at least).
+    prt = translucent.Prt(big, marble, coefficients=32, samples=BIG_SAMPLES, backend="cpu")
     skin = translucent.Material.preset("skin1", mm_per_unit=1000.0)
     core, wall = [], []
     for k in range(args.edits):
@@ -160,6 +168,23 @@ def main() -> int:
     return 0
 
 
+def first_preview(scene, marble, full, args) -> None:
+    """Issue 29: the time to the first preview the add-on shows while the walks run
+    (`Prt(first_preview=True)`: the half-space profile alone on at most 150,000 samples), and
+    how far it is from the full precompute's preview."""
+    times = []
+    for _ in range(args.runs):
+        t0 = time.perf_counter()
+        prt = translucent.Prt(scene, marble, first_preview=True)
+        times.append(time.perf_counter() - t0)
+    rms = translucent.relative_error(prt.radiance(marble), full.radiance(marble), scene.vertex_areas)["rms"]
+    print(
+        f"first preview, bunny 10 cm, marble: median {statistics.median(times):.2f} s over {args.runs} runs "
+        f"(transport {prt.report['seconds_transport']:.2f} s, {prt.report['samples']} samples) [budget 1 s]; "
+        f"{', '.join(f'{100 * x:.1f}' for x in rms)} % from the full preview (what the walks and the own light add)"
+    )
+
+
 def moved_scene(positions, triangles, turn: float, across: float) -> translucent.Scene:
     """The benchmark lighting with the sun turned by `turn` radians about the vertical and the
     point light moved by `across` diagonals along x."""
@@ -208,12 +233,12 @@ def textured_edits(scene, positions, edits) -> None:
     here a pattern over the whole [0.05, 0.95] range in every channel), the Subsurface Scale
     slider moved between edits: the table of media fitted again and the interpolated dot
     product, on the CPU. The transport is chosen for the pattern's mean, brightest and darkest
-    Base Colour (as the add-on does); no walks, no own light (150k samples)."""
+    Base Colour (as the add-on does); no walks, no own light (`BIG_SAMPLES` samples)."""
     x = positions[:, 0] / np.ptp(positions[:, 0])
     colours = np.stack([0.5 + 0.45 * np.sin(40 * x), 0.5 + 0.45 * np.cos(31 * x), 0.5 + 0.45 * np.sin(23 * x + 1)], 1)
     reps = [translucent.Material.from_principled(tuple(c), (1.0, 0.35, 0.2), 0.002)
             for c in (colours.mean(0), colours.max(0), colours.min(0))]
-    prt = translucent.Prt(scene, reps, coefficients=32, samples=150_000, backend="cpu", walks=0,
+    prt = translucent.Prt(scene, reps, coefficients=32, samples=BIG_SAMPLES, backend="cpu", walks=0,
                           interreflection=False, single_scattering=False)
     core, fits = [], []
     for k in range(edits):
@@ -273,7 +298,7 @@ def floor_bounce(p, t, marble, args) -> None:
 def single_scattering(big, positions, marble, skin, args) -> None:
     """MS + SS with the dipole on the >= 120k-vertex bunny: precompute and one edit, CPU."""
     t0 = time.perf_counter()
-    prt = translucent.Prt(big, [marble, skin], coefficients=32, samples=150_000, backend="cpu",
+    prt = translucent.Prt(big, [marble, skin], coefficients=32, samples=BIG_SAMPLES, backend="cpu",
                           profile="dipole", single_scattering=True)
     total = time.perf_counter() - t0
     r, ss = prt.report, prt.report["single"]

@@ -80,7 +80,7 @@ def test_gpu_and_cpu_agree_on_multiple_plus_single_scattering():
     p, t = models.load("stanford-bunny.obj") if BUNNY.exists() else plane(31, 0.05)
     s = models.standard_scene(p, t)
     prt = translucent.Prt(s, [MARBLE, SKIN], profile="dipole", single_scattering=True,
-                          backend="cpu", coefficients=12, samples=20_000)
+                          backend="cpu", coefficients=12, samples=150_000)
     eye = p.mean(axis=0) + np.array([0.05, -0.25, 0.1])
     cases = [(with_g(MARBLE, 0.0), "eddington", eye), (with_g(SKIN, 0.9), "hg", eye),
              (with_g(MARBLE, -0.3), "hg", None)]
@@ -193,7 +193,7 @@ def spread(request):
                          size_v=d, power=50.0)
     reps = [with_g(MARBLE, 0.3), with_g(SKIN, 0.3)]
     prt = translucent.Prt(s, reps, profile="dipole", single_scattering=True, coefficients=16,
-                          backend="cpu", samples=20_000)
+                          backend="cpu", samples=150_000)
     eye = p.mean(axis=0) + np.array([0.05, -0.25, 0.1])
     return s, p, prt, eye
 

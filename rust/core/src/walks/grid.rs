@@ -55,22 +55,12 @@ impl Grid {
         diff: &[([f32; 3], [f32; 3])],
         class: &[bool],
     ) -> ([f32; 3], [f32; 3]) {
-        self.sums(mesh, v, candidates, diff, class).mean()
-    }
-
-    /// The kernel's weighted sums at vertex v (`average` is their mean).
-    pub(super) fn sums(
-        &self,
-        mesh: &Mesh,
-        v: u32,
-        candidates: &[u32],
-        diff: &[([f32; 3], [f32; 3])],
-        class: &[bool],
-    ) -> KernelSums {
         self.sums_where(mesh, v, candidates, diff, class, |_| true)
+            .mean()
     }
 
-    /// As `sums`, over the candidates `keep` accepts (by index).
+    /// The kernel's weighted sums at vertex v over the candidates `keep` accepts (by index);
+    /// `average` is their mean over all.
     pub(super) fn sums_where(
         &self,
         mesh: &Mesh,

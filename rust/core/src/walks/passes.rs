@@ -505,7 +505,13 @@ pub(super) fn smooth(
             let i = candidate_of[v] as usize;
             match own_weight.get(i) {
                 Some(&w) if w != [0.0; 3] => {
-                    shrinkage::combined(mesh, grid, candidates, diff, embedded, i, w)
+                    let near = shrinkage::Neighbours {
+                        mesh,
+                        grid,
+                        candidates,
+                        class: embedded,
+                    };
+                    near.combined(diff, i, w)
                 }
                 _ => grid.average(mesh, v as u32, candidates, diff, embedded),
             }

@@ -19,7 +19,7 @@
 //! The weights are the precompute's light's; they are kept (`relight::Layout`), so a new
 //! light combines its D the same way and the term stays linear in the walks' scores.
 
-use super::grid::Grid;
+use super::grid::{Grid, KernelSums};
 use super::term::Diff;
 use crate::mesh::Mesh;
 use rayon::prelude::*;
@@ -36,114 +36,95 @@ fn walked(diff: &Diff) -> bool {
     diff.1 != [0.0; 3]
 }
 
-/// The leave-one-out kernel average at candidate `i` (vertex `v`), or None where no
-/// neighbour is left.
-fn others(
-    mesh: &Mesh,
-    grid: &Grid,
-    candidates: &[u32],
-    diff: &[Diff],
-    class: &[bool],
-    i: usize,
-) -> Option<Diff> {
-    let sums = grid
-        .sums(mesh, candidates[i], candidates, diff, class)
-        .without(1.0, diff[i]);
-    (sums.weight > LONE).then(|| sums.mean())
+/// The walked vertices' kernel (`Grid`) and what it needs to average over them.
+pub(super) struct Neighbours<'a> {
+    pub(super) mesh: &'a Mesh,
+    pub(super) grid: &'a Grid,
+    pub(super) candidates: &'a [u32],
+    /// Embedded or exposed: a kernel averages within one class.
+    pub(super) class: &'a [bool],
 }
 
-/// Per candidate and channel, the weight w of its own D (0 for a candidate without walks:
-/// it is left to the kernel).
-pub(super) fn own_weights(
-    mesh: &Mesh,
-    grid: &Grid,
-    candidates: &[u32],
-    diff: &[Diff],
-    class: &[bool],
-) -> Vec<[f32; 3]> {
-    // (D_u - A_u)^2 - s_u^2 - a_u^2 at each walked candidate: an unbiased estimate of t^2.
-    // Only walked candidates with neighbours speak for t^2.
-    let excess: Vec<Option<[f32; 3]>> = (0..candidates.len())
-        .into_par_iter()
-        .map(|i| {
-            let (d, s2) = diff[i];
-            match others(mesh, grid, candidates, diff, class, i) {
-                Some((a, a2)) if walked(&diff[i]) => Some(std::array::from_fn(|c| {
-                    (d[c] - a[c]).powi(2) - s2[c] - a2[c]
-                })),
-                _ => None,
-            }
-        })
-        .collect();
-    let speaks: Vec<bool> = excess.iter().map(Option::is_some).collect();
-    // t^2 over twice the kernel's radius: four times the walked vertices speak for it, so
-    // its noise (which, clamped at 0, would lend the own walks weight they should not
-    // have where D is smooth) is halved.
-    let wide = Grid::new(mesh, candidates, TAU_RADIUS * grid.radius());
-    let excess: Vec<Diff> = excess
-        .into_iter()
-        .map(|e| (e.unwrap_or([0.0; 3]), [0.0; 3]))
-        .collect();
-    (0..candidates.len())
-        .into_par_iter()
-        .map(|i| {
-            if !walked(&diff[i]) {
-                return [0.0; 3];
-            }
-            let Some((_, a2)) = others(mesh, grid, candidates, diff, class, i) else {
-                return [1.0; 3];
-            };
-            let t2 = local_mean(mesh, &wide, candidates, &excess, &speaks, class, i);
-            let s2 = diff[i].1;
-            std::array::from_fn(|c| {
-                let prior = t2[c].max(0.0) + a2[c];
-                let w = prior / (prior + s2[c]);
-                if w.is_finite() {
-                    w.clamp(0.0, 1.0)
-                } else {
-                    0.0
+impl Neighbours<'_> {
+    /// The kernel average of `values` at candidate `i` over the candidates `keep` accepts.
+    fn sums(&self, values: &[Diff], i: usize, keep: impl Fn(usize) -> bool) -> KernelSums {
+        let v = self.candidates[i];
+        self.grid
+            .sums_where(self.mesh, v, self.candidates, values, self.class, keep)
+    }
+
+    /// The leave-one-out kernel average at candidate `i`, or None where no neighbour is left.
+    fn others(&self, diff: &[Diff], i: usize) -> Option<Diff> {
+        let sums = self.sums(diff, i, |_| true).without(1.0, diff[i]);
+        (sums.weight > LONE).then(|| sums.mean())
+    }
+
+    /// Per candidate and channel, the weight w of its own D (0 for a candidate without walks:
+    /// it is left to the kernel).
+    pub(super) fn own_weights(&self, diff: &[Diff]) -> Vec<[f32; 3]> {
+        // (D_u - A_u)^2 - s_u^2 - a_u^2 at each walked candidate with neighbours: an unbiased
+        // estimate of t^2; only those speak for it.
+        let excess: Vec<Option<[f32; 3]>> = (0..self.candidates.len())
+            .into_par_iter()
+            .map(|i| {
+                let (d, s2) = diff[i];
+                match self.others(diff, i) {
+                    Some((a, a2)) if walked(&diff[i]) => Some(std::array::from_fn(|c| {
+                        (d[c] - a[c]).powi(2) - s2[c] - a2[c]
+                    })),
+                    _ => None,
                 }
             })
-        })
-        .collect()
-}
+            .collect();
+        let speaks: Vec<bool> = excess.iter().map(Option::is_some).collect();
+        let excess: Vec<Diff> = excess
+            .into_iter()
+            .map(|e| (e.unwrap_or([0.0; 3]), [0.0; 3]))
+            .collect();
+        // t^2 over twice the kernel's radius: four times the walked vertices speak for it, so
+        // its noise (which, clamped at 0, would lend the own walks weight they should not
+        // have where D is smooth) is halved.
+        let wide = Grid::new(self.mesh, self.candidates, TAU_RADIUS * self.grid.radius());
+        let wide = Neighbours {
+            grid: &wide,
+            ..*self
+        };
+        (0..self.candidates.len())
+            .into_par_iter()
+            .map(|i| {
+                if !walked(&diff[i]) {
+                    return [0.0; 3];
+                }
+                let Some((_, a2)) = self.others(diff, i) else {
+                    return [1.0; 3];
+                };
+                let t2 = wide.sums(&excess, i, |u| speaks[u]).mean().0;
+                let s2 = diff[i].1;
+                std::array::from_fn(|c| {
+                    let prior = t2[c].max(0.0) + a2[c];
+                    let w = prior / (prior + s2[c]);
+                    if w.is_finite() {
+                        w.clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect()
+    }
 
-/// The kernel average of `values` over the candidates that `speak` around candidate `i`.
-fn local_mean(
-    mesh: &Mesh,
-    grid: &Grid,
-    candidates: &[u32],
-    values: &[Diff],
-    speaks: &[bool],
-    class: &[bool],
-    i: usize,
-) -> [f32; 3] {
-    grid.sums_where(mesh, candidates[i], candidates, values, class, |u| {
-        speaks[u]
-    })
-    .mean()
-    .0
-}
-
-/// D at candidate `i`: its own walks weighted by `w`, its neighbours' leave-one-out average
-/// by 1 - w; its own D where it has no neighbour.
-pub(super) fn combined(
-    mesh: &Mesh,
-    grid: &Grid,
-    candidates: &[u32],
-    diff: &[Diff],
-    class: &[bool],
-    i: usize,
-    w: [f32; 3],
-) -> Diff {
-    let (d, s2) = diff[i];
-    let Some((a, a2)) = others(mesh, grid, candidates, diff, class, i) else {
-        return diff[i];
-    };
-    (
-        std::array::from_fn(|c| w[c] * d[c] + (1.0 - w[c]) * a[c]),
-        std::array::from_fn(|c| w[c] * w[c] * s2[c] + (1.0 - w[c]).powi(2) * a2[c]),
-    )
+    /// D at candidate `i`: its own walks weighted by `w`, its neighbours' leave-one-out
+    /// average by 1 - w; its own D where it has no neighbour.
+    pub(super) fn combined(&self, diff: &[Diff], i: usize, w: [f32; 3]) -> Diff {
+        let (d, s2) = diff[i];
+        let Some((a, a2)) = self.others(diff, i) else {
+            return diff[i];
+        };
+        (
+            std::array::from_fn(|c| w[c] * d[c] + (1.0 - w[c]) * a[c]),
+            std::array::from_fn(|c| w[c] * w[c] * s2[c] + (1.0 - w[c]).powi(2) * a2[c]),
+        )
+    }
 }
 
 #[cfg(test)]
@@ -193,7 +174,13 @@ mod tests {
         let diff = walked_diffs(truth, sd as f32, 7);
         // The kernel of the walk term: two spacings.
         let grid = Grid::new(&mesh, &candidates, 2.0);
-        let w = own_weights(&mesh, &grid, &candidates, &diff, &class);
+        let near = Neighbours {
+            mesh: &mesh,
+            grid: &grid,
+            candidates: &candidates,
+            class: &class,
+        };
+        let w = near.own_weights(&diff);
         let (mut kernel, mut combined_err, mut mean_w) = (0.0, 0.0, 0.0);
         // Away from the rim, where the kernel is whole.
         let mut count = 0.0;
@@ -203,7 +190,7 @@ mod tests {
                 continue;
             }
             let k = grid.average(&mesh, i as u32, &candidates, &diff, &class).0[0];
-            let c = combined(&mesh, &grid, &candidates, &diff, &class, i, w[i]).0[0];
+            let c = near.combined(&diff, i, w[i]).0[0];
             kernel += f64::from(k - truth[i]).powi(2);
             combined_err += f64::from(c - truth[i]).powi(2);
             mean_w += f64::from(w[i][0]);
@@ -257,15 +244,24 @@ mod tests {
         let mut diff = walked_diffs(&[0.5; 16], 0.1, 3);
         diff[5] = ([0.0; 3], [0.0; 3]); // flat: no walks
         let grid = Grid::new(&mesh, &candidates, 2.0);
-        let w = own_weights(&mesh, &grid, &candidates, &diff, &class);
+        let near = Neighbours {
+            mesh: &mesh,
+            grid: &grid,
+            candidates: &candidates,
+            class: &class,
+        };
+        let w = near.own_weights(&diff);
         assert_eq!(w[5], [0.0; 3]);
         // A kernel narrower than the spacing: no neighbour is left.
         let lone = Grid::new(&mesh, &candidates, 0.5);
-        let w = own_weights(&mesh, &lone, &candidates, &diff, &class);
+        let lone = Neighbours {
+            mesh: &mesh,
+            grid: &lone,
+            candidates: &candidates,
+            class: &class,
+        };
+        let w = lone.own_weights(&diff);
         assert_eq!(w[0], [1.0; 3]);
-        assert_eq!(
-            combined(&mesh, &lone, &candidates, &diff, &class, 0, w[0]),
-            diff[0]
-        );
+        assert_eq!(lone.combined(&diff, 0, w[0]), diff[0]);
     }
 }

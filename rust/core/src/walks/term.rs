@@ -200,7 +200,13 @@ impl WalkTerm {
         let flagged = passes.flagged(&main, &diff, &grid);
         let refined = passes.refine(&main, &flagged, sharp.rays)?;
         let own_weight = if settings.shrink {
-            shrinkage::own_weights(mesh, &grid, &main.candidates, &diff, &passes.embedded)
+            shrinkage::Neighbours {
+                mesh,
+                grid: &grid,
+                candidates: &main.candidates,
+                class: &passes.embedded,
+            }
+            .own_weights(&diff)
         } else {
             Vec::new()
         };
