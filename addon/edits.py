@@ -75,7 +75,7 @@ def follow_texture(material: bpy.types.Material, s: Session, force: bool = False
     s.base_color, s.texture_key, s.texture_message = texture.colours, texture.key, texture.message
 
 
-FIRST_PREVIEW_MESSAGE = "first preview after {:.2f} s (the half-space profile alone): refining with the walks"
+FIRST_PREVIEW_MESSAGE = "first preview after {:.2f} s (no walks yet): refining with the walks"
 
 
 def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, lighting) -> Session | None:

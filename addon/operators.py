@@ -77,7 +77,7 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             first = SESSIONS.get(self._mat)
             if getattr(self, "_first_shown", False) and first is not None and first.transport is job.first:
                 # The first preview stays up; the panel no longer says it is refining.
-                first.method_message = "first preview (the half-space profile alone): the full precompute stopped"
+                first.method_message = "first preview (no walks): the full precompute stopped"
 
             if isinstance(job.error, translucent.Cancelled):
                 self.report({"INFO"}, "precompute cancelled")

@@ -1,5 +1,5 @@
 """Pressing Precompute with a window (issue 29, point 4): with Cycles' profile a first preview
-(the half-space profile alone on fewer samples) is shown while the walks run, says so in the
+(no walks, fewer samples, a cheap own light) is shown while the walks run, says so in the
 panel, takes slider edits, and is replaced by the full precompute when it is done; the user's
 mesh is not written. Driven the way the modal operator drives it, in headless Blender (which
 runs no modal loop): the job built by `jobs.start(first_preview=True)`, the first preview shown

@@ -52,7 +52,8 @@ pub use knots::BASIS_SIZES;
 pub use own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
 pub use relight::RelightReport;
 pub use request::{
-    irradiance_eta, path_settings, PrtRequest, FIRST_PREVIEW_FAR_FIELD, FIRST_PREVIEW_SAMPLES,
+    irradiance_eta, path_settings, PrtRequest, FIRST_PREVIEW_FAR_FIELD,
+    FIRST_PREVIEW_OWN_LIGHT_RAYS, FIRST_PREVIEW_SAMPLES,
 };
 pub use settings::{
     default_walk_rays, PrtReport, PrtSettings, DEFAULT_FAR_FIELD, DEFAULT_MAX_SAMPLES,

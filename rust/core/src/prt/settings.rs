@@ -143,8 +143,9 @@ pub struct PrtReport {
     /// own light (when interreflection is on too).
     pub walks: Option<WalkTermReport>,
     pub walks_indirect: Option<WalkTermReport>,
-    /// A first preview (`PrtRequest::first_preview`): the half-space profile alone on at most
-    /// `FIRST_PREVIEW_SAMPLES` samples, no walks and no own light, whatever the profile.
+    /// A first preview (`PrtRequest::first_preview`): the half-space profile on at most
+    /// `FIRST_PREVIEW_SAMPLES` samples, no walks, the own light (where asked for or Cycles'
+    /// profile) on `FIRST_PREVIEW_OWN_LIGHT_RAYS` rays a vertex.
     pub first_preview: bool,
     /// The last `Prt::relight`, if any.
     pub last_relight: Option<super::relight::RelightReport>,
