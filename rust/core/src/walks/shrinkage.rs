@@ -62,18 +62,18 @@ impl Neighbours<'_> {
     /// Per candidate and channel, the weight w of its own D (0 for a candidate without walks:
     /// it is left to the kernel).
     pub(super) fn own_weights(&self, diff: &[Diff]) -> Vec<[f32; 3]> {
+        // Each walked candidate's leave-one-out average, once.
+        let others: Vec<Option<Diff>> = (0..self.candidates.len())
+            .into_par_iter()
+            .map(|i| walked(&diff[i]).then(|| self.others(diff, i)).flatten())
+            .collect();
         // (D_u - A_u)^2 - s_u^2 - a_u^2 at each walked candidate with neighbours: an unbiased
         // estimate of t^2; only those speak for it.
-        let excess: Vec<Option<[f32; 3]>> = (0..self.candidates.len())
-            .into_par_iter()
-            .map(|i| {
-                let (d, s2) = diff[i];
-                match self.others(diff, i) {
-                    Some((a, a2)) if walked(&diff[i]) => Some(std::array::from_fn(|c| {
-                        (d[c] - a[c]).powi(2) - s2[c] - a2[c]
-                    })),
-                    _ => None,
-                }
+        let excess: Vec<Option<[f32; 3]>> = others
+            .iter()
+            .zip(diff)
+            .map(|(o, (d, s2))| {
+                o.map(|(a, a2)| std::array::from_fn(|c| (d[c] - a[c]).powi(2) - s2[c] - a2[c]))
             })
             .collect();
         let speaks: Vec<bool> = excess.iter().map(Option::is_some).collect();
@@ -95,7 +95,7 @@ impl Neighbours<'_> {
                 if !walked(&diff[i]) {
                     return [0.0; 3];
                 }
-                let Some((_, a2)) = self.others(diff, i) else {
+                let Some((_, a2)) = others[i] else {
                     return [1.0; 3];
                 };
                 let t2 = wide.sums(&excess, i, |u| speaks[u]).mean().0;
