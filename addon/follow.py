@@ -236,7 +236,8 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
     name = mat.name
     try:
         job, objects, info, lighting = jobs.start(mat, method=method, previous=None if topology else s,
-                                                  relight=change == "light" and not topology)
+                                                  relight=change == "light" and not topology,
+                                                  pose=change == "deformation" and not topology)
     except ValueError as e:
         s.follow_message = f"following the scene failed: {e}"
         return

@@ -125,6 +125,46 @@ class RelightJob(Job):
             self.error = e
 
 
+# The share of the progress bar a pose's carried preview takes, before the walks on the pose.
+POSE_SHARE = 0.1
+
+
+class PoseJob(Job):
+    """PRT after a deformation of the same mesh: first the `previous` Prt carried to the pose
+    (`Prt.update(lights=scene)` with the posed scene: samples, irradiance and transport on the
+    posed mesh, the walks and the own light read on the same triangles, none traced), kept as
+    `first` for the preview at once ("posed (refining)"); then a precompute on the posed mesh,
+    the walks traced on it ("refined"). Should the update refuse (another topology after all),
+    only the precompute runs."""
+
+    def __init__(self, scene, materials, previous, **kwargs):
+        super().__init__(scene, materials, **kwargs)
+        self._previous = previous
+        self.stage_message = ""
+        self.first_message = ""
+
+    def _run(self, scene, materials, kwargs):
+        import translucent
+
+        try:
+            t0 = time.perf_counter()
+            self._span = (0.0, POSE_SHARE)
+            try:
+                r = self._previous.update(lights=scene, progress=self._tick)
+                self.first_seconds = time.perf_counter() - t0
+                self.first_message = (f"posed (refining): the walks carried to the pose in {r['seconds']:.2f} s, "
+                                      f"tracing them on it")
+                self.first = self._previous
+                prefix = f"refined: walks traced on the pose after {self.first_seconds:.2f} s carried"
+            except ValueError as e:
+                prefix = f"precomputed again ({e})"
+            self._span = (POSE_SHARE, 1.0)
+            self.result = translucent.Prt(scene, materials, progress=self._tick, **kwargs)
+            self.stage_message = prefix
+        except BaseException as e:  # reported to the user by the follow refresh
+            self.error = e
+
+
 def hierarchy_available() -> bool:
     import translucent
 
@@ -137,12 +177,13 @@ HIERARCHY_MISSING = "Hierarchy: not in this build of translucent (no translucent
 def resolve_method(setting: str, change: str, current: str = "prt") -> tuple[str, str]:
     """The method ("prt" or "hierarchy") that builds the transport for a `change` ("precompute",
     "deformation", "light") under the panel's `setting` ("PRT", "HIERARCHY", "AUTO"), and why it
-    is not the one asked for ("" when it is). Auto: the hierarchy for a deformation, and for a
-    light when the hierarchy already holds the transport (its render mode); PRT otherwise (the
-    button, material editing: PRT's edits are dot products)."""
+    is not the one asked for ("" when it is). Auto: the method that holds the transport for a
+    deformation or a light (PRT carries its walks and own light to a pose, `PoseJob`, and
+    relights without a walk; the hierarchy updates itself in place); PRT otherwise (the button,
+    material editing: PRT's edits are dot products)."""
     if setting == "PRT":
         return "prt", ""
-    wants = setting == "HIERARCHY" or change == "deformation" or (change == "light" and current == "hierarchy")
+    wants = setting == "HIERARCHY" or (change in ("deformation", "light") and current == "hierarchy")
     if not wants:
         return "prt", ""
     if not hierarchy_available():
@@ -151,11 +192,12 @@ def resolve_method(setting: str, change: str, current: str = "prt") -> tuple[str
 
 
 def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
-          previous=None, relight: bool = False,
+          previous=None, relight: bool = False, pose: bool = False,
           first_preview: bool = False) -> tuple[Job, list[str], export.ExportInfo, dict]:
     """Exports what the material needs and creates (but does not start) the job that builds its
     transport: PRT's precompute (with `relight`, only the lights changed: the `previous`
-    session's Prt updated to them, when it was built for the same objects and settings), or the
+    session's Prt updated to them, when it was built for the same objects and settings; with
+    `pose`, the meshes deformed: that Prt carried to the pose first, `PoseJob`), or the
     hierarchy (updated in place from the `previous` session when the topology is the same).
     `first_preview`: a PRT precompute with Cycles' profile builds a first preview first
     (`Job.first`). Returns the job, the objects, the export info and the lighting keys."""
@@ -178,10 +220,12 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
                            profile=s.profile_name())
     else:
         kwargs = dict(coefficients=s.coefficients, degree=int(s.degree), backend=s.backend, profile=s.profile_name())
-        same = (relight and previous is not None and previous.method == "prt"
+        same = ((relight or pose) and previous is not None and previous.method == "prt"
                 and hasattr(previous.transport, "update") and previous.chosen_for == params(s)
                 and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
-        if same:
+        if same and pose:
+            job = PoseJob(scene, materials, previous.transport, **kwargs)
+        elif same:
             job = RelightJob(scene, materials, previous.transport, **kwargs)
         else:
             # A first preview where the full precompute walks through the mesh (Cycles'
@@ -194,10 +238,11 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
     return job, [r.name for r in info.objects], info, export.lighting_keys(bl_scene)
 
 
-def in_background(name: str, job: Job, done, failed) -> None:
+def in_background(name: str, job: Job, done, failed, first=None) -> None:
     """Runs `job` for material `name` off the UI thread (headless: here, at once); when it is
     done, `done(material)` swaps its transport in (until then the old preview stays up), or
-    `failed(error)` reports its error."""
+    `failed(error)` reports its error. `first(material)`: the job's first preview shown as soon
+    as it has one (`Job.first`; headless, just before `done`)."""
     JOBS[name] = job
     job.background = True  # the panel: no Esc to cancel it (no modal operator runs it)
 
@@ -209,7 +254,15 @@ def in_background(name: str, job: Job, done, failed) -> None:
         if job.error is not None:
             failed(job.error)
             return
+        show_first(mat)
         done(mat)
+
+    shown = []
+
+    def show_first(mat) -> None:
+        if first is not None and job.first is not None and not shown:
+            shown.append(True)
+            first(mat)
 
     if headless():
         job.run_here()
@@ -218,6 +271,10 @@ def in_background(name: str, job: Job, done, failed) -> None:
 
     def poll():
         if not job.done:
+            mat = bpy.data.materials.get(name)
+            if mat is not None and job.first is not None and not shown:
+                show_first(mat)
+                redraw()
             return 0.2
         complete()
         redraw()

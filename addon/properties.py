@@ -118,10 +118,11 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
     )
     method: EnumProperty(
         name="Method",
-        items=[("AUTO", "Auto", "Choose by what changed: PRT for material edits and lights, the hierarchy for "
-                "deforming or animated meshes"),
-               ("PRT", "PRT", "Precomputed radiance transfer (Xu 2007): live material edits; a moved light or a "
-                "deformation precomputes again in the background"),
+        items=[("AUTO", "Auto", "Choose by what changed: PRT for material edits, lights (relit, no walk traced) "
+                "and poses (its walks carried to the pose at once, then traced on it); the hierarchy where it "
+                "already holds the transport"),
+               ("PRT", "PRT", "Precomputed radiance transfer (Xu 2007): live material edits; a moved light is "
+                "relit and a pose carried at once, then refined in the background"),
                ("HIERARCHY", "Hierarchy", "Hierarchical boundary elements (Mertens 2003): deforming scenes, "
                 "nothing precomputed that a deformation invalidates")],
         default="AUTO",

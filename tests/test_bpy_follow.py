@@ -73,8 +73,12 @@ def test_a_deformed_mesh_refreshes_the_preview_after_the_scene_is_still(addon, m
     follow.follow_tick()
     followed = session.SESSIONS[mat.name]
     assert followed is not sess and session.state(mat) == "ready" and not followed.changed
-    # What may be left pending is the add-on's own colour write: checked, no second refresh.
-    clock[0] += 1.0
+    # What may be left pending is the add-on's own colour writes (the pose carried, then
+    # refined: two): checked, no second refresh.
+    for _ in range(2):
+        clock[0] += 1.0
+        if follow.follow_tick() is None:
+            break
     assert follow.follow_tick() is None
     assert session.SESSIONS[mat.name] is followed and not follow.PENDING
     now = read_preview(obj)
@@ -110,14 +114,42 @@ def test_an_armature_pose_refreshes_the_preview(addon):
     rest = session.SESSIONS[mat.name]
     assert session.state(mat) == "ready" and not rest.deformed
     first = read_preview(obj)
-    rig.pose.bones["Bone"].location = (0.0, 0.03, 0.0)  # the upper half slides toward +Y
-    bpy.context.view_layer.update()
-    assert mat.name in follow.PENDING
-    follow.follow_now()
+    # The pose is shown twice: carried at once ("posed (refining)"), then refined.
+    import translucent
+    from addon import edits
+
+    shown = []
+    show_first = edits.show_first
+
+    def recording(material, job, *args):
+        out = show_first(material, job, *args)
+        shown.append((session.SESSIONS[material.name].method_message, read_preview(obj),
+                      session.SESSIONS[material.name].transport.report["carried_pose"]))
+        return out
+
+    edits.show_first = recording
+    try:
+        rig.pose.bones["Bone"].location = (0.0, 0.03, 0.0)  # the upper half slides toward +Y
+        bpy.context.view_layer.update()
+        assert mat.name in follow.PENDING
+        follow.follow_now()
+    finally:
+        edits.show_first = show_first
     assert session.SESSIONS[mat.name] is not rest and session.state(mat) == "ready"
+    refined = session.SESSIONS[mat.name]
+    assert refined.follow_message.startswith("refined"), refined.follow_message
+    assert not refined.transport.report["carried_pose"]
     now = read_preview(obj)
     assert not np.allclose(now, first), "the pose did not change the preview"
     np.testing.assert_allclose(now, precomputed_preview(bpy, mat, obj), rtol=1e-5, atol=1e-7)
+    assert len(shown) == 1, shown
+    message, carried, was_carried = shown[0]
+    assert message.startswith("posed (refining)") and was_carried, message
+    # The carried preview is the refined one within both estimates, and far from the rest pose's.
+    w = np.ones(len(now))
+    between = max(translucent.relative_error(carried, now, w[:, None])["rms"])
+    moved = max(translucent.relative_error(first, now, w[:, None])["rms"])
+    assert between < 0.5 * moved, (between, moved)
     assert mesh_hash(obj.data) == user_mesh and node_inputs(mat) == user_nodes
 
 
@@ -287,8 +319,10 @@ def test_the_hierarchy_method_falls_back_to_prt_saying_why(addon, monkeypatch):
     obj.modifiers["Displace"].strength = 0.02
     bpy.context.view_layer.update()
     follow.follow_now()
+    # Auto with PRT holding the transport: the pose carried by PRT, nothing missed.
     sess = session.SESSIONS[mat.name]
-    assert sess.method == "prt" and sess.method_message == jobs.HIERARCHY_MISSING
+    assert sess.method == "prt" and sess.method_message == ""
+    assert sess.follow_message.startswith("refined")
     assert session.state(mat) == "ready"
 
 
@@ -299,13 +333,16 @@ def test_auto_picks_the_method_by_what_changed(addon, monkeypatch):
     monkeypatch.setattr(translucent, "Hierarchy", object, raising=False)
     assert jobs.resolve_method("AUTO", "precompute") == ("prt", "")
     assert jobs.resolve_method("AUTO", "light", "prt") == ("prt", "")
-    assert jobs.resolve_method("AUTO", "deformation") == ("hierarchy", "")
+    # A pose: PRT carries its walks to it at once (then traces them on it); the hierarchy updates
+    # itself in place where it holds the transport.
+    assert jobs.resolve_method("AUTO", "deformation", "prt") == ("prt", "")
+    assert jobs.resolve_method("AUTO", "deformation", "hierarchy") == ("hierarchy", "")
     assert jobs.resolve_method("AUTO", "light", "hierarchy") == ("hierarchy", "")
     assert jobs.resolve_method("PRT", "deformation") == ("prt", "")
     assert jobs.resolve_method("HIERARCHY", "precompute") == ("hierarchy", "")
     monkeypatch.delattr(translucent, "Hierarchy")
     assert jobs.resolve_method("HIERARCHY", "precompute") == ("prt", jobs.HIERARCHY_MISSING)
-    assert jobs.resolve_method("AUTO", "deformation") == ("prt", jobs.HIERARCHY_MISSING)
+    assert jobs.resolve_method("AUTO", "deformation", "hierarchy") == ("prt", jobs.HIERARCHY_MISSING)
 
 
 def test_a_shape_key_and_edit_mode_edits_are_followed(addon):

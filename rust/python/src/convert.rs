@@ -338,3 +338,11 @@ pub fn rgb_array<'py>(py: Python<'py>, values: &[[f32; 3]]) -> Bound<'py, PyArra
         .map(|a| PyArray2::from_owned_array(py, a))
         .expect("shape matches length")
 }
+
+/// (N, 3) float32 rows of points or directions.
+pub fn vec3_rows<'py>(py: Python<'py>, values: &[Vec3]) -> Bound<'py, PyArray2<f32>> {
+    let flat: Vec<f32> = values.iter().flat_map(|v| v.to_array()).collect();
+    numpy::ndarray::Array2::from_shape_vec((values.len(), 3), flat)
+        .map(|x| PyArray2::from_owned_array(py, x))
+        .expect("three per row")
+}

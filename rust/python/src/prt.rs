@@ -54,6 +54,8 @@ pub struct PyPrt {
     )>,
     /// What the tracer kept of the occluders at the precompute or the last update.
     occluders: Mutex<translucent_core::occluders::OccluderReport>,
+    /// The mesh the transport holds (the last pose's): what `update(positions=...)` poses.
+    mesh: Mutex<translucent_core::mesh::Mesh>,
 }
 
 /// A lock's value, whether or not a panic (caught by `call::run`) poisoned it.
@@ -62,6 +64,114 @@ fn held<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl PyPrt {
+    /// `update` for a pose: `given` the posed positions (and normals) of the held mesh, under
+    /// `lights`' lights or the held ones; else `lights` is a Scene of the posed mesh.
+    fn pose<'py>(
+        &self,
+        py: Python<'py>,
+        lights: Option<&PyScene>,
+        given: Option<(Vec<Vec3>, Option<Vec<Vec3>>)>,
+        quick: bool,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        use std::sync::Arc;
+        use translucent_core::raytrace::Tracer;
+        use translucent_core::scene::Scene;
+        // The posed scene and its tracer: the given positions on the held mesh, lit by the
+        // `lights` scene or the held lights; or the `lights` scene itself.
+        let built: Option<(
+            Scene,
+            Arc<Tracer>,
+            translucent_core::occluders::OccluderReport,
+        )> = match given {
+            Some((p, n)) => {
+                let mesh = held(&self.mesh).clone();
+                let (lit, world, occluders) = match lights {
+                    Some(l) => (
+                        l.scene.lights.clone(),
+                        l.scene.world.clone(),
+                        l.scene.occluders.clone(),
+                    ),
+                    None => held(&self.lit_with).clone(),
+                };
+                let (scene, tracer, report) = run(py, None, |_| {
+                    let mut scene = Scene::new(mesh.posed(p, n)?);
+                    scene.lights = lit;
+                    scene.world = world;
+                    scene.occluders = occluders;
+                    let own = Tracer::new(&scene.mesh);
+                    let (tracer, report) = if scene.occluders.is_empty() {
+                        (own, Default::default())
+                    } else {
+                        scene.shadow_tracer(&own)
+                    };
+                    Ok((scene, Arc::new(tracer), report))
+                })?;
+                Some((scene, tracer, report))
+            }
+            None => None,
+        };
+        let (scene, tracer, occluder_report) = match (&built, lights) {
+            (Some((s, t, r)), _) => (s, t.clone(), r.clone()),
+            (None, Some(l)) => (&l.scene, l.tracer(), l.occluder_report()),
+            (None, None) => {
+                return Err(PyValueError::new_err(
+                    "update needs lights (a Scene of this mesh) or positions (a pose of it)",
+                ))
+            }
+        };
+        let lighting = Mutex::new(IrradianceReport::default());
+        let (irr, single_on, single_settings) =
+            (&self.irradiance, self.single.on, &self.single_settings);
+        let lock = &self.inner;
+        // Built beside the old transport, which answers edits meanwhile and stays on a cancel.
+        let (next, report, single_seconds) = run(py, progress, |tick| {
+            let inner = lock.read().unwrap_or_else(|e| e.into_inner());
+            let (mut next, report, lit) = if quick {
+                inner.posed_preview(scene, &tracer, irr, Some(tick))?
+            } else {
+                inner.reposed_scene(scene, &tracer, irr, Some(tick))?
+            };
+            *held(&lighting) = lit;
+            let t = std::time::Instant::now();
+            if single_on {
+                let materials = next.representatives().to_vec();
+                let s = single::SingleScattering::precompute(
+                    scene,
+                    &tracer,
+                    &materials,
+                    single_settings,
+                )?;
+                next.set_single_scattering(Some(s))?;
+            }
+            Ok((next, report, t.elapsed().as_secs_f64()))
+        })?;
+        *self.inner.write().unwrap_or_else(|e| e.into_inner()) = next;
+        *held(&self.mesh) = scene.mesh.clone();
+        *held(&self.lit_with) = (
+            scene.lights.clone(),
+            scene.world.clone(),
+            scene.occluders.clone(),
+        );
+        *held(&self.occluders) = occluder_report;
+        *held(&self.lighting) = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
+        if let Some(l) = lights {
+            // Lit by that scene now: its lighting version is the one to follow.
+            let counter = l.lighting_counter();
+            let version = counter.load(std::sync::atomic::Ordering::Relaxed);
+            *held(&self.scene_lighting) = counter;
+            self.lighting_version
+                .store(version, std::sync::atomic::Ordering::Relaxed);
+        }
+        *held(&self.last) = None;
+        *held(&self.last_single) = None;
+        if report.dropped.contains(&"the GPU copy of the transport") {
+            let (backend, half) = held(&self.backend_request).clone();
+            self.choose_backend(py, &backend, half)?;
+        }
+        relit_dict(py, &report, single_seconds, held(&self.lighting).rays)
+    }
+
     /// The transport for a quick read with the GIL held: busy while a backend change runs.
     fn read(&self) -> PyResult<RwLockReadGuard<'_, Prt>> {
         match self.inner.try_read() {
@@ -296,6 +406,7 @@ impl PyPrt {
                 core_scene.occluders.clone(),
             )),
             occluders: Mutex::new(scene.occluder_report()),
+            mesh: Mutex::new(core_scene.mesh.clone()),
         };
         prt.choose_backend(py, backend, false)?;
         Ok(prt)
@@ -499,22 +610,79 @@ impl PyPrt {
         })
     }
 
-    /// New lights for the same mesh (the call `Hierarchy.update` takes): `lights` is a Scene
-    /// of this mesh whose lights and world replace the precompute's. Only what depends on the
-    /// light is computed again: the irradiance, the transport rows, the walks' term (its walks
-    /// read at the same exits under the new light, none traced) and the object's own light
-    /// (cast again); samples, basis, walk tables and walks stay. Single scattering, when on,
-    /// is precomputed again; the backend is chosen again. Releases the GIL; `progress` as for
-    /// the constructor. Returns {"seconds", "seconds_irradiance", "seconds_transport",
-    /// "seconds_walks", "seconds_own_light", "seconds_single_scattering", "rays" (the
-    /// irradiance's), "own_light_rays", "walks_traced"}.
-    #[pyo3(signature = (lights, progress = None))]
+    /// New lights, or a pose, for the precomputed mesh (the call `Hierarchy.update` takes).
+    /// `lights`: a Scene of this mesh whose lights, world and occluders replace the
+    /// precompute's. Only what depends on the light is computed again: the irradiance, the
+    /// transport rows, the walks' term (its walks read at the same exits under the new light,
+    /// none traced) and the object's own light (gathered over its kept rays); samples, basis,
+    /// walk tables and walks stay. `positions` (N, 3) and optionally `normals`: the mesh posed
+    /// (same vertices and triangles; with `lights` too, under that scene's lights), as is a
+    /// `lights` Scene whose mesh is a pose of this one: the samples, irradiance and transport
+    /// are computed on the posed mesh and the walks and own light carried to it (read on the
+    /// same triangles, no walk or own-light ray traced; `report["carried_pose"]` until a new
+    /// precompute refines them), on a first preview's samples (`first_preview`, the default
+    /// for a pose: about a second) or the precompute's (False). Single scattering, when on, is precomputed again; the backend
+    /// is chosen again. Releases the GIL; `progress` as for the constructor. Returns
+    /// {"seconds", "seconds_irradiance", "seconds_transport", "seconds_walks",
+    /// "seconds_own_light", "seconds_single_scattering", "rays" (the irradiance's),
+    /// "own_light_rays", "walks_traced", "rescaled", "posed"}.
+    #[pyo3(signature = (lights = None, positions = None, normals = None, first_preview = None, progress = None))]
     fn update<'py>(
         &self,
         py: Python<'py>,
-        lights: PyRef<'_, PyScene>,
+        lights: Option<PyRef<'_, PyScene>>,
+        positions: Option<&Bound<'_, PyAny>>,
+        normals: Option<&Bound<'_, PyAny>>,
+        first_preview: Option<bool>,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        if normals.is_some() && positions.is_none() {
+            return Err(PyValueError::new_err(
+                "normals need positions (a pose): update(positions=..., normals=...)",
+            ));
+        }
+        let quick = first_preview.unwrap_or(true);
+        if let Some(p) = positions {
+            let p = crate::convert::vec3_array("positions", p)?;
+            let n = normals
+                .map(|n| crate::convert::vec3_array("normals", n))
+                .transpose()?;
+            return self.pose(py, lights.as_deref(), Some((p, n)), quick, progress);
+        }
+        let Some(lights) = lights else {
+            return Err(PyValueError::new_err(
+                "update needs lights (a Scene of this mesh) or positions (a pose of it)",
+            ));
+        };
+        let posed = {
+            let mesh = held(&self.mesh);
+            let other = &lights.scene.mesh;
+            other.vertex_count() == mesh.vertex_count()
+                && other.triangles() == mesh.triangles()
+                && (other.positions() != mesh.positions() || other.normals() != mesh.normals())
+        };
+        if posed {
+            return self.pose(py, Some(&lights), None, quick, progress);
+        }
+        {
+            let mesh = held(&self.mesh);
+            let other = &lights.scene.mesh;
+            if other.vertex_count() == mesh.vertex_count() && other.triangles() != mesh.triangles()
+            {
+                return Err(PyValueError::new_err(format!(
+                    "lights: a Scene of another topology (its {} triangles are not the \
+                     precomputed mesh's {}): precompute again",
+                    other.triangles().len(),
+                    mesh.triangles().len()
+                )));
+            }
+        }
+        if first_preview.is_some() {
+            return Err(PyValueError::new_err(
+                "first_preview applies to a pose (positions, or a Scene of the posed mesh); \
+                 these lights light the precomputed mesh",
+            ));
+        }
         let tracer = lights.tracer();
         let counter = lights.lighting_counter();
         let version = counter.load(std::sync::atomic::Ordering::Relaxed);
@@ -576,6 +744,7 @@ impl PyPrt {
             d.set_item("own_light_rays", 0)?;
             d.set_item("walks_traced", 0)?;
             d.set_item("rescaled", k.to_vec())?;
+            d.set_item("posed", false)?;
             return Ok(d);
         }
         let lighting = Mutex::new(IrradianceReport::default());
@@ -621,18 +790,7 @@ impl PyPrt {
             let (backend, half) = held(&self.backend_request).clone();
             self.choose_backend(py, &backend, half)?;
         }
-        let d = PyDict::new(py);
-        d.set_item("seconds", report.seconds + single_seconds)?;
-        d.set_item("seconds_irradiance", report.seconds_irradiance)?;
-        d.set_item("seconds_transport", report.seconds_transport)?;
-        d.set_item("seconds_walks", report.seconds_walks)?;
-        d.set_item("seconds_own_light", report.seconds_own_light)?;
-        d.set_item("seconds_single_scattering", single_seconds)?;
-        d.set_item("rays", held(&self.lighting).rays)?;
-        d.set_item("own_light_rays", report.own_light_rays)?;
-        d.set_item("walks_traced", report.walks_traced)?;
-        d.set_item("rescaled", py.None())?;
-        Ok(d)
+        relit_dict(py, &report, single_seconds, held(&self.lighting).rays)
     }
 
     /// What the precompute did, skipped, and how long each step took.
@@ -689,6 +847,7 @@ impl PyPrt {
             None => d.set_item("single", py.None())?,
         }
         d.set_item("first_preview", r.first_preview)?;
+        d.set_item("carried_pose", r.carried_pose)?;
         d.set_item("stored_channels", r.stored_channels)?;
         d.set_item("transport_bytes", r.transport_bytes)?;
         d.set_item("exact_samples", r.exact_samples)?;
@@ -783,4 +942,26 @@ fn per_vertex_colour(
         )
     })?;
     Ok(Some((inputs, crate::convert::float_rows("base_color", b)?)))
+}
+
+/// What `update` returns: its seconds per stage, rays and walks traced.
+fn relit_dict<'py>(
+    py: Python<'py>,
+    report: &translucent_core::prt::RelightReport,
+    single_seconds: f64,
+    rays: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("seconds", report.seconds + single_seconds)?;
+    d.set_item("seconds_irradiance", report.seconds_irradiance)?;
+    d.set_item("seconds_transport", report.seconds_transport)?;
+    d.set_item("seconds_walks", report.seconds_walks)?;
+    d.set_item("seconds_own_light", report.seconds_own_light)?;
+    d.set_item("seconds_single_scattering", single_seconds)?;
+    d.set_item("rays", rays)?;
+    d.set_item("own_light_rays", report.own_light_rays)?;
+    d.set_item("walks_traced", report.walks_traced)?;
+    d.set_item("rescaled", py.None())?;
+    d.set_item("posed", report.posed)?;
+    Ok(d)
 }

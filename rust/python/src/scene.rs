@@ -305,6 +305,19 @@ impl PyScene {
         occluder_dict(py, &self.traced().1)
     }
 
+    /// The mesh's vertex positions, (N, 3) float32 [unit]: what `Prt.update(positions=...)`
+    /// and `Hierarchy.update(positions=...)` take for a pose.
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        crate::convert::vec3_rows(py, self.scene.mesh.positions())
+    }
+
+    /// The unit vertex normals, (N, 3) float32 (given, or area-weighted).
+    #[getter]
+    fn normals<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        crate::convert::vec3_rows(py, self.scene.mesh.normals())
+    }
+
     #[getter]
     fn vertex_count(&self) -> usize {
         self.scene.mesh.vertex_count()

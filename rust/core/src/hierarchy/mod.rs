@@ -232,17 +232,7 @@ impl Hierarchy {
         positions: Vec<Vec3>,
         normals: Option<Vec<Vec3>>,
     ) -> Result<()> {
-        let n = self.scene.mesh.vertex_count();
-        if positions.len() != n {
-            return Err(Error::InvalidArgument(format!(
-                "{} positions for a mesh of {n} vertices (a topology change needs a new Hierarchy)",
-                positions.len()
-            )));
-        }
-        let mut mesh = Mesh::new(positions, self.scene.mesh.triangles().to_vec(), normals)?;
-        if let Some(objects) = self.scene.mesh.objects() {
-            mesh = mesh.with_objects(objects.to_vec())?;
-        }
+        let mesh = self.scene.mesh.posed(positions, normals)?;
         self.faces = faces_of(&mesh);
         self.scene.mesh = mesh;
         self.tracer = self.scene.tracer();

@@ -249,6 +249,25 @@ impl Mesh {
     }
 
     /// Per vertex its object, where the mesh holds several (`with_objects`).
+    /// This mesh posed: the same triangles and object indices, the vertices at `positions`
+    /// (one per vertex) with `normals` (computed when None), validated as `new` does. Errors
+    /// when the count differs (a topology change is a new mesh).
+    pub fn posed(&self, positions: Vec<Vec3>, normals: Option<Vec<Vec3>>) -> Result<Mesh> {
+        let n = self.vertex_count();
+        if positions.len() != n {
+            return Err(Error::InvalidArgument(format!(
+                "{} positions for a mesh of {n} vertices (a pose keeps the vertices and \
+                 triangles; a topology change is a new mesh)",
+                positions.len()
+            )));
+        }
+        let mesh = Mesh::new(positions, self.triangles.clone(), normals)?;
+        match &self.objects {
+            Some(objects) => mesh.with_objects(objects.clone()),
+            None => Ok(mesh),
+        }
+    }
+
     pub fn objects(&self) -> Option<&[u32]> {
         self.objects.as_deref()
     }

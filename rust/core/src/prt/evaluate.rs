@@ -260,6 +260,13 @@ impl Prt {
         let mut out = Vec::new();
         // A first preview says so: its estimate covers the fit alone, not what it left out.
         let first = self.report.first_preview;
+        if self.report.carried_pose && (self.walks.is_some() || self.bounce.is_some()) {
+            out.push(Skipped::new(
+                "the walks and the own light's rays on this pose",
+                "carried from the pose they were traced on (read on the same triangles): a \
+                 precompute on this pose traces them",
+            ));
+        }
         match (&self.bounce, bounce) {
             (None, _) if first => out.push(Skipped::new(
                 "the object's own light",

@@ -14,7 +14,8 @@
 //!
 //! Rooms: `settings` (what to precompute and the report of what was done), `precompute` (the
 //! steps in order), `knots` (basis knots and the error estimate), `rows` (one vertex's
-//! transport row and the far field), `own_light` (the object's light falling back on it),
+//! transport row and the far field), `own_light` (the object's light falling back on it), `relight` and `pose` (a new light or
+//! shape for the same transport),
 //! `evaluate` (an edit: fit and dot product), `textured` (an edit with a Base Color per
 //! vertex: a table of media), `backend` (CPU or GPU), `layout` and `tree`.
 
@@ -26,6 +27,7 @@ mod interreflection;
 mod knots;
 mod layout;
 mod own_light;
+mod pose;
 mod precompute;
 mod relight;
 pub mod request;
@@ -69,6 +71,8 @@ pub struct Prt {
     gpu: Option<crate::prt::gpu::GpuEvaluator>,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
+    /// The triangles the transport was precomputed on: a pose (`reposed_scene`) keeps them.
+    triangles: std::sync::Arc<Vec<[u32; 3]>>,
     /// I(x_o) per vertex, for the profiles' point mass (not scaled by the rim coverage: a
     /// diffuse lobe returns the light where it arrives, whatever surface lies around).
     vertex_irradiance: Vec<[f32; 3]>,

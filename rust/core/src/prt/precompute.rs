@@ -109,6 +109,7 @@ impl Prt {
             gpu: None,
             positions: mesh.positions().to_vec(),
             normals: mesh.normals().to_vec(),
+            triangles: std::sync::Arc::new(mesh.triangles().to_vec()),
             vertex_irradiance: lit.vertex_irradiance,
             near_radius,
             whole_mesh: knots.whole_mesh,

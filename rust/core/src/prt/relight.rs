@@ -3,7 +3,7 @@
 //! walks themselves stay; the irradiance, the sample tree's weights, the transport rows
 //! (Xu 2007 eq. 10 holds the light), the walks' term (its walks read at the same exits under
 //! the new light, `walks::relight`) and the object's own light (cast again from the new B)
-//! are redone.
+//! are redone. A pose of the mesh goes the same way (`pose`).
 
 use super::precompute::{transport_under, SampledLight};
 use super::{Density, IrradianceFn, ProgressFn, Prt};
@@ -53,6 +53,8 @@ pub struct RelightReport {
     /// What was dropped and must be attached again: the GPU copy of the transport, single
     /// scattering (both hold the old light).
     pub dropped: Vec<&'static str>,
+    /// A pose (`reposed_scene`): the mesh moved, the walks and own light carried.
+    pub posed: bool,
 }
 
 impl Prt {
@@ -101,7 +103,7 @@ impl Prt {
         let spacing = self.spacing;
         let sampled =
             |samples: Vec<SurfaceSample>| SampledLight::lit(mesh, spacing, samples, irradiance);
-        self.relit_with(mesh, irradiance, &sampled, progress)
+        self.relit_with(mesh, irradiance, &sampled, progress, false)
     }
 
     /// `relit` with the samples' and vertices' irradiance from `sampled`.
@@ -111,6 +113,7 @@ impl Prt {
         irradiance: &IrradianceFn,
         sampled: &dyn Fn(Vec<SurfaceSample>) -> Result<SampledLight>,
         progress: Option<&ProgressFn>,
+        pose: bool,
     ) -> Result<(Prt, RelightReport)> {
         let mut next = Prt {
             fitter: self.fitter.clone(),
@@ -118,6 +121,7 @@ impl Prt {
             gpu: None,
             positions: self.positions.clone(),
             normals: self.normals.clone(),
+            triangles: self.triangles.clone(),
             vertex_irradiance: self.vertex_irradiance.clone(),
             near_radius: self.near_radius,
             whole_mesh: self.whole_mesh,
@@ -134,7 +138,14 @@ impl Prt {
             light_scale: [1.0; 3],
             kept_irradiance: self.kept_irradiance.clone(),
         };
+        if pose {
+            next.positions = mesh.positions().to_vec();
+            next.normals = mesh.normals().to_vec();
+            next.samples = mesh.surface_samples(self.spacing)?;
+            next.report.carried_pose = true;
+        }
         let mut out = next.relight_steps(mesh, irradiance, sampled, progress)?;
+        out.posed = pose;
         if self.gpu.is_some() {
             out.dropped.push("the GPU copy of the transport");
         }
@@ -167,6 +178,17 @@ impl Prt {
         settings: &IrradianceSettings,
         progress: Option<&ProgressFn>,
     ) -> Result<(Prt, RelightReport, IrradianceReport)> {
+        self.lit_in_scene(scene, tracer, settings, progress, false)
+    }
+
+    pub(super) fn lit_in_scene(
+        &self,
+        scene: &Scene,
+        tracer: &Tracer,
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+        pose: bool,
+    ) -> Result<(Prt, RelightReport, IrradianceReport)> {
         let mesh = &scene.mesh;
         let ask = cancel_only(progress);
         let lighting = Mutex::new(IrradianceReport::default());
@@ -187,7 +209,13 @@ impl Prt {
             merge(&r);
             Ok(v)
         };
-        let kept = &self.kept_irradiance;
+        // A pose moves every sample and vertex: nothing kept holds, the posed transport keeps
+        // its own from here.
+        let kept = if pose {
+            std::sync::Arc::new(Mutex::new(KeptIrradiance::default()))
+        } else {
+            self.kept_irradiance.clone()
+        };
         let spacing = self.spacing;
         let sampled = |samples: Vec<SurfaceSample>| {
             let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
@@ -215,7 +243,8 @@ impl Prt {
             merge(&r);
             SampledLight::from_values(mesh, spacing, samples, at_samples, at_vertices)
         };
-        let (mut next, mut out) = self.relit_with(mesh, &irradiance, &sampled, progress)?;
+        let (mut next, mut out) = self.relit_with(mesh, &irradiance, &sampled, progress, pose)?;
+        next.kept_irradiance = kept.clone();
         let report = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
         out.irradiance_rays = report.rays;
         next.report.last_relight = Some(out.clone());
@@ -230,6 +259,13 @@ impl Prt {
         progress: Option<&ProgressFn>,
     ) -> Result<RelightReport> {
         let start = Instant::now();
+        if mesh.triangles() != self.triangles.as_slice() {
+            return Err(Error::InvalidArgument(format!(
+                "relight needs the mesh the transport was precomputed for: its {} triangles \
+                 differ (another topology): precompute again",
+                self.triangles.len()
+            )));
+        }
         if mesh.positions() != self.positions.as_slice()
             || mesh.normals() != self.normals.as_slice()
         {
@@ -270,14 +306,42 @@ impl Prt {
         self.vertex_irradiance = lit.vertex_irradiance;
         self.samples = lit.samples;
         self.report = report;
-        let rep = &resolved[0];
+        self.carry_terms(mesh, &resolved[0], irradiance, true, progress, &mut out)?;
+        out.seconds = start.elapsed().as_secs_f64();
+        tick(1.0)?;
+        Ok(out)
+    }
+
+    /// The walks' term and the object's own light under the light (and on the mesh) this
+    /// transport now holds: the kept walks read at their exits and the own light gathered over
+    /// its kept rays (walked or cast afresh where nothing was kept). `fine_edges`: the walks'
+    /// exits read the light finer where a shadow's edge crosses a triangle (`ShadowEdges`),
+    /// else from the triangle's corners. Progress from 0.7 to 0.99.
+    pub(super) fn carry_terms(
+        &mut self,
+        mesh: &Mesh,
+        rep: &Resolved,
+        irradiance: &IrradianceFn,
+        fine_edges: bool,
+        progress: Option<&ProgressFn>,
+        out: &mut RelightReport,
+    ) -> Result<()> {
+        let tick = |f: f32| match progress {
+            Some(p) if !p(f) => Err(Error::Cancelled),
+            _ => Ok(()),
+        };
+        let settings = self.settings.clone();
         let tracer = (self.walks.is_some() || self.bounce.is_some()).then(|| Tracer::new(mesh));
         let halfspace = self.radiosity_of(rep, false, false)?.values;
         let t = Instant::now();
         if let (Some(mut term), Some(tracer)) = (self.walks.take(), &tracer) {
-            let edges = ShadowEdges::new(mesh, &self.vertex_irradiance, &|p, n| {
-                irradiance(p, n, Density::Receivers)
-            })?;
+            let edges = if fine_edges {
+                ShadowEdges::new(mesh, &self.vertex_irradiance, &|p, n| {
+                    irradiance(p, n, Density::Receivers)
+                })?
+            } else {
+                ShadowEdges::none()
+            };
             self.report.shadow_edge_triangles = edges.len();
             self.report.shadow_edge_points = edges.points();
             if term.relightable() {
@@ -327,8 +391,6 @@ impl Prt {
             }
         }
         out.seconds_own_light = t.elapsed().as_secs_f64();
-        out.seconds = start.elapsed().as_secs_f64();
-        tick(1.0)?;
-        Ok(out)
+        Ok(())
     }
 }

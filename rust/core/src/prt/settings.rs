@@ -149,6 +149,10 @@ pub struct PrtReport {
     pub first_preview: bool,
     /// The last `Prt::relight`, if any.
     pub last_relight: Option<super::relight::RelightReport>,
+    /// The walks' term and the object's own light were carried from another pose of the mesh
+    /// (`Prt::reposed_scene`: the walks' exits and the own light's hits on the same triangles
+    /// of the posed mesh), not walked on this one: a precompute refines them.
+    pub carried_pose: bool,
     /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
     /// evaluated there, and the time it took.
     pub shadow_edge_triangles: usize,

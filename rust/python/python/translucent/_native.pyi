@@ -167,6 +167,12 @@ class Scene:
         """(N,) share of a small disc around each vertex that the surface covers: 1 inside, the
         angle share on an open boundary (1/2 on a straight edge), 0 for unused vertices."""
     @property
+    def positions(self) -> npt.NDArray[np.float32]:
+        """(N, 3) vertex positions [unit]: a pose's `update(positions=...)` takes these."""
+    @property
+    def normals(self) -> npt.NDArray[np.float32]:
+        """(N, 3) unit vertex normals (given, or area-weighted)."""
+    @property
     def vertex_areas(self) -> npt.NDArray[np.float32]:
         """(N, 1) area per vertex, the weights of error metrics."""
     @property
@@ -298,14 +304,29 @@ class Prt:
     def stale_reason(self) -> str | None:
         """None while the precompute's (or the last update's) lighting is the scene's; else a
         sentence saying the scene's lights or world changed since."""
-    def update(self, lights: Scene, progress: Progress | None = None) -> dict[str, float | int]:
-        """New lights and world for the same mesh (`lights`: a Scene of this mesh). Recomputes
-        only what depends on the light (irradiance, transport rows, the walks' term read at the
-        same exits with no walk traced, the object's own light); the old transport answers
+    def update(
+        self,
+        lights: Scene | None = None,
+        positions: npt.ArrayLike | None = None,
+        normals: npt.ArrayLike | None = None,
+        first_preview: bool | None = None,
+        progress: Progress | None = None,
+    ) -> dict[str, Any]:
+        """New lights and world for the same mesh (`lights`: a Scene of this mesh), or a pose of
+        it: `positions` (N, 3) and optionally `normals` (the same vertices and triangles; under
+        `lights`' lights when given, else the held ones), or a `lights` Scene whose mesh is a
+        pose of this one. Recomputes only what depends on the light (irradiance, transport
+        rows, the walks' term read at the same exits with no walk traced, the object's own
+        light gathered over its kept rays); a pose recomputes the samples, irradiance and
+        transport on the posed mesh and carries the walks and the own light to it
+        (`report["carried_pose"]`: a new precompute refines them), on a first preview's
+        samples (`first_preview` None or True: about a second) or the precompute's (False;
+        `first_preview` is refused for a light-only update). The old transport answers
         edits until the new one replaces it, and a cancel keeps it. When every light's (and
         the world's) emission only changed by one factor per channel, a rescale: no ray, and
         `rescaled` gives the factor (else None). Returns seconds (and per stage), rays,
-        own_light_rays, walks_traced, rescaled."""
+        own_light_rays, walks_traced, rescaled, posed. ValueError names a bad argument (normals
+        without positions, another vertex count or topology)."""
     @property
     def report(self) -> dict[str, float | int | bool | list[float]]:
         """What the precompute did and left out: samples, support_radius [unit], knots,
@@ -320,7 +341,8 @@ class Prt:
         walked one by one), walks, rays, spacing, kernel_radius, noise, share, seconds:
         the walks through the mesh for the direct light and for the object's own light),
         shadow_edge_triangles and shadow_edge_points (where the walks read the light on a finer
-        grid), seconds per step."""
+        grid), carried_pose (the walks and own light carried from another pose by `update`,
+        not walked on this one), seconds per step."""
     @property
     def eta(self) -> float:
         """The IOR of the irradiance's Fresnel factor (1 for the Cycles profile)."""
