@@ -86,7 +86,7 @@ def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, light
         return None
     session = Session(job.first, info, objects, lighting, material.translucent.eta, profile=job.profile)
     session.chosen_for = job.chosen_for
-    session.method = "prt"
+    session.method = getattr(job, "method", "prt")
     session.method_message = getattr(job, "first_message", "") or FIRST_PREVIEW_MESSAGE.format(job.first_seconds)
     session.remap = nearest_original_vertices(objects, info)
     _take_texture(session, job)
@@ -96,11 +96,17 @@ def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, light
     return session
 
 
-def in_background(name: str, job: jobs.Job, objects, info, lighting, failed, method_message: str = "") -> None:
+def in_background(name: str, job: jobs.Job, objects, info, lighting, failed, method_message: str = "",
+                  then=None) -> None:
     """`job` run off the UI thread (`jobs.in_background`); its transport is shown when done, and
-    its first preview (a pose carried, `jobs.PoseJob`) as soon as it has one."""
-    jobs.in_background(name, job, lambda mat: finish(mat, job, objects, info, lighting, method_message), failed,
-                       first=lambda mat: show_first(mat, job, objects, info, lighting))
+    its first preview (a pose carried, `jobs.PoseJob`) as soon as it has one. `then(material)`
+    runs after the transport is shown (a refinement to start)."""
+    def done(mat):
+        finish(mat, job, objects, info, lighting, method_message)
+        if then is not None:
+            then(mat)
+
+    jobs.in_background(name, job, done, failed, first=lambda mat: show_first(mat, job, objects, info, lighting))
 
 
 def _previewed(material: bpy.types.Material) -> list[bpy.types.Object]:

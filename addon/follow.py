@@ -261,8 +261,16 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
             return
         edits.in_background(name, job2, objects2, info2, lighting2, failed, why)
 
+    def refine(mat):
+        # The hierarchy carried its walks to the pose: now it walks the pose, in the background.
+        if getattr(job, "retrace", False) and mat.name not in JOBS:
+            again = jobs.RetraceJob(job.result, mat.translucent.material())
+            for key in ("method", "base_color", "texture_key", "texture_message", "chosen_for", "profile"):
+                setattr(again, key, getattr(job, key, None))
+            edits.in_background(mat.name, again, objects, info, lighting, failed, message)
+
     edits.in_background(name, job, objects, info, lighting, hierarchy_failed if method == "hierarchy" else failed,
-                        message)
+                        message, then=refine)
 
 
 # ----------------------------------------------------------------------- following the view

@@ -75,11 +75,16 @@ HIERARCHY_ESTIMATE_RECEIVERS = 32
 class HierarchyJob(Job):
     """The hierarchy built (or updated, same topology) on a worker thread; the same polling. Its
     result is the `translucent.Hierarchy` itself: it answers the edit path's calls as a `Prt`
-    does (`radiance`, `last_eval`, `report`, `profile`), each with its own keys."""
+    does (`radiance`, `last_eval`, `report`, `profile`), each with its own keys. With Cycles'
+    profile it takes the walks' term and the object's own light (`walks=True`, as PRT has
+    them); after a pose they are carried at once ("posed (refining)", `retrace` set) and then
+    walked on the pose by a `RetraceJob` ("refined")."""
 
     def __init__(self, scene, material, previous=None, positions=None, **kwargs):
         super().__init__(scene, [material], **kwargs)
         self._material, self._previous, self._positions = material, previous, positions
+        self.stage_message = ""
+        self.retrace = False
 
     def _run(self, scene, materials, kwargs):
         import translucent
@@ -87,14 +92,48 @@ class HierarchyJob(Job):
         try:
             if self._previous is not None:
                 # Same topology: the hierarchy's own update (links promoted or demoted).
-                self._previous.update(positions=self._positions, lights=scene)
-                self.result = self._previous
+                h = self._previous
+                if self._positions is not None:
+                    # The exported mesh's own normals (Blender's), as a fresh build takes them.
+                    h.update(positions=scene.positions, normals=scene.normals, lights=scene)
+                else:
+                    h.update(lights=scene)
+                # With walks, a pose carries them at once; `RetraceJob` then walks the pose.
+                self.retrace = h.report.get("terms") is not None and self._positions is not None
+                if self.retrace:
+                    t0 = time.perf_counter()
+                    h.radiance(self._material)
+                    self.stage_message = (f"posed (refining): the walks carried to the pose in "
+                                          f"{time.perf_counter() - t0:.2f} s, tracing them on it")
+                self.result = h
             else:
-                # The world shadowed by the mesh, as Cycles renders it.
+                # The world shadowed by the mesh, as Cycles renders it; Cycles' walks through
+                # the mesh and its own light with Cycles' profile.
                 self.result = translucent.Hierarchy(scene, self._material, profile=kwargs["profile"],
                                                     eps=HIERARCHY_EPS, mode="on_the_fly", world_shadows=True,
-                                                    estimate_receivers=HIERARCHY_ESTIMATE_RECEIVERS)
+                                                    estimate_receivers=HIERARCHY_ESTIMATE_RECEIVERS,
+                                                    walks=kwargs["profile"] == "cycles")
         except BaseException as e:  # reported by the follow refresh, which falls back to PRT
+            self.error = e
+
+
+class RetraceJob(Job):
+    """The hierarchy's walks traced on the pose they were carried to (`retrace_walks`), on a
+    worker thread; its result is the same `translucent.Hierarchy`."""
+
+    def __init__(self, hierarchy, material, **kwargs):
+        super().__init__(None, [material], **kwargs)
+        self._hierarchy, self._material = hierarchy, material
+        self.stage_message = ""
+
+    def _run(self, scene, materials, kwargs):
+        try:
+            t0 = time.perf_counter()
+            self._hierarchy.retrace_walks()
+            self._hierarchy.radiance(self._material)
+            self.stage_message = f"refined: walks traced on the pose in {time.perf_counter() - t0:.2f} s"
+            self.result = self._hierarchy
+        except BaseException as e:  # reported by the follow refresh
             self.error = e
 
 

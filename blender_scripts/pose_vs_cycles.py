@@ -2,8 +2,10 @@
 armature bending her left ear by 40 degrees, previewed three ways after the pose and each
 compared with a Cycles vertex bake of the posed mesh:
 
-- the hierarchy updated in place (`Hierarchy.update(positions=...)`: the half-space profile, no
-  walks, no own light; what Auto picked for a deformation before the pose update);
+- the hierarchy updated in place (`Hierarchy.update(positions=...)`): the half-space profile
+  alone (what Auto picked for a deformation before the pose update), and with walks
+  (`Hierarchy(walks=True)`: the walks and the own light carried to the pose, then
+  `retrace_walks` walking the pose);
 - PRT updated to the pose (`Prt.update(lights=posed scene)`: samples, irradiance and transport on
   the posed mesh, the walks and the object's own light carried from the rest pose), on a first
   preview's samples (the default) and on the precompute's (`first_preview=False`);
@@ -100,6 +102,15 @@ def main(argv=None) -> int:
         h.update(positions=posed.positions, normals=posed.normals)
         hb = h.radiance(m)
         h_s = time.perf_counter() - t0
+        hw = translucent.Hierarchy(rest, m, mode="render", world_shadows=True, walks=True)
+        t0 = time.perf_counter()
+        hw.update(positions=posed.positions, normals=posed.normals)
+        hwb = hw.radiance(m)
+        hw_s = time.perf_counter() - t0
+        hw.retrace_walks()
+        t0 = time.perf_counter()
+        hrb = hw.radiance(m)
+        hr_s = time.perf_counter() - t0
         rest_prt = translucent.Prt(rest, m, backend="cpu", single_scattering=False)
         carried = {}
         for quick in (True, False):
@@ -113,7 +124,8 @@ def main(argv=None) -> int:
         f_s = time.perf_counter() - t0
         still = rest_prt.radiance(m)
         (qb, q_s, qr), (pb, p_s, pr) = carried[True], carried[False]
-        print(f"{name}: hierarchy update {h_s:.2f} s, {errors(hb, bake)}; PRT pose update (first preview's "
+        print(f"{name}: hierarchy update {h_s:.2f} s, {errors(hb, bake)}; with walks carried {hw_s:.2f} s, "
+              f"{errors(hwb, bake)}, retraced {hr_s:.2f} s more, {errors(hrb, bake)}; PRT pose update (first preview's "
               f"samples) {q_s:.2f} s, {errors(qb, bake)}; PRT pose update (precompute's samples) {p_s:.2f} s, "
               f"{errors(pb, bake)} ({qr['walks_traced'] + pr['walks_traced']} walks traced); fresh PRT on the "
               f"pose {f_s:.2f} s, {errors(fb, bake)}; the rest pose's preview left as it was "

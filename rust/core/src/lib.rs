@@ -14,6 +14,7 @@ pub mod mesh; // validated triangle meshes, surface samples, vertex areas
 pub mod metrics; // area-weighted relative error
 pub mod occluders; // the rest of the scene: shadow casters that do not scatter, culled per light
 pub mod optics; // material, Fresnel, measured data, Principled layers
+pub mod own_light; // the object's own light falling back on it: kept rays, bounces, any edit
 pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated
 pub mod progress; // progress and cancelling of long loops (a Ticker over an atomic counter)
 pub mod quadrature; // Gauss–Legendre and Simpson rules
@@ -25,7 +26,7 @@ pub mod spherical_harmonics; // real Y_lm and HG's Legendre series (addition the
 pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)
 pub mod walks; // Cycles' walk traced inside the mesh, its half-space twin, the walk term
 
-// Methods, each with its private parts inside it (prt: basis, interreflection, gpu, single;
+// Methods, each with its private parts inside it (prt: basis, gpu, single;
 // hierarchy: clusters, links, far field, rings).
 pub mod hierarchy; // Mertens et al. 2003: face clusters and links, deformation and moving lights
 pub mod prt; // Xu et al. 2007: precomputed transport, live material edits

@@ -32,3 +32,28 @@ pub fn evaluation_dict<'py, D>(
     d.set_item("skipped", skipped_list(py, &e.skipped)?)?;
     Ok(d)
 }
+
+/// A walk term's report (`walks::WalkTermReport`) as the methods' reports give it.
+pub fn walks_dict<'py>(
+    py: Python<'py>,
+    g: &translucent_core::walks::WalkTermReport,
+) -> PyResult<Bound<'py, PyDict>> {
+    let w = PyDict::new(py);
+    w.set_item("walked_vertices", g.walked_vertices)?;
+    w.set_item("skipped_flat", g.skipped_flat)?;
+    w.set_item("walks_per_vertex", g.walks_per_vertex)?;
+    w.set_item("refined_vertices", g.refined_vertices)?;
+    w.set_item("refined_walks_per_vertex", g.refined_walks_per_vertex)?;
+    w.set_item("sharp_vertices", g.sharp_vertices)?;
+    w.set_item("sharp_walks_per_vertex", g.sharp_walks_per_vertex)?;
+    w.set_item("walks", g.walks)?;
+    w.set_item("rays", g.rays)?;
+    w.set_item("spacing", g.spacing)?;
+    w.set_item("kernel_radius", g.kernel_radius)?;
+    w.set_item("noise", g.noise.to_vec())?;
+    w.set_item("share", g.share.to_vec())?;
+    w.set_item("seconds", g.seconds)?;
+    w.set_item("relight_bytes", g.relight_bytes)?;
+    w.set_item("seconds_relight", g.seconds_relight)?;
+    Ok(w)
+}

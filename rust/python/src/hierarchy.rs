@@ -53,7 +53,7 @@ impl PyHierarchy {
     #[new]
     #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.5),
         mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32,
-        world_shadows = false, progress = None))]
+        world_shadows = false, walks = false, walk_rays = None, progress = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -66,9 +66,45 @@ impl PyHierarchy {
         #[pyo3(from_py_with = crate::convert::int)] area_samples: i64,
         #[pyo3(from_py_with = crate::convert::int)] estimate_receivers: i64,
         world_shadows: bool,
+        walks: bool,
+        #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
         let model = crate::material::profile_kind(profile)?;
+        if walk_rays.is_some() && !walks {
+            return Err(PyValueError::new_err(
+                "walk_rays: the walks are off (walks=False)",
+            ));
+        }
+        let terms = if walks {
+            let vertices = scene.scene.mesh.vertex_count();
+            let rays = match walk_rays {
+                Some(r) => {
+                    let r: u64 = non_negative("walk_rays", r)?;
+                    if r == 0 {
+                        return Err(PyValueError::new_err(
+                            "walk_rays 0: leave walks off instead",
+                        ));
+                    }
+                    r
+                }
+                None => translucent_core::walks::default_walk_rays(vertices),
+            };
+            Some(translucent_core::hierarchy::TermSettings {
+                walks: translucent_core::walks::WalkTermSettings {
+                    rays,
+                    ..Default::default()
+                },
+                // PRT's default own light: 144 rays a vertex.
+                interreflection: Some(
+                    (translucent_core::own_light::DEFAULT_RAYS as f64)
+                        .sqrt()
+                        .round() as usize,
+                ),
+            })
+        } else {
+            None
+        };
         let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
         let settings = HierarchySettings {
             eps_receiver: eps.0,
@@ -79,6 +115,7 @@ impl PyHierarchy {
             area_samples: non_negative("area_samples", area_samples)?,
             estimate_receivers: non_negative("estimate_receivers", estimate_receivers)?,
             world_shadows,
+            terms,
             ..HierarchySettings::default()
         };
         let core_scene = scene.scene.clone();
@@ -169,6 +206,14 @@ impl PyHierarchy {
         })
     }
 
+    /// With walks on: the next evaluation walks them (and casts the own light's rays) anew on
+    /// the mesh as it is now, instead of carrying them from the pose they were traced on (the
+    /// refinement after a pose). No-op with walks off.
+    fn retrace_walks(&self) -> PyResult<()> {
+        self.read()?.retrace_terms();
+        Ok(())
+    }
+
     /// "on_the_fly", "incremental" or "render" (Mertens §5.5); settable.
     #[getter]
     fn mode(&self) -> PyResult<&'static str> {
@@ -234,6 +279,27 @@ impl PyHierarchy {
         d.set_item("seconds_estimate", r.seconds_estimate)?;
         d.set_item("seconds", r.seconds)?;
         d.set_item("error_estimate", r.error_estimate.map(|x| x.to_vec()))?;
+        match &r.terms {
+            Some(t) => {
+                let w = PyDict::new(py);
+                match &t.walks {
+                    Some(g) => w.set_item("walks", crate::evaluation::walks_dict(py, g)?)?,
+                    None => w.set_item("walks", py.None())?,
+                }
+                match &t.walks_indirect {
+                    Some(g) => {
+                        w.set_item("walks_indirect", crate::evaluation::walks_dict(py, g)?)?
+                    }
+                    None => w.set_item("walks_indirect", py.None())?,
+                }
+                w.set_item("own_light_rays", t.own_light_rays)?;
+                w.set_item("own_light_share", t.own_light_share)?;
+                w.set_item("carried_pose", t.carried_pose)?;
+                w.set_item("seconds", t.seconds)?;
+                d.set_item("terms", w)?;
+            }
+            None => d.set_item("terms", py.None())?,
+        }
         d.set_item("method", "hierarchy")?;
         let last = self.last.lock().unwrap_or_else(|e| e.into_inner());
         let skipped = last.as_ref().map_or(&[][..], |e| &e.skipped[..]);

@@ -866,26 +866,7 @@ impl PyPrt {
         d.set_item("seconds_shadow_edges", r.seconds_shadow_edges)?;
         for (key, report) in [("walks", &r.walks), ("walks_indirect", &r.walks_indirect)] {
             match report {
-                Some(g) => {
-                    let w = PyDict::new(py);
-                    w.set_item("walked_vertices", g.walked_vertices)?;
-                    w.set_item("skipped_flat", g.skipped_flat)?;
-                    w.set_item("walks_per_vertex", g.walks_per_vertex)?;
-                    w.set_item("refined_vertices", g.refined_vertices)?;
-                    w.set_item("refined_walks_per_vertex", g.refined_walks_per_vertex)?;
-                    w.set_item("sharp_vertices", g.sharp_vertices)?;
-                    w.set_item("sharp_walks_per_vertex", g.sharp_walks_per_vertex)?;
-                    w.set_item("walks", g.walks)?;
-                    w.set_item("rays", g.rays)?;
-                    w.set_item("spacing", g.spacing)?;
-                    w.set_item("kernel_radius", g.kernel_radius)?;
-                    w.set_item("noise", g.noise.to_vec())?;
-                    w.set_item("share", g.share.to_vec())?;
-                    w.set_item("seconds", g.seconds)?;
-                    w.set_item("relight_bytes", g.relight_bytes)?;
-                    w.set_item("seconds_relight", g.seconds_relight)?;
-                    d.set_item(key, w)?;
-                }
+                Some(g) => d.set_item(key, crate::evaluation::walks_dict(py, g)?)?,
                 None => d.set_item(key, py.None())?,
             }
         }

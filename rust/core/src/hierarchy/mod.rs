@@ -24,8 +24,10 @@ pub mod far;
 pub mod links;
 pub mod ring;
 mod settings;
+mod terms;
 
 pub use settings::{HierarchyReport, HierarchySettings, Mode};
+pub use terms::{TermReport, TermSettings};
 
 use crate::error::{Error, Result};
 use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
@@ -82,6 +84,10 @@ pub struct Hierarchy {
     profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
     geometry_changed: bool,
     report: HierarchyReport,
+    /// The walks' term and the own light (`terms`), when on.
+    terms: Option<terms::Terms>,
+    /// The next evaluation walks the terms anew (`retrace_terms`).
+    retrace: bool,
 }
 
 /// Each channel's decay length (infinite where nothing diffuses).
@@ -157,6 +163,12 @@ impl Hierarchy {
                 settings.support_tolerance
             )));
         }
+        if settings.terms.is_some() && settings.profile != ProfileKind::Cycles {
+            return Err(Error::InvalidArgument(
+                "walks: the walks' term is Cycles' random walk: use profile 'cycles' with it"
+                    .into(),
+            ));
+        }
         let start = Instant::now();
         tick(progress, 0.0)?;
         let clusters = stage(progress, 0.0, 0.7);
@@ -189,7 +201,6 @@ impl Hierarchy {
             slots: Vec::new(),
             scene,
             tracer,
-            settings,
             tree,
             faces,
             has_links: false,
@@ -206,7 +217,16 @@ impl Hierarchy {
             profiles: None,
             geometry_changed: false,
             report,
+            terms: settings.terms.clone().map(terms::Terms::new),
+            retrace: false,
+            settings,
         })
+    }
+
+    /// The next evaluation walks the terms anew on the mesh as it is now (after a pose they
+    /// are carried: `HierarchyReport::terms`'s `carried_pose`). No-op without the terms.
+    pub fn retrace_terms(&mut self) {
+        self.retrace = self.terms.is_some();
     }
 
     pub fn settings(&self) -> &HierarchySettings {
@@ -241,6 +261,9 @@ impl Hierarchy {
         self.vertex_irradiance = None;
         self.face_sources.clear();
         self.vertex_sources.clear();
+        if let Some(t) = &mut self.terms {
+            t.stale(true);
+        }
         Ok(())
     }
 
@@ -271,6 +294,9 @@ impl Hierarchy {
         }
         self.face_irradiance = None;
         self.vertex_irradiance = None;
+        if let Some(t) = &mut self.terms {
+            t.stale(false);
+        }
     }
 
     fn irradiance_settings(&self, eta: f64, density: Density) -> IrradianceSettings {
@@ -389,7 +415,20 @@ impl Hierarchy {
         material: &Material,
         progress: Option<&ProgressFn>,
     ) -> Result<Evaluation> {
-        let values = self.radiosity_values(material, progress)?;
+        let needs_terms = self
+            .terms
+            .as_ref()
+            .is_some_and(|t| !t.current || self.retrace);
+        let direct = if needs_terms {
+            stage(progress, 0.0, 0.2)
+        } else {
+            stage(progress, 0.0, 1.0)
+        };
+        let mut values = self.radiosity_values(material, progress.map(|_| &direct as _))?;
+        if self.terms.is_some() {
+            let rest = stage(progress, 0.2, 1.0);
+            self.add_terms(material, &mut values, progress.map(|_| &rest as _))?;
+        }
         Ok(Evaluation {
             values,
             quantity: Quantity::Radiosity,
@@ -402,16 +441,28 @@ impl Hierarchy {
 
     /// What the hierarchy leaves out of every evaluation, and why.
     fn skipped(&self) -> Vec<Skipped> {
-        let mut out = vec![
-            Skipped::new(
-                "walks through the mesh",
-                "the hierarchy sums the half-space profile (Mertens 2003)",
-            ),
-            Skipped::new(
+        let mut out = match &self.terms {
+            None => vec![
+                Skipped::new(
+                    "walks through the mesh",
+                    "the hierarchy sums the half-space profile (Mertens 2003): walks off",
+                ),
+                Skipped::new(
+                    "the object's own light",
+                    "the hierarchy gathers the direct light only: walks off",
+                ),
+            ],
+            Some(t) if t.report.carried_pose => vec![Skipped::new(
+                "the walks and the own light's rays on this pose",
+                "carried from the pose they were traced on (read on the same triangles): \
+                 retracing the walks on this pose refines them",
+            )],
+            Some(t) if t.settings.interreflection.is_none() => vec![Skipped::new(
                 "the object's own light",
-                "the hierarchy gathers the direct light only",
-            ),
-        ];
+                "interreflection off",
+            )],
+            Some(_) => Vec::new(),
+        };
         if self.settings.estimate_receivers == 0 {
             out.push(Skipped::new("error estimate", "estimate_receivers = 0"));
         }
@@ -422,6 +473,62 @@ impl Hierarchy {
             ));
         }
         out
+    }
+
+    /// Adds the walks' term and the own light for `material` to `values` (B per vertex), and
+    /// their noise to the error estimate; carries (or walks, the first time or after
+    /// `retrace_terms`) them to the current light and shape first, for the representative.
+    fn add_terms(
+        &mut self,
+        material: &Material,
+        values: &mut [[f32; 3]],
+        progress: Option<&ProgressFn>,
+    ) -> Result<()> {
+        let Some(current) = self.terms.as_ref().map(|t| t.current) else {
+            return Ok(());
+        };
+        if !current || self.retrace {
+            let rep = self.terms.as_ref().and_then(|t| t.rep).unwrap_or(*material);
+            let fresh = self.retrace || self.terms.as_ref().is_some_and(|t| t.rep.is_none());
+            // The representative's half-space B under this light and shape (its own evaluation
+            // when another material is asked for; this evaluation's report kept).
+            let halfspace = if rep == *material {
+                values.to_vec()
+            } else {
+                let report = self.report.clone();
+                let b = self.radiosity_values(&rep, None);
+                self.report = report;
+                b?
+            };
+            let eta = self.settings.profile.irradiance_eta(&rep);
+            self.sample_vertices(eta)?;
+            let vertices = match &self.vertex_irradiance {
+                Some((v, _)) => v.clone(),
+                None => return Err(Error::InvalidArgument("no vertex irradiance".into())),
+            };
+            let resolved = crate::profiles::Resolved::new(ProfileKind::Cycles, &rep)?;
+            let lit = terms::Lit {
+                scene: &self.scene,
+                tracer: &self.tracer,
+                irradiance: self.irradiance_settings(eta, Density::Receivers),
+                vertices: &vertices,
+                halfspace: &halfspace,
+            };
+            let mut terms = self.terms.take().expect("checked above");
+            let done = terms.update(&lit, &resolved, fresh, progress);
+            self.terms = Some(terms);
+            done?;
+            self.retrace = false;
+        }
+        let resolved = crate::profiles::Resolved::new(ProfileKind::Cycles, material)?;
+        let terms = self.terms.as_ref().expect("checked above");
+        let mut error = self.report.error_estimate.unwrap_or([0.0; 3]);
+        terms.add_to(values, &resolved, &mut error)?;
+        if self.report.error_estimate.is_some() {
+            self.report.error_estimate = Some(error);
+        }
+        self.report.terms = Some(terms.report.clone());
+        Ok(())
     }
 
     fn radiosity_values(

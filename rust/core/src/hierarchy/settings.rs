@@ -52,6 +52,9 @@ pub struct HierarchySettings {
     pub seed: u64,
     /// Faces whose radiosity the error estimate recomputes with ε/4.
     pub estimate_receivers: usize,
+    /// The walks' geometry term and the object's own light (`terms`, Cycles' profile only);
+    /// None: the half-space profile alone, as Mertens 2003 has it.
+    pub terms: Option<super::terms::TermSettings>,
 }
 
 impl Default for HierarchySettings {
@@ -67,6 +70,7 @@ impl Default for HierarchySettings {
             area_samples: 16,
             seed: 1,
             estimate_receivers: 32,
+            terms: None,
         }
     }
 }
@@ -97,6 +101,8 @@ pub struct HierarchyReport {
     pub seconds: f64,
     /// Area-weighted relative RMS per channel between the faces' radiosity and the same
     /// recomputed with ε/4 on `estimate_receivers` faces; None when `estimate_receivers` is 0
-    /// (no estimate computed, never a made-up zero).
+    /// (no estimate computed, never a made-up zero). With the walks on, their noise added.
     pub error_estimate: Option<[f64; 3]>,
+    /// The walks' term and the own light, when on (`HierarchySettings::terms`).
+    pub terms: Option<super::terms::TermReport>,
 }

@@ -202,27 +202,8 @@ impl Prt {
             }
         }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
-            let receiving = material.totals();
-            let albedo = material.sent_on(1.0);
-            // How much more or less light the edited material sends out than the source did.
-            let ratio: [f64; 3] = std::array::from_fn(|ch| {
-                if bounce.source_albedo[ch] > 0.0 {
-                    albedo[ch] / bounce.source_albedo[ch]
-                } else {
-                    0.0
-                }
-            });
-            let k: [f32; 3] = std::array::from_fn(|ch| (receiving[ch] * ratio[ch]) as f32);
-            radiosity
-                .par_iter_mut()
-                .zip(bounce.irradiance.par_iter())
-                .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
-            if let Some(g) = bounce.walked.as_ref().filter(|_| walks) {
-                // Its noise is relative to the indirect light, a share of B.
-                let share = self.report.interreflection_share;
-                let added = g.add_scaled_to(&mut radiosity, profiles, ratio.map(|r| r as f32));
-                add_indirect_noise(&mut error_estimate, added, share);
-            }
+            let share = self.report.interreflection_share;
+            bounce.add_to(&mut radiosity, material, walks, share, &mut error_estimate);
         }
         self.apply_light_scale(&mut radiosity);
         let dot_seconds = t1.elapsed().as_secs_f64();

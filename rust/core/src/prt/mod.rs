@@ -14,8 +14,8 @@
 //!
 //! Rooms: `settings` (what to precompute and the report of what was done), `precompute` (the
 //! steps in order), `knots` (basis knots and the error estimate), `rows` (one vertex's
-//! transport row and the far field), `own_light` (the object's light falling back on it), `relight` and `pose` (a new light or
-//! shape for the same transport),
+//! transport row and the far field), `relight` and `pose` (a new light or shape for the same
+//! transport),
 //! `evaluate` (an edit: fit and dot product), `textured` (an edit with a Base Color per
 //! vertex: a table of media), `backend` (CPU or GPU), `layout` and `tree`.
 
@@ -23,10 +23,8 @@ mod backend;
 pub mod basis;
 mod evaluate;
 pub mod gpu;
-mod interreflection;
 mod knots;
 mod layout;
-mod own_light;
 mod pose;
 mod precompute;
 mod relight;
@@ -39,19 +37,19 @@ mod tests;
 pub mod textured;
 mod tree;
 
+use crate::own_light::Bounce;
 use crate::profiles::ProfileKind;
 use crate::walks::WalkTerm;
 use basis::{Basis, Fitter};
 use glam::Vec3;
 use layout::Transport;
-use own_light::Bounce;
 
 pub use crate::irradiance::Density;
 pub use crate::irradiance::{IrradianceFn, ProgressFn};
+pub use crate::own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
 pub use backend::Backend;
 pub use evaluate::{Coefficients, Evaluation, PrtDetails, REFRESH_FACTOR, REFRESH_FLOOR};
 pub use knots::BASIS_SIZES;
-pub use own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
 pub use relight::RelightReport;
 pub use request::{
     irradiance_eta, path_settings, PrtRequest, FIRST_PREVIEW_FAR_FIELD,

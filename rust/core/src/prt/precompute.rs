@@ -4,7 +4,6 @@
 use super::basis::Basis;
 use super::knots::{default_spacing, Knots};
 use super::layout::Transport;
-use super::own_light::{self, Bounce, INDIRECT_WALK_SHARE};
 use super::rows::{transport_rows, within, FarField};
 use super::settings::check_settings;
 use super::tree::{SampleTree, WeightedSample};
@@ -12,6 +11,7 @@ use super::{Density, IrradianceFn, ProgressFn, Prt, PrtReport, PrtSettings};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, SurfaceSample};
 use crate::optics::Material;
+use crate::own_light::{self, Bounce, INDIRECT_WALK_SHARE};
 use crate::profiles::{Profile, Resolved};
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
@@ -50,7 +50,7 @@ impl Prt {
         check_settings(representatives, settings)?;
         // The object's own light beyond its limit is refused now, not after the transport.
         if let Some(strata) = settings.interreflection.filter(|&s| s > 0) {
-            super::interreflection::check_rays(mesh.vertex_count(), strata)?;
+            crate::own_light::interreflection::check_rays(mesh.vertex_count(), strata)?;
         }
         let tick = |f: f32| match progress {
             Some(p) if !p(f) => Err(Error::Cancelled),
@@ -221,7 +221,7 @@ impl Prt {
         strata: usize,
         settings: &PrtSettings,
         walked_before: Option<WalkTerm>,
-        gather_before: Option<std::sync::Arc<super::interreflection::Gather>>,
+        gather_before: Option<std::sync::Arc<crate::own_light::interreflection::Gather>>,
         progress: Option<&ProgressFn>,
     ) -> Result<()> {
         let t_bounce = Instant::now();

@@ -70,7 +70,7 @@ impl Default for PrtRequest {
             tolerance: 1e-5,
             far_field: DEFAULT_FAR_FIELD,
             interreflection: None,
-            interreflection_rays: 144,
+            interreflection_rays: crate::own_light::DEFAULT_RAYS,
             walks: None,
             walk_vertices: 1000,
             walk_rays: None,

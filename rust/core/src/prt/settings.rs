@@ -10,24 +10,10 @@ use crate::walks::{WalkTermReport, WalkTermSettings};
 /// The most samples the default spacing asks for.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
 
-/// The walks' default ray budget: 20 M rays (8-9 s on 2 cores for the 10 cm bunny), at least
-/// 600 per vertex (a larger mesh gets the bunny's walks per vertex, so the same noise per
-/// vertex, in proportionally more time: the horse's 48,485 vertices 29 M) and at most 8000 per
-/// vertex. On the bunny each vertex's D is a kernel average over about a dozen walked
-/// vertices; on a coarse mesh (faces as wide as the diffusion length) each vertex keeps its
-/// own walks (`walks::shrinkage`), so it needs about the rays the bunny's kernel pools for one
-/// vertex: 8000 (a 3,000-vertex character gets the whole 20 M, docs/walks.md "Coarse meshes").
-pub const DEFAULT_WALK_RAYS: u64 = 20_000_000;
-pub const MIN_WALK_RAYS_PER_VERTEX: u64 = 600;
-pub const MAX_WALK_RAYS_PER_VERTEX: u64 = 8000;
-
-/// The walks' ray budget when the caller names none, for a mesh of `vertices` vertices.
-pub fn default_walk_rays(vertices: usize) -> u64 {
-    let n = vertices as u64;
-    DEFAULT_WALK_RAYS
-        .max(MIN_WALK_RAYS_PER_VERTEX * n)
-        .min(MAX_WALK_RAYS_PER_VERTEX * n)
-}
+// The walks' budget is the walks' own (every method that walks takes it).
+pub use crate::walks::{
+    default_walk_rays, DEFAULT_WALK_RAYS, MAX_WALK_RAYS_PER_VERTEX, MIN_WALK_RAYS_PER_VERTEX,
+};
 
 /// The far field's default opening angle (`PrtSettings::far_field`). 0.4 would take the 10 cm
 /// bunny's transport from 1.1-1.6 s to 0.7-1.0 s at 0.03 % RMS, but the far side of a sun-lit

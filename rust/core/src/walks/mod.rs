@@ -18,4 +18,7 @@ pub use radiosity::{
     MeshWalkSettings,
 };
 pub(crate) use term::lengths_and_albedos;
-pub use term::{WalkTerm, WalkTermReport, WalkTermSettings, FLAT_TOLERANCE, LENGTH_MARGIN};
+pub use term::{
+    default_walk_rays, WalkTerm, WalkTermReport, WalkTermSettings, DEFAULT_WALK_RAYS,
+    FLAT_TOLERANCE, LENGTH_MARGIN, MAX_WALK_RAYS_PER_VERTEX, MIN_WALK_RAYS_PER_VERTEX,
+};

@@ -55,6 +55,25 @@ pub const LENGTH_MARGIN: f64 = 1.5;
 /// diffusion lengths of the tangent plane.
 pub const FLAT_TOLERANCE: f64 = 0.02;
 
+/// The walks' default ray budget: 20 M rays (8-9 s on 2 cores for the 10 cm bunny), at least
+/// 600 per vertex (a larger mesh gets the bunny's walks per vertex, so the same noise per
+/// vertex, in proportionally more time: the horse's 48,485 vertices 29 M) and at most 8000 per
+/// vertex. On the bunny each vertex's D is a kernel average over about a dozen walked
+/// vertices; on a coarse mesh (faces as wide as the diffusion length) each vertex keeps its
+/// own walks (`walks::shrinkage`), so it needs about the rays the bunny's kernel pools for one
+/// vertex: 8000 (a 3,000-vertex character gets the whole 20 M, docs/walks.md "Coarse meshes").
+pub const DEFAULT_WALK_RAYS: u64 = 20_000_000;
+pub const MIN_WALK_RAYS_PER_VERTEX: u64 = 600;
+pub const MAX_WALK_RAYS_PER_VERTEX: u64 = 8000;
+
+/// The walks' ray budget when the caller names none, for a mesh of `vertices` vertices.
+pub fn default_walk_rays(vertices: usize) -> u64 {
+    let n = vertices as u64;
+    DEFAULT_WALK_RAYS
+        .max(MIN_WALK_RAYS_PER_VERTEX * n)
+        .min(MAX_WALK_RAYS_PER_VERTEX * n)
+}
+
 /// D per channel and its variance, at one walked vertex.
 pub(super) type Diff = ([f32; 3], [f32; 3]);
 

@@ -367,9 +367,15 @@ class Hierarchy:
         area_samples: int = 16,
         estimate_receivers: int = 32,
         world_shadows: bool = False,
+        walks: bool = False,
+        walk_rays: int | None = None,
         progress: Progress | None = None,
     ) -> None:
-        """Builds the hierarchy and evaluates `material` once. `world_shadows`: False lights
+        """Builds the hierarchy and evaluates `material` once. `walks` (Cycles' profile only):
+        the walks' geometry term and the object's own light as PRT has them (the shared
+        `walks` and `own_light` kernels), walked at this first evaluation for `material`
+        (`walk_rays` in all, default as PRT's) and carried to a new light or pose without a
+        walk traced (`retrace_walks` walks the pose); off, the half-space profile alone. `world_shadows`: False lights
         by the world's nine spherical-harmonic coefficients, unshadowed (Mertens 2003 §5.3,
         no rays); True traces `world_samples` shadowed rays per point. `eps` = (ε₁, ε₂) [sr]: the
         receiver's and the emitter's solid-angle thresholds of the refinement oracle.
@@ -389,6 +395,9 @@ class Hierarchy:
         """The mesh deformed (same vertex count and triangles) and/or the lights, world and
         occluders are now those of the Scene `lights` (other occluders: every light's rays
         cast again). Evaluated at the next `radiosity`/`radiance`."""
+    def retrace_walks(self) -> None:
+        """With walks on: the next evaluation walks them anew on the mesh as it is now (the
+        refinement after a pose); a no-op with walks off."""
     mode: Literal["on_the_fly", "incremental", "render"]
     @property
     def profile(self) -> Profile: ...
@@ -405,7 +414,9 @@ class Hierarchy:
     def report(self) -> dict[str, object]:
         """The last evaluation: links, far_links, near_links, links_per_face, clusters, faces,
         depth, oracle_tests, relinked, rays, seconds per phase (build, refit, irradiance, pull,
-        links, push, estimate) and in all, error_estimate per channel."""
+        links, push, estimate) and in all, error_estimate per channel (the walks' noise
+        added), terms (None with walks off; else walks, walks_indirect, own_light_rays,
+        own_light_share, carried_pose, seconds)."""
 
 @overload
 def reference_radiosity(

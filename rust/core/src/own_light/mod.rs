@@ -1,19 +1,25 @@
 //! The object's own light falling back on it (`interreflection`): what it adds per vertex,
-//! carried to any edit by the ratio of the slab albedos the material sends on.
+//! carried to any edit by the ratio of the slab albedos the material sends on. Shared by the
+//! methods (PRT casts it at its precompute, the hierarchy at its first evaluation; both carry
+//! it to a new light or pose over the kept rays).
 
-use super::interreflection::{gather, Gather, Source};
+pub mod interreflection;
+
 use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::profiles::Resolved;
 use crate::progress::{cancel_only, ProgressFn};
 use crate::raytrace::Tracer;
 use crate::walks::WalkTerm;
+use interreflection::{gather, Gather, Source};
 use std::sync::Arc;
 
 /// Bounces of the object's own light: each returns a fraction (albedo x the view factor of
 /// what a point sees of the object, 0.2-0.3 in a concave character) of the one before, so
 /// three leave about a percent of the series.
 pub const INTERREFLECTION_BOUNCES: usize = 3;
+/// Rays per vertex the own light casts by default (12 x 12 strata): PRT's and the hierarchy's.
+pub const DEFAULT_RAYS: usize = 144;
 /// Share of the walks' ray budget (and walked vertices) spent on the object's own light.
 pub const INDIRECT_WALK_SHARE: f64 = 0.2;
 
@@ -26,29 +32,68 @@ pub const INDIRECT_WALK_SHARE: f64 = 0.2;
 /// its own), both scaled per channel by how much more or less light the edited material sends
 /// out than the representative did (the ratio of their slab albedos seen along the normal).
 #[derive(Debug, Clone)]
-pub(super) struct Bounce {
-    pub(super) irradiance: Vec<[f32; 3]>,
-    pub(super) source_albedo: [f64; 3],
+pub struct Bounce {
+    pub irradiance: Vec<[f32; 3]>,
+    pub source_albedo: [f64; 3],
     /// What the walks through the mesh make of E_ind beyond its local conversion.
-    pub(super) walked: Option<WalkTerm>,
+    pub walked: Option<WalkTerm>,
     /// The rays' hits, kept: a new light is gathered over them without a ray.
-    pub(super) gather: Arc<Gather>,
+    pub gather: Arc<Gather>,
+}
+
+impl Bounce {
+    /// Adds the own light for `material` to `radiosity` (per vertex, B of the direct light):
+    /// (R_total + point mass) E_ind scaled per channel by how much more or less light the
+    /// material sends out than the source did, and with `walks` what walks make of E_ind beyond
+    /// that; adds to `error` the walked part's noise, relative to the indirect light (`share`
+    /// of B: `share`).
+    pub fn add_to(
+        &self,
+        radiosity: &mut [[f32; 3]],
+        material: &Resolved,
+        walks: bool,
+        share: f64,
+        error: &mut [f64; 3],
+    ) {
+        use rayon::prelude::*;
+        let receiving = material.totals();
+        let albedo = material.sent_on(1.0);
+        let ratio: [f64; 3] = std::array::from_fn(|ch| {
+            if self.source_albedo[ch] > 0.0 {
+                albedo[ch] / self.source_albedo[ch]
+            } else {
+                0.0
+            }
+        });
+        let k: [f32; 3] = std::array::from_fn(|ch| (receiving[ch] * ratio[ch]) as f32);
+        radiosity
+            .par_iter_mut()
+            .zip(self.irradiance.par_iter())
+            .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
+        if let Some(g) = self.walked.as_ref().filter(|_| walks) {
+            let added = g.add_scaled_to(radiosity, &material.profiles, ratio.map(|r| r as f32));
+            // A term whose edit left the walked range says 1: kept whole.
+            for (e, a) in error.iter_mut().zip(added) {
+                *e += if a >= 1.0 { a } else { a * share };
+            }
+        }
+    }
 }
 
 /// What the surface sends out, per vertex: the half-space B, the irradiance (for the light
 /// reflected without entering), and what the walks through the mesh add to B.
-pub(super) struct Sent<'a> {
-    pub(super) halfspace: &'a [[f32; 3]],
-    pub(super) irradiance: &'a [[f32; 3]],
-    pub(super) walked: Option<&'a [[f32; 3]]>,
+pub struct Sent<'a> {
+    pub halfspace: &'a [[f32; 3]],
+    pub irradiance: &'a [[f32; 3]],
+    pub walked: Option<&'a [[f32; 3]]>,
 }
 
 /// The indirect irradiance E_ind per vertex after `INTERREFLECTION_BOUNCES` bounces, and the
 /// rays it took.
-pub(super) struct Cast {
-    pub(super) irradiance: Vec<[f32; 3]>,
-    pub(super) rays: u64,
-    pub(super) gather: Arc<Gather>,
+pub struct Cast {
+    pub irradiance: Vec<[f32; 3]>,
+    pub rays: u64,
+    pub gather: Arc<Gather>,
 }
 
 /// Bounce after bounce: the light sent out is the direct B plus what the indirect irradiance
@@ -65,7 +110,7 @@ pub(super) struct Cast {
 /// diffuse fallback at the wall, whatever `PATH_RAY_DIFFUSE_ANCESTOR` suggests in Cycles'
 /// source).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn cast(
+pub fn cast(
     mesh: &Mesh,
     tracer: &Tracer,
     rep: &Resolved,
@@ -140,7 +185,7 @@ pub(super) fn cast(
 
 /// The share of B the own light adds: area-weighted over the vertices, the worst channel of
 /// (R_total + point mass) E_ind over the direct B.
-pub(super) fn share(
+pub fn share(
     irradiance: &[[f32; 3]],
     direct: &[[f32; 3]],
     areas: &[f32],

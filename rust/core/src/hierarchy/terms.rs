@@ -1,0 +1,258 @@
+//! What the half-space profile cannot see, for the hierarchy: the walks' geometry term
+//! (`walks::WalkTerm`) and the object's own light (`own_light::Bounce`), the shared kernels
+//! PRT holds too, so both methods show the same Cycles-matching answer (issue 29, point 3).
+//!
+//! They are computed at the first evaluation with walks on (`HierarchySettings::terms`), for
+//! that evaluation's material (the representative): D = B_walk - B_half against the
+//! hierarchy's own half-space B, carried to every vertex by the walks' kernels; the own light
+//! cast from the direct B over kept rays. After a new light or a pose they are carried, not
+//! traced again: the walks' exits and the own light's hits are a triangle and barycentrics,
+//! read on the same triangles under the new light and shape (exact for a rigid motion with the
+//! lights; near a bend the rest pose's paths, until `Hierarchy::retrace_terms` walks the pose).
+//! Any edit scales them as PRT's: D / A at the edited diffusion length, the own light by the
+//! ratio of the slab albedos sent on.
+
+use crate::error::{Error, Result};
+use crate::irradiance::{irradiance_with_progress, IrradianceSettings};
+use crate::mesh::Mesh;
+use crate::optics::Material;
+use crate::own_light::{self, Bounce, INDIRECT_WALK_SHARE};
+use crate::profiles::Resolved;
+use crate::progress::ProgressFn;
+use crate::raytrace::Tracer;
+use crate::scene::Scene;
+use crate::shadow_edges::ShadowEdges;
+use crate::walks::{ExitLight, WalkTerm, WalkTermReport, WalkTermSettings};
+use glam::Vec3;
+use std::time::Instant;
+
+/// The walks' and the own light's settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TermSettings {
+    pub walks: WalkTermSettings,
+    /// Own-light rays per vertex as `strata` x `strata`; None leaves the own light out.
+    pub interreflection: Option<usize>,
+}
+
+/// What the terms did: their walks, the own light's rays and share, and whether they are
+/// carried from another pose or light.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TermReport {
+    pub walks: Option<WalkTermReport>,
+    pub walks_indirect: Option<WalkTermReport>,
+    pub own_light_rays: u64,
+    /// The own light's share of B (worst channel).
+    pub own_light_share: f64,
+    /// Walked on another pose than this one (carried to it).
+    pub carried_pose: bool,
+    /// Seconds of the last computation or carrying.
+    pub seconds: f64,
+}
+
+/// The terms and the state they are in.
+pub(super) struct Terms {
+    pub(super) settings: TermSettings,
+    /// The material they were walked for; None before the first evaluation.
+    pub(super) rep: Option<Material>,
+    walks: Option<WalkTerm>,
+    bounce: Option<Bounce>,
+    /// Lit and shaped as the hierarchy now is.
+    pub(super) current: bool,
+    pub(super) report: TermReport,
+}
+
+/// The hierarchy's state the terms read.
+pub(super) struct Lit<'a> {
+    pub(super) scene: &'a Scene,
+    pub(super) tracer: &'a Tracer,
+    pub(super) irradiance: IrradianceSettings,
+    /// Irradiance per vertex (with the representative's Fresnel factor).
+    pub(super) vertices: &'a [[f32; 3]],
+    /// The representative's half-space B per vertex.
+    pub(super) halfspace: &'a [[f32; 3]],
+}
+
+impl Terms {
+    pub(super) fn new(settings: TermSettings) -> Terms {
+        Terms {
+            settings,
+            rep: None,
+            walks: None,
+            bounce: None,
+            current: false,
+            report: TermReport::default(),
+        }
+    }
+
+    /// The lights or the shape changed: carried at the next evaluation.
+    pub(super) fn stale(&mut self, posed: bool) {
+        self.current = false;
+        if posed && self.walks.is_some() {
+            self.report.carried_pose = true;
+        }
+    }
+
+    /// Computes the terms under `lit` (walked anew when `fresh` or never walked; else the kept
+    /// walks and rays read again).
+    pub(super) fn update(
+        &mut self,
+        lit: &Lit<'_>,
+        rep: &Resolved,
+        fresh: bool,
+        progress: Option<&ProgressFn>,
+    ) -> Result<()> {
+        let start = Instant::now();
+        let mesh = &lit.scene.mesh;
+        let irradiance = |p: &[Vec3], n: &[Vec3]| -> Result<Vec<[f32; 3]>> {
+            Ok(irradiance_with_progress(lit.scene, lit.tracer, p, n, &lit.irradiance, None)?.0)
+        };
+        // Carried to a pose, the walks' exits read the light from their triangles' corners
+        // (as PRT's pose preview does: the shadow edges are a third of the carrying's time);
+        // walked, or carried to a new light, from a finer grid where a shadow's edge crosses.
+        let edges = if fresh || !self.report.carried_pose {
+            ShadowEdges::new(mesh, lit.vertices, &irradiance)?
+        } else {
+            ShadowEdges::none()
+        };
+        let exits = ExitLight {
+            vertices: lit.vertices,
+            edges: &edges,
+        };
+        let kept = if fresh { None } else { self.walks.take() };
+        let walks = match kept.filter(WalkTerm::relightable) {
+            Some(mut term) => {
+                term.relight(mesh, rep, &exits, lit.halfspace)?;
+                term
+            }
+            None => {
+                self.report.carried_pose = false;
+                WalkTerm::compute(
+                    mesh,
+                    lit.tracer,
+                    rep,
+                    &exits,
+                    lit.halfspace,
+                    &self.settings.walks,
+                    progress,
+                )?
+            }
+        };
+        self.report.walks = Some(walks.report.clone());
+        // The direct B with the walks' term: what the surface sends on.
+        let mut direct = lit.halfspace.to_vec();
+        walks.add_to(&mut direct, &rep.profiles);
+        self.walks = Some(walks);
+        let kept_bounce = if fresh { None } else { self.bounce.take() };
+        self.bounce = match self.settings.interreflection {
+            Some(strata) => Some(self.cast(mesh, lit, rep, &direct, strata, kept_bounce)?),
+            None => None,
+        };
+        self.rep = Some(rep.material);
+        self.current = true;
+        self.report.seconds = start.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// The own light (`own_light::cast`): from the kept rays' hits when there are some.
+    fn cast(
+        &mut self,
+        mesh: &Mesh,
+        lit: &Lit<'_>,
+        rep: &Resolved,
+        direct: &[[f32; 3]],
+        strata: usize,
+        kept: Option<Bounce>,
+    ) -> Result<Bounce> {
+        let walked_part: Vec<[f32; 3]> = direct
+            .iter()
+            .zip(lit.halfspace)
+            .map(|(b, h)| std::array::from_fn(|c| b[c] - h[c]))
+            .collect();
+        let (gather, walked_before) = match kept {
+            Some(b) => (Some(b.gather), b.walked),
+            None => (None, None),
+        };
+        let cast = own_light::cast(
+            mesh,
+            lit.tracer,
+            rep,
+            own_light::Sent {
+                halfspace: lit.halfspace,
+                irradiance: lit.vertices,
+                walked: Some(&walked_part),
+            },
+            strata,
+            gather,
+            None,
+        )?;
+        let receiving = rep.totals();
+        self.report.own_light_rays = cast.rays;
+        self.report.own_light_share =
+            own_light::share(&cast.irradiance, direct, mesh.vertex_areas(), &receiving);
+        // What walks make of the indirect light beyond its local conversion, on a share of
+        // the walks' budget (as PRT's precompute does).
+        let local: Vec<[f32; 3]> = cast
+            .irradiance
+            .iter()
+            .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
+            .collect();
+        let exits = ExitLight {
+            vertices: &cast.irradiance,
+            edges: &ShadowEdges::none(),
+        };
+        let g = &self.settings.walks;
+        let walked = match walked_before.filter(WalkTerm::relightable) {
+            Some(mut term) => {
+                term.relight(mesh, rep, &exits, &local)?;
+                term
+            }
+            None => {
+                let shared = WalkTermSettings {
+                    rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
+                    vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
+                    refine: false,
+                    shrink: false,
+                    ..g.clone()
+                };
+                WalkTerm::compute(mesh, lit.tracer, rep, &exits, &local, &shared, None)?
+            }
+        };
+        self.report.walks_indirect = Some(walked.report.clone());
+        Ok(Bounce {
+            irradiance: cast.irradiance,
+            source_albedo: rep.sent_on(1.0),
+            walked: Some(walked),
+            gather: cast.gather,
+        })
+    }
+
+    /// Adds the terms for `material` to `radiosity` (B per vertex) and their noise to `error`.
+    pub(super) fn add_to(
+        &self,
+        radiosity: &mut [[f32; 3]],
+        material: &Resolved,
+        error: &mut [f64; 3],
+    ) -> Result<()> {
+        if !self.current {
+            return Err(Error::InvalidArgument(
+                "the walks' term is not carried to this light or shape yet".into(),
+            ));
+        }
+        if let Some(w) = &self.walks {
+            let added = w.add_to(radiosity, &material.profiles);
+            for (e, a) in error.iter_mut().zip(added) {
+                *e += a;
+            }
+        }
+        if let Some(b) = &self.bounce {
+            b.add_to(
+                radiosity,
+                material,
+                true,
+                self.report.own_light_share,
+                error,
+            );
+        }
+        Ok(())
+    }
+}
