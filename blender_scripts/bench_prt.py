@@ -3,8 +3,9 @@ machine; timings live here, never in tests.
 
 0. Cycles' random-walk table: the build of one table (Monte Carlo of the walk), g = 0 and 0.8.
 1. Precompute: the Stanford bunny scaled to 10 cm, marble, 32 coefficients, Cycles' profile and
-   the dipole (budget: 20 s on the 2-core CI machine); the first preview (budget 1 s) and the
-   relight (`update(lights=...)`).
+   the dipole (budget: 20 s on the 2-core CI machine); the first preview (budget 1 s), the
+   relight (`update(lights=...)`) and a pose (`update(positions=...)`, PRT and the hierarchy
+   with walks; budget 1 s).
 2. One edit (coefficient fit + dot product, 3 channels) on a >= 120k-vertex mesh (the bunny
    subdivided once; budget: 5 ms on the CPU), Cycles' profile.
 3. Single scattering (Xu 2007 eqs. 12-15, the dipole): the MS + SS precompute of that mesh and
@@ -88,6 +89,7 @@ def main() -> int:
         kept[profile] = (prt, statistics.median(times))
     first_preview(scene, marble, kept["cycles"][0], args)
     relight(p, t, marble, kept, args)
+    pose(p, t, marble, kept["cycles"][0], args)
     floor_bounce(p, t, marble, args)
 
     # Growth: the same surface with 4x the vertices and 4x the samples. Brute force (Xu 2007
@@ -226,6 +228,70 @@ def relight(positions, triangles, marble, kept, args) -> None:
             f"(estimates: updated {', '.join(f'{x:.2f}' for x in est)} %, fresh "
             f"{', '.join(f'{x:.2f}' for x in fresh_est)} %)"
         )
+
+
+def bent(positions: np.ndarray, angle: float) -> np.ndarray:
+    """The bunny's upper part turned by `angle` about a horizontal axis through its middle, the
+    turn blended in over a fifth of its height (a hinge, as a skinned joint bends)."""
+    z = positions[:, 2]
+    lo, hi = np.quantile(z, 0.5), np.quantile(z, 0.7)
+    x = np.clip((z - lo) / (hi - lo), 0.0, 1.0)
+    a = angle * x * x * (3.0 - 2.0 * x)
+    y, zc = positions[:, 1], z - lo
+    out = positions.copy()
+    out[:, 1] = np.cos(a) * y - np.sin(a) * zc
+    out[:, 2] = np.sin(a) * y + np.cos(a) * zc + lo
+    return out.astype(np.float32)
+
+
+def pose(positions, triangles, marble, precomputed, args) -> None:
+    """Issue 29: a pose (the bunny's upper part bent 30 degrees at a hinge) carried by PRT
+    (`update(positions=...)`: transport on the pose at a first preview's samples, the walks and
+    own light carried) and by the hierarchy with walks, median over the runs; each against a
+    fresh precompute on the posed mesh."""
+    posed = bent(positions, np.radians(30.0))
+    posed_scene = models.standard_scene(posed, triangles)
+    prt, times = precomputed, []
+    for k in range(args.runs):
+        # Posed and back in turn (the way back carries the carried walks again: the same work).
+        t0 = time.perf_counter()
+        out = prt.update(positions=posed if k % 2 == 0 else positions)
+        times.append(time.perf_counter() - t0)
+        r = out if k == 0 else r
+    if args.runs % 2 == 0:
+        prt.update(positions=posed)
+    fresh = translucent.Prt(posed_scene, marble, coefficients=32, single_scattering=False)
+    area = posed_scene.vertex_areas
+    between = translucent.relative_error(prt.radiance(marble), fresh.radiance(marble), area)
+    # For scale: the walks' share here, and the carried preview with its walks left out (a bend
+    # through the body within marble's centimetre walks changes what they find: docs/walks.md).
+    full = fresh.radiosity(marble)
+    share = translucent.relative_error(fresh.radiosity(marble, walks=False), full, area)
+    bare = translucent.relative_error(prt.radiosity(marble, walks=False), full, area)
+    print(
+        f"update(positions=...), bunny, marble, cycles: upper part bent 30 degrees: median "
+        f"{statistics.median(times):.2f} s over {args.runs} poses [budget 1 s] (irradiance "
+        f"{r['seconds_irradiance']:.2f} s, transport {r['seconds_transport']:.2f} s, walks carried "
+        f"{r['seconds_walks']:.2f} s with {r['walks_traced']} traced, own light {r['seconds_own_light']:.2f} s); "
+        f"against a fresh precompute on the pose: {', '.join(f'{100 * x:.2f}' for x in between['rms'])} % "
+        f"(with the carried walks left out {', '.join(f'{100 * x:.2f}' for x in bare['rms'])} %; the fresh "
+        f"precompute's own walks are {', '.join(f'{100 * x:.2f}' for x in share['rms'])} % of it)"
+    )
+    h = translucent.Hierarchy(models.standard_scene(positions, triangles), marble, mode="render", walks=True)
+    times = []
+    for k in range(args.runs):
+        t0 = time.perf_counter()
+        h.update(positions=posed if k % 2 == 0 else positions)
+        h.radiance(marble)
+        times.append(time.perf_counter() - t0)
+    if args.runs % 2 == 0:
+        h.update(positions=posed)
+    between = translucent.relative_error(h.radiance(marble), fresh.radiance(marble), posed_scene.vertex_areas)
+    print(
+        f"Hierarchy(walks=True).update(positions=...), the same pose and back: median "
+        f"{statistics.median(times):.2f} s over {args.runs} [budget 1 s]; against the fresh precompute: "
+        f"{', '.join(f'{100 * x:.2f}' for x in between['rms'])} %"
+    )
 
 
 def textured_edits(scene, positions, edits) -> None:

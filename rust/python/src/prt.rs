@@ -120,25 +120,64 @@ impl PyPrt {
                 ))
             }
         };
+        let lit_by = lights.map(|l| {
+            let counter = l.lighting_counter();
+            let version = counter.load(std::sync::atomic::Ordering::Relaxed);
+            (counter, version)
+        });
+        self.swap_in(
+            py,
+            scene,
+            &tracer,
+            occluder_report,
+            lit_by,
+            progress,
+            &|inner, tick| {
+                if quick {
+                    inner.posed_preview(scene, &tracer, &self.irradiance, Some(tick))
+                } else {
+                    inner.reposed_scene(scene, &tracer, &self.irradiance, Some(tick))
+                }
+            },
+        )
+    }
+
+    /// The transport `build` makes from the held one (off the GIL, single scattering again
+    /// when on) put in its place once the whole call succeeded (a cancel, even at the last
+    /// progress call, leaves the old one answering); the scene's lights, world, occluders and
+    /// mesh held, and `lit_by`'s lighting version followed from now on. Returns `update`'s
+    /// dict.
+    #[allow(clippy::too_many_arguments)]
+    fn swap_in<'py>(
+        &self,
+        py: Python<'py>,
+        scene: &translucent_core::scene::Scene,
+        tracer: &std::sync::Arc<translucent_core::raytrace::Tracer>,
+        occluder_report: translucent_core::occluders::OccluderReport,
+        lit_by: Option<(std::sync::Arc<std::sync::atomic::AtomicU64>, u64)>,
+        progress: Option<Py<PyAny>>,
+        build: &(dyn Fn(
+            &Prt,
+            &translucent_core::progress::ProgressFn,
+        ) -> translucent_core::Result<(
+            Prt,
+            translucent_core::prt::RelightReport,
+            IrradianceReport,
+        )> + Sync),
+    ) -> PyResult<Bound<'py, PyDict>> {
         let lighting = Mutex::new(IrradianceReport::default());
-        let (irr, single_on, single_settings) =
-            (&self.irradiance, self.single.on, &self.single_settings);
+        let (single_on, single_settings) = (self.single.on, &self.single_settings);
         let lock = &self.inner;
-        // Built beside the old transport, which answers edits meanwhile and stays on a cancel.
         let (next, report, single_seconds) = run(py, progress, |tick| {
             let inner = lock.read().unwrap_or_else(|e| e.into_inner());
-            let (mut next, report, lit) = if quick {
-                inner.posed_preview(scene, &tracer, irr, Some(tick))?
-            } else {
-                inner.reposed_scene(scene, &tracer, irr, Some(tick))?
-            };
+            let (mut next, report, lit) = build(&inner, tick)?;
             *held(&lighting) = lit;
             let t = std::time::Instant::now();
             if single_on {
                 let materials = next.representatives().to_vec();
                 let s = single::SingleScattering::precompute(
                     scene,
-                    &tracer,
+                    tracer,
                     &materials,
                     single_settings,
                 )?;
@@ -155,10 +194,7 @@ impl PyPrt {
         );
         *held(&self.occluders) = occluder_report;
         *held(&self.lighting) = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
-        if let Some(l) = lights {
-            // Lit by that scene now: its lighting version is the one to follow.
-            let counter = l.lighting_counter();
-            let version = counter.load(std::sync::atomic::Ordering::Relaxed);
+        if let Some((counter, version)) = lit_by {
             *held(&self.scene_lighting) = counter;
             self.lighting_version
                 .store(version, std::sync::atomic::Ordering::Relaxed);
@@ -747,50 +783,19 @@ impl PyPrt {
             d.set_item("posed", false)?;
             return Ok(d);
         }
-        let lighting = Mutex::new(IrradianceReport::default());
-        let (irr, single_on, single_settings) =
-            (&self.irradiance, self.single.on, &self.single_settings);
-        let lock = &self.inner;
-        // The new transport is built beside the old one, which goes on answering edits; it
-        // replaces it only once the whole call succeeded (a cancel, even at the last progress
-        // call, leaves the old light in place).
-        let (next, report, single_seconds) = run(py, progress, |tick| {
-            let inner = lock.read().unwrap_or_else(|e| e.into_inner());
-            // The core keeps the irradiance source by source between updates: only the
-            // lights (or world) that changed cast rays.
-            let (mut next, report, lit) = inner.relit_scene(scene, &tracer, irr, Some(tick))?;
-            *held(&lighting) = lit;
-            let t = std::time::Instant::now();
-            if single_on {
-                let materials = next.representatives().to_vec();
-                let s = single::SingleScattering::precompute(
-                    scene,
-                    &tracer,
-                    &materials,
-                    single_settings,
-                )?;
-                next.set_single_scattering(Some(s))?;
-            }
-            Ok((next, report, t.elapsed().as_secs_f64()))
-        })?;
-        *self.inner.write().unwrap_or_else(|e| e.into_inner()) = next;
-        *held(&self.lit_with) = (
-            scene.lights.clone(),
-            scene.world.clone(),
-            scene.occluders.clone(),
-        );
-        *held(&self.occluders) = lights.occluder_report();
-        *held(&self.lighting) = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
-        *held(&self.scene_lighting) = counter;
-        self.lighting_version
-            .store(version, std::sync::atomic::Ordering::Relaxed);
-        *held(&self.last) = None;
-        *held(&self.last_single) = None;
-        if report.dropped.contains(&"the GPU copy of the transport") {
-            let (backend, half) = held(&self.backend_request).clone();
-            self.choose_backend(py, &backend, half)?;
-        }
-        relit_dict(py, &report, single_seconds, held(&self.lighting).rays)
+        // The new transport is built beside the old one, which goes on answering edits. The
+        // core keeps the irradiance source by source between updates: only the lights (or
+        // world) that changed cast rays.
+        let occluders = lights.occluder_report();
+        self.swap_in(
+            py,
+            scene,
+            &tracer,
+            occluders,
+            Some((counter, version)),
+            progress,
+            &|inner, tick| inner.relit_scene(scene, &tracer, &self.irradiance, Some(tick)),
+        )
     }
 
     /// What the precompute did, skipped, and how long each step took.
