@@ -58,6 +58,12 @@ pub struct PyPrt {
     mesh: Mutex<translucent_core::mesh::Mesh>,
 }
 
+/// What `update` builds from the held transport: the new one, what it did and its irradiance.
+type Rebuilt = (Prt, translucent_core::prt::RelightReport, IrradianceReport);
+type Rebuild<'a> = dyn Fn(&Prt, &translucent_core::progress::ProgressFn) -> translucent_core::Result<Rebuilt>
+    + Sync
+    + 'a;
+
 /// A lock's value, whether or not a panic (caught by `call::run`) poisoned it.
 fn held<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
@@ -156,14 +162,7 @@ impl PyPrt {
         occluder_report: translucent_core::occluders::OccluderReport,
         lit_by: Option<(std::sync::Arc<std::sync::atomic::AtomicU64>, u64)>,
         progress: Option<Py<PyAny>>,
-        build: &(dyn Fn(
-            &Prt,
-            &translucent_core::progress::ProgressFn,
-        ) -> translucent_core::Result<(
-            Prt,
-            translucent_core::prt::RelightReport,
-            IrradianceReport,
-        )> + Sync),
+        build: &Rebuild<'_>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let lighting = Mutex::new(IrradianceReport::default());
         let (single_on, single_settings) = (self.single.on, &self.single_settings);
