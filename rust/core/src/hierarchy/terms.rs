@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::irradiance::{irradiance_with_progress, IrradianceSettings};
 use crate::mesh::Mesh;
 use crate::optics::Material;
-use crate::own_light::{self, Bounce, INDIRECT_WALK_SHARE};
+use crate::own_light::{self, Bounce};
 use crate::profiles::Resolved;
 use crate::progress::ProgressFn;
 use crate::raytrace::Tracer;
@@ -189,34 +189,16 @@ impl Terms {
         self.report.own_light_rays = cast.rays;
         self.report.own_light_share =
             own_light::share(&cast.irradiance, direct, mesh.vertex_areas(), &receiving);
-        // What walks make of the indirect light beyond its local conversion, on a share of
-        // the walks' budget (as PRT's precompute does).
-        let local: Vec<[f32; 3]> = cast
-            .irradiance
-            .iter()
-            .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
-            .collect();
-        let exits = ExitLight {
-            vertices: &cast.irradiance,
-            edges: &ShadowEdges::none(),
-        };
-        let g = &self.settings.walks;
-        let walked = match walked_before.filter(WalkTerm::relightable) {
-            Some(mut term) => {
-                term.relight(mesh, rep, &exits, &local)?;
-                term
-            }
-            None => {
-                let shared = WalkTermSettings {
-                    rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
-                    vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
-                    refine: false,
-                    shrink: false,
-                    ..g.clone()
-                };
-                WalkTerm::compute(mesh, lit.tracer, rep, &exits, &local, &shared, None)?
-            }
-        };
+        // What walks make of the indirect light beyond its local conversion, as PRT's does.
+        let walked = own_light::walked_term(
+            mesh,
+            lit.tracer,
+            rep,
+            &cast.irradiance,
+            &self.settings.walks,
+            walked_before,
+            None,
+        )?;
         self.report.walks_indirect = Some(walked.report.clone());
         Ok(Bounce {
             irradiance: cast.irradiance,

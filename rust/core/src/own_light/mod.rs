@@ -183,6 +183,48 @@ pub fn cast(
     })
 }
 
+/// What walks through the mesh make of the indirect irradiance `indirect` beyond its local
+/// conversion (R_total + point mass) E_ind: the indirect light enters through the real
+/// geometry too (what falls on the front of an ear comes out at its back). On
+/// `INDIRECT_WALK_SHARE` of the direct walks' budget `g` (E_ind is a few per cent of the light,
+/// so is the noise that share leaves), no refinement, no shrinkage; `before` (a kept term) is
+/// read under it instead of walked again. PRT's precompute and the hierarchy both call it.
+pub fn walked_term(
+    mesh: &Mesh,
+    tracer: &Tracer,
+    rep: &Resolved,
+    indirect: &[[f32; 3]],
+    g: &crate::walks::WalkTermSettings,
+    before: Option<WalkTerm>,
+    progress: Option<&ProgressFn>,
+) -> Result<WalkTerm> {
+    let receiving = rep.totals();
+    let local: Vec<[f32; 3]> = indirect
+        .iter()
+        .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
+        .collect();
+    let lit = crate::walks::ExitLight {
+        vertices: indirect,
+        edges: &crate::shadow_edges::ShadowEdges::none(),
+    };
+    match before.filter(WalkTerm::relightable) {
+        Some(mut term) => {
+            term.relight(mesh, rep, &lit, &local)?;
+            Ok(term)
+        }
+        None => {
+            let shared = crate::walks::WalkTermSettings {
+                rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
+                vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
+                refine: false,
+                shrink: false,
+                ..g.clone()
+            };
+            WalkTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)
+        }
+    }
+}
+
 /// The share of B the own light adds: area-weighted over the vertices, the worst channel of
 /// (R_total + point mass) E_ind over the direct B.
 pub fn share(

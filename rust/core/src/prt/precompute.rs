@@ -11,7 +11,7 @@ use super::{Density, IrradianceFn, ProgressFn, Prt, PrtReport, PrtSettings};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, SurfaceSample};
 use crate::optics::Material;
-use crate::own_light::{self, Bounce, INDIRECT_WALK_SHARE};
+use crate::own_light::{self, Bounce};
 use crate::profiles::{Profile, Resolved};
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
@@ -260,34 +260,18 @@ impl Prt {
         self.report.last_own_light_rays = cast.rays;
         self.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();
         let irradiance = cast.irradiance;
-        // The indirect light enters through the real geometry too (what falls on the
-        // front of an ear comes out at its back): walks gather E_ind against its local
-        // conversion (R_total + point mass) E_ind, on a share of the walks' budget (E_ind
-        // is a few per cent of the light, so is the noise that share leaves).
+        // What walks through the mesh make of it (`own_light::walked_term`).
         let walked = match &settings.walks {
             Some(g) => {
-                let local: Vec<[f32; 3]> = irradiance
-                    .iter()
-                    .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
-                    .collect();
-                let shared = WalkTermSettings {
-                    rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
-                    vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
-                    refine: false,
-                    shrink: false,
-                    ..g.clone()
-                };
-                let lit = ExitLight {
-                    vertices: &irradiance,
-                    edges: &ShadowEdges::none(),
-                };
-                let term = match walked_before.filter(WalkTerm::relightable) {
-                    Some(mut term) => {
-                        term.relight(mesh, rep, &lit, &local)?;
-                        term
-                    }
-                    None => WalkTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)?,
-                };
+                let term = own_light::walked_term(
+                    mesh,
+                    tracer,
+                    rep,
+                    &irradiance,
+                    g,
+                    walked_before,
+                    progress,
+                )?;
                 self.report.walks_indirect = Some(term.report.clone());
                 Some(term)
             }
