@@ -15,7 +15,7 @@ pub mod metrics; // area-weighted relative error
 pub mod occluders; // the rest of the scene: shadow casters that do not scatter, culled per light
 pub mod optics; // material, Fresnel, measured data, Principled layers
 pub mod own_light; // the object's own light falling back on it: kept rays, bounces, any edit
-pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated
+pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabulated, the multipole
 pub mod progress; // progress and cancelling of long loops (a Ticker over an atomic counter)
 pub mod quadrature; // Gauss–Legendre and Simpson rules
 pub mod raytrace; // BVH, shadow rays, rays from inside a part, the inside test (obvhs)

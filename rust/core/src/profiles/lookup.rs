@@ -73,18 +73,30 @@ impl LookupProfile {
 /// fraction past it; None from the support on.
 #[inline]
 fn locate(rho: f64, support: f64, scale: f64) -> Option<(usize, f64)> {
+    locate_in(rho, support, scale, NODES)
+}
+
+/// `locate` on a table of `nodes` intervals (`scale` = nodes / √support).
+#[inline]
+pub(super) fn locate_in(rho: f64, support: f64, scale: f64, nodes: usize) -> Option<(usize, f64)> {
     if rho >= support || rho.is_nan() {
         return None;
     }
     let u = rho.max(0.0).sqrt() * scale;
-    let i = (u as usize).min(NODES - 1);
+    let i = (u as usize).min(nodes - 1);
     Some((i, u - i as f64))
 }
 
 /// ρ_i = support (i / NODES)².
 #[inline]
 fn node(support: f64, i: usize) -> f64 {
-    let u = i as f64 / NODES as f64;
+    node_in(support, i, NODES)
+}
+
+/// ρ_i = support (i / nodes)².
+#[inline]
+pub(super) fn node_in(support: f64, i: usize, nodes: usize) -> f64 {
+    let u = i as f64 / nodes as f64;
     support * u * u
 }
 
@@ -92,7 +104,13 @@ fn node(support: f64, i: usize) -> f64 {
 /// (ρ_i = support (i / NODES)²) with slopes C'(ρ) = 2πρR(ρ).
 #[inline]
 fn hermite(rho: f64, support: f64, i: usize) -> [f64; 4] {
-    let (r0, r1) = (node(support, i), node(support, i + 1));
+    hermite_in(rho, support, i, NODES)
+}
+
+/// `hermite` on a table of `nodes` intervals.
+#[inline]
+pub(super) fn hermite_in(rho: f64, support: f64, i: usize, nodes: usize) -> [f64; 4] {
+    let (r0, r1) = (node_in(support, i, nodes), node_in(support, i + 1, nodes));
     let h = r1 - r0;
     let t = ((rho - r0) / h).clamp(0.0, 1.0);
     let (t2, t3) = (t * t, t * t * t);

@@ -5,11 +5,17 @@
 //! - `Dipole`: Jensen et al. 2001's dipole, the papers' model (closed forms);
 //! - `WalkProfile`: the radial exit profile of Cycles' random walk in a half-space, tabulated
 //!   by Monte Carlo over single-scattering albedo x optical radius (`walk`, `table`); with
-//!   the Principled layers it is what Cycles renders.
+//!   the Principled layers it is what Cycles renders;
+//! - `multipole::Poles`: Donner and Jensen 2005's multipole, a slab of finite thickness, and
+//!   `Layered`, a thin layer over a thick one (checked against `slab_walk`, a brute-force walk
+//!   through the same stack).
 
 pub mod dipole;
+pub mod layered;
 pub mod lookup;
+pub mod multipole;
 pub mod resolved;
+pub mod slab_walk;
 pub mod table;
 pub mod walk;
 
