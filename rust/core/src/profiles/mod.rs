@@ -1,7 +1,7 @@
 //! Radial diffusion profiles R(r): how much of the light entering at one point leaves at
 //! distance r, per unit area. Every method sums a profile over the mesh and none of them
 //! knows which profile it sums (pbrt-v4's `bssrdf.h` keeps profiles apart from integrators
-//! the same way). Two implementations:
+//! the same way). The implementations:
 //! - `Dipole`: Jensen et al. 2001's dipole, the papers' model (closed forms);
 //! - `WalkProfile`: the radial exit profile of Cycles' random walk in a half-space, tabulated
 //!   by Monte Carlo over single-scattering albedo x optical radius (`walk`, `table`); with
