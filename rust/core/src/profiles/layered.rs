@@ -72,6 +72,13 @@ impl Layered {
         base_thickness: f64,
         eta: f64,
     ) -> Result<Layered> {
+        top.validate("top")?;
+        base.validate("base")?;
+        if !eta.is_finite() || eta < 1.0 {
+            return Err(Error::InvalidArgument(format!(
+                "eta = {eta}: the relative index of refraction must be finite and >= 1"
+            )));
+        }
         if !(thickness.is_finite() && thickness > 0.0) {
             return Err(Error::InvalidArgument(format!(
                 "layer thickness = {thickness}: must be finite and > 0 (scene units)"
@@ -331,6 +338,11 @@ mod tests {
         assert!(Layered::new(m, 0.0, m, f64::INFINITY, 1.3).is_err());
         assert!(Layered::new(m, f64::NAN, m, f64::INFINITY, 1.3).is_err());
         assert!(Layered::new(m, 1.0, m, -1.0, 1.3).is_err());
+        assert!(Layered::new(m, 1.0, m, f64::INFINITY, f64::NAN).is_err());
+        assert!(Layered::new(m, 1.0, m, f64::INFINITY, 0.9).is_err());
+        let negative = medium(-0.01, 1.0);
+        assert!(Layered::new(negative, 1.0, m, f64::INFINITY, 1.3).is_err());
+        assert!(Layered::new(m, 1.0, medium(0.01, f64::NAN), f64::INFINITY, 1.3).is_err());
         // Thinner than the source depth 1/sigma_t' = 1/1.01.
         assert!(Layered::new(m, 0.5, m, f64::INFINITY, 1.3).is_err());
     }

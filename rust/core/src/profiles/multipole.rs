@@ -39,6 +39,21 @@ pub struct Medium {
 }
 
 impl Medium {
+    /// Both coefficients finite and >= 0; `what` names the medium in the error.
+    pub fn validate(&self, what: &str) -> crate::error::Result<()> {
+        for (name, v) in [
+            ("sigma_a", self.sigma_a),
+            ("sigma_s_prime", self.sigma_s_prime),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(crate::error::Error::InvalidArgument(format!(
+                    "{what}.{name} = {v}: must be finite and >= 0 (1/scene unit)"
+                )));
+            }
+        }
+        Ok(())
+    }
+
     fn sigma_t_prime(&self) -> f64 {
         self.sigma_a + self.sigma_s_prime
     }
