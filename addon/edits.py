@@ -150,8 +150,8 @@ def edit(material: bpy.types.Material) -> None:
         show_medium(settings, m)
     if s.profile != settings.profile_name():
         return  # another profile needs a new precompute; the panel says so
-    if s.profile == "dipole" and abs(s.eta - m.eta) > 1e-9:
-        return  # the dipole's irradiance holds the IOR's Fresnel factor: precompute again
+    if s.profile in ("dipole", "multipole") and abs(s.eta - m.eta) > 1e-9:
+        return  # the irradiance holds the IOR's Fresnel factor (dipole, multipole): precompute again
     if s.profile == "cycles" and not translucent.profile_ready(m) and not _prepare_tables(material, m):
         return  # the walk tables for a new g, Roughness or IOR are being built; old preview kept
     s.edit_message = ""

@@ -114,6 +114,13 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         s = mat.translucent
         layout.active = s.enabled
         layout.prop(s, "profile")
+        if s.profile == "MULTIPOLE":
+            col = layout.column(align=True)
+            col.prop(s, "thickness_mm")
+            col.prop(s, "top_layer")
+            sub = col.column(align=True)
+            sub.enabled = s.top_layer != "NONE"
+            sub.prop(s, "top_thickness_mm")
         layout.prop(s, "source", expand=True)
         if s.source == "PRINCIPLED":
             p = principled.principled_inputs(mat)

@@ -5,7 +5,9 @@ Where the medium comes from (`source`): the material's own Principled BSDF, foll
 artist edits it (every input that changes Cycles' subsurface answer: Base Color, Subsurface
 Weight, Radius, Scale, Anisotropy, IOR, Specular IOR Level, Roughness, Metallic, Transmission),
 or custom coefficients and Jensen's presets. The profile (`profile`): Cycles' random walk, what
-a Cycles render shows (the default), or Jensen's dipole, the papers' model."""
+a Cycles render shows (the default), Jensen's dipole, the papers' model, or Donner and Jensen's
+multipole, which reads the medium's depth (`thickness_mm`, 0 for a half-space) and a thin layer
+of one of Jensen's presets over it (`top_layer`, `top_thickness_mm`)."""
 
 from __future__ import annotations
 
@@ -25,6 +27,18 @@ def _preset_items(self, context):
         names = []
     return [("CUSTOM", "Custom", "Coefficients as set below")] + [
         (n.upper(), n.capitalize(), f"Jensen 2001 measured {n}") for n in names
+    ]
+
+
+def _top_layer_items(self, context):
+    try:
+        import translucent
+
+        names = translucent.Material.preset_names()
+    except ImportError:
+        names = []
+    return [("NONE", "None", "No layer over the medium")] + [
+        (n.upper(), n.capitalize(), f"A layer of Jensen 2001 measured {n}") for n in names
     ]
 
 
@@ -90,8 +104,23 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
         name="Profile",
         items=[("CYCLES", "Cycles Random Walk", "Cycles' random walk tabulated, with the Principled layers: "
                 "what a Cycles render shows"),
-               ("DIPOLE", "Dipole", "Jensen's dipole (Jensen 2001), the model of the papers the methods follow")],
+               ("DIPOLE", "Dipole", "Jensen's dipole (Jensen 2001), the model of the papers the methods follow"),
+               ("MULTIPOLE", "Multipole", "Donner and Jensen 2005: the medium as a slab of the Thickness below, "
+                "under an optional thin top layer (Shah 2009 Fig. 11)")],
         default="CYCLES", update=_live_edit,
+    )
+    thickness_mm: FloatProperty(
+        name="Thickness", description="Depth of the medium [mm] for the multipole profile; 0: a half-space "
+        "(the dipole's assumption)", min=0.0, soft_max=100.0, default=0.0, precision=2, update=_live_edit,
+    )
+    top_layer: EnumProperty(
+        name="Top layer", description="A thin layer of one of Jensen's measured media over the medium "
+        "(multipole profile)", items=_top_layer_items, update=_live_edit,
+    )
+    top_thickness_mm: FloatProperty(
+        name="Top thickness", description="Depth of the top layer [mm]; at least its source depth 1/sigma_t' "
+        "(diffusion does not hold in thinner layers)", min=1e-4, soft_max=10.0, default=1.0, precision=3,
+        update=_live_edit,
     )
     preset: EnumProperty(name="Preset", items=_preset_items, update=_apply_preset)
     sigma_a: FloatVectorProperty(
@@ -144,14 +173,32 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
         BSDF's medium and layers when following it, else the coefficients."""
         import translucent
 
+        m = None
         if self.source == "PRINCIPLED":
             p = principled_inputs(self.id_data)
             if p is not None:
-                return p.material()
-        k = self.mm_per_unit
-        return translucent.Material(
-            tuple(x * k for x in self.sigma_a), tuple(x * k for x in self.sigma_s), g=self.g, eta=self.eta
-        )
+                m = p.material()
+        if m is None:
+            k = self.mm_per_unit
+            m = translucent.Material(
+                tuple(x * k for x in self.sigma_a), tuple(x * k for x in self.sigma_s), g=self.g, eta=self.eta
+            )
+        return self.stacked(m)
+
+    def stacked(self, m):
+        """`m` with the multipole's depth and top layer (scene units), when that profile is chosen."""
+        if self.profile != "MULTIPOLE" or (self.thickness_mm <= 0.0 and self.top_layer == "NONE"):
+            return m
+        import math
+
+        import translucent
+
+        unit = self.mm_per_unit
+        thickness = self.thickness_mm / unit if self.thickness_mm > 0.0 else math.inf
+        if self.top_layer == "NONE":
+            return m.with_stack(thickness)
+        top = translucent.Material.preset(self.top_layer.lower(), mm_per_unit=unit)
+        return m.with_stack(thickness, top=top, top_thickness=self.top_thickness_mm / unit)
 
     def profile_name(self) -> str:
         return self.profile.lower()

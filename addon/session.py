@@ -19,7 +19,7 @@ class Session:
     # export.lighting_keys at the precompute: what each light and the world were.
     lighting: dict
     eta: float
-    # "cycles" or "dipole": the profile the transport was precomputed for.
+    # "cycles", "dipole" or "multipole": the profile the transport was precomputed for.
     profile: str = "cycles"
     # The Principled inputs last shown (when following the node), to notice edits.
     principled_key: str = ""
@@ -103,7 +103,7 @@ def state(material: bpy.types.Material) -> str:
         return "none"
     if s.profile != material.translucent.profile_name():
         return "stale"
-    if s.profile == "dipole" and abs(s.eta - material.translucent.eta) > 1e-9:
+    if s.profile in ("dipole", "multipole") and abs(s.eta - material.translucent.eta) > 1e-9:
         return "stale"
     # What the follow handler and check found (no mesh is evaluated here: the panel calls this).
     if s.changed or any(bpy.data.objects.get(n) is None for n in s.objects):

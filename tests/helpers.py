@@ -57,6 +57,42 @@ def disc_integral(m, c: int, rho: float) -> float:
     return 0.5 * sp / st_ * total
 
 
+def slab_totals(sigma_a: float, sigma_s_prime: float, d: float, a_top: float, a_bottom: float) -> tuple[float, float]:
+    """Total reflectance and transmittance of a slab d deep under Donner and Jensen 2005's
+    multipole: real poles at z_r,i = 2i(d + z_b0 + z_bd) + l (+1), virtual ones at
+    z_v,i = 2i(d + z_b0 + z_bd) - l - 2 z_b0 (-1), l = 1/sigma_t', z_b = 2 A / (3 sigma_t');
+    each pole integrates over the plane to sgn(z) e^{-sigma_tr |z|}, z below the top face for
+    R and above the bottom face (d - z) for T; a_top, a_bottom the faces' A."""
+    st_ = sigma_a + sigma_s_prime
+    alpha = sigma_s_prime / st_
+    l, zb0, zbd = 1.0 / st_, 2 * a_top / (3 * st_), 2 * a_bottom / (3 * st_)
+    tr = math.sqrt(3 * sigma_a * st_)
+    i = np.arange(-2000, 2001, dtype=float)
+    shift = 2 * i * (d + zb0 + zbd)
+    zr, zv = shift + l, shift - l - 2 * zb0
+
+    def term(z):
+        return np.sign(z) * np.exp(-tr * np.abs(z))
+
+    return 0.5 * alpha * float(np.sum(term(zr) - term(zv))), 0.5 * alpha * float(np.sum(term(d - zr) - term(d - zv)))
+
+
+def layered_total(top: tuple[float, float, float], base: tuple[float, float, float], eta: float) -> float:
+    """A layer (sigma_a, sigma_s', thickness) over a base (thickness inf: a half-space) at zero
+    spatial frequency (Donner and Jensen 2005): R1 + T1 T1' R2 / (1 - R1' R2), the face
+    between them index-matched (A = 1)."""
+    a = boundary_a(eta)[0]
+    r1, t1 = slab_totals(*top, a, 1.0)
+    r1u, t1u = slab_totals(*top, 1.0, a)
+    if math.isinf(base[2]):
+        st_ = base[0] + base[1]
+        tr, l, zb = math.sqrt(3 * base[0] * st_), 1 / st_, 2 / (3 * st_)
+        r2 = 0.5 * base[1] / st_ * (math.exp(-tr * l) + math.exp(-tr * (l + 2 * zb)))
+    else:
+        r2 = slab_totals(*base, 1.0, a)[0]
+    return r1 + t1 * t1u * r2 / (1 - r1u * r2)
+
+
 def entering(eta: float, cos_i: float, irradiance: float = 1.0) -> float:
     """The irradiance a sun of `irradiance` at cos_i from the normal sends into the medium:
     F_t(cos_i) E cos_i."""

@@ -4,14 +4,14 @@
 //! fresh on-the-fly evaluation; incremental after a deformation equals a fresh build).
 
 mod common;
-use common::oracles::rd_total;
+use common::oracles::{rd_total, slab_rd_total};
 use common::plane;
 use translucent_core::hierarchy::{Hierarchy, HierarchySettings, Mode};
 use translucent_core::irradiance::{irradiance, Density, IrradianceSettings};
 use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
 use translucent_core::metrics::{relative_error, ErrorStats};
-use translucent_core::optics::{fresnel_transmittance, Material};
+use translucent_core::optics::{fresnel_transmittance, Material, Stack};
 use translucent_core::profiles::{ProfileKind, RadialProfile};
 use translucent_core::raytrace::Tracer;
 use translucent_core::reference::{reference_radiosity, ReferenceSettings};
@@ -75,8 +75,22 @@ fn sun_over_a_large_plane_gives_the_closed_form() {
         ("ketchup", 0.4),
         ("skimmilk", 0.2),
     ] {
-        let m = Material::preset(name, 1.0).unwrap();
-        for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
+        let half_space = Material::preset(name, 1.0).unwrap();
+        for model in [
+            ProfileKind::Dipole,
+            ProfileKind::Cycles,
+            ProfileKind::Multipole,
+        ] {
+            // The multipole on a 4 mm slab of the medium (the plane its top face).
+            let m = match model {
+                ProfileKind::Multipole => half_space
+                    .with_stack(Stack {
+                        thickness: 4.0,
+                        top: None,
+                    })
+                    .unwrap(),
+                _ => half_space,
+            };
             let mut scene = Scene::new(mesh.clone());
             let dir = Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32);
             scene.lights.push(Light::sun(dir, [2.0; 3]).unwrap());
@@ -95,6 +109,13 @@ fn sun_over_a_large_plane_gives_the_closed_form() {
                     ProfileKind::Cycles => {
                         let p = &model.profiles(&m).unwrap()[c];
                         2.0 * cos * (p.total() + p.point_mass())
+                    }
+                    ProfileKind::Multipole => {
+                        let (sa, sp) = (m.sigma_a[c], m.sigma_s_prime()[c]);
+                        fresnel_transmittance(m.eta, cos)
+                            * 2.0
+                            * cos
+                            * slab_rd_total(sa, sp, m.eta, 4.0)
                     }
                 };
                 let got = f64::from(b[centre][c]);
@@ -165,8 +186,22 @@ fn radiosity_matches_the_ground_truth_on_a_lumpy_sphere() {
         .collect();
     let scene = lit(mesh, Vec3::new(20.0, -10.0, 30.0));
     for name in ["marble", "ketchup"] {
-        let m = Material::preset(name, 1.0).unwrap();
-        for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
+        let half_space = Material::preset(name, 1.0).unwrap();
+        for model in [
+            ProfileKind::Dipole,
+            ProfileKind::Cycles,
+            ProfileKind::Multipole,
+        ] {
+            // The multipole on a 4 mm slab of the medium (the plane its top face).
+            let m = match model {
+                ProfileKind::Multipole => half_space
+                    .with_stack(Stack {
+                        thickness: 4.0,
+                        top: None,
+                    })
+                    .unwrap(),
+                _ => half_space,
+            };
             let e = error_on(&scene, &m, model, &receivers, &weights);
             eprintln!("{name} {model:?}: {e:?}");
             assert!(e.worst_rms() < 0.02, "{name} {model:?}: {e:?}");
@@ -198,8 +233,22 @@ fn vertices_on_an_open_edge_match_the_ground_truth() {
         .lights
         .push(Light::sun(Vec3::new(0.2, 0.1, -1.0), [1.0; 3]).unwrap());
     for name in ["marble", "skimmilk"] {
-        let m = Material::preset(name, 1.0).unwrap();
-        for model in [ProfileKind::Dipole, ProfileKind::Cycles] {
+        let half_space = Material::preset(name, 1.0).unwrap();
+        for model in [
+            ProfileKind::Dipole,
+            ProfileKind::Cycles,
+            ProfileKind::Multipole,
+        ] {
+            // The multipole on a 4 mm slab of the medium (the plane its top face).
+            let m = match model {
+                ProfileKind::Multipole => half_space
+                    .with_stack(Stack {
+                        thickness: 4.0,
+                        top: None,
+                    })
+                    .unwrap(),
+                _ => half_space,
+            };
             let e = error_on(&scene, &m, model, &receivers, &weights);
             eprintln!("edge, {name} {model:?}: {e:?}");
             assert!(e.worst_rms() < 0.01, "{name} {model:?}: {e:?}");

@@ -5,7 +5,7 @@ use crate::convert::{rgb, to_py};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use translucent_core::optics::principled::{self, PrincipledInputs};
-use translucent_core::optics::{Layers, Material};
+use translucent_core::optics::{Layers, Material, Stack, TopLayer};
 use translucent_core::profiles::{table, ProfileKind, Resolved};
 
 /// A homogeneous translucent material: the medium (coefficients in 1/scene unit) and the
@@ -19,7 +19,7 @@ pub struct PyMaterial {
     pub principled: Option<PrincipledInputs>,
 }
 
-/// "cycles" or "dipole" as a core model.
+/// "cycles", "dipole" or "multipole" as a core model.
 pub fn profile_kind(profile: &str) -> PyResult<ProfileKind> {
     ProfileKind::parse(profile).map_err(to_py)
 }
@@ -110,6 +110,60 @@ impl PyMaterial {
                 ..p
             }),
         })
+    }
+
+    /// The same medium as a slab `thickness` deep (scene units; infinite: a half-space) under
+    /// an optional layer of `top`'s coefficients (this material's g and eta) `top_thickness`
+    /// deep. Only the multipole profile reads it (Donner and Jensen 2005).
+    #[pyo3(signature = (thickness = f64::INFINITY, top = None, top_thickness = None))]
+    fn with_stack(
+        &self,
+        thickness: f64,
+        top: Option<PyRef<'_, PyMaterial>>,
+        top_thickness: Option<f64>,
+    ) -> PyResult<Self> {
+        let top = match (top, top_thickness) {
+            (None, None) => None,
+            (Some(t), Some(d)) => Some(TopLayer {
+                sigma_a: t.inner.sigma_a,
+                sigma_s: t.inner.sigma_s,
+                thickness: d,
+            }),
+            (Some(_), None) => {
+                return Err(PyValueError::new_err(
+                    "top_thickness: give the top layer's thickness (scene units) with `top`",
+                ))
+            }
+            (None, Some(_)) => {
+                return Err(PyValueError::new_err(
+                    "top: give the top layer's material with `top_thickness`",
+                ))
+            }
+        };
+        Ok(Self {
+            inner: self
+                .inner
+                .with_stack(Stack { thickness, top })
+                .map_err(to_py)?,
+            principled: self.principled,
+        })
+    }
+
+    /// The medium's depth (scene units; inf for a half-space), read by the multipole only.
+    #[getter]
+    fn thickness(&self) -> f64 {
+        self.inner.stack.thickness
+    }
+
+    /// The layer over the medium: (sigma_a, sigma_s, thickness), or None.
+    #[getter]
+    #[allow(clippy::type_complexity)]
+    fn top_layer(&self) -> Option<((f64, f64, f64), (f64, f64, f64), f64)> {
+        let t = |v: [f64; 3]| (v[0], v[1], v[2]);
+        self.inner
+            .stack
+            .top
+            .map(|l| (t(l.sigma_a), t(l.sigma_s), l.thickness))
     }
 
     /// One of Jensen 2001's measured materials; `mm_per_unit` millimetres per scene unit.
@@ -206,9 +260,18 @@ impl PyMaterial {
     fn __repr__(&self) -> String {
         let m = &self.inner;
         let l = &m.layers;
+        let stack = if m.stack.is_half_space() {
+            String::new()
+        } else {
+            format!(
+                ", thickness={}, top_layer={:?}",
+                m.stack.thickness,
+                self.top_layer()
+            )
+        };
         format!(
             "Material(sigma_a={:?}, sigma_s={:?}, g={}, eta={}, roughness={}, \
-             subsurface_weight={}, metallic={}, transmission={}, base_color={:?})",
+             subsurface_weight={}, metallic={}, transmission={}, base_color={:?}{stack})",
             m.sigma_a,
             m.sigma_s,
             m.g,

@@ -1,7 +1,8 @@
 //! A homogeneous translucent material: its scattering and absorption coefficients, phase
 //! function and index of refraction (Xu 2007 Table 1), and the Principled BSDF layers Cycles
-//! puts over its subsurface lobe. Which radial profile carries light under the surface is
-//! chosen apart from the material (`profiles`).
+//! puts over its subsurface lobe; for the multipole, its depth and a layer over it. Which
+//! radial profile carries light under the surface is chosen apart from the material
+//! (`profiles`).
 
 use super::measured::{MEASURED, MEASURED_ETA};
 use crate::error::{Error, Result};
@@ -23,6 +24,91 @@ pub struct Material {
     /// What sits over and beside the subsurface lobe in Cycles' Principled BSDF; only the
     /// Cycles profile reads it (the dipole has its own smooth Fresnel boundary).
     pub layers: Layers,
+    /// The medium's depth and a thin layer over it; only the multipole profile reads it (the
+    /// others take the medium as a half-space).
+    pub stack: Stack,
+}
+
+/// The geometry Donner and Jensen 2005's multipole gives a material: the medium as a slab of
+/// finite `thickness` (infinite: a half-space, where the multipole is Jensen's dipole), with
+/// an optional thin layer of another medium over it (Shah et al. 2009 Fig. 11's thin yellow
+/// layer over green).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stack {
+    /// Depth of the material's own medium [scene unit]; infinite for a half-space.
+    pub thickness: f64,
+    pub top: Option<TopLayer>,
+}
+
+/// A layer over the material's medium: its own coefficients (the material's g and eta) and
+/// thickness. Diffusion needs it at least its source depth 1/sigma_t' deep in every channel
+/// (`profiles::layered::Layered::new` refuses a thinner one).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TopLayer {
+    /// Absorption coefficient per channel [1/scene unit].
+    pub sigma_a: [f64; CHANNELS],
+    /// Scattering coefficient per channel [1/scene unit].
+    pub sigma_s: [f64; CHANNELS],
+    /// [scene unit], finite and > 0.
+    pub thickness: f64,
+}
+
+impl Default for Stack {
+    /// A half-space with nothing over it: every profile's assumption.
+    fn default() -> Self {
+        Self {
+            thickness: f64::INFINITY,
+            top: None,
+        }
+    }
+}
+
+impl Stack {
+    /// Whether this is the half-space every profile assumes.
+    pub fn is_half_space(&self) -> bool {
+        self.thickness.is_infinite() && self.top.is_none()
+    }
+
+    /// Thicknesses > 0 (the base's may be infinite), the top layer's coefficients as a
+    /// material's (`check_coefficients`).
+    pub fn validate(&self) -> Result<()> {
+        if self.thickness.is_nan() || self.thickness <= 0.0 {
+            return Err(Error::InvalidMaterial(format!(
+                "thickness = {}: must be > 0 scene units (infinite for a half-space)",
+                self.thickness
+            )));
+        }
+        if let Some(top) = &self.top {
+            check_coefficients("top_layer.sigma_a", &top.sigma_a)?;
+            check_coefficients("top_layer.sigma_s", &top.sigma_s)?;
+            if !(top.thickness.is_finite() && top.thickness > 0.0) {
+                return Err(Error::InvalidMaterial(format!(
+                    "top_layer.thickness = {}: must be finite and > 0 scene units",
+                    top.thickness
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Coefficients finite, >= 0 and at most `MAX_COEFFICIENT`, the error naming `name`.
+fn check_coefficients(name: &str, v: &[f64; CHANNELS]) -> Result<()> {
+    for (c, x) in v.iter().enumerate() {
+        if !x.is_finite() || *x < 0.0 {
+            return Err(Error::InvalidMaterial(format!(
+                "{name}[{c}] = {x}: coefficients must be finite and >= 0 (1/scene unit)"
+            )));
+        }
+        if *x > MAX_COEFFICIENT {
+            return Err(Error::InvalidMaterial(format!(
+                "{name}[{c}] = {x:e}: coefficients must be at most {MAX_COEFFICIENT:e} \
+                 per scene unit (profiles grow as sigma^2 in single precision); use a \
+                 larger scene unit, which divides the coefficients by the same factor"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The Principled BSDF inputs besides the medium that change Cycles' diffuse answer
@@ -84,22 +170,8 @@ impl Material {
     /// all-zero medium too: it scatters nothing, so its radiosity is 0 (the continuous limit
     /// the stability tests approach, docs/stability.md).
     pub fn new(sigma_a: [f64; 3], sigma_s: [f64; 3], g: f64, eta: f64) -> Result<Self> {
-        for (name, v) in [("sigma_a", sigma_a), ("sigma_s", sigma_s)] {
-            for (c, x) in v.iter().enumerate() {
-                if !x.is_finite() || *x < 0.0 {
-                    return Err(Error::InvalidMaterial(format!(
-                        "{name}[{c}] = {x}: coefficients must be finite and >= 0 (1/scene unit)"
-                    )));
-                }
-                if *x > MAX_COEFFICIENT {
-                    return Err(Error::InvalidMaterial(format!(
-                        "{name}[{c}] = {x:e}: coefficients must be at most {MAX_COEFFICIENT:e} \
-                         per scene unit (profiles grow as sigma^2 in single precision); use a \
-                         larger scene unit, which divides the coefficients by the same factor"
-                    )));
-                }
-            }
-        }
+        check_coefficients("sigma_a", &sigma_a)?;
+        check_coefficients("sigma_s", &sigma_s)?;
         if !g.is_finite() || g.abs() >= 1.0 {
             return Err(Error::InvalidMaterial(format!(
                 "g = {g}: the phase-function mean cosine must lie in (-1, 1)"
@@ -116,7 +188,14 @@ impl Material {
             g,
             eta,
             layers: Layers::default(),
+            stack: Stack::default(),
         })
+    }
+
+    /// The same medium as a slab of another depth or under a top layer (validated).
+    pub fn with_stack(self, stack: Stack) -> Result<Self> {
+        stack.validate()?;
+        Ok(Self { stack, ..self })
     }
 
     /// The same medium under other Principled layers (validated).

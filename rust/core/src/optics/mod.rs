@@ -9,5 +9,5 @@ pub mod measured;
 pub mod principled;
 
 pub use fresnel::{boundary_a, f_dr, fresnel_transmittance, refracted_cosine};
-pub use material::{Layers, Material, CHANNELS, MAX_COEFFICIENT};
+pub use material::{Layers, Material, Stack, TopLayer, CHANNELS, MAX_COEFFICIENT};
 pub use measured::{MEASURED, MEASURED_ETA};

@@ -16,6 +16,7 @@ pub mod lookup;
 pub mod multipole;
 pub mod resolved;
 pub mod slab_walk;
+pub mod stacked;
 pub mod table;
 pub mod walk;
 
@@ -34,6 +35,9 @@ pub enum ProfileKind {
     Dipole,
     /// Cycles' random walk (Blender 5.0, Principled BSDF "Random Walk") with its layers.
     Cycles,
+    /// Donner and Jensen 2005's multipole: the material's `Stack`, a slab of finite depth or
+    /// a thin layer over the medium, with the dipole's smooth Fresnel boundary (`stacked`).
+    Multipole,
 }
 
 impl ProfileKind {
@@ -41,8 +45,9 @@ impl ProfileKind {
         match name.to_ascii_lowercase().as_str() {
             "dipole" => Ok(ProfileKind::Dipole),
             "cycles" => Ok(ProfileKind::Cycles),
+            "multipole" => Ok(ProfileKind::Multipole),
             other => Err(Error::InvalidArgument(format!(
-                "profile {other:?}: choose 'cycles' or 'dipole'"
+                "profile {other:?}: choose 'cycles', 'dipole' or 'multipole'"
             ))),
         }
     }
@@ -51,6 +56,7 @@ impl ProfileKind {
         match self {
             ProfileKind::Dipole => "dipole",
             ProfileKind::Cycles => "cycles",
+            ProfileKind::Multipole => "multipole",
         }
     }
 
@@ -59,7 +65,7 @@ impl ProfileKind {
     /// index-matched boundary into a plain Lambertian BSDF (no Fresnel): 1.
     pub fn irradiance_eta(self, material: &Material) -> f64 {
         match self {
-            ProfileKind::Dipole => material.eta,
+            ProfileKind::Dipole | ProfileKind::Multipole => material.eta,
             ProfileKind::Cycles => 1.0,
         }
     }
@@ -70,7 +76,9 @@ impl ProfileKind {
     /// (`principled::layer_weight`).
     pub fn exit_weight(self, material: &Material, cos_o: f64) -> f64 {
         match self {
-            ProfileKind::Dipole => fresnel_transmittance(material.eta, cos_o),
+            ProfileKind::Dipole | ProfileKind::Multipole => {
+                fresnel_transmittance(material.eta, cos_o)
+            }
             ProfileKind::Cycles => {
                 if cos_o <= 0.0 {
                     0.0
@@ -106,7 +114,7 @@ impl ProfileKind {
     /// reflection left out). The dipole: 0 (the papers' model has no such layer).
     pub fn specular_reflectance(self, material: &Material, cos_o: f64) -> f64 {
         match self {
-            ProfileKind::Dipole => 0.0,
+            ProfileKind::Dipole | ProfileKind::Multipole => 0.0,
             ProfileKind::Cycles => {
                 if cos_o <= 0.0 {
                     0.0
@@ -140,6 +148,7 @@ impl ProfileKind {
                     Profile::Walk(WalkProfile::new(&tables, material, c))
                 }))
             }
+            ProfileKind::Multipole => stacked::profiles(material),
         }
     }
 }
@@ -148,8 +157,8 @@ impl Profile {
     /// See `WalkProfile::view_factor`; the dipole's exit is Lambertian under F_t: 1.
     pub fn view_factor(&self, cos_o: f64) -> f64 {
         match self {
-            Profile::Dipole(_) => 1.0,
             Profile::Walk(p) => p.view_factor(cos_o),
+            Profile::Dipole(_) | Profile::Slab(_) | Profile::Layered(_) => 1.0,
         }
     }
 }
@@ -220,6 +229,10 @@ pub trait RadialProfile {
 pub enum Profile {
     Dipole(Dipole),
     Walk(WalkProfile),
+    /// The multipole's slab reflectance.
+    Slab(multipole::Poles),
+    /// A thin layer over the medium (kept tables, shared).
+    Layered(std::sync::Arc<layered::Layered>),
 }
 
 macro_rules! dispatch {
@@ -227,6 +240,8 @@ macro_rules! dispatch {
         match $self {
             Profile::Dipole($p) => $e,
             Profile::Walk($p) => $e,
+            Profile::Slab($p) => $e,
+            Profile::Layered($p) => $e,
         }
     };
 }

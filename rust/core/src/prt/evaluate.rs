@@ -273,6 +273,7 @@ impl Prt {
                 match self.profile {
                     ProfileKind::Dipole => "the dipole's model is the half-space profile",
                     ProfileKind::Cycles => "not precomputed (walks off)",
+                    ProfileKind::Multipole => "the multipole's model is a plane-parallel stack",
                 },
             )),
             (Some(_), false) => out.push(Skipped::new(

@@ -69,6 +69,72 @@ fn sun_on_a_large_plane_gives_ft_e_cos_rd_total_for_marble() {
 }
 
 #[test]
+#[allow(clippy::needless_range_loop)]
+fn the_multipole_on_a_plane_gives_the_slab_and_layer_closed_forms() {
+    use crate::mesh::test_meshes::oracles::{layered_rd_total, slab_rd_total, slab_totals};
+    use crate::optics::{Stack, TopLayer};
+    // The oracle itself: without absorption an index-matched slab reflects or transmits all.
+    let (r, t) = slab_totals(0.0, 2.0, 3.0, 1.0, 1.0);
+    assert!((r + t - 1.0).abs() < 1e-9, "R {r} + T {t}");
+    let mesh = plane(101, 200.0);
+    let marble = Material::preset("marble", 1.0).unwrap();
+    let skin = Material::preset("skin1", 1.0).unwrap();
+    let slab = marble
+        .with_stack(Stack {
+            thickness: 4.0,
+            top: None,
+        })
+        .unwrap();
+    // Skin's first layer, 1.5 mm, over marble: Shah 2009 Fig. 11's thin layer over a thick one.
+    let layer = TopLayer {
+        sigma_a: skin.sigma_a,
+        sigma_s: skin.sigma_s,
+        thickness: 1.5,
+    };
+    let layered = marble
+        .with_stack(Stack {
+            thickness: f64::INFINITY,
+            top: Some(layer),
+        })
+        .unwrap();
+    let theta: f64 = 0.5;
+    let e = fresnel_transmittance(marble.eta, theta.cos()) * theta.cos();
+    let settings = PrtSettings {
+        eta: marble.eta,
+        profile: ProfileKind::Multipole,
+        ..Default::default()
+    };
+    // One precompute; the stack is an edit like any other coefficient.
+    let irr = sun(1.0, theta, marble.eta);
+    let prt = Prt::precompute(&mesh, &[slab], &settings, &irr, None).unwrap();
+    let v = centre(&mesh);
+    for (m, name) in [(slab, "slab"), (layered, "layer")] {
+        let b = prt.radiosity(&m).unwrap().values;
+        for c in 0..3 {
+            let (sa, sp) = (m.sigma_a[c], m.sigma_s_prime()[c]);
+            let total = match name {
+                "slab" => slab_rd_total(sa, sp, m.eta, 4.0),
+                _ => layered_rd_total(
+                    (skin.sigma_a[c], skin.sigma_s_prime()[c], 1.5),
+                    (sa, sp, f64::INFINITY),
+                    m.eta,
+                ),
+            };
+            let expect = e * total;
+            let got = f64::from(b[v][c]);
+            assert!(
+                (got - expect).abs() <= 0.01 * expect,
+                "{name} channel {c}: B = {got}, closed form {expect} ({:+.3} %)",
+                100.0 * (got / expect - 1.0)
+            );
+            // The half-space answer differs by more than the tolerance (the test can fail).
+            let half = e * rd_total(sa, sp, m.eta);
+            assert!((half - expect).abs() > 0.02 * expect, "{name} channel {c}");
+        }
+    }
+}
+
+#[test]
 fn stiff_material_tends_to_the_diffuse_brdf_limit() {
     // sigma_s' = 1e4 per mm on a millimetre mesh: R_d lives far inside one sample.
     let mesh = plane(41, 20.0);

@@ -1,6 +1,7 @@
 """Type stubs of the native module. Units: scene units for lengths, 1/scene unit for
 coefficients, Blender/Cycles light units (W, W/m^2, radiance)."""
 
+import math
 from typing import Any, Callable, Literal, Sequence, overload
 
 import numpy as np
@@ -10,6 +11,7 @@ __version__: str
 
 RGB = float | Sequence[float]
 Vec3 = Sequence[float]
+RGBTuple = tuple[float, float, float]
 ArrayN3 = npt.ArrayLike
 Progress = Callable[[float], bool | None]
 
@@ -22,7 +24,7 @@ CYCLES_CLAMPS: dict[str, tuple[float, float]]
 """The stated limits on request sizes by name (docs/api.md, "Limits"); a request over one
 raises ValueError naming it."""
 
-Profile = Literal["cycles", "dipole"]
+Profile = Literal["cycles", "dipole", "multipole"]
 
 class Material:
     """A homogeneous translucent material: the medium (coefficients in 1/scene unit, g, eta)
@@ -53,6 +55,22 @@ class Material:
         transmission: float | None = None,
         base_color: RGB | None = None,
     ) -> Material: ...
+    def with_stack(
+        self,
+        thickness: float = math.inf,
+        top: Material | None = None,
+        top_thickness: float | None = None,
+    ) -> Material:
+        """The same medium as a slab `thickness` deep (scene units; inf: a half-space) under an
+        optional layer with `top`'s sigma_a and sigma_s (this material's g and eta)
+        `top_thickness` deep. Only profile "multipole" reads it (Donner and Jensen 2005); a top
+        layer thinner than its source depth 1/sigma_t' in any channel is refused when the
+        profile is built. ValueError naming the argument for a thickness <= 0 or NaN."""
+    @property
+    def thickness(self) -> float: ...
+    @property
+    def top_layer(self) -> tuple[RGBTuple, RGBTuple, float] | None:
+        """(sigma_a, sigma_s, thickness) of the layer over the medium, or None."""
     @staticmethod
     def preset(name: str, mm_per_unit: float = 1000.0) -> Material:
         """Jensen 2001's measured material `name`; `mm_per_unit` mm per scene unit (1000 = metres)."""

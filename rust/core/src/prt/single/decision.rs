@@ -65,6 +65,21 @@ pub fn decide(
             reason: "profile 'cycles' already contains every order of scattering".into(),
         });
     }
+    if model == ProfileKind::Multipole {
+        // Xu 2007 eq. 5's single scattering is the half-space's: the dipole's companion.
+        if request == Some(true) {
+            return Err(Error::InvalidArgument(
+                "single scattering joins the dipole only: it is a half-space's term, and the \
+                 multipole's stack is not one"
+                    .into(),
+            ));
+        }
+        return Ok(Decision {
+            on: false,
+            share: 0.0,
+            reason: "profile 'multipole': single scattering is the half-space's term".into(),
+        });
+    }
     let mut share = 0.0f64;
     for m in representatives {
         let p = model.profiles(m)?;
