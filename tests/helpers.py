@@ -289,3 +289,28 @@ def draw_panel(addon, mat):
     labels = []
     addon.panel.TRANSLUCENT_PT_material.draw(SimpleNamespace(layout=Layout(labels)), SimpleNamespace(material=mat))
     return labels
+
+
+def square(cx, cy, z, h):
+    """A horizontal square 2h wide centred at (cx, cy, z): (positions, triangles)."""
+    p = np.array([[cx - h, cy - h, z], [cx + h, cy - h, z], [cx + h, cy + h, z], [cx - h, cy + h, z]], np.float32)
+    return p, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def assert_shadow_edge(b, p, m, e_in, near=1e-3, tol=0.02) -> int:
+    """A blocker covers x > 0 of a plane lit straight down: on the row y = 0, between `near` and
+    12 cm from the edge, B is E_in H(d) beneath it and E_in (R_total - H(d)) beside it (the
+    dipole's half-plane integral, `half_plane`), within `tol` of E_in R_total per channel.
+    Returns how many values were checked."""
+    checked = 0
+    for c in range(3):
+        total = rd_total(m.sigma_a[c], (1 - m.g) * m.sigma_s[c], m.eta)
+        for v in np.flatnonzero(np.abs(p[:, 1]) < 1e-6):
+            x = float(p[v, 0])
+            if abs(x) < near or abs(x) > 0.12:
+                continue
+            h = half_plane(m, c, abs(x))
+            expect = e_in * (h if x > 0 else total - h)
+            assert abs(b[v, c] - expect) < tol * e_in * total, (c, x, b[v, c], expect)
+            checked += 1
+    return checked

@@ -27,9 +27,10 @@ pub mod surface_integral; // a profile over a triangle or polygon from a point (
 pub mod walks; // Cycles' walk traced inside the mesh, its half-space twin, the walk term
 
 // Methods, each with its private parts inside it (prt: basis, gpu, single;
-// hierarchy: clusters, links, far field, rings).
+// hierarchy: clusters, links, far field, rings; splat: sizes, light view, receivers).
 pub mod hierarchy; // Mertens et al. 2003: face clusters and links, deformation and moving lights
 pub mod prt; // Xu et al. 2007: precomputed transport, live material edits
+pub mod splat; // Shah et al. 2009: light-view splats gathered at the vertices, nothing precomputed
 
 // Reference.
 pub mod reference; // brute-force integration of the same model: the ground truth

@@ -12,6 +12,7 @@ mod material;
 mod prt;
 mod reference;
 mod scene;
+mod splat;
 
 /// mimalloc keeps freed pages for the next call: an edit allocates a few megabytes per call at
 /// 120k vertices, and the system allocator returned them to the kernel each time, so every
@@ -48,6 +49,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reference::reference_radiosity_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::reference_radiance_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::relative_error, m)?)?;
+    m.add_function(wrap_pyfunction!(splat::splat_radiosity_py, m)?)?;
+    m.add_function(wrap_pyfunction!(splat::splat_radiance_py, m)?)?;
     m.add_function(wrap_pyfunction!(
         reference::reference_single_scattering_py,
         m

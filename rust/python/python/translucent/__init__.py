@@ -3,7 +3,8 @@
 Any radial profile on triangle meshes: Cycles' random walk (the default: what a Cycles render
 of the Principled BSDF shows) or Jensen's dipole (the papers' model); PRT material editing after
 Xu et al. 2007; hierarchical boundary elements after Mertens et al. 2003 for deforming
-meshes and moving lights. Lengths are in scene units, coefficients in 1/scene unit, light units follow
+meshes and moving lights; image-space splatting after Shah et al. 2009 (started: on the CPU,
+nothing precomputed). Lengths are in scene units, coefficients in 1/scene unit, light units follow
 Blender/Cycles (sun Strength = W/m^2, point/spot/area Power = W, world colour = radiance).
 
 The random-walk tables are kept in $TRANSLUCENT_CACHE, else $XDG_CACHE_HOME/translucent, else
@@ -31,6 +32,8 @@ from ._native import (
     reference_single_scattering,
     relative_error,
     set_table_cache,
+    splat_radiance,
+    splat_radiosity,
     table_cache,
 )
 
@@ -60,5 +63,7 @@ __all__ = [
     "reference_single_scattering",
     "relative_error",
     "set_table_cache",
+    "splat_radiance",
+    "splat_radiosity",
     "table_cache",
 ]

@@ -436,6 +436,34 @@ class Hierarchy:
         added), terms (None with walks off; else walks, walks_indirect, own_light_rays,
         own_light_share, carried_pose, seconds)."""
 
+def splat_radiosity(
+    scene: Scene,
+    material: Material,
+    profile: Profile = "cycles",
+    eps: float = 0.01,
+    max_grid: int = 1024,
+    progress: Progress | None = None,
+) -> tuple[npt.NDArray[np.float32], dict[str, object]]:
+    """Radiosity B per vertex by image-space splatting (Shah et al. 2009), nothing precomputed:
+    each sun, point or spot light's view gives the splats (ray casts on the CPU), each vertex
+    gathers those within r_max (eq. 4) on its own object. `eps` is eqs. 4-5's threshold in
+    (0, 1); `max_grid` the largest light-view side in [1, 4096] (eq. 5's grid is cut to it, the
+    cut reported). Returns (values (N, 3), evaluation): "method" "splat", "quantity",
+    "error_estimate" (None: not computed yet), "seconds", "skipped" (area lights, the world,
+    the walks, the own light...), and "report" (r_max, overlap, splats, per-light grid and
+    counts, stage seconds). ValueError naming eps or max_grid; Cancelled on a cancel."""
+
+def splat_radiance(
+    scene: Scene,
+    material: Material,
+    eye: Sequence[float] | None = None,
+    profile: Profile = "cycles",
+    eps: float = 0.01,
+    max_grid: int = 1024,
+    progress: Progress | None = None,
+) -> tuple[npt.NDArray[np.float32], dict[str, object]]:
+    """`splat_radiosity`'s B leaving toward `eye` (scene units) or along each normal (None)."""
+
 @overload
 def reference_radiosity(
     scene: Scene,
