@@ -152,8 +152,8 @@ def edit(material: bpy.types.Material) -> None:
         return  # another profile needs a new precompute; the panel says so
     if s.profile in ("dipole", "multipole") and abs(s.eta - m.eta) > 1e-9:
         return  # the irradiance holds the IOR's Fresnel factor (dipole, multipole): precompute again
-    if s.profile == "cycles" and not translucent.profile_ready(m) and not _prepare_tables(material, m):
-        return  # the walk tables for a new g, Roughness or IOR are being built; old preview kept
+    if s.profile != "dipole" and not translucent.profile_ready(m, s.profile) and not _prepare_tables(material, m):
+        return  # the tables for a new g, Roughness, IOR or layer are being built; old preview kept
     s.edit_message = ""
     transport = s.transport
     # Radiance leaving along each normal (a view-independent viewport colour), or toward the
@@ -201,24 +201,34 @@ def edit(material: bpy.types.Material) -> None:
 
 
 def _prepare_tables(material: bpy.types.Material, m) -> bool:
-    """Cycles' walk tables for `m` (new g, Roughness or IOR): built at once headless (returns
-    True), else on a worker thread that never touches bpy, the edit running again when they are
-    ready (returns False; the old preview stays up meanwhile)."""
+    """The profile's tables for `m`: Cycles' walk tables (a new g, Roughness or IOR) or the
+    multipole's layered tables (a new top layer or depth, about 2 s): built at once headless
+    (returns True, or False with the reason in the panel), else on a worker thread that never
+    touches bpy, the edit running again when they are ready (returns False; the old preview
+    stays up meanwhile)."""
     import translucent
 
     name = material.name
-    if bpy.app.background:
-        translucent.prepare_profile(m)
-        return True
     s = SESSIONS[name]
+    profile = s.profile
+    if bpy.app.background:
+        try:
+            translucent.prepare_profile(m, profile=profile)
+        except ValueError as e:
+            s.edit_message = f"not shown: {e}"
+            return False
+        return True
     if name in PREPARING:
         return False
-    s.edit_message = f"building Cycles' walk table (g {m.g:.2f}, Roughness {m.roughness:.2f}, IOR {m.eta:.2f})"
+    if profile == "cycles":
+        s.edit_message = f"building Cycles' walk table (g {m.g:.2f}, Roughness {m.roughness:.2f}, IOR {m.eta:.2f})"
+    else:
+        s.edit_message = "building the multipole's layer table"
     errors = []
 
     def work():
         try:
-            translucent.prepare_profile(m)
+            translucent.prepare_profile(m, profile=profile)
         except Exception as e:  # reported by the timer below, on the main thread
             errors.append(e)
 

@@ -103,3 +103,18 @@ def test_bad_stacks_raise_value_errors_naming_the_argument():
     with pytest.raises(ValueError, match="single scattering joins the dipole only"):
         p, s = sun_plane(11, 10.0)
         translucent.Prt(s, MARBLE_MM, profile="multipole", single_scattering=True, backend="cpu")
+
+
+def test_a_layer_table_can_be_built_ahead_of_an_edit():
+    # The add-on builds a new layer's tables on a worker thread while a slider moves
+    # (prepare_profile releases the GIL), then edits without waiting.
+    m = MARBLE_MM.with_stack(top=SKIN_MM, top_thickness=1.834)  # a stack no other test builds
+    assert not translucent.profile_ready(m, "multipole")
+    assert translucent.profile_ready(m, "dipole") and translucent.profile_ready(MARBLE_MM.with_stack(4.0), "multipole")
+    assert translucent.prepare_profile(m, profile="multipole") > 0.05
+    assert translucent.profile_ready(m, "multipole")
+    assert translucent.prepare_profile(m, profile="multipole") < 0.05  # kept
+    with pytest.raises(ValueError, match="source depth"):
+        translucent.prepare_profile(MARBLE_MM.with_stack(top=SKIN_MM, top_thickness=0.05), profile="multipole")
+    with pytest.raises(ValueError, match="profile"):
+        translucent.profile_ready(m, "bogus")

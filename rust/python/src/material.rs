@@ -6,7 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use translucent_core::optics::principled::{self, PrincipledInputs};
 use translucent_core::optics::{Layers, Material, Stack, TopLayer};
-use translucent_core::profiles::{table, ProfileKind, Resolved};
+use translucent_core::profiles::{stacked, table, ProfileKind, Resolved};
 
 /// A homogeneous translucent material: the medium (coefficients in 1/scene unit) and the
 /// Principled BSDF layers Cycles puts around its subsurface lobe.
@@ -285,28 +285,46 @@ impl PyMaterial {
     }
 }
 
-/// Builds (or reads from the cache folder) the random-walk tables `material` needs under the
-/// Cycles profile; returns the seconds it took (0 when they were in memory). Releases the GIL:
-/// call it from a worker thread to keep a UI live while g, Roughness or IOR change.
+/// Builds what `material` needs under `profile`: the random-walk tables of the Cycles profile
+/// (or reads them from the cache folder), the layered tables of the multipole's top layer
+/// (kept in memory); nothing for the dipole. Returns the seconds it took (0 when all was in
+/// memory). Releases the GIL: call it from a worker thread to keep a UI live while g,
+/// Roughness, IOR or a layer change. ValueError for a stack the multipole refuses.
 #[pyfunction]
-#[pyo3(signature = (material, progress = None))]
+#[pyo3(signature = (material, progress = None, profile = "cycles"))]
 pub fn prepare_profile(
     py: Python<'_>,
     material: PyRef<'_, PyMaterial>,
     #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+    profile: &str,
 ) -> PyResult<f64> {
+    let kind = profile_kind(profile)?;
     let m = material.inner;
     run(py, progress, |tick| {
         let start = std::time::Instant::now();
-        table::tables_for_with_progress(&m, Some(tick))?;
+        match kind {
+            ProfileKind::Cycles => {
+                table::tables_for_with_progress(&m, Some(tick))?;
+            }
+            ProfileKind::Multipole => {
+                stacked::profiles(&m)?;
+            }
+            ProfileKind::Dipole => {}
+        }
         Ok(start.elapsed().as_secs_f64())
     })
 }
 
-/// Whether every walk table `material` needs is in memory (an edit will not wait for one).
+/// Whether everything `material` needs under `profile` is in memory (an edit will not wait
+/// for a table to be built).
 #[pyfunction]
-pub fn profile_ready(material: PyRef<'_, PyMaterial>) -> bool {
-    table::tables_ready(&material.inner)
+#[pyo3(signature = (material, profile = "cycles"))]
+pub fn profile_ready(material: PyRef<'_, PyMaterial>, profile: &str) -> PyResult<bool> {
+    Ok(match profile_kind(profile)? {
+        ProfileKind::Cycles => table::tables_ready(&material.inner),
+        ProfileKind::Multipole => stacked::ready(&material.inner),
+        ProfileKind::Dipole => true,
+    })
 }
 
 /// Where the walk tables are kept between sessions (None: memory only). Returns the folder

@@ -12,7 +12,7 @@ use crate::optics::{Material, TopLayer};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
-/// Layered tables kept in memory (about 33 KB each); the oldest half goes when full.
+/// Layered tables kept in memory (about 33 KB each); all are dropped when it is full.
 const KEPT: usize = 96;
 
 /// The three channels' multipole profiles of `material` (its `stack`).
@@ -48,6 +48,36 @@ pub fn profiles(material: &Material) -> Result<[Profile; 3]> {
             Ok(out.try_into().expect("three channels"))
         }
     }
+}
+
+/// Whether `profiles(material)` will build nothing: a slab without a top layer (closed forms),
+/// or a layered stack whose three tables are kept. A stack that `profiles` would refuse is
+/// "ready" too: the refusal costs nothing.
+pub fn ready(material: &Material) -> bool {
+    let Some(top) = material.stack.top else {
+        return true;
+    };
+    if material.stack.validate().is_err() {
+        return true;
+    }
+    let sp = material.sigma_s_prime();
+    let map = kept()
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    (0..3).all(|c| {
+        let base = Medium {
+            sigma_a: material.sigma_a[c],
+            sigma_s_prime: sp[c],
+        };
+        let upper = top_medium(&top, material.g, c);
+        map.contains_key(&Key::new(
+            &upper,
+            top.thickness,
+            &base,
+            material.stack.thickness,
+            material.eta,
+        ))
+    })
 }
 
 /// The top layer's medium in channel `c`, with the material's phase function.
@@ -184,6 +214,28 @@ mod tests {
             (Profile::Layered(a), Profile::Layered(b)) => assert!(Arc::ptr_eq(a, b)),
             _ => panic!("expected layered profiles"),
         }
+    }
+
+    #[test]
+    fn ready_says_whether_a_table_will_be_built() {
+        let m = marble_mm();
+        assert!(ready(&m)); // a half-space: closed forms
+        let layer = |thickness| {
+            m.with_stack(Stack {
+                thickness: f64::INFINITY,
+                top: Some(TopLayer {
+                    sigma_a: [0.0123; 3],
+                    sigma_s: [1.87; 3],
+                    thickness,
+                }),
+            })
+            .unwrap()
+        };
+        let stack = layer(3.125); // a stack no other test builds
+        assert!(!ready(&stack));
+        profiles(&stack).unwrap();
+        assert!(ready(&stack));
+        assert!(!ready(&layer(3.126)));
     }
 
     #[test]

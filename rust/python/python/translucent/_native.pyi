@@ -572,11 +572,12 @@ def relative_error(
     """Area-weighted relative RMS and max relative error per channel. ValueError for a
     non-finite value (naming the row) or weights all zero; an all-zero truth channel reads 0
     where the estimate is 0 there too, inf where it is not."""
-def prepare_profile(material: Material, progress: Progress | None = None) -> float:
-    """Builds (or reads from the table cache) the random-walk tables `material` needs under the
-    Cycles profile; seconds taken. Releases the GIL."""
-def profile_ready(material: Material) -> bool:
-    """Whether an edit with `material` will find its walk tables in memory."""
+def prepare_profile(material: Material, progress: Progress | None = None, profile: Profile = "cycles") -> float:
+    """Builds what `material` needs under `profile`: the random-walk tables of "cycles" (or reads
+    them from the table cache), the layered tables of a "multipole" top layer; seconds taken.
+    Releases the GIL. ValueError for a stack the multipole refuses."""
+def profile_ready(material: Material, profile: Profile = "cycles") -> bool:
+    """Whether an edit with `material` under `profile` will find its tables in memory."""
 def set_table_cache(path: str | None = None) -> str | None:
     """Folder the walk tables are kept in between sessions (None: memory only)."""
 def table_cache() -> str | None: ...
