@@ -212,7 +212,7 @@ pub fn splat_radiosity(
         .collect::<Result<_>>()?;
     let rays: u64 = planned.iter().map(|s| u64::from(s.grid).pow(2)).sum();
     let ticker = Ticker::span(progress, rays, 0.0, 0.45);
-    let mut samples = Vec::new();
+    let (mut samples, mut tags) = (Vec::new(), Vec::new());
     for ((k, view), sizes) in views.iter().zip(planned) {
         let light = &scene.lights[*k];
         let t_light = Instant::now();
@@ -225,6 +225,7 @@ pub fn splat_radiosity(
                  face, or was shadowed",
             ));
         }
+        tags.extend(std::iter::repeat_n(*k as u32, s.len()));
         samples.extend(s);
         report.lights.push(LightReport {
             light: *k,
@@ -250,7 +251,12 @@ pub fn splat_radiosity(
     let table = LookupRgb::new(&std::array::from_fn(|c| {
         LookupProfile::new(&resolved.profiles[c], settings.eps)
     }));
-    let splats: Vec<Splat> = samples.iter().map(Splat::new).collect();
+    let splats: Vec<Splat> = (samples.iter().zip(&tags))
+        .map(|(s, &light)| Splat {
+            light,
+            ..Splat::new(s)
+        })
+        .collect();
     drop(samples);
     let receivers: Vec<(Vec3, u32)> = (0..mesh.vertex_count())
         .map(|v| (mesh.positions()[v], mesh.object_of_vertex(v)))

@@ -22,6 +22,13 @@
 //! distance", one node search for three channels. Splats are binned in a uniform grid of
 //! cells a third of r_max wide; a vertex visits the cells that come within r_max of its own
 //! (`rayon` over the vertices).
+//!
+//! A second departure, for speed on the CPU: within each cell the splats of one object and one
+//! light are grouped by sub-cell (`SUBCELLS` a side), and a vertex more than `FAR_SUBCELLS`
+//! sub-cells from a group takes the group as one splat (its power at its power-weighted
+//! centroid; the first-order error cancels, the second is under 0.4 % of that group's share).
+//! On the 10 mm marble sphere (814,007 splats) this took the gather from 1.8 s to 0.7 s with
+//! the same error against the ground truth; a GPU draws every splat instead.
 
 use super::light_view::LightSample;
 use crate::error::Result;
@@ -46,6 +53,9 @@ pub struct Splat {
     /// means within `NEAR_DISCS` a_i are multiplied by.
     pub near_power: [f32; 3],
     pub object: u32,
+    /// The light whose view gave it (its index in the scene): groups never mix lights, so
+    /// lights add up exactly.
+    pub light: u32,
 }
 
 /// Within this many disc radii of a splat a receiver reads the profile's mean over the disc
@@ -73,6 +83,7 @@ impl Splat {
             radius: (area / PI).sqrt().min(2.0 * across) as f32,
             near_power: power,
             object: s.object,
+            light: 0,
         }
     }
 }
@@ -196,30 +207,102 @@ impl NearScales {
 /// 27 r^3 with cells r wide.
 const CELLS_PER_REACH: i32 = 3;
 
-/// Splats binned in cubic cells `cell` wide.
+/// Sub-cells per cell side: the splats of one sub-cell and one object form a group, summed
+/// into one splat (its power at the power-weighted centroid) where the receiver is far from
+/// it (`FAR_SUBCELLS`).
+const SUBCELLS: i32 = 12;
+
+/// Sub-cell widths from a receiver beyond which a group is taken as its sum: the monopole's
+/// error on a profile falling as r^-3 is (h^2/24) 9/d^2 relative at d = (this) h, 0.35 % at
+/// 10 (a group of uniform splats in a square h wide; the centroid cancels the first order).
+const FAR_SUBCELLS: f32 = 10.0;
+
+/// The splats of one object and one light in one sub-cell: `splats[start..end]`, their summed power at
+/// their power-weighted centroid, and the sub-cell's centre.
+struct Group {
+    centre: Vec3,
+    /// A receiver closer than this to `centre` sums the group splat by splat:
+    /// `FAR_SUBCELLS` sub-cells, or its splats' widest near zone (their discs' mean read
+    /// there), plus the sub-cell's half diagonal.
+    near: f32,
+    centroid: Vec3,
+    power: [f32; 3],
+    object: u32,
+    start: usize,
+    end: usize,
+}
+
+/// Splats binned in cubic cells `cell` wide, grouped by sub-cell and object within each.
 struct Bins {
     cell: f32,
     origin: Vec3,
     splats: Vec<Splat>,
-    /// Each occupied cell's range in `splats`.
+    groups: Vec<Group>,
+    /// Each cell's groups: `groups[a..b]`.
     ranges: HashMap<[i32; 3], (usize, usize)>,
-    /// The offsets of the cells some point of which lies within the reach of some point of
-    /// the receiver's cell.
+    /// The cell offsets that may hold splats within `reach` of a point of the centre cell.
     offsets: Vec<IVec3>,
 }
 
 impl Bins {
     fn new(mut splats: Vec<Splat>, cell: f32, reach: f32) -> Bins {
-        let origin = (splats.iter()).fold(Vec3::splat(f32::INFINITY), |lo, s| lo.min(s.position));
-        let key = |p: Vec3| ((p - origin) / cell).floor().as_ivec3().to_array();
-        splats.sort_by_key(|s| key(s.position));
+        // Cells on a lattice fixed in space (not at the splats' corner): a light's splats
+        // fall in the same groups whatever other lights add.
+        let origin = Vec3::ZERO;
+        let sub = cell / SUBCELLS as f32;
+        let fine = |p: Vec3| ((p - origin) / sub).floor().as_ivec3();
+        let coarse = |f: IVec3| f.div_euclid(IVec3::splat(SUBCELLS)).to_array();
+        splats.sort_by_key(|s| {
+            let f = fine(s.position);
+            (coarse(f), f.to_array(), s.object, s.light)
+        });
+        let mut groups = Vec::new();
         let mut ranges = HashMap::new();
         let mut start = 0;
+        let mut cell_start = 0;
         for k in 1..=splats.len() {
-            if k == splats.len() || key(splats[k].position) != key(splats[start].position) {
-                ranges.insert(key(splats[start].position), (start, k));
-                start = k;
+            let f0 = fine(splats[start].position);
+            let ends = k == splats.len()
+                || fine(splats[k].position) != f0
+                || splats[k].object != splats[start].object
+                || splats[k].light != splats[start].light;
+            if !ends {
+                continue;
             }
+            let members = &splats[start..k];
+            let mut power = [0.0f32; 3];
+            let mut radius = 0.0f32;
+            let (mut weight, mut sum) = (0.0f64, glam::DVec3::ZERO);
+            for s in members {
+                for (p, q) in power.iter_mut().zip(s.power) {
+                    *p += q;
+                }
+                radius = radius.max(s.radius);
+                let w = f64::from(s.power[0] + s.power[1] + s.power[2]);
+                weight += w;
+                sum += w * s.position.as_dvec3();
+            }
+            let centroid = if weight > 0.0 {
+                (sum / weight).as_vec3()
+            } else {
+                members[0].position
+            };
+            groups.push(Group {
+                centre: origin + (f0.as_vec3() + Vec3::splat(0.5)) * sub,
+                near: (sub * FAR_SUBCELLS).max(NEAR_DISCS as f32 * radius)
+                    + sub * 0.5 * 3f32.sqrt(),
+                centroid,
+                power,
+                object: splats[start].object,
+                start,
+                end: k,
+            });
+            let cell_ends = k == splats.len() || coarse(fine(splats[k].position)) != coarse(f0);
+            if cell_ends {
+                ranges.insert(coarse(f0), (cell_start, groups.len()));
+                cell_start = groups.len();
+            }
+            start = k;
         }
         let k = (reach / cell).ceil() as i32 + 1;
         let mut offsets = Vec::new();
@@ -238,17 +321,18 @@ impl Bins {
             cell,
             origin,
             splats,
+            groups,
             ranges,
             offsets,
         }
     }
 
-    /// The splats in the cells that may lie within reach of `p`.
-    fn around(&self, p: Vec3) -> impl Iterator<Item = &[Splat]> + '_ {
+    /// The groups in the cells that may lie within reach of `p`.
+    fn around(&self, p: Vec3) -> impl Iterator<Item = &[Group]> + '_ {
         let at = ((p - self.origin) / self.cell).floor().as_ivec3();
         self.offsets.iter().filter_map(move |d| {
             let (a, b) = *self.ranges.get(&(at + *d).to_array())?;
-            Some(&self.splats[a..b])
+            Some(&self.groups[a..b])
         })
     }
 }
@@ -293,7 +377,9 @@ pub fn gather(
                 s.near_power = std::array::from_fn(|c| (f64::from(s.power[c]) * k[c]) as f32);
             });
     }
-    let cell = (search as f32 / CELLS_PER_REACH as f32).max(1e-6 * (hi - lo).max_element());
+    // Cells from the reach alone (not from the splats' sizes), so that a light's groups do not
+    // depend on the other lights' splats.
+    let cell = (reach as f32 / CELLS_PER_REACH as f32).max(1e-6 * (hi - lo).max_element());
     let bins = &Bins::new(splats, cell, search as f32);
     // R far from the splats from the f32 nodes, uniform in sqrt(r): u = sqrt(r) scale.
     let (nodes, scale, _) = profile.f32_table();
@@ -310,26 +396,43 @@ pub fn gather(
                 if !go {
                     return b;
                 }
+                // R far from the splats, from the f32 nodes uniform in sqrt(r).
+                let far = |b: &mut [f64; 3], d: f32, power: &[f32; 3]| {
+                    let u = d.sqrt() * scale;
+                    let i = (u as usize).min(last);
+                    let f = u - i as f32;
+                    let (lo, hi) = (nodes[i], nodes[i + 1]);
+                    for c in 0..3 {
+                        let r = lo[c] + f * (hi[c] - lo[c]);
+                        b[c] += f64::from(r * power[c]);
+                    }
+                };
                 for cell in bins.around(x) {
-                    for s in cell {
-                        let d2 = (s.position - x).length_squared();
-                        if d2 >= search2 || s.object != object {
+                    for g in cell {
+                        if g.object != object {
                             continue;
                         }
-                        let d = d2.sqrt();
-                        if d < near * s.radius {
-                            let r = disc_mean(profile, f64::from(d), f64::from(s.radius), rule);
-                            for c in 0..3 {
-                                b[c] += r[c] * f64::from(s.near_power[c]);
+                        if (g.centre - x).length_squared() >= g.near * g.near {
+                            // Far from the whole group: its sum at its centroid.
+                            let d2 = (g.centroid - x).length_squared();
+                            if d2 < reach2 {
+                                far(&mut b, d2.sqrt(), &g.power);
                             }
-                        } else if d2 < reach2 {
-                            let u = d.sqrt() * scale;
-                            let i = (u as usize).min(last);
-                            let f = u - i as f32;
-                            let (lo, hi) = (nodes[i], nodes[i + 1]);
-                            for c in 0..3 {
-                                let r = lo[c] + f * (hi[c] - lo[c]);
-                                b[c] += f64::from(r * s.power[c]);
+                            continue;
+                        }
+                        for s in &bins.splats[g.start..g.end] {
+                            let d2 = (s.position - x).length_squared();
+                            if d2 >= search2 {
+                                continue;
+                            }
+                            let d = d2.sqrt();
+                            if d < near * s.radius {
+                                let r = disc_mean(profile, f64::from(d), f64::from(s.radius), rule);
+                                for c in 0..3 {
+                                    b[c] += r[c] * f64::from(s.near_power[c]);
+                                }
+                            } else if d2 < reach2 {
+                                far(&mut b, d, &s.power);
                             }
                         }
                     }
