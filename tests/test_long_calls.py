@@ -96,10 +96,12 @@ def long_calls(ball, lit_by_world, marble, unbuilt=None, big=None):
         "reference_single_scattering": lambda progress: translucent.reference_single_scattering(
             ball, marble, steps=2**20, progress=progress
         ),
+        "splat": lambda progress: translucent.Splat(ball, eps=1e-6, max_grid=4096).radiosity(marble, progress=progress),
     }
 
 
-NAMES = ["hierarchy", "prt_tables", "prt_walks", "reference_radiance", "irradiance", "reference_radiosity", "reference_single_scattering"]
+NAMES = ["hierarchy", "prt_tables", "prt_walks", "reference_radiance", "irradiance", "reference_radiosity", "reference_single_scattering",
+         "splat"]
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -46,11 +46,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scene::PyScene>()?;
     m.add_class::<prt::PyPrt>()?;
     m.add_class::<hierarchy::PyHierarchy>()?;
+    m.add_class::<splat::PySplat>()?;
     m.add_function(wrap_pyfunction!(reference::reference_radiosity_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::reference_radiance_py, m)?)?;
     m.add_function(wrap_pyfunction!(reference::relative_error, m)?)?;
-    m.add_function(wrap_pyfunction!(splat::splat_radiosity_py, m)?)?;
-    m.add_function(wrap_pyfunction!(splat::splat_radiance_py, m)?)?;
     m.add_function(wrap_pyfunction!(
         reference::reference_single_scattering_py,
         m

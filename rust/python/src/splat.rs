@@ -1,31 +1,40 @@
-//! `translucent.splat_radiosity`, `translucent.splat_radiance`: image-space splatting
-//! (Shah et al. 2009, `translucent_core::splat`), nothing precomputed.
+//! `translucent.Splat`: image-space splatting (Shah et al. 2009, `translucent_core::splat`),
+//! nothing precomputed: every evaluation splats each light's view anew.
 
 use crate::call::run;
-use crate::convert::{int, rgb_array};
+use crate::convert::{int, rgb_array, vec3_array};
 use crate::evaluation::evaluation_dict;
 use crate::material::{profile_kind, PyMaterial};
 use crate::scene::PyScene;
+use numpy::PyArray2;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use translucent_core::profiles::Resolved;
-use translucent_core::splat::{splat_radiance, splat_radiosity, Evaluation, SplatSettings};
+use std::sync::{Mutex, RwLock};
+use translucent_core::splat::{Evaluation, SplatReport, SplatSettings, Splatting, MAX_GRID};
 
-/// The settings from Python's arguments; a grid side that is not a u32 is named.
-fn settings(eps: f64, max_grid: i64) -> PyResult<SplatSettings> {
-    let max_grid = u32::try_from(max_grid).map_err(|_| {
-        pyo3::exceptions::PyValueError::new_err(format!(
-            "max_grid = {max_grid}: the light view's largest side must lie in [1, {}]",
-            translucent_core::splat::MAX_GRID
-        ))
-    })?;
-    Ok(SplatSettings { eps, max_grid })
+/// The splatting over a copy of a scene (`update` changes it, not the Scene). Evaluations run
+/// off the GIL and may overlap; an `update` waits for them.
+#[pyclass(name = "Splat", module = "translucent", frozen)]
+pub struct PySplat {
+    inner: RwLock<Splatting>,
+    /// The last evaluation (values dropped), for `last_eval` and `report`.
+    last: Mutex<Option<Evaluation>>,
 }
 
-/// The values and the evaluation dict: the keys every method has, then "report".
-fn result<'py>(py: Python<'py>, e: &Evaluation) -> PyResult<Bound<'py, PyAny>> {
-    let d = evaluation_dict(py, "splat", e)?;
-    let r = &e.details;
+impl PySplat {
+    fn keep(&self, mut e: Evaluation) {
+        e.values = Vec::new();
+        *self.last.lock().unwrap_or_else(|e| e.into_inner()) = Some(e);
+    }
+
+    fn read(&self) -> std::sync::RwLockReadGuard<'_, Splatting> {
+        self.inner.read().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// What the splatting did, as a dict.
+fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyDict>> {
     let report = PyDict::new(py);
     report.set_item("eps", r.eps)?;
     report.set_item("r_max", r.r_max.to_vec())?;
@@ -56,64 +65,153 @@ fn result<'py>(py: Python<'py>, e: &Evaluation) -> PyResult<Bound<'py, PyAny>> {
         lights.append(x)?;
     }
     report.set_item("lights", lights)?;
-    d.set_item("report", report)?;
-    Ok((rgb_array(py, &e.values), d).into_pyobject(py)?.into_any())
+    Ok(report)
 }
 
-/// Radiosity B per vertex, (N, 3) float32, by image-space splatting (Shah 2009) of the
-/// `profile` ("cycles", "dipole" or "multipole"): each light's view gives the splats, each
-/// vertex gathers those within r_max (eq. 4) on its own object. `eps` is eqs. 4-5's threshold,
-/// `max_grid` the largest light-view side (eq. 5's grid is cut to it and the cut reported).
-/// Returns (values, evaluation): the keys every method's `last_eval` has, and "report".
-#[pyfunction]
-#[pyo3(signature = (scene, material, profile = "cycles", eps = 0.01, max_grid = 1024,
-    progress = None))]
-#[pyo3(name = "splat_radiosity")]
-pub fn splat_radiosity_py<'py>(
-    py: Python<'py>,
-    scene: PyRef<'_, PyScene>,
-    material: PyRef<'_, PyMaterial>,
-    profile: &str,
-    eps: f64,
-    #[pyo3(from_py_with = int)] max_grid: i64,
-    #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
-) -> PyResult<Bound<'py, PyAny>> {
-    let kind = profile_kind(profile)?;
-    let settings = settings(eps, max_grid)?;
-    let m = material.inner;
-    let core_scene = &scene.scene;
-    let e = run(py, progress, |tick| {
-        let resolved = Resolved::new(kind, &m)?;
-        splat_radiosity(core_scene, &resolved, &settings, Some(tick))
-    })?;
-    result(py, &e)
-}
+#[pymethods]
+impl PySplat {
+    /// The splatting of `scene` (copied) under `profile` ("cycles", "dipole", "multipole");
+    /// `eps` is eqs. 4-5's threshold in (0, 1), `max_grid` the light view's largest side in
+    /// [1, 4096]. Nothing is computed until an evaluation.
+    #[new]
+    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024))]
+    fn new(
+        scene: PyRef<'_, PyScene>,
+        profile: &str,
+        eps: f64,
+        #[pyo3(from_py_with = int)] max_grid: i64,
+    ) -> PyResult<Self> {
+        let kind = profile_kind(profile)?;
+        let max_grid = u32::try_from(max_grid).map_err(|_| {
+            PyValueError::new_err(format!(
+                "max_grid = {max_grid}: the light view's largest side must lie in [1, {MAX_GRID}]"
+            ))
+        })?;
+        let inner = Splatting::new(scene.scene.clone(), kind, SplatSettings { eps, max_grid })
+            .map_err(crate::convert::to_py)?;
+        Ok(Self {
+            inner: RwLock::new(inner),
+            last: Mutex::new(None),
+        })
+    }
 
-/// Outgoing radiance per vertex, (N, 3) float32: `splat_radiosity`'s B leaving toward `eye`
-/// (a point, scene units) or along each normal (None), through the profile's exit weight.
-#[pyfunction]
-#[pyo3(signature = (scene, material, eye = None, profile = "cycles", eps = 0.01,
-    max_grid = 1024, progress = None))]
-#[pyo3(name = "splat_radiance")]
-#[allow(clippy::too_many_arguments)]
-pub fn splat_radiance_py<'py>(
-    py: Python<'py>,
-    scene: PyRef<'_, PyScene>,
-    material: PyRef<'_, PyMaterial>,
-    eye: Option<Bound<'py, PyAny>>,
-    profile: &str,
-    eps: f64,
-    #[pyo3(from_py_with = int)] max_grid: i64,
-    #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
-) -> PyResult<Bound<'py, PyAny>> {
-    let kind = profile_kind(profile)?;
-    let settings = settings(eps, max_grid)?;
-    let eye = crate::convert::eye(eye.as_ref())?;
-    let m = material.inner;
-    let core_scene = &scene.scene;
-    let e = run(py, progress, |tick| {
-        let resolved = Resolved::new(kind, &m)?;
-        splat_radiance(core_scene, &resolved, &settings, eye, Some(tick))
-    })?;
-    result(py, &e)
+    /// Radiosity B per vertex, (N, 3) float32: the quantity `reference_radiosity` integrates.
+    /// Releases the GIL; `progress(fraction)` as for every long call (False cancels).
+    #[pyo3(signature = (material, progress = None))]
+    fn radiosity<'py>(
+        &self,
+        py: Python<'py>,
+        material: PyRef<'_, PyMaterial>,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let m = material.inner;
+        let e = run(py, progress, |tick| self.read().radiosity(&m, Some(tick)))?;
+        let out = rgb_array(py, &e.values);
+        self.keep(e);
+        Ok(out)
+    }
+
+    /// Radiance toward the point `eye`, L = W(w_o) V B / pi, (N, 3) float32; without `eye`,
+    /// along each vertex normal (what a Cycles bake records).
+    #[pyo3(signature = (material, eye = None, progress = None))]
+    fn radiance<'py>(
+        &self,
+        py: Python<'py>,
+        material: PyRef<'_, PyMaterial>,
+        eye: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let m = material.inner;
+        let eye = crate::convert::eye(eye)?;
+        let e = run(py, progress, |tick| {
+            self.read().radiance(&m, eye, Some(tick))
+        })?;
+        let out = rgb_array(py, &e.values);
+        self.keep(e);
+        Ok(out)
+    }
+
+    /// The scene changed: `positions` (N, 3) of the same mesh deformed (normals recomputed
+    /// unless `normals` is given), and/or `lights`: a Scene whose lights, world and occluders
+    /// replace these. The next evaluation splats the new scene; nothing else is redone.
+    #[pyo3(signature = (positions = None, lights = None, normals = None))]
+    fn update(
+        &self,
+        py: Python<'_>,
+        positions: Option<&Bound<'_, PyAny>>,
+        lights: Option<PyRef<'_, PyScene>>,
+        normals: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        if normals.is_some() && positions.is_none() {
+            return Err(PyValueError::new_err("normals need positions"));
+        }
+        let p = positions.map(|p| vec3_array("positions", p)).transpose()?;
+        let n = normals.map(|n| vec3_array("normals", n)).transpose()?;
+        let lights = lights.map(|s| {
+            let s = &s.scene;
+            (s.lights.clone(), s.world.clone(), s.occluders.clone())
+        });
+        run(py, None, |_| {
+            let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
+            if let Some(p) = p {
+                inner.set_positions(p, n)?;
+            }
+            if let Some((l, w, o)) = lights {
+                inner.set_lighting(l, w, Some(o));
+            }
+            Ok(())
+        })
+    }
+
+    /// "cycles", "dipole" or "multipole".
+    #[getter]
+    fn profile(&self) -> &'static str {
+        self.read().profile().name()
+    }
+
+    #[getter]
+    fn eps(&self) -> f64 {
+        self.read().settings().eps
+    }
+
+    #[getter]
+    fn max_grid(&self) -> u32 {
+        self.read().settings().max_grid
+    }
+
+    /// What the last evaluation did (None before the first): "eps", "r_max" and "overlap"
+    /// per channel (eqs. 4, 5), "splats", the stages' seconds, and per light its "grid",
+    /// "grid_capped", "spacing" and ray counts.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        last.as_ref()
+            .map(|e| report_dict(py, &e.details))
+            .transpose()
+    }
+
+    /// The last evaluation, None before the first: the keys every method shares ("method"
+    /// "splat", "quantity", "error_estimate" — None: not computed yet — "seconds", "skipped"
+    /// as {"what", "why"}) and "refresh_advised" (always False: nothing precomputed).
+    #[getter]
+    fn last_eval<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let Some(e) = last.as_ref() else {
+            return Ok(None);
+        };
+        let d = evaluation_dict(py, "splat", e)?;
+        d.set_item("refresh_advised", false)?;
+        Ok(Some(d))
+    }
+
+    fn __repr__(&self) -> String {
+        let s = self.read();
+        format!(
+            "Splat({} vertices, profile {}, eps {}, max_grid {})",
+            s.scene().mesh.vertex_count(),
+            s.profile().name(),
+            s.settings().eps,
+            s.settings().max_grid
+        )
+    }
 }

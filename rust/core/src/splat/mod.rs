@@ -29,7 +29,8 @@ use crate::evaluation::{check_eye, radiance_from_radiosity, Quantity, Skipped};
 use crate::irradiance::{irradiance, IrradianceSettings};
 use crate::lights::{Light, World};
 use crate::occluders::Occluders;
-use crate::profiles::{LookupProfile, LookupRgb, RadialProfile, Resolved};
+use crate::optics::Material;
+use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile, Resolved};
 use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
@@ -325,4 +326,79 @@ pub fn splat_radiance(
     e.quantity = Quantity::Radiance;
     e.seconds = start.elapsed().as_secs_f64();
     Ok(e)
+}
+
+/// The splatting over a scene it keeps (Shah 2009's setting: geometry, lights and material may
+/// all change between frames): nothing is precomputed, so `set_positions` and `set_lighting`
+/// only replace what the next evaluation reads.
+#[derive(Debug, Clone)]
+pub struct Splatting {
+    scene: Scene,
+    profile: ProfileKind,
+    settings: SplatSettings,
+}
+
+impl Splatting {
+    /// Errors: `eps` or `max_grid` out of range (`Error::InvalidArgument`, naming it).
+    pub fn new(scene: Scene, profile: ProfileKind, settings: SplatSettings) -> Result<Self> {
+        sizes::check_eps(settings.eps)?;
+        sizes::check_max_grid(settings.max_grid)?;
+        Ok(Self {
+            scene,
+            profile,
+            settings,
+        })
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn profile(&self) -> ProfileKind {
+        self.profile
+    }
+
+    pub fn settings(&self) -> SplatSettings {
+        self.settings
+    }
+
+    /// A pose: the same vertices and triangles at `positions` (`Mesh::posed`).
+    pub fn set_positions(
+        &mut self,
+        positions: Vec<Vec3>,
+        normals: Option<Vec<Vec3>>,
+    ) -> Result<()> {
+        self.scene.mesh = self.scene.mesh.posed(positions, normals)?;
+        Ok(())
+    }
+
+    /// New lights and world, and a new rest of the scene where `occluders` is given.
+    pub fn set_lighting(&mut self, lights: Vec<Light>, world: World, occluders: Option<Occluders>) {
+        self.scene.lights = lights;
+        self.scene.world = world;
+        if let Some(o) = occluders {
+            self.scene.occluders = o;
+        }
+    }
+
+    /// `splat_radiosity` of `material` under the kept profile (tables built if needed).
+    pub fn radiosity(
+        &self,
+        material: &Material,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Evaluation> {
+        let resolved = Resolved::new(self.profile, material)?;
+        splat_radiosity(&self.scene, &resolved, &self.settings, progress)
+    }
+
+    /// `splat_radiance` of `material` toward `eye` or along each normal.
+    pub fn radiance(
+        &self,
+        material: &Material,
+        eye: Option<Vec3>,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Evaluation> {
+        let resolved = Resolved::new(self.profile, material)?;
+        splat_radiance(&self.scene, &resolved, &self.settings, eye, progress)
+    }
 }

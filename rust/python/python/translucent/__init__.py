@@ -22,6 +22,7 @@ from ._native import (
     Material,
     Prt,
     Scene,
+    Splat,
     __version__,
     layer_weight,
     prepare_profile,
@@ -32,8 +33,6 @@ from ._native import (
     reference_single_scattering,
     relative_error,
     set_table_cache,
-    splat_radiance,
-    splat_radiosity,
     table_cache,
 )
 
@@ -54,6 +53,7 @@ __all__ = [
     "Material",
     "Prt",
     "Scene",
+    "Splat",
     "__version__",
     "layer_weight",
     "prepare_profile",
@@ -63,7 +63,5 @@ __all__ = [
     "reference_single_scattering",
     "relative_error",
     "set_table_cache",
-    "splat_radiance",
-    "splat_radiosity",
     "table_cache",
 ]

@@ -369,6 +369,43 @@ class Prt:
     @property
     def vertex_count(self) -> int: ...
 
+class Splat:
+    """Image-space splatting (Shah et al. 2009) over a copy of `scene`, nothing precomputed:
+    every evaluation splats each sun, point or spot light's view (ray casts on the CPU) and
+    gathers the splats within r_max (eq. 4) at the vertices of their own object. `eps` is
+    eqs. 4-5's threshold in (0, 1); `max_grid` the largest light-view side in [1, 4096] (eq. 5's
+    grid is cut to it, the cut reported). ValueError naming eps, max_grid or profile."""
+
+    def __init__(self, scene: Scene, profile: Profile = "cycles", eps: float = 0.01, max_grid: int = 1024) -> None: ...
+    def radiosity(self, material: Material, progress: Progress | None = None) -> npt.NDArray[np.float32]:
+        """(N, 3) radiosity B per vertex; Cancelled when `progress` returns False."""
+    def radiance(
+        self, material: Material, eye: Vec3 | None = None, progress: Progress | None = None
+    ) -> npt.NDArray[np.float32]:
+        """(N, 3) radiance toward `eye` (scene units) or along each normal (None)."""
+    def update(
+        self,
+        positions: npt.ArrayLike | None = None,
+        lights: Scene | None = None,
+        normals: npt.ArrayLike | None = None,
+    ) -> None:
+        """A pose (same vertices and triangles) and/or a Scene whose lights, world and
+        occluders replace these; the next evaluation splats the new scene."""
+    @property
+    def profile(self) -> Profile: ...
+    @property
+    def eps(self) -> float: ...
+    @property
+    def max_grid(self) -> int: ...
+    @property
+    def report(self) -> dict[str, object] | None:
+        """The last evaluation's r_max, overlap, splats, stage seconds and per-light grid and
+        ray counts; None before the first."""
+    @property
+    def last_eval(self) -> dict[str, object] | None:
+        """The keys every method shares ("method" "splat", "quantity", "error_estimate" None:
+        not computed yet, "seconds", "skipped") and "refresh_advised" (False)."""
+
 class Hierarchy:
     """Hierarchical boundary elements (Mertens 2003): a face-cluster hierarchy over a copy of
     the scene, links refined by the solid-angle oracle, for deforming meshes and moving lights.
@@ -435,34 +472,6 @@ class Hierarchy:
         links, push, estimate) and in all, error_estimate per channel (the walks' noise
         added), terms (None with walks off; else walks, walks_indirect, own_light_rays,
         own_light_share, carried_pose, seconds)."""
-
-def splat_radiosity(
-    scene: Scene,
-    material: Material,
-    profile: Profile = "cycles",
-    eps: float = 0.01,
-    max_grid: int = 1024,
-    progress: Progress | None = None,
-) -> tuple[npt.NDArray[np.float32], dict[str, object]]:
-    """Radiosity B per vertex by image-space splatting (Shah et al. 2009), nothing precomputed:
-    each sun, point or spot light's view gives the splats (ray casts on the CPU), each vertex
-    gathers those within r_max (eq. 4) on its own object. `eps` is eqs. 4-5's threshold in
-    (0, 1); `max_grid` the largest light-view side in [1, 4096] (eq. 5's grid is cut to it, the
-    cut reported). Returns (values (N, 3), evaluation): "method" "splat", "quantity",
-    "error_estimate" (None: not computed yet), "seconds", "skipped" (area lights, the world,
-    the walks, the own light...), and "report" (r_max, overlap, splats, per-light grid and
-    counts, stage seconds). ValueError naming eps or max_grid; Cancelled on a cancel."""
-
-def splat_radiance(
-    scene: Scene,
-    material: Material,
-    eye: Sequence[float] | None = None,
-    profile: Profile = "cycles",
-    eps: float = 0.01,
-    max_grid: int = 1024,
-    progress: Progress | None = None,
-) -> tuple[npt.NDArray[np.float32], dict[str, object]]:
-    """`splat_radiosity`'s B leaving toward `eye` (scene units) or along each normal (None)."""
 
 @overload
 def reference_radiosity(
