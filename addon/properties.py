@@ -18,27 +18,25 @@ from . import edits, follow
 from .principled import principled_inputs, read_from_principled
 
 
-def _preset_items(self, context):
+def _preset_names() -> list[str]:
+    """Jensen 2001's measured materials, none where the native module is missing."""
     try:
         import translucent
 
-        names = translucent.Material.preset_names()
+        return translucent.Material.preset_names()
     except ImportError:
-        names = []
+        return []
+
+
+def _preset_items(self, context):
     return [("CUSTOM", "Custom", "Coefficients as set below")] + [
-        (n.upper(), n.capitalize(), f"Jensen 2001 measured {n}") for n in names
+        (n.upper(), n.capitalize(), f"Jensen 2001 measured {n}") for n in _preset_names()
     ]
 
 
 def _top_layer_items(self, context):
-    try:
-        import translucent
-
-        names = translucent.Material.preset_names()
-    except ImportError:
-        names = []
     return [("NONE", "None", "No layer over the medium")] + [
-        (n.upper(), n.capitalize(), f"A layer of Jensen 2001 measured {n}") for n in names
+        (n.upper(), n.capitalize(), f"A layer of Jensen 2001 measured {n}") for n in _preset_names()
     ]
 
 

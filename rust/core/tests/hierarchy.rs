@@ -57,6 +57,27 @@ fn settings(model: ProfileKind, mode: Mode) -> HierarchySettings {
     }
 }
 
+/// Every profile kind the hierarchy is checked with.
+const PROFILES: [ProfileKind; 3] = [
+    ProfileKind::Dipole,
+    ProfileKind::Cycles,
+    ProfileKind::Multipole,
+];
+
+/// The material a profile is checked with: the half-space itself, or for the multipole a
+/// 4 mm slab of the same medium (its top face the surface).
+fn for_profile(half_space: Material, model: ProfileKind) -> Material {
+    match model {
+        ProfileKind::Multipole => half_space
+            .with_stack(Stack {
+                thickness: 4.0,
+                top: None,
+            })
+            .unwrap(),
+        _ => half_space,
+    }
+}
+
 #[test]
 #[allow(clippy::needless_range_loop)]
 fn sun_over_a_large_plane_gives_the_closed_form() {
@@ -76,21 +97,8 @@ fn sun_over_a_large_plane_gives_the_closed_form() {
         ("skimmilk", 0.2),
     ] {
         let half_space = Material::preset(name, 1.0).unwrap();
-        for model in [
-            ProfileKind::Dipole,
-            ProfileKind::Cycles,
-            ProfileKind::Multipole,
-        ] {
-            // The multipole on a 4 mm slab of the medium (the plane its top face).
-            let m = match model {
-                ProfileKind::Multipole => half_space
-                    .with_stack(Stack {
-                        thickness: 4.0,
-                        top: None,
-                    })
-                    .unwrap(),
-                _ => half_space,
-            };
+        for model in PROFILES {
+            let m = for_profile(half_space, model);
             let mut scene = Scene::new(mesh.clone());
             let dir = Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32);
             scene.lights.push(Light::sun(dir, [2.0; 3]).unwrap());
@@ -187,21 +195,8 @@ fn radiosity_matches_the_ground_truth_on_a_lumpy_sphere() {
     let scene = lit(mesh, Vec3::new(20.0, -10.0, 30.0));
     for name in ["marble", "ketchup"] {
         let half_space = Material::preset(name, 1.0).unwrap();
-        for model in [
-            ProfileKind::Dipole,
-            ProfileKind::Cycles,
-            ProfileKind::Multipole,
-        ] {
-            // The multipole on a 4 mm slab of the medium (the plane its top face).
-            let m = match model {
-                ProfileKind::Multipole => half_space
-                    .with_stack(Stack {
-                        thickness: 4.0,
-                        top: None,
-                    })
-                    .unwrap(),
-                _ => half_space,
-            };
+        for model in PROFILES {
+            let m = for_profile(half_space, model);
             let e = error_on(&scene, &m, model, &receivers, &weights);
             eprintln!("{name} {model:?}: {e:?}");
             assert!(e.worst_rms() < 0.02, "{name} {model:?}: {e:?}");
@@ -234,21 +229,8 @@ fn vertices_on_an_open_edge_match_the_ground_truth() {
         .push(Light::sun(Vec3::new(0.2, 0.1, -1.0), [1.0; 3]).unwrap());
     for name in ["marble", "skimmilk"] {
         let half_space = Material::preset(name, 1.0).unwrap();
-        for model in [
-            ProfileKind::Dipole,
-            ProfileKind::Cycles,
-            ProfileKind::Multipole,
-        ] {
-            // The multipole on a 4 mm slab of the medium (the plane its top face).
-            let m = match model {
-                ProfileKind::Multipole => half_space
-                    .with_stack(Stack {
-                        thickness: 4.0,
-                        top: None,
-                    })
-                    .unwrap(),
-                _ => half_space,
-            };
+        for model in PROFILES {
+            let m = for_profile(half_space, model);
             let e = error_on(&scene, &m, model, &receivers, &weights);
             eprintln!("edge, {name} {model:?}: {e:?}");
             assert!(e.worst_rms() < 0.01, "{name} {model:?}: {e:?}");

@@ -36,7 +36,7 @@
 //! at open boundaries, and the phantom radiosity of an isolated vertex off the surface.
 
 mod common;
-use common::{mesh, plane_parts, sphere_parts};
+use common::{mesh, nearest, plane_parts, sphere_parts};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 use std::f64::consts::PI;
@@ -291,17 +291,6 @@ impl Lit {
 
 fn all_finite_non_negative(values: &[[f32; 3]]) -> bool {
     values.iter().flatten().all(|x| x.is_finite() && *x >= 0.0)
-}
-
-/// Index of the vertex nearest `x`.
-fn nearest(mesh: &Mesh, x: Vec3) -> usize {
-    (0..mesh.vertex_count())
-        .min_by(|a, b| {
-            (mesh.positions()[*a] - x)
-                .length()
-                .total_cmp(&(mesh.positions()[*b] - x).length())
-        })
-        .unwrap()
 }
 
 // ------------------------------------------------------------------- the dipole, thousands

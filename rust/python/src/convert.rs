@@ -108,6 +108,26 @@ pub fn vec3_array(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
         .collect())
 }
 
+/// An `update`'s pose: `positions` (N, 3) and optional `normals` (N, 3), or None without
+/// positions; normals without positions are a ValueError.
+#[allow(clippy::type_complexity)]
+pub fn pose(
+    positions: Option<&Bound<'_, PyAny>>,
+    normals: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Option<(Vec<Vec3>, Option<Vec<Vec3>>)>> {
+    let Some(p) = positions else {
+        if normals.is_some() {
+            return Err(PyValueError::new_err(
+                "normals need positions (a pose): update(positions=..., normals=...)",
+            ));
+        }
+        return Ok(None);
+    };
+    let p = vec3_array("positions", p)?;
+    let n = normals.map(|n| vec3_array("normals", n)).transpose()?;
+    Ok(Some((p, n)))
+}
+
 /// A count or index argument taken as i64 (so that a negative value reaches us instead of
 /// pyo3's OverflowError) and checked here: ValueError naming the argument.
 pub fn non_negative<T: TryFrom<i64>>(name: &str, value: i64) -> PyResult<T> {

@@ -2,7 +2,7 @@
 //! geometry, lights and material all change.
 
 use crate::call::{busy, run};
-use crate::convert::{non_negative, rgb_array, vec3_array};
+use crate::convert::{non_negative, rgb_array};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
@@ -185,18 +185,11 @@ impl PyHierarchy {
         lights: Option<PyRef<'_, PyScene>>,
         normals: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        if normals.is_some() && positions.is_none() {
-            return Err(PyValueError::new_err("normals need positions"));
-        }
-        let p = positions.map(|p| vec3_array("positions", p)).transpose()?;
-        let n = normals.map(|n| vec3_array("normals", n)).transpose()?;
-        let lights = lights.map(|s| {
-            let s = &s.scene;
-            (s.lights.clone(), s.world.clone(), s.occluders.clone())
-        });
+        let pose = crate::convert::pose(positions, normals)?;
+        let lights = lights.map(|s| s.lighting());
         run(py, None, |_| {
             let mut inner = self.lock();
-            if let Some(p) = p {
+            if let Some((p, n)) = pose {
                 inner.set_positions(p, n)?;
             }
             if let Some((l, w, o)) = lights {

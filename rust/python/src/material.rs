@@ -6,7 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use translucent_core::optics::principled::{self, PrincipledInputs};
 use translucent_core::optics::{Layers, Material, Stack, TopLayer};
-use translucent_core::profiles::{stacked, table, ProfileKind, Resolved};
+use translucent_core::profiles::{table, ProfileKind, Resolved};
 
 /// A homogeneous translucent material: the medium (coefficients in 1/scene unit) and the
 /// Principled BSDF layers Cycles puts around its subsurface lobe.
@@ -302,15 +302,7 @@ pub fn prepare_profile(
     let m = material.inner;
     run(py, progress, |tick| {
         let start = std::time::Instant::now();
-        match kind {
-            ProfileKind::Cycles => {
-                table::tables_for_with_progress(&m, Some(tick))?;
-            }
-            ProfileKind::Multipole => {
-                stacked::profiles(&m)?;
-            }
-            ProfileKind::Dipole => {}
-        }
+        kind.prepare(&m, Some(tick))?;
         Ok(start.elapsed().as_secs_f64())
     })
 }
@@ -320,11 +312,7 @@ pub fn prepare_profile(
 #[pyfunction]
 #[pyo3(signature = (material, profile = "cycles"))]
 pub fn profile_ready(material: PyRef<'_, PyMaterial>, profile: &str) -> PyResult<bool> {
-    Ok(match profile_kind(profile)? {
-        ProfileKind::Cycles => table::tables_ready(&material.inner),
-        ProfileKind::Multipole => stacked::ready(&material.inner),
-        ProfileKind::Dipole => true,
-    })
+    Ok(profile_kind(profile)?.ready(&material.inner))
 }
 
 /// Where the walk tables are kept between sessions (None: memory only). Returns the folder

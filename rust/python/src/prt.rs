@@ -671,18 +671,9 @@ impl PyPrt {
         first_preview: Option<bool>,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        if normals.is_some() && positions.is_none() {
-            return Err(PyValueError::new_err(
-                "normals need positions (a pose): update(positions=..., normals=...)",
-            ));
-        }
         let quick = first_preview.unwrap_or(true);
-        if let Some(p) = positions {
-            let p = crate::convert::vec3_array("positions", p)?;
-            let n = normals
-                .map(|n| crate::convert::vec3_array("normals", n))
-                .transpose()?;
-            return self.pose(py, lights.as_deref(), Some((p, n)), quick, progress);
+        if let Some(pose) = crate::convert::pose(positions, normals)? {
+            return self.pose(py, lights.as_deref(), Some(pose), quick, progress);
         }
         let Some(lights) = lights else {
             return Err(PyValueError::new_err(

@@ -11,7 +11,7 @@ use std::sync::{Arc, OnceLock};
 use translucent_core::irradiance::{irradiance_with_progress, IrradianceSettings};
 use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
-use translucent_core::occluders::OccluderReport;
+use translucent_core::occluders::{OccluderReport, Occluders};
 use translucent_core::raytrace::Tracer;
 use translucent_core::scene::Scene;
 
@@ -33,6 +33,12 @@ impl PyScene {
     /// The scene's lighting version counter, shared with what was precomputed from it.
     pub fn lighting_counter(&self) -> Arc<AtomicU64> {
         self.lighting.clone()
+    }
+
+    /// Its lights, world and occluders: what an `update(lights=scene)` takes from it.
+    pub fn lighting(&self) -> (Vec<Light>, World, Occluders) {
+        let s = &self.scene;
+        (s.lights.clone(), s.world.clone(), s.occluders.clone())
     }
 
     fn lighting_changed(&mut self) {

@@ -2,7 +2,7 @@
 //! nothing precomputed: every evaluation splats each light's view anew.
 
 use crate::call::run;
-use crate::convert::{int, rgb_array, vec3_array};
+use crate::convert::{int, rgb_array};
 use crate::evaluation::evaluation_dict;
 use crate::material::{profile_kind, PyMaterial};
 use crate::scene::PyScene;
@@ -142,18 +142,11 @@ impl PySplat {
         lights: Option<PyRef<'_, PyScene>>,
         normals: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        if normals.is_some() && positions.is_none() {
-            return Err(PyValueError::new_err("normals need positions"));
-        }
-        let p = positions.map(|p| vec3_array("positions", p)).transpose()?;
-        let n = normals.map(|n| vec3_array("normals", n)).transpose()?;
-        let lights = lights.map(|s| {
-            let s = &s.scene;
-            (s.lights.clone(), s.world.clone(), s.occluders.clone())
-        });
+        let pose = crate::convert::pose(positions, normals)?;
+        let lights = lights.map(|s| s.lighting());
         run(py, None, |_| {
             let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
-            if let Some(p) = p {
+            if let Some((p, n)) = pose {
                 inner.set_positions(p, n)?;
             }
             if let Some((l, w, o)) = lights {

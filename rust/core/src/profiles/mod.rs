@@ -27,6 +27,7 @@ pub use table::{WalkProfile, WalkTable};
 
 use crate::error::{Error, Result};
 use crate::optics::{fresnel_transmittance, principled, Material};
+use crate::progress::ProgressFn;
 
 /// Which radial profile (and exit weight) a method sums.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -149,6 +150,26 @@ impl ProfileKind {
                 }))
             }
             ProfileKind::Multipole => stacked::profiles(material),
+        }
+    }
+
+    /// Builds what `material` needs under this profile ahead of an evaluation: Cycles' walk
+    /// tables (or reads them from the cache folder), the multipole's layered tables (kept in
+    /// memory); nothing for the dipole. Errors: a material the profile refuses, a cancel.
+    pub fn prepare(self, material: &Material, progress: Option<&ProgressFn>) -> Result<()> {
+        match self {
+            ProfileKind::Cycles => table::tables_for_with_progress(material, progress).map(drop),
+            ProfileKind::Multipole => stacked::profiles(material).map(drop),
+            ProfileKind::Dipole => Ok(()),
+        }
+    }
+
+    /// Whether `prepare` would build nothing: an evaluation will not wait for a table.
+    pub fn ready(self, material: &Material) -> bool {
+        match self {
+            ProfileKind::Cycles => table::tables_ready(material),
+            ProfileKind::Multipole => stacked::ready(material),
+            ProfileKind::Dipole => true,
         }
     }
 }

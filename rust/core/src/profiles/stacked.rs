@@ -18,22 +18,18 @@ const KEPT: usize = 96;
 /// The three channels' multipole profiles of `material` (its `stack`).
 pub fn profiles(material: &Material) -> Result<[Profile; 3]> {
     material.stack.validate()?;
-    let sp = material.sigma_s_prime();
-    let medium = |c: usize| Medium {
-        sigma_a: material.sigma_a[c],
-        sigma_s_prime: sp[c],
-    };
     let stack = material.stack;
     let eta = material.eta;
     match stack.top {
         None => Ok(std::array::from_fn(|c| {
-            Profile::Slab(Slab::in_the_open(medium(c), stack.thickness, eta).reflectance())
+            Profile::Slab(
+                Slab::in_the_open(medium(material, c), stack.thickness, eta).reflectance(),
+            )
         })),
         Some(top) => {
             let mut out = Vec::with_capacity(3);
             for c in 0..3 {
-                let (upper, base) = (top_medium(&top, material.g, c), medium(c));
-                let key = Key::new(&upper, top.thickness, &base, stack.thickness, eta);
+                let (upper, base, key) = layers(material, &top, c);
                 out.push(Profile::Layered(layered(key, || {
                     Layered::new(upper, top.thickness, base, stack.thickness, eta).map_err(|e| {
                         match e {
@@ -60,32 +56,36 @@ pub fn ready(material: &Material) -> bool {
     if material.stack.validate().is_err() {
         return true;
     }
-    let sp = material.sigma_s_prime();
     let map = kept()
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner());
-    (0..3).all(|c| {
-        let base = Medium {
-            sigma_a: material.sigma_a[c],
-            sigma_s_prime: sp[c],
-        };
-        let upper = top_medium(&top, material.g, c);
-        map.contains_key(&Key::new(
-            &upper,
-            top.thickness,
-            &base,
-            material.stack.thickness,
-            material.eta,
-        ))
-    })
+    (0..3).all(|c| map.contains_key(&layers(material, &top, c).2))
 }
 
-/// The top layer's medium in channel `c`, with the material's phase function.
-fn top_medium(top: &TopLayer, g: f64, c: usize) -> Medium {
+/// The material's own medium in channel `c`.
+fn medium(material: &Material, c: usize) -> Medium {
     Medium {
-        sigma_a: top.sigma_a[c],
-        sigma_s_prime: (1.0 - g) * top.sigma_s[c],
+        sigma_a: material.sigma_a[c],
+        sigma_s_prime: material.sigma_s_prime()[c],
     }
+}
+
+/// Channel `c` of a layered stack: the top layer's medium (with the material's phase
+/// function), the base's, and the key of their table.
+fn layers(material: &Material, top: &TopLayer, c: usize) -> (Medium, Medium, Key) {
+    let upper = Medium {
+        sigma_a: top.sigma_a[c],
+        sigma_s_prime: (1.0 - material.g) * top.sigma_s[c],
+    };
+    let base = medium(material, c);
+    let key = Key::new(
+        &upper,
+        top.thickness,
+        &base,
+        material.stack.thickness,
+        material.eta,
+    );
+    (upper, base, key)
 }
 
 /// What a layered table depends on, bit for bit: the two media, both thicknesses and eta.

@@ -73,3 +73,14 @@ pub fn sphere(n: usize, radius: f32) -> Mesh {
 pub fn mesh((p, t): (Vec<Vec3>, Vec<[u32; 3]>)) -> Mesh {
     Mesh::new(p, t, None).expect("a valid test mesh")
 }
+
+/// Index of the vertex nearest `x`.
+pub fn nearest(mesh: &Mesh, x: Vec3) -> usize {
+    (0..mesh.vertex_count())
+        .min_by(|a, b| {
+            (mesh.positions()[*a] - x)
+                .length()
+                .total_cmp(&(mesh.positions()[*b] - x).length())
+        })
+        .unwrap()
+}

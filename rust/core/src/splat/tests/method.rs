@@ -5,7 +5,7 @@
 use super::super::*;
 use crate::irradiance::{irradiance, Density, IrradianceSettings};
 use crate::mesh::test_meshes::oracles::rd_total;
-use crate::mesh::test_meshes::{plane, sphere, sphere_parts};
+use crate::mesh::test_meshes::{nearest, plane, sphere, sphere_parts};
 use crate::mesh::Mesh;
 use crate::metrics::relative_error;
 use crate::optics::{fresnel_transmittance, Material};
@@ -26,14 +26,16 @@ fn sunlit(mesh: Mesh, direction: Vec3) -> Scene {
     scene
 }
 
-fn nearest(mesh: &Mesh, x: Vec3) -> usize {
-    (0..mesh.vertex_count())
-        .min_by(|a, b| {
-            (mesh.positions()[*a] - x)
-                .length()
-                .total_cmp(&(mesh.positions()[*b] - x).length())
-        })
-        .unwrap()
+/// The splatting at the default settings of `mesh` under a unit sun `theta` from +Z (in xz).
+fn sun_at(mesh: &Mesh, r: &Resolved, theta: f64) -> Evaluation {
+    let dir = Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32);
+    splat_radiosity(
+        &sunlit(mesh.clone(), dir),
+        r,
+        &SplatSettings::default(),
+        None,
+    )
+    .unwrap()
 }
 
 #[test]
@@ -49,14 +51,7 @@ fn a_sun_over_a_large_plane_gives_the_closed_form_less_eps() {
     let r = dipole("marble", 1.0);
     let m = r.material;
     for theta in [0.0f64, 1.0] {
-        let dir = Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32);
-        let e = splat_radiosity(
-            &sunlit(mesh.clone(), dir),
-            &r,
-            &SplatSettings::default(),
-            None,
-        )
-        .unwrap();
+        let e = sun_at(&mesh, &r, theta);
         let d = &e.details;
         eprintln!(
             "plane, theta {theta}: {} splats, grid {} (capped {}), r_max {:?}, n_o {:?}, \
@@ -353,14 +348,7 @@ fn cycles_profile_on_a_plane_gives_its_total() {
     let r = Resolved::new(ProfileKind::Cycles, &m).unwrap();
     assert!(r.profiles.iter().all(|p| p.point_mass() > 0.0));
     let theta = 0.5f64;
-    let dir = Vec3::new(theta.sin() as f32, 0.0, -theta.cos() as f32);
-    let e = splat_radiosity(
-        &sunlit(mesh.clone(), dir),
-        &r,
-        &SplatSettings::default(),
-        None,
-    )
-    .unwrap();
+    let e = sun_at(&mesh, &r, theta);
     let inner: Vec<usize> = (0..mesh.vertex_count())
         .filter(|&v| mesh.positions()[v].length() < 30.0)
         .collect();
