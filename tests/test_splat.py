@@ -109,3 +109,54 @@ def test_what_it_cannot_splat_is_named_and_bad_arguments_raise():
         splat.update(positions=np.full((len(p), 3), np.nan, np.float32))
     with pytest.raises(translucent.Cancelled):
         splat.radiosity(MARBLE_MM, progress=lambda f: False)
+
+
+def test_render_shows_the_camera_view_with_its_conventions_and_the_ground_truth():
+    # A 10 mm marble sphere lit from +x and the camera's side, seen from -y with z up: +x is
+    # the image's right, +z its top row; the pixel at the sphere's centre sees the point facing
+    # the camera.
+    p, t = sphere(16, 10.0)
+    s = translucent.Scene(p, t)
+    s.add_sun((-0.6, 0.8, 0.0), 1.0)
+    splat = translucent.Splat(s, profile="dipole")
+    eye = (0.0, -60.0, 0.0)
+    image, mask = splat.render(MARBLE_MM, eye=eye, target=(0.0, 0.0, 0.0), fov=0.5, size=(64, 48))
+    assert image.shape == (48, 64, 3) and image.dtype == np.float32
+    assert mask.shape == (48, 64) and mask.dtype == np.int32
+    # The sphere spans atan(10 / 60) = 0.165 rad of the 0.25 half-angle: about 42 of 64 columns.
+    covered = np.flatnonzero(mask[24] == 1)
+    assert 38 <= len(covered) <= 46 and mask[0, 0] == 0 and np.all(image[mask == 0] == 0)
+    assert image[24, 48:56, 0].mean() > 2 * image[24, 8:16, 0].mean() + 1e-9  # lit from the right
+    ev = splat.last_eval
+    assert ev["quantity"] == "radiance" and ev["method"] == "splat"
+    assert splat.report["pixels"] == int((mask > 0).sum()) and splat.report["seconds_camera_view"] >= 0
+    # Against the ground truth at the vertex facing the camera, through the same exit weight the
+    # per-vertex radiance applies (its ratio to B, checked above to be one factor).
+    v = int(np.argmin(np.linalg.norm(p - np.array([0.0, -10.0, 0.0]), axis=1)))
+    truth = translucent.reference_radiosity(s, MARBLE_MM, rel_tol=1e-3, receivers=[v], profile="dipole")[0]
+    exit_w = splat.radiance(MARBLE_MM, eye=eye)[v] / splat.radiosity(MARBLE_MM)[v]
+    centre = image[23:25, 31:33].mean(axis=(0, 1))
+    assert np.all(np.abs(centre / (truth * exit_w) - 1) < 0.03), centre / (truth * exit_w)
+    # Lit from above instead: the top rows are the bright ones.
+    s2 = translucent.Scene(p, t)
+    s2.add_sun((0.0, 0.0, -1.0), 1.0)
+    splat.update(lights=s2)
+    image, mask = splat.render(MARBLE_MM, eye=eye, target=(0.0, 0.0, 0.0), fov=0.5, size=(64, 48))
+    assert image[10:16, 30:34, 0].mean() > 10 * image[32:38, 30:34, 0].mean() + 1e-9
+
+
+def test_render_refuses_bad_cameras_naming_them_and_cancels():
+    p, s = sun_plane(21, 20.0)
+    splat = translucent.Splat(s, profile="dipole", max_grid=64)
+    ok = dict(eye=(0.0, -30.0, 30.0), target=(0.0, 0.0, 0.0), size=(16, 12))
+    for kw, name in [(dict(eye=(float("nan"), 0, 0)), "eye"), (dict(target=(0.0, -30.0, 30.0)), "target"),
+                     (dict(up=(0.0, -1.0, 1.0)), "up"), (dict(fov=0.0), "fov"), (dict(fov=4.0), "fov"),
+                     (dict(size=(0, 12)), "size"), (dict(size=(16,)), "size"), (dict(size=(1.5, 2)), "size"),
+                     (dict(size=(9000, 10)), "size")]:
+        with pytest.raises(ValueError, match=name):
+            splat.render(MARBLE_MM, **{**ok, **kw})
+    with pytest.raises(translucent.Cancelled):
+        splat.render(MARBLE_MM, progress=lambda f: False, **ok)
+    image, mask = splat.render(MARBLE_MM, **ok)
+    # The 20 mm plane fills the middle of the view (about 30 mm across at the target).
+    assert image.shape == (12, 16, 3) and mask[6, 8] == 1 and mask[0, 0] == 0 and image[6, 8, 0] > 0

@@ -142,6 +142,11 @@ impl Occluders {
         self.triangles.len()
     }
 
+    /// Every triangle, unculled: what a camera may see in front of the mesh.
+    pub fn triangles(&self) -> &[[Vec3; 3]] {
+        &self.triangles
+    }
+
     /// Every triangle with its object's albedo, when some object sends light back (None when
     /// none does: no bounce, no work). All triangles, those of black objects too: they shadow
     /// the bounce's light and hide what lies behind them.

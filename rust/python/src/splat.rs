@@ -2,16 +2,18 @@
 //! nothing precomputed: every evaluation splats each light's view anew.
 
 use crate::call::run;
-use crate::convert::{int, rgb_array};
+use crate::convert::{int, rgb_array, vec3};
 use crate::evaluation::evaluation_dict;
 use crate::material::{profile_kind, PyMaterial};
 use crate::scene::PyScene;
-use numpy::PyArray2;
+use numpy::{PyArray2, PyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::sync::{Mutex, RwLock};
+use translucent_core::splat::camera::{Camera, DEFAULT_FOV, MAX_SIDE};
 use translucent_core::splat::{Evaluation, SplatReport, SplatSettings, Splatting, MAX_GRID};
+use translucent_core::Vec3;
 
 /// The splatting over a copy of a scene (`update` changes it, not the Scene). Evaluations run
 /// off the GIL and may overlap; an `update` waits for them.
@@ -43,6 +45,8 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
     report.set_item("seconds_light_view", r.seconds_light_view)?;
     report.set_item("seconds_splat", r.seconds_splat)?;
     report.set_item("seconds_point_mass", r.seconds_point_mass)?;
+    report.set_item("seconds_camera_view", r.seconds_camera_view)?;
+    report.set_item("pixels", r.pixels)?;
     let lights = PyList::empty(py);
     for l in &r.lights {
         let x = PyDict::new(py);
@@ -66,6 +70,31 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
     }
     report.set_item("lights", lights)?;
     Ok(report)
+}
+
+/// An image's (width, height): two integers, each in [1, 8192] (the core checks the range).
+fn image_size(value: &Bound<'_, PyAny>) -> PyResult<(u32, u32)> {
+    let bad = || {
+        PyValueError::new_err(format!(
+            "size must be (width, height) in pixels, two integers in [1, {MAX_SIDE}]; got {}",
+            value.repr().map(|r| r.to_string()).unwrap_or_default()
+        ))
+    };
+    let items: Vec<Bound<'_, PyAny>> = value
+        .try_iter()
+        .map_err(|_| bad())?
+        .collect::<PyResult<_>>()?;
+    if items.len() != 2 {
+        return Err(bad());
+    }
+    let side = |v: &Bound<'_, PyAny>| {
+        int(v)
+            .ok()
+            .and_then(|n| u32::try_from(n).ok())
+            .filter(|n| (1..=MAX_SIDE).contains(n))
+            .ok_or_else(bad)
+    };
+    Ok((side(&items[0])?, side(&items[1])?))
 }
 
 #[pymethods]
@@ -129,6 +158,53 @@ impl PySplat {
         let out = rgb_array(py, &e.values);
         self.keep(e);
         Ok(out)
+    }
+
+    /// The camera's image (Shah 2009's passes 2-4): a pinhole at `eye` looking at `target`,
+    /// `up` the image's up, `fov` the angle [rad] across the larger side of `size` = (width,
+    /// height). Returns ((H, W, 3) float32 radiance, row 0 the top; (H, W) int32 mask: the
+    /// object seen plus 1, 0 where the pixel sees no previewed object). Releases the GIL;
+    /// `progress(fraction)` as for every long call (False cancels).
+    #[pyo3(signature = (material, eye, target, up = None, fov = DEFAULT_FOV, size = None, progress = None))]
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        material: PyRef<'_, PyMaterial>,
+        eye: &Bound<'_, PyAny>,
+        target: &Bound<'_, PyAny>,
+        up: Option<&Bound<'_, PyAny>>,
+        fov: f64,
+        size: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+    ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<i32>>)> {
+        let m = material.inner;
+        let eye = vec3("eye", eye)?;
+        let target = vec3("target", target)?;
+        let up = match up.filter(|u| !u.is_none()) {
+            Some(u) => vec3("up", u)?,
+            None => Vec3::Z,
+        };
+        let (width, height) = match size.filter(|s| !s.is_none()) {
+            Some(s) => image_size(s)?,
+            None => (800, 600),
+        };
+        let camera =
+            Camera::new(eye, target, up, fov, (width, height)).map_err(crate::convert::to_py)?;
+        let r = run(py, progress, |tick| {
+            self.read().render(&m, &camera, Some(tick))
+        })?;
+        let (h, w) = (r.height as usize, r.width as usize);
+        let flat: Vec<f32> = r.evaluation.values.iter().flatten().copied().collect();
+        let image = numpy::ndarray::Array3::from_shape_vec((h, w, 3), flat)
+            .map(|a| PyArray3::from_owned_array(py, a))
+            .expect("three per pixel");
+        let mask: Vec<i32> = r.mask.iter().map(|&m| m as i32).collect();
+        let mask = numpy::ndarray::Array2::from_shape_vec((h, w), mask)
+            .map(|a| PyArray2::from_owned_array(py, a))
+            .expect("one per pixel");
+        self.keep(r.evaluation);
+        Ok((image, mask))
     }
 
     /// The scene changed: `positions` (N, 3) of the same mesh deformed (normals recomputed

@@ -134,6 +134,22 @@ pub fn irradiance_with_progress(
     )
 }
 
+/// `irradiance` from `lights` alone (no world), for a mesh whose box is `bounds`: the caller
+/// holds no `Scene` of its own (the splatting's receivers).
+pub fn irradiance_of_lights(
+    bounds: (Vec3, Vec3),
+    lights: &[Light],
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+    let world = World::Black;
+    estimate(
+        bounds, lights, &world, tracer, points, normals, settings, None,
+    )
+}
+
 #[allow(clippy::too_many_arguments)]
 fn estimate(
     bounds: (Vec3, Vec3),

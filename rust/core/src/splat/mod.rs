@@ -18,6 +18,7 @@
 //! a splat a vertex reads the profile's mean over the splat's patch, not its value at the
 //! centre (`receivers`).
 
+pub mod camera;
 pub mod light_view;
 pub mod receivers;
 pub mod sizes;
@@ -26,7 +27,7 @@ mod tests;
 
 use crate::error::{Error, Result};
 use crate::evaluation::{check_eye, radiance_from_radiosity, Quantity, Skipped};
-use crate::irradiance::{irradiance, IrradianceSettings};
+use crate::irradiance::{irradiance_of_lights, IrradianceSettings};
 use crate::lights::{Light, World};
 use crate::occluders::Occluders;
 use crate::optics::Material;
@@ -34,6 +35,7 @@ use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile, Reso
 use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
+use camera::{camera_view, Camera};
 use glam::Vec3;
 use light_view::{light_samples, BoundingSphere, View, ViewCounts};
 use receivers::{gather, Splat};
@@ -104,6 +106,10 @@ pub struct SplatReport {
     pub seconds_splat: f64,
     /// The point mass's irradiance at the vertices (0 where the profile has none).
     pub seconds_point_mass: f64,
+    /// Pass 2, a render only: the camera's view (0 at the vertices).
+    pub seconds_camera_view: f64,
+    /// Pixels that see the mesh, a render only (0 at the vertices).
+    pub pixels: usize,
 }
 
 fn light_kind(light: &Light) -> &'static str {
@@ -172,23 +178,34 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> (Vec<(usize, View)>, Vec<Skip
     (views, skipped)
 }
 
-/// Radiosity B per vertex of `scene.mesh` for the material `resolved` by splatting, with the
-/// shared evaluation's seconds and skips (no error estimate: None). `progress` hears of the
-/// light views (the first 45 %, per row of rays) and the gather (to 95 %, per vertex); false
-/// cancels (`Error::Cancelled`). Errors: `eps` or `max_grid` out of range
-/// (`Error::InvalidArgument`, naming it).
-pub fn splat_radiosity(
+/// Pass 1's result: the splats of every light splatted, with what the receivers need.
+struct Sources {
+    splats: Vec<Splat>,
+    /// The lights splatted (what the point mass's irradiance is taken from).
+    used: Vec<Light>,
+    /// The mesh and the occluders that can shadow it from those lights.
+    tracer: Tracer,
+    /// The mesh alone, for the camera to add every occluder to.
+    mesh_tracer: Tracer,
+    /// The mesh's box.
+    bounds: (Vec3, Vec3),
+    report: SplatReport,
+    skipped: Vec<Skipped>,
+}
+
+/// Pass 1: each light's view of `scene.mesh` (`progress` from `from` to `to`, per row of rays).
+fn sources(
     scene: &Scene,
     resolved: &Resolved,
     settings: &SplatSettings,
     progress: Option<&ProgressFn>,
-) -> Result<Evaluation> {
-    let start = Instant::now();
+    (from, to): (f32, f32),
+) -> Result<Sources> {
     sizes::check_eps(settings.eps)?;
     sizes::check_max_grid(settings.max_grid)?;
     let eta = resolved.irradiance_eta();
     let spreads: [Option<Spread>; 3] = sizes::spreads(&resolved.profiles, settings.eps)?;
-    tick(progress, 0.0)?;
+    tick(progress, from)?;
     let mesh = &scene.mesh;
     let sphere = BoundingSphere::of(mesh);
     let (views, mut skipped) = plan(scene, &sphere);
@@ -198,22 +215,21 @@ pub fn splat_radiosity(
         .collect();
     // The rest of the scene that can shadow the mesh from the lights splatted.
     let (kept, _) = (scene.occluders).relevant(mesh.bounds(), &used, &World::Black);
-    let tracer = Tracer::new(mesh).with_occluders(&kept);
+    let mesh_tracer = Tracer::new(mesh);
+    let tracer = mesh_tracer.with_occluders(&kept);
     let mut report = SplatReport {
         eps: settings.eps,
         r_max: spreads.map(|s| s.map_or(0.0, |s| s.r_max)),
         overlap: spreads.map(|s| s.map_or(0, |s| s.overlap)),
         ..Default::default()
     };
-
-    // Pass 1: each light's view.
     let t = Instant::now();
     let planned: Vec<Sizes> = (views.iter())
         .map(|(_, v)| Sizes::from_spreads(&spreads, v.width(), settings.max_grid))
         .collect::<Result<_>>()?;
     let rays: u64 = planned.iter().map(|s| u64::from(s.grid).pow(2)).sum();
-    let ticker = Ticker::span(progress, rays, 0.0, 0.45);
-    let (mut samples, mut tags) = (Vec::new(), Vec::new());
+    let ticker = Ticker::span(progress, rays, from, to);
+    let mut splats = Vec::new();
     for ((k, view), sizes) in views.iter().zip(planned) {
         let light = &scene.lights[*k];
         let t_light = Instant::now();
@@ -226,8 +242,10 @@ pub fn splat_radiosity(
                  face, or was shadowed",
             ));
         }
-        tags.extend(std::iter::repeat_n(*k as u32, s.len()));
-        samples.extend(s);
+        splats.extend(s.iter().map(|s| Splat {
+            light: *k as u32,
+            ..Splat::new(s)
+        }));
         report.lights.push(LightReport {
             light: *k,
             kind: light_kind(light),
@@ -244,61 +262,98 @@ pub fn splat_radiosity(
         });
     }
     report.seconds_light_view = t.elapsed().as_secs_f64();
-    report.splats = samples.len();
-    tick(progress, 0.45)?;
+    report.splats = splats.len();
+    tick(progress, to)?;
+    Ok(Sources {
+        splats,
+        used,
+        tracer,
+        mesh_tracer,
+        bounds: mesh.bounds(),
+        report,
+        skipped,
+    })
+}
 
-    // Pass 3: the splats gathered at the vertices, R cut at each channel's r_max.
+/// Pass 3 and the point mass: B at `points` (with their shading `normals` and `objects`), the
+/// splats gathered with R cut at each channel's r_max (`progress` from `from` to `to`, per
+/// receiver), plus the profile's point mass times the irradiance there from the lights
+/// splatted, as the ground truth adds it.
+fn radiosity_at(
+    src: &mut Sources,
+    resolved: &Resolved,
+    settings: &SplatSettings,
+    (points, normals, objects): (&[Vec3], &[Vec3], &[u32]),
+    progress: Option<&ProgressFn>,
+    (from, to): (f32, f32),
+) -> Result<Vec<[f64; 3]>> {
     let t = Instant::now();
     let table = LookupRgb::new(&std::array::from_fn(|c| {
         LookupProfile::new(&resolved.profiles[c], settings.eps)
     }));
-    let splats: Vec<Splat> = (samples.iter().zip(&tags))
-        .map(|(s, &light)| Splat {
-            light,
-            ..Splat::new(s)
-        })
+    let receivers: Vec<(Vec3, u32)> = points
+        .iter()
+        .copied()
+        .zip(objects.iter().copied())
         .collect();
-    drop(samples);
-    let receivers: Vec<(Vec3, u32)> = (0..mesh.vertex_count())
-        .map(|v| (mesh.positions()[v], mesh.object_of_vertex(v)))
-        .collect();
-    let ticker = Ticker::span(progress, receivers.len() as u64, 0.45, 0.95);
-    let reach = report.r_max.iter().cloned().fold(0.0, f64::max);
+    let ticker = Ticker::span(progress, receivers.len() as u64, from, to);
+    let reach = src.report.r_max.iter().cloned().fold(0.0, f64::max);
+    let splats = std::mem::take(&mut src.splats);
     let mut b = gather(splats, &table, reach, &receivers, Some(&ticker))?;
-    report.seconds_splat = t.elapsed().as_secs_f64();
+    src.report.seconds_splat = t.elapsed().as_secs_f64();
 
-    // The point mass (light returned at the entry point itself): the vertex's own irradiance
-    // from the lights splatted, as the ground truth adds it.
     let t = Instant::now();
     let point: [f64; 3] = std::array::from_fn(|c| resolved.profiles[c].point_mass());
-    if point.iter().any(|m| *m > 0.0) && !used.is_empty() {
-        tick(progress, 0.95)?;
-        let lit = Scene {
-            mesh: mesh.clone(),
-            lights: used,
-            world: World::Black,
-            occluders: Occluders::default(),
-        };
+    if point.iter().any(|m| *m > 0.0) && !src.used.is_empty() {
+        tick(progress, to)?;
         let s = IrradianceSettings {
-            eta,
+            eta: resolved.irradiance_eta(),
             ..Default::default()
         };
-        let (e, _) = irradiance(&lit, &tracer, mesh.positions(), mesh.normals(), &s)?;
+        let (e, _) = irradiance_of_lights(src.bounds, &src.used, &src.tracer, points, normals, &s)?;
         for (bv, ev) in b.iter_mut().zip(&e) {
             for c in 0..3 {
                 bv[c] += point[c] * f64::from(ev[c]);
             }
         }
     }
-    report.seconds_point_mass = t.elapsed().as_secs_f64();
+    src.report.seconds_point_mass = t.elapsed().as_secs_f64();
+    Ok(b)
+}
+
+/// Radiosity B per vertex of `scene.mesh` for the material `resolved` by splatting, with the
+/// shared evaluation's seconds and skips (no error estimate: None). `progress` hears of the
+/// light views (the first 45 %, per row of rays) and the gather (to 95 %, per vertex); false
+/// cancels (`Error::Cancelled`). Errors: `eps` or `max_grid` out of range
+/// (`Error::InvalidArgument`, naming it).
+pub fn splat_radiosity(
+    scene: &Scene,
+    resolved: &Resolved,
+    settings: &SplatSettings,
+    progress: Option<&ProgressFn>,
+) -> Result<Evaluation> {
+    let start = Instant::now();
+    let mut src = sources(scene, resolved, settings, progress, (0.0, 0.45))?;
+    let mesh = &scene.mesh;
+    let objects: Vec<u32> = (0..mesh.vertex_count())
+        .map(|v| mesh.object_of_vertex(v))
+        .collect();
+    let b = radiosity_at(
+        &mut src,
+        resolved,
+        settings,
+        (mesh.positions(), mesh.normals(), &objects),
+        progress,
+        (0.45, 0.95),
+    )?;
     tick(progress, 1.0)?;
     Ok(Evaluation {
         values: b.iter().map(|v| v.map(|x| x as f32)).collect(),
         quantity: Quantity::Radiosity,
         error_estimate: None,
         seconds: start.elapsed().as_secs_f64(),
-        skipped,
-        details: report,
+        skipped: src.skipped,
+        details: src.report,
     })
 }
 
@@ -326,6 +381,75 @@ pub fn splat_radiance(
     e.quantity = Quantity::Radiance;
     e.seconds = start.elapsed().as_secs_f64();
     Ok(e)
+}
+
+/// The camera's image of the splatting (Shah 2009's passes 2-4): per pixel the radiance the
+/// previewed mesh sends toward the eye, L = W(cos_o) B / pi with B gathered at the point the
+/// pixel sees (`camera::camera_view`), row-major from the top row; 0 where the pixel sees
+/// nothing of the mesh. `mask` holds the object seen plus 1 per pixel (0: none). The
+/// evaluation's values are the pixels; its report adds the camera's seconds and pixel count.
+pub struct Render {
+    pub evaluation: Evaluation,
+    pub mask: Vec<u32>,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// `Render` of `scene` seen by `camera`. `progress`: the light views to 30 %, the camera view
+/// to 40 %, the gather per pixel to 95 %; false cancels (`Error::Cancelled`).
+pub fn splat_render(
+    scene: &Scene,
+    resolved: &Resolved,
+    settings: &SplatSettings,
+    camera: &Camera,
+    progress: Option<&ProgressFn>,
+) -> Result<Render> {
+    let start = Instant::now();
+    let mut src = sources(scene, resolved, settings, progress, (0.0, 0.3))?;
+    // Pass 2: the receivers, hidden by every object of the rest of the scene in front.
+    let t = Instant::now();
+    let seen = src.mesh_tracer.with_occluders(scene.occluders.triangles());
+    let ticker = Ticker::span(progress, camera.pixels() as u64, 0.3, 0.4);
+    let hits = camera_view(camera, &scene.mesh, &seen, Some(&ticker))?;
+    drop(seen);
+    src.report.seconds_camera_view = t.elapsed().as_secs_f64();
+    src.report.pixels = hits.len();
+    let points: Vec<Vec3> = hits.iter().map(|h| h.position).collect();
+    let normals: Vec<Vec3> = hits.iter().map(|h| h.normal).collect();
+    let objects: Vec<u32> = hits.iter().map(|h| h.object).collect();
+    let b = radiosity_at(
+        &mut src,
+        resolved,
+        settings,
+        (&points, &normals, &objects),
+        progress,
+        (0.4, 0.95),
+    )?;
+    // Pass 4: what leaves toward the eye.
+    let eye = camera.eye();
+    let mut values = vec![[0.0f32; 3]; camera.pixels()];
+    let mut mask = vec![0u32; camera.pixels()];
+    for (h, bv) in hits.iter().zip(&b) {
+        let to_eye = (eye - h.position).normalize_or_zero();
+        let k = resolved.exit_weights(f64::from(h.normal.dot(to_eye)));
+        values[h.pixel as usize] =
+            std::array::from_fn(|c| (bv[c] * k[c] / std::f64::consts::PI) as f32);
+        mask[h.pixel as usize] = h.object + 1;
+    }
+    tick(progress, 1.0)?;
+    Ok(Render {
+        evaluation: Evaluation {
+            values,
+            quantity: Quantity::Radiance,
+            error_estimate: None,
+            seconds: start.elapsed().as_secs_f64(),
+            skipped: src.skipped,
+            details: src.report,
+        },
+        mask,
+        width: camera.width(),
+        height: camera.height(),
+    })
 }
 
 /// The splatting over a scene it keeps (Shah 2009's setting: geometry, lights and material may
@@ -389,6 +513,17 @@ impl Splatting {
     ) -> Result<Evaluation> {
         let resolved = Resolved::new(self.profile, material)?;
         splat_radiosity(&self.scene, &resolved, &self.settings, progress)
+    }
+
+    /// `splat_render` of `material` seen by `camera`.
+    pub fn render(
+        &self,
+        material: &Material,
+        camera: &Camera,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Render> {
+        let resolved = Resolved::new(self.profile, material)?;
+        splat_render(&self.scene, &resolved, &self.settings, camera, progress)
     }
 
     /// `splat_radiance` of `material` toward `eye` or along each normal.

@@ -383,6 +383,23 @@ class Splat:
         self, material: Material, eye: Vec3 | None = None, progress: Progress | None = None
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiance toward `eye` (scene units) or along each normal (None)."""
+    def render(
+        self,
+        material: Material,
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3 | None = None,
+        fov: float = 0.6911503837897546,
+        size: tuple[int, int] | None = None,
+        progress: Progress | None = None,
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]:
+        """The camera's image: a pinhole at `eye` looking at `target` (scene units), `up` the
+        image's up (default +Z), `fov` [rad] across the larger side of `size` = (width, height)
+        (default (800, 600); fov's default is Blender's 50 mm lens on its 36 mm sensor). Returns
+        the (H, W, 3) radiance toward the eye, row 0 the top (0 off the previewed objects and
+        where the rest of the scene stands in front), and an (H, W) mask: the object seen plus
+        1, 0 for none. ValueError naming eye, target, up, fov or size; Cancelled when
+        `progress` returns False."""
     def update(
         self,
         positions: npt.ArrayLike | None = None,
@@ -399,8 +416,9 @@ class Splat:
     def max_grid(self) -> int: ...
     @property
     def report(self) -> dict[str, object] | None:
-        """The last evaluation's r_max, overlap, splats, stage seconds and per-light grid and
-        ray counts; None before the first."""
+        """The last evaluation's r_max, overlap, splats, stage seconds (a render's camera view
+        too, with the pixels that see the mesh) and per-light grid and ray counts; None before
+        the first."""
     @property
     def last_eval(self) -> dict[str, object] | None:
         """The keys every method shares ("method" "splat", "quantity", "error_estimate" None:

@@ -3,6 +3,7 @@
 //! (`reference_radiosity`) for the gathered radiosity, and the shared evaluation's contract
 //! (skips, bad input, cancelling).
 
+mod camera;
 mod light_view;
 mod method;
 mod receivers;
