@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import edits, jobs, panel, viewport, writeback
+from . import edits, jobs, panel, splat_view, viewport, writeback
 from .session import JOBS, SESSIONS, objects_with
 
 
@@ -163,4 +163,108 @@ class TRANSLUCENT_OT_clear(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (TRANSLUCENT_OT_precompute, TRANSLUCENT_OT_clear)
+class TRANSLUCENT_OT_render_splatting(bpy.types.Operator):
+    """Render the previewed materials by image-space splatting (Shah 2009) from a camera into the image
+    "Translucent Splatting"."""
+
+    bl_idname = "translucent.render_splatting"
+    bl_label = "Render Splatting"
+    bl_options = {"REGISTER", "UNDO"}
+
+    camera: bpy.props.StringProperty(name="Camera", description="The camera object (empty: the scene's camera)",
+                                     options={"SKIP_SAVE"})
+    width: bpy.props.IntProperty(name="Width", description="Pixels across (0: the scene's resolution)", min=0,
+                                 max=8192, default=0, options={"SKIP_SAVE"})
+    height: bpy.props.IntProperty(name="Height", description="Pixels down (0: the scene's resolution)", min=0,
+                                  max=8192, default=0, options={"SKIP_SAVE"})
+    filepath: bpy.props.StringProperty(name="File", description="Also save the image here (.exr: linear; "
+                                       "otherwise as the scene's output format, colour managed)", subtype="FILE_PATH",
+                                       options={"SKIP_SAVE"})
+    material_name: bpy.props.StringProperty(name="Material", description="Only this material (empty: every "
+                                            "previewed material in the scene)", options={"HIDDEN", "SKIP_SAVE"})
+
+    _timer = None
+
+    def _prepare(self, context):
+        scene = context.scene
+        cam = bpy.data.objects.get(self.camera) if self.camera else scene.camera
+        if cam is None:
+            self.report({"ERROR"}, f"camera: no object named {self.camera!r}" if self.camera
+                        else "camera: the scene has no camera (pass camera=...)")
+            return None
+        materials = None
+        if self.material_name:
+            mat = _resolve(self, context, needs_preview=True)
+            if mat is None:
+                return None
+            materials = [mat]
+        size = (self.width, self.height) if self.width and self.height else None
+        if (self.width == 0) != (self.height == 0):
+            self.report({"ERROR"}, "width, height: give both, or neither (the scene's resolution)")
+            return None
+        try:
+            view = splat_view.camera_view(cam, scene, size)
+            return splat_view.prepare(scene, view, materials)
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
+            return None
+
+    def _finish(self, context, job):
+        import translucent
+
+        if job.error is not None:
+            if isinstance(job.error, translucent.Cancelled):
+                self.report({"INFO"}, "splatting render cancelled")
+            else:
+                self.report({"ERROR"}, f"splatting render failed: {job.error}")
+            return {"CANCELLED"}
+        splat_view.store(job.result)
+        if self.filepath:
+            try:
+                splat_view.save(self.filepath, context.scene)
+            except RuntimeError as e:
+                self.report({"ERROR"}, f"filepath: could not save {self.filepath!r}: {e}")
+                return {"CANCELLED"}
+        self.report({"INFO"}, splat_view.STATE["message"])
+        return {"FINISHED"}
+
+    def execute(self, context):
+        job = self._prepare(context)
+        if job is None:
+            return {"CANCELLED"}
+        job.run_here()
+        return self._finish(context, job)
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        job = self._prepare(context)
+        if job is None:
+            return {"CANCELLED"}
+        self._job = job
+        job.start()
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        wm = context.window_manager
+        if event.type == "ESC":
+            self._job.cancel = True
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        wm.progress_update(int(100 * self._job.progress))
+        context.workspace.status_text_set(f"Translucent: splatting {100 * self._job.progress:.0f} % (Esc cancels)")
+        if not self._job.done:
+            return {"RUNNING_MODAL"}
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        for area in context.screen.areas:
+            area.tag_redraw()
+        return self._finish(context, self._job)
+
+
+classes = (TRANSLUCENT_OT_precompute, TRANSLUCENT_OT_clear, TRANSLUCENT_OT_render_splatting)

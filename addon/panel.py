@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import jobs, principled
+from . import jobs, principled, splat_view
 from .session import JOBS, PREPARING, SESSIONS, Session, state
 
 
@@ -165,6 +165,19 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         for text, icon in status_lines(mat):
             layout.label(text=text, icon=icon)
         layout.operator("translucent.clear").material_name = mat.name
+        # The splatting's camera image (Shah 2009), one for the scene's previewed materials.
+        box = layout.box()
+        box.label(text="Splatting image (every previewed material)")
+        sv = bpy.context.scene.translucent_splat
+        row = box.row()
+        row.prop(sv, "show_in_viewport")
+        row.operator("translucent.render_splatting", icon="RENDER_STILL")
+        row = box.row()
+        row.prop(sv, "eps")
+        row.prop(sv, "max_grid")
+        box.prop(sv, "max_side")
+        if splat_view.STATE["message"]:
+            box.label(text=splat_view.STATE["message"])
 
 
 classes = (TRANSLUCENT_PT_material,)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty
 
-from . import edits, follow
+from . import edits, follow, splat_view
 from .principled import principled_inputs, read_from_principled
 
 
@@ -202,11 +202,38 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
         return self.profile.lower()
 
 
+def _show_toggle(self, context):
+    splat_view.show_toggle(self, context)
+
+
+class TranslucentSplatSettings(bpy.types.PropertyGroup):
+    """The splatting image's settings (Shah 2009), stored on the scene: one image for every
+    previewed material in it."""
+
+    show_in_viewport: BoolProperty(
+        name="Show in viewport",
+        description="Draw the splatting's image over the 3D viewports, rendered again by itself when the view, a "
+        "light, a previewed mesh or a material changes",
+        default=False, update=_show_toggle,
+    )
+    eps: FloatProperty(name="Threshold", description="Shah 2009 eqs. 4-5: the share of each splat's light left "
+                       "beyond its radius, and Weber's fraction for the overlap", min=1e-4, max=0.5, default=0.01,
+                       precision=4)
+    max_grid: IntProperty(name="Light grid", description="The largest side of each light's view grid (eq. 5's "
+                          "grid is cut to it; more is finer and slower)", min=16, max=4096, default=1024)
+    max_side: IntProperty(name="Viewport size", description="The largest side in pixels of the image rendered for "
+                          "a viewport (the CPU render takes seconds at 800 x 600)", min=16, max=4096, default=320)
+
+
 def register():
     bpy.utils.register_class(TranslucentMaterialSettings)
     bpy.types.Material.translucent = bpy.props.PointerProperty(type=TranslucentMaterialSettings)
+    bpy.utils.register_class(TranslucentSplatSettings)
+    bpy.types.Scene.translucent_splat = bpy.props.PointerProperty(type=TranslucentSplatSettings)
 
 
 def unregister():
+    del bpy.types.Scene.translucent_splat
+    bpy.utils.unregister_class(TranslucentSplatSettings)
     del bpy.types.Material.translucent
     bpy.utils.unregister_class(TranslucentMaterialSettings)

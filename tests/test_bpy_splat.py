@@ -1,0 +1,170 @@
+"""The splatting's camera image in the add-on (issue 31 point 7), in headless Blender: rendered
+from a camera by the operator (saved to a file), two touching objects of different materials
+exchanging no light, the image following a moved light and a deformed mesh by itself (not the
+preview's own colour writes), and the viewport's view read from its matrices. Expected values:
+Blender's own camera projection (`world_to_camera_view`), zero where no light can arrive
+without crossing between objects, and a fresh render of the changed scene."""
+
+import math
+
+import numpy as np
+import pytest
+
+from helpers import key_light, lit_sphere, mesh_hash
+
+pytestmark = pytest.mark.bpy
+
+
+def look_at(bpy, obj, target):
+    from mathutils import Vector
+
+    d = Vector(target) - obj.location
+    obj.rotation_euler = d.to_track_quat("-Z", "Y").to_euler()
+    bpy.context.view_layer.update()
+
+
+def add_camera(bpy, location, target=(0.0, 0.0, 0.0)):
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    bpy.context.scene.collection.objects.link(cam)
+    cam.location = location
+    look_at(bpy, cam, target)
+    bpy.context.scene.camera = cam
+    return cam
+
+
+def pixel_of(bpy, cam, point, size):
+    """Where Blender's own camera projection puts `point`: (row from the top, column)."""
+    from bpy_extras.object_utils import world_to_camera_view
+    from mathutils import Vector
+
+    bl_scene = bpy.context.scene
+    bl_scene.render.resolution_x, bl_scene.render.resolution_y = size
+    bl_scene.render.resolution_percentage = 100
+    x, y, _ = world_to_camera_view(bl_scene, cam, Vector(point))
+    return int((1.0 - y) * size[1]), int(x * size[0])
+
+
+def material(bpy, name, preset):
+    m = bpy.data.materials.new(name)
+    s = m.translucent
+    s.enabled, s.source, s.preset, s.profile = True, "CUSTOM", preset, "DIPOLE"
+    return m
+
+
+def test_two_touching_objects_exchange_no_light_and_the_render_is_saved(addon, tmp_path):
+    import bpy
+
+    from addon import splat_view
+
+    # Two 4 cm cubes touching at x = 0, "Jade" (marble) at x < 0 and "Milk" at x > 0, under a
+    # sun travelling along +x: Milk lies wholly in Jade's shadow (its top face grazed), so any
+    # light in Milk would have crossed from Jade.
+    jade, milk = material(bpy, "Jade", "MARBLE"), material(bpy, "Milk", "SKIMMILK")
+    bpy.ops.mesh.primitive_cube_add(size=0.04, location=(-0.02, 0.0, 0.0))
+    a = bpy.context.active_object
+    a.data.materials.append(jade)
+    bpy.ops.mesh.primitive_cube_add(size=0.04, location=(0.02, 0.0, 0.0))
+    b = bpy.context.active_object
+    b.data.materials.append(milk)
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy = 3.0
+    sun.rotation_euler = (0.0, -math.pi / 2, 0.0)  # -Z turned to +x
+    bpy.context.scene.collection.objects.link(sun)
+    cam = add_camera(bpy, (-0.12, -0.25, 0.08))
+    hashes = (mesh_hash(a.data), mesh_hash(b.data))
+    out = tmp_path / "splat.png"
+    assert bpy.ops.translucent.render_splatting(width=64, height=48, filepath=str(out)) == {"FINISHED"}
+    assert out.exists() and out.stat().st_size > 0
+    last = splat_view.STATE["last"]
+    assert last.radiance.shape == (48, 64, 3) and set(last.objects) == {a.name, b.name}
+    image = bpy.data.images[splat_view.IMAGE]
+    assert tuple(image.size) == (64, 48)
+    ids = {name: k + 1 for k, name in enumerate(last.objects)}
+    # Blender's projection of each cube's centre of its camera-facing side lands on that cube.
+    for obj, at in ((a, (-0.03, -0.02, 0.0)), (b, (0.01, -0.02, 0.0))):
+        row, col = pixel_of(bpy, cam, at, (64, 48))
+        assert last.mask[row, col] == ids[obj.name], (obj.name, row, col)
+    lit_a = last.radiance[last.mask == ids[a.name]]
+    dark_b = last.radiance[last.mask == ids[b.name]]
+    assert len(dark_b) > 50 and np.all(dark_b == 0.0)
+    assert lit_a[:, 0].max() > 0.01
+    # The image's pixels are the radiance, rows bottom-up, alpha where an object is seen.
+    px = np.empty(64 * 48 * 4, np.float32)
+    image.pixels.foreach_get(px)
+    px = px.reshape(48, 64, 4)[::-1]
+    np.testing.assert_allclose(px[..., :3], last.radiance, rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(px[..., 3] > 0, last.mask > 0)
+    # The user's meshes were not written, and each material's report says what it left out.
+    assert (mesh_hash(a.data), mesh_hash(b.data)) == hashes
+    assert all(r["method"] == "splat" and r["error_estimate"] is None for r in last.reports.values())
+    # Bad input: a named error, nothing rendered.
+    with pytest.raises(RuntimeError, match="camera"):
+        bpy.ops.translucent.render_splatting(camera="Nope")
+    with pytest.raises(RuntimeError, match="width, height"):
+        bpy.ops.translucent.render_splatting(width=10)
+
+
+def test_the_image_follows_a_moved_light_and_a_deformed_mesh_by_itself(addon):
+    import bpy
+
+    from addon import splat_view
+
+    mat, obj, light = lit_sphere(bpy)  # the per-vertex preview precomputed too
+    add_camera(bpy, (0.0, -0.3, 0.05))
+    bl_scene = bpy.context.scene
+    bl_scene.render.resolution_x, bl_scene.render.resolution_y, bl_scene.render.resolution_percentage = 40, 30, 100
+    bl_scene.translucent_splat.max_grid = 128
+    bl_scene.translucent_splat.show_in_viewport = True  # headless: no timer runs; tick() is the timer
+    assert bpy.app.timers.is_registered(splat_view.tick)
+    splat_view.tick()
+    first = splat_view.STATE["last"]
+    assert splat_view.STATE["renders"] == 1 and first.radiance.shape == (30, 40, 3)
+    assert (first.mask > 0).sum() > 50
+    # Nothing changed: nothing rendered. The per-vertex preview's own colour writes are no change.
+    bpy.context.view_layer.update()
+    splat_view.tick()
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    bpy.context.view_layer.update()
+    splat_view.tick()
+    assert splat_view.STATE["renders"] == 1
+    # The light moves: rendered again by itself, as a fresh render of the moved scene.
+    light.location = (0.15, -0.15, 0.1)
+    bpy.context.view_layer.update()
+    assert splat_view.STATE["dirty"]
+    splat_view.tick()
+    moved = splat_view.STATE["last"]
+    assert splat_view.STATE["renders"] == 2 and not np.allclose(moved.radiance, first.radiance, rtol=0.05)
+    assert bpy.ops.translucent.render_splatting() == {"FINISHED"}
+    np.testing.assert_array_equal(splat_view.STATE["last"].radiance, moved.radiance)
+    # The mesh deforms (a Displace modifier: the sphere grows by 2 cm toward the light).
+    obj.modifiers["Displace"].strength = 0.02
+    bpy.context.view_layer.update()
+    splat_view.tick()
+    grown = splat_view.STATE["last"]
+    assert splat_view.STATE["renders"] == 4 and (grown.mask > 0).sum() > (moved.mask > 0).sum()
+    # Turned off: the timer stops.
+    bl_scene.translucent_splat.show_in_viewport = False
+    assert splat_view.tick() is None
+
+
+def test_a_viewports_view_is_read_from_its_matrices(addon):
+    from types import SimpleNamespace
+
+    from mathutils import Matrix, Vector
+
+    from addon import splat_view
+
+    eye, target = Vector((0.3, -0.4, 0.2)), Vector((0.0, 0.0, 0.05))
+    world = (target - eye).to_track_quat("-Z", "Y").to_matrix().to_4x4()
+    world.translation = eye
+    fx, fy = 0.9, 0.9 * 0.5  # the wider angle across the wider side
+    window = Matrix.Identity(4)
+    window[0][0], window[1][1] = 1 / math.tan(fx / 2), 1 / math.tan(fy / 2)
+    rv3d = SimpleNamespace(is_perspective=True, view_matrix=world.inverted(), window_matrix=window)
+    view = splat_view.region_view(SimpleNamespace(width=1000, height=500), rv3d, max_side=320)
+    assert view.size == (320, 160) and view.fov == pytest.approx(fx)
+    np.testing.assert_allclose(view.eye, eye, atol=1e-6)
+    ahead = np.array(view.target) - np.array(view.eye)
+    np.testing.assert_allclose(ahead, (target - eye).normalized(), atol=1e-6)
+    rv3d.is_perspective = False
+    assert splat_view.region_view(SimpleNamespace(width=1000, height=500), rv3d, 320) is None
