@@ -27,6 +27,10 @@ use rayon::prelude::*;
 /// nearer the mesh than that (or inside its bounding sphere) would need a cube map of six.
 pub const MAX_HALF_ANGLE: f64 = 80.0 * std::f64::consts::PI / 180.0;
 
+/// Where a cell meets the surface edge-on, the most footprints it may stand for (its slant
+/// area is the footprint / cos up to cos = 1/4) when its hit triangle is smaller than that.
+pub const GRAZING_CAP: f64 = 4.0;
+
 /// A sphere holding every vertex of the mesh: what a light's view must cover.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BoundingSphere {
@@ -244,8 +248,8 @@ impl View {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LightSample {
     pub position: Vec3,
-    /// The surface area the cell covers [unit^2]: h^2 / cos or dOmega t^2 / cos (at most the
-    /// hit triangle's area).
+    /// The surface area the cell covers [unit^2]: h^2 / cos or dOmega t^2 / cos (edge-on, at most
+    /// the larger of the hit triangle and `GRAZING_CAP` footprints).
     pub area: f32,
     /// |n . w|: the hit triangle's normal against the ray (area x cos is the cell's footprint
     /// across the ray).
@@ -346,7 +350,7 @@ fn cast(
         return; // a degenerate triangle carries no surface
     };
     // The cell covers footprint / |n . w| of the triangle's plane, whichever way it is wound
-    // (and no more than the triangle: an edge-on hit stands for its triangle at most).
+    // (and no more than the triangle, or `GRAZING_CAP` footprints, edge-on).
     let cos = flat.dot(cell.direction).abs();
     let p = cell.origin + cell.direction * hit.t;
     // Light enters where the surface's own normal faces it, as the irradiance estimator
@@ -396,8 +400,11 @@ fn cast(
         View::Orthographic { .. } => cell.measure,
         View::Perspective { .. } => cell.measure * f64::from(hit.t) * f64::from(hit.t),
     };
-    let area =
-        (footprint / f64::from(cos)).min(f64::from(mesh.triangle_areas()[hit.triangle as usize]));
+    // An edge-on hit stands for its triangle at most, or for `GRAZING_CAP` footprints where
+    // the cells are coarser than the triangles (Shah's 8-32 a side): capped at the triangle
+    // alone, a coarse cell on a fine mesh lost all but a triangle's worth of its light.
+    let triangle = f64::from(mesh.triangle_areas()[hit.triangle as usize]);
+    let area = (footprint / f64::from(cos)).min(triangle.max(GRAZING_CAP * footprint));
     counts.samples += 1;
     samples.push(LightSample {
         position: p,

@@ -378,8 +378,11 @@ pub fn gather(
             });
     }
     // Cells from the reach alone (not from the splats' sizes), so that a light's groups do not
-    // depend on the other lights' splats.
-    let cell = (reach as f32 / CELLS_PER_REACH as f32).max(1e-6 * (hi - lo).max_element());
+    // depend on the other lights' splats; from the near zone where a grid far coarser than
+    // r_max makes it wider than twice the reach (Shah's 8-32 a side: cells of r_max / 3 made
+    // each receiver visit ~1e5 of them, 32 s for an 8 x 8 grid at 128 x 128 pixels).
+    let base = if search > 2.0 * reach { search } else { reach };
+    let cell = (base as f32 / CELLS_PER_REACH as f32).max(1e-6 * (hi - lo).max_element());
     let bins = &Bins::new(splats, cell, search as f32);
     // R far from the splats from the f32 nodes, uniform in sqrt(r): u = sqrt(r) scale.
     let (nodes, scale, _) = profile.f32_table();

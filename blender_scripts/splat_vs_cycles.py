@@ -1,0 +1,131 @@
+"""The splatting's camera image against a Cycles render of the same camera (issue 31's second
+done-when): the demo's Suzanne (10 cm, Subdivision 2) under its point light, the world black
+(the splatting does not light by the world yet), the Principled BSDF random walk mapped from the
+material with its specular layer off (Specular IOR Level 0), 128 x 128, 1024 spp, no denoising.
+Against that one image, object pixels, relative RMS worst channel (`metrics.image_error`):
+
+- `Splat.render` (Cycles' profile), with eps as the knob at the default 1024 grid, and at the
+  grids Shah's Fig. 12 uses (8, 16 and 32 a side) at eps 0.01;
+- the per-vertex preview (PRT, Cycles' profile, with its walks and own light), shown as the
+  viewport shows it (the vertex colours as emission, rendered by Cycles at 16 spp: the
+  interpolation across the faces is Blender's own);
+- EEVEE's own subsurface scattering at 64 samples (skipped, saying why, where it cannot run).
+
+Each with its wall time. Run: .venv/bin/python blender_scripts/splat_vs_cycles.py [--material
+marble] [--size 128] [--spp 1024].
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import pathlib
+import sys
+import time
+
+import numpy as np
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+import bpy  # noqa: E402
+
+import translucent  # noqa: E402
+from addon import export, writeback  # noqa: E402
+from blender_scripts.lib import cycles_reference as cr  # noqa: E402
+from blender_scripts.lib import scenes  # noqa: E402
+from blender_scripts.lib.machine import describe as machine  # noqa: E402
+from blender_scripts.lib.metrics import image_error  # noqa: E402
+
+
+def render(engine: str, samples: int, size: int) -> tuple[np.ndarray, float]:
+    """The scene's camera at `size` square through `engine`, transparent film: RGBA, seconds."""
+    scene = bpy.context.scene
+    if engine == "CYCLES":
+        cr.use_cycles(samples)
+    else:
+        names = [e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items]
+        eevee = next((n for n in ("BLENDER_EEVEE", "BLENDER_EEVEE_NEXT") if n in names), None)
+        if eevee is None:
+            raise RuntimeError(f"no EEVEE engine in this Blender (engines: {names})")
+        scene.render.engine = eevee
+        scene.eevee.taa_render_samples = samples
+    scene.render.film_transparent = True
+    scene.render.resolution_x = scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+    scene.view_settings.view_transform = "Standard"
+    t0 = time.perf_counter()
+    img = cr.render_exr(scene)
+    return img, time.perf_counter() - t0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--material", default="marble")
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=1024)
+    args = ap.parse_args()
+
+    obj, cam = scenes.build_scene("suzanne")
+    bl_scene = bpy.context.scene
+    bl_scene.world = None  # black: the splatting does not light by the world yet
+    scene, info = export.export_scene([obj])
+    m = translucent.Material.preset(args.material, scenes.MM_PER_UNIT)
+    shown = scenes.preview_object(obj)  # the evaluated mesh, the attribute as emission
+    preview_mat = shown.data.materials[0]
+    source = obj
+
+    # Cycles: the source in the mapped Principled BSDF, its specular layer off.
+    mat = cr.principled_material(m)
+    mat.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+    source.data.materials.clear()
+    source.data.materials.append(mat)
+    source.hide_render, shown.hide_render = False, True
+    truth, truth_s = render("CYCLES", args.spp, args.size)
+    rows = [("Cycles random walk", f"{args.spp} spp", "(the reference)", truth_s)]
+    try:
+        img, s = render("EEVEE", 64, args.size)
+        rms, _ = image_error(img, truth)
+        rows.append(("EEVEE", "64 samples", f"{100 * rms:.2f}", s))
+    except RuntimeError as e:
+        rows.append(("EEVEE", "64 samples", f"not run: {e}", float("nan")))
+    source.hide_render, shown.hide_render = True, False
+
+    # The per-vertex preview, as the viewport shows it.
+    t0 = time.perf_counter()
+    prt = translucent.Prt(scene, [m], profile="cycles")
+    pre = time.perf_counter() - t0
+    colors = prt.radiance(m)
+    writeback.write_colors(shown.data, colors)
+    img, _ = render("CYCLES", 16, args.size)
+    rms, _ = image_error(img, truth)
+    rows.append(("PRT per-vertex preview (Cycles' profile, walks)", "32 coefficients", f"{100 * rms:.2f}",
+                 pre + prt.last_eval["seconds"]))
+    shown.hide_render = True
+    del preview_mat
+
+    # The splatting's image of the same camera.
+    mw = np.array(cam.matrix_world, dtype=np.float64)
+    eye = mw[:3, 3]
+    view = dict(eye=tuple(eye), target=tuple(eye - mw[:3, 2]), up=tuple(mw[:3, 1]), fov=float(cam.data.angle),
+                size=(args.size, args.size))
+    for eps, grid in [(0.1, 1024), (0.03, 1024), (0.01, 1024), (0.003, 1024), (0.01, 8), (0.01, 16), (0.01, 32)]:
+        splat = translucent.Splat(scene, profile="cycles", eps=eps, max_grid=grid)
+        t0 = time.perf_counter()
+        image, mask = splat.render(m, **view)
+        s = time.perf_counter() - t0
+        rgba = np.concatenate([image, (mask > 0)[..., None].astype(np.float32)], axis=2)
+        rms, _ = image_error(rgba, truth)
+        rows.append(("Splat.render (Cycles' profile, no walks)", f"eps {eps:g}, grid {grid}", f"{100 * rms:.2f}", s))
+
+    print(f"machine: {machine()}; Suzanne (demo scene, world black), {args.material}, {args.size} x {args.size}, "
+          f"against Cycles {args.spp} spp (specular off), object pixels")
+    print("| method | setting | rel. RMS % (worst channel) | seconds |")
+    print("|---|---|---|---|")
+    for method, setting, rms, s in rows:
+        print(f"| {method} | {setting} | {rms} | {s:.2f} |" if not math.isnan(s) else f"| {method} | {setting} | {rms} | |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
