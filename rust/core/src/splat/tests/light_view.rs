@@ -77,6 +77,35 @@ fn a_sun_on_a_sphere_covers_its_lit_half_and_its_silhouette() {
 }
 
 #[test]
+fn a_coarse_grid_on_a_fine_sphere_still_brings_in_the_light_the_sun_sends() {
+    // Shah's Fig. 12 grids (8-32 a side) on a sphere of 2,048 triangles: each cell covers many
+    // triangles. The light entering through all cells, sum E dA, against the closed form
+    // E pi R^2 <F_t> with <F_t> = 2 int_0^1 F_t(mu) mu dmu (Gauss-Legendre). One ray per cell
+    // undersamples the rim; capped at its triangle's area an edge-on cell had brought in a
+    // fraction of its light.
+    let mesh = sphere(32, 1.0);
+    let tracer = Tracer::new(&mesh);
+    let sun = Light::sun(Vec3::new(0.0, 0.0, -1.0), [1.0; 3]).unwrap();
+    let mean_ft: f64 = crate::quadrature::gauss_legendre(32)
+        .iter()
+        .map(|&(x, w)| {
+            let mu = 0.5 * (x + 1.0);
+            w * fresnel_transmittance(1.3, mu) * mu
+        })
+        .sum();
+    let expect = PI * mean_ft;
+    for n in [8, 16, 32] {
+        let (s, _) = samples(&mesh, &tracer, &sun, n);
+        let power: f64 = s.iter().map(|s| f64::from(s.irradiance[0] * s.area)).sum();
+        eprintln!("grid {n}: {power:.4} of {expect:.4}");
+        assert!(
+            (power / expect - 1.0).abs() < 0.15,
+            "grid {n}: {power} vs {expect}"
+        );
+    }
+}
+
+#[test]
 fn a_point_light_covers_the_cap_it_sees_and_the_solid_angle_of_the_sphere() {
     // From distance d a sphere shows the cap of area 2 pi R^2 (1 - R/d) within the solid angle
     // 2 pi (1 - sqrt(1 - R^2/d^2)); on the convex mesh, exactly the triangles facing the light.
