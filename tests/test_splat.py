@@ -160,3 +160,42 @@ def test_render_refuses_bad_cameras_naming_them_and_cancels():
     image, mask = splat.render(MARBLE_MM, **ok)
     # The 20 mm plane fills the middle of the view (about 30 mm across at the target).
     assert image.shape == (12, 16, 3) and mask[6, 8] == 1 and mask[0, 0] == 0 and image[6, 8, 0] > 0
+
+
+def test_the_walks_term_brings_the_splatting_to_prt_and_follows_a_light_and_the_image():
+    # An 8 mm marble sphere: the half-space profile misses what Cycles' walk finds on a curved
+    # surface. PRT (Cycles' profile, with its walks and own light: what is checked against
+    # Cycles elsewhere) against the splatting without and with the same shared terms.
+    p, t = sphere(24, 0.008)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.3, 0.2, -1.0), 3.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    w = s.vertex_areas[:, 0]
+    b_prt = translucent.Prt(s, [m]).radiosity(m)
+    plain = translucent.Splat(s)
+    walked = translucent.Splat(s, walks=True)
+    assert not plain.walks and walked.walks
+    far = max(translucent.relative_error(plain.radiosity(m), b_prt, w)["rms"])
+    near = max(translucent.relative_error(walked.radiosity(m), b_prt, w)["rms"])
+    assert far > 0.04 and near < 0.015, (far, near)  # measured: 7.8 % and 0.31 %
+    assert walked.report["terms"]["walk_rays"] > 0 and plain.report["terms"] is None
+    assert "walks through the mesh" not in {x["what"] for x in walked.last_eval["skipped"]}
+    # The image carries the same layer: at the vertex facing the camera, the pixels there are
+    # that vertex's radiance.
+    eye = (0.0, -0.05, 0.0)
+    image, mask = walked.render(m, eye=eye, target=(0.0, 0.0, 0.0), fov=0.4, size=(48, 48))
+    v = int(np.argmin(np.linalg.norm(p - np.array([0.0, -0.008, 0.0]), axis=1)))
+    l_v = walked.radiance(m, eye=eye)[v]
+    centre = image[23:25, 23:25].mean(axis=(0, 1))
+    assert mask[24, 24] == 1 and np.all(np.abs(centre / l_v - 1) < 0.03), centre / l_v
+    # A moved light: the walks carried to it (no walk traced again), as near a fresh PRT.
+    moved = translucent.Scene(p, t)
+    moved.add_sun((-0.5, 0.1, -1.0), 3.0)
+    walked.update(lights=moved)
+    b_moved = walked.radiosity(m)
+    ref = translucent.Prt(moved, [m]).radiosity(m)
+    assert max(translucent.relative_error(b_moved, ref, w)["rms"]) < 0.025  # measured: 1.6 % (walks carried)
+    with pytest.raises(ValueError, match="walks"):
+        translucent.Splat(s, profile="dipole", walks=True)
+    with pytest.raises(ValueError, match="walk_rays"):
+        translucent.Splat(s, walk_rays=1000)

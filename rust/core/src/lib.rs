@@ -24,6 +24,7 @@ pub mod shadow_edges; // the irradiance on a finer grid where a shadow's edge cr
 pub mod single_scattering; // Xu 2007 eq. 5's path model, phase functions, brute force
 pub mod spherical_harmonics; // real Y_lm and HG's Legendre series (addition theorem)
 pub mod surface_integral; // a profile over a triangle or polygon from a point (Mertens 2003 §4)
+pub mod surface_terms; // the walks' term and the object's own light for a half-space method
 pub mod walks; // Cycles' walk traced inside the mesh, its half-space twin, the walk term
 
 // Methods, each with its private parts inside it (prt: basis, gpu, single;

@@ -366,3 +366,45 @@ pub fn vec3_rows<'py>(py: Python<'py>, values: &[Vec3]) -> Bound<'py, PyArray2<f
         .map(|x| PyArray2::from_owned_array(py, x))
         .expect("three per row")
 }
+
+/// The walks' term and own light's settings (`surface_terms`) from a method's `walks` and
+/// `walk_rays` arguments: None with the walks off; ValueError naming `walk_rays` when it is
+/// given with the walks off, or 0.
+pub fn term_settings(
+    walks: bool,
+    walk_rays: Option<i64>,
+    vertices: usize,
+) -> PyResult<Option<translucent_core::surface_terms::TermSettings>> {
+    if walk_rays.is_some() && !walks {
+        return Err(PyValueError::new_err(
+            "walk_rays: the walks are off (walks=False)",
+        ));
+    }
+    if !walks {
+        return Ok(None);
+    }
+    let rays = match walk_rays {
+        Some(r) => {
+            let r: u64 = non_negative("walk_rays", r)?;
+            if r == 0 {
+                return Err(PyValueError::new_err(
+                    "walk_rays 0: leave walks off instead",
+                ));
+            }
+            r
+        }
+        None => translucent_core::walks::default_walk_rays(vertices),
+    };
+    Ok(Some(translucent_core::surface_terms::TermSettings {
+        walks: translucent_core::walks::WalkTermSettings {
+            rays,
+            ..Default::default()
+        },
+        // PRT's default own light: 144 rays a vertex.
+        interreflection: Some(
+            (translucent_core::own_light::DEFAULT_RAYS as f64)
+                .sqrt()
+                .round() as usize,
+        ),
+    }))
+}

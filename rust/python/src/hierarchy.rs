@@ -6,7 +6,6 @@ use crate::convert::{non_negative, rgb_array};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::{Mutex, MutexGuard};
@@ -71,40 +70,8 @@ impl PyHierarchy {
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
         let model = crate::material::profile_kind(profile)?;
-        if walk_rays.is_some() && !walks {
-            return Err(PyValueError::new_err(
-                "walk_rays: the walks are off (walks=False)",
-            ));
-        }
-        let terms = if walks {
-            let vertices = scene.scene.mesh.vertex_count();
-            let rays = match walk_rays {
-                Some(r) => {
-                    let r: u64 = non_negative("walk_rays", r)?;
-                    if r == 0 {
-                        return Err(PyValueError::new_err(
-                            "walk_rays 0: leave walks off instead",
-                        ));
-                    }
-                    r
-                }
-                None => translucent_core::walks::default_walk_rays(vertices),
-            };
-            Some(translucent_core::hierarchy::TermSettings {
-                walks: translucent_core::walks::WalkTermSettings {
-                    rays,
-                    ..Default::default()
-                },
-                // PRT's default own light: 144 rays a vertex.
-                interreflection: Some(
-                    (translucent_core::own_light::DEFAULT_RAYS as f64)
-                        .sqrt()
-                        .round() as usize,
-                ),
-            })
-        } else {
-            None
-        };
+        let terms =
+            crate::convert::term_settings(walks, walk_rays, scene.scene.mesh.vertex_count())?;
         let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
         let settings = HierarchySettings {
             eps_receiver: eps.0,

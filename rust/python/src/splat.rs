@@ -47,6 +47,17 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
     report.set_item("seconds_point_mass", r.seconds_point_mass)?;
     report.set_item("seconds_camera_view", r.seconds_camera_view)?;
     report.set_item("pixels", r.pixels)?;
+    if let Some(t) = &r.terms {
+        let d = PyDict::new(py);
+        d.set_item("own_light_rays", t.own_light_rays)?;
+        d.set_item("own_light_share", t.own_light_share)?;
+        d.set_item("carried_pose", t.carried_pose)?;
+        d.set_item("seconds", t.seconds)?;
+        d.set_item("walk_rays", t.walks.as_ref().map(|w| w.rays))?;
+        report.set_item("terms", d)?;
+    } else {
+        report.set_item("terms", py.None())?;
+    }
     let lights = PyList::empty(py);
     for l in &r.lights {
         let x = PyDict::new(py);
@@ -103,12 +114,14 @@ impl PySplat {
     /// `eps` is eqs. 4-5's threshold in (0, 1), `max_grid` the light view's largest side in
     /// [1, 4096]. Nothing is computed until an evaluation.
     #[new]
-    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024))]
+    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None))]
     fn new(
         scene: PyRef<'_, PyScene>,
         profile: &str,
         eps: f64,
         #[pyo3(from_py_with = int)] max_grid: i64,
+        walks: bool,
+        #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
     ) -> PyResult<Self> {
         let kind = profile_kind(profile)?;
         let max_grid = u32::try_from(max_grid).map_err(|_| {
@@ -116,8 +129,13 @@ impl PySplat {
                 "max_grid = {max_grid}: the light view's largest side must lie in [1, {MAX_GRID}]"
             ))
         })?;
-        let inner = Splatting::new(scene.scene.clone(), kind, SplatSettings { eps, max_grid })
+        let terms =
+            crate::convert::term_settings(walks, walk_rays, scene.scene.mesh.vertex_count())?;
+        let mut inner = Splatting::new(scene.scene.clone(), kind, SplatSettings { eps, max_grid })
             .map_err(crate::convert::to_py)?;
+        if let Some(t) = terms {
+            inner = inner.with_walks(t).map_err(crate::convert::to_py)?;
+        }
         Ok(Self {
             inner: RwLock::new(inner),
             last: Mutex::new(None),
@@ -273,14 +291,21 @@ impl PySplat {
         Ok(Some(d))
     }
 
+    /// Whether the walks' term and the object's own light are on.
+    #[getter]
+    fn walks(&self) -> bool {
+        self.read().walks()
+    }
+
     fn __repr__(&self) -> String {
         let s = self.read();
         format!(
-            "Splat({} vertices, profile {}, eps {}, max_grid {})",
+            "Splat({} vertices, profile {}, eps {}, max_grid {}, walks {})",
             s.scene().mesh.vertex_count(),
             s.profile().name(),
             s.settings().eps,
-            s.settings().max_grid
+            s.settings().max_grid,
+            s.walks()
         )
     }
 }

@@ -24,10 +24,10 @@ pub mod far;
 pub mod links;
 pub mod ring;
 mod settings;
-mod terms;
 
+use crate::surface_terms as terms;
+pub use crate::surface_terms::{TermReport, TermSettings};
 pub use settings::{HierarchyReport, HierarchySettings, Mode};
-pub use terms::{TermReport, TermSettings};
 
 use crate::error::{Error, Result};
 use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};

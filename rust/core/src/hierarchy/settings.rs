@@ -54,7 +54,7 @@ pub struct HierarchySettings {
     pub estimate_receivers: usize,
     /// The walks' geometry term and the object's own light (`terms`, Cycles' profile only);
     /// None: the half-space profile alone, as Mertens 2003 has it.
-    pub terms: Option<super::terms::TermSettings>,
+    pub terms: Option<crate::surface_terms::TermSettings>,
 }
 
 impl Default for HierarchySettings {
@@ -104,5 +104,5 @@ pub struct HierarchyReport {
     /// (no estimate computed, never a made-up zero). With the walks on, their noise added.
     pub error_estimate: Option<[f64; 3]>,
     /// The walks' term and the own light, when on (`HierarchySettings::terms`).
-    pub terms: Option<super::terms::TermReport>,
+    pub terms: Option<crate::surface_terms::TermReport>,
 }

@@ -49,6 +49,10 @@ pub struct PixelHit {
     /// The shading normal at the hit (unit).
     pub normal: Vec3,
     pub object: u32,
+    /// The hit triangle and the barycentric u, v of its corners 1 and 2 there (what a
+    /// per-vertex layer is interpolated with).
+    pub triangle: u32,
+    pub uv: [f32; 2],
 }
 
 impl Camera {
@@ -196,18 +200,19 @@ pub fn camera_view(
                     continue;
                 };
                 let p = eye + dir * hit.t;
-                let normal = match barycentric(&corners, p) {
-                    Some([_, u, v]) => {
-                        let normals = tri.map(|v| mesh.normals()[v as usize]);
-                        interpolated_normal(&normals, u, v, flat)
-                    }
-                    None => flat,
+                let uv = match barycentric(&corners, p) {
+                    Some([_, u, v]) => [u, v],
+                    None => [1.0 / 3.0; 2],
                 };
+                let normals = tri.map(|v| mesh.normals()[v as usize]);
+                let normal = interpolated_normal(&normals, uv[0], uv[1], flat);
                 out.push(PixelHit {
                     pixel: row * camera.width + column,
                     position: p,
                     normal,
                     object: mesh.object_of_triangle(hit.triangle as usize),
+                    triangle: hit.triangle,
+                    uv,
                 });
             }
             out

@@ -27,7 +27,9 @@ mod tests;
 
 use crate::error::{Error, Result};
 use crate::evaluation::{check_eye, radiance_from_radiosity, Quantity, Skipped};
-use crate::irradiance::{irradiance_of_lights, IrradianceSettings};
+use crate::irradiance::{
+    irradiance as irradiance_of_scene, irradiance_of_lights, IrradianceSettings,
+};
 use crate::lights::{Light, World};
 use crate::occluders::Occluders;
 use crate::optics::Material;
@@ -35,6 +37,7 @@ use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile, Reso
 use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
+use crate::surface_terms::{self, TermReport, TermSettings, Terms};
 use camera::{camera_view, Camera};
 use glam::Vec3;
 use light_view::{light_samples, BoundingSphere, View, ViewCounts};
@@ -110,6 +113,8 @@ pub struct SplatReport {
     pub seconds_camera_view: f64,
     /// Pixels that see the mesh, a render only (0 at the vertices).
     pub pixels: usize,
+    /// The walks' term and the object's own light, where they are on (`Splatting::with_walks`).
+    pub terms: Option<TermReport>,
 }
 
 fn light_kind(light: &Light) -> &'static str {
@@ -404,6 +409,20 @@ pub fn splat_render(
     camera: &Camera,
     progress: Option<&ProgressFn>,
 ) -> Result<Render> {
+    render_with_layer(scene, resolved, settings, camera, None, progress)
+}
+
+/// `splat_render` with `layer` (B per vertex: the walks' term and the object's own light,
+/// `surface_terms`) interpolated across each hit triangle and added to the gathered B: the
+/// per-vertex layer rasterised in the camera pass (Shah's pass 2 with an extra target).
+pub fn render_with_layer(
+    scene: &Scene,
+    resolved: &Resolved,
+    settings: &SplatSettings,
+    camera: &Camera,
+    layer: Option<&[[f32; 3]]>,
+    progress: Option<&ProgressFn>,
+) -> Result<Render> {
     let start = Instant::now();
     let mut src = sources(scene, resolved, settings, progress, (0.0, 0.3))?;
     // Pass 2: the receivers, hidden by every object of the rest of the scene in front.
@@ -429,7 +448,18 @@ pub fn splat_render(
     let eye = camera.eye();
     let mut values = vec![[0.0f32; 3]; camera.pixels()];
     let mut mask = vec![0u32; camera.pixels()];
+    let tris = scene.mesh.triangles();
     for (h, bv) in hits.iter().zip(&b) {
+        let mut bv = *bv;
+        if let Some(layer) = layer {
+            let [i, j, k] = tris[h.triangle as usize].map(|v| v as usize);
+            let [u, v] = h.uv.map(f64::from);
+            for c in 0..3 {
+                bv[c] += (1.0 - u - v) * f64::from(layer[i][c])
+                    + u * f64::from(layer[j][c])
+                    + v * f64::from(layer[k][c]);
+            }
+        }
         let to_eye = (eye - h.position).normalize_or_zero();
         let k = resolved.exit_weights(f64::from(h.normal.dot(to_eye)));
         values[h.pixel as usize] =
@@ -454,12 +484,14 @@ pub fn splat_render(
 
 /// The splatting over a scene it keeps (Shah 2009's setting: geometry, lights and material may
 /// all change between frames): nothing is precomputed, so `set_positions` and `set_lighting`
-/// only replace what the next evaluation reads.
-#[derive(Debug, Clone)]
+/// only replace what the next evaluation reads. With the walks on (`with_walks`, Cycles'
+/// profile), the walks' geometry term and the object's own light (`surface_terms`, shared with
+/// the hierarchy) are walked at the first evaluation and carried to a new light or pose after.
 pub struct Splatting {
     scene: Scene,
     profile: ProfileKind,
     settings: SplatSettings,
+    terms: Option<std::sync::Mutex<Terms>>,
 }
 
 impl Splatting {
@@ -471,7 +503,25 @@ impl Splatting {
             scene,
             profile,
             settings,
+            terms: None,
         })
+    }
+
+    /// This splatting with the walks' term and the object's own light (`surface_terms`).
+    /// Errors: a profile other than Cycles' (the walks are Cycles' random walk).
+    pub fn with_walks(mut self, settings: TermSettings) -> Result<Self> {
+        if self.profile != ProfileKind::Cycles {
+            return Err(Error::InvalidArgument(
+                "walks: the walks' term is Cycles' random walk: use profile 'cycles' with it"
+                    .into(),
+            ));
+        }
+        self.terms = Some(std::sync::Mutex::new(Terms::new(settings)));
+        Ok(self)
+    }
+
+    pub fn walks(&self) -> bool {
+        self.terms.is_some()
     }
 
     pub fn scene(&self) -> &Scene {
@@ -486,13 +536,17 @@ impl Splatting {
         self.settings
     }
 
-    /// A pose: the same vertices and triangles at `positions` (`Mesh::posed`).
+    /// A pose: the same vertices and triangles at `positions` (`Mesh::posed`); the walks'
+    /// term is carried to it at the next evaluation.
     pub fn set_positions(
         &mut self,
         positions: Vec<Vec3>,
         normals: Option<Vec<Vec3>>,
     ) -> Result<()> {
         self.scene.mesh = self.scene.mesh.posed(positions, normals)?;
+        if let Some(t) = &self.terms {
+            t.lock().unwrap_or_else(|e| e.into_inner()).stale(true);
+        }
         Ok(())
     }
 
@@ -503,37 +557,135 @@ impl Splatting {
         if let Some(o) = occluders {
             self.scene.occluders = o;
         }
+        if let Some(t) = &self.terms {
+            t.lock().unwrap_or_else(|e| e.into_inner()).stale(false);
+        }
     }
 
-    /// `splat_radiosity` of `material` under the kept profile (tables built if needed).
+    /// The walks' term and own light for `material` per vertex (what they add to B), walked or
+    /// carried first where the light or shape changed; `halfspace`: the splatted B at the
+    /// vertices for `material`, when the caller has it. None without the walks.
+    fn layer(
+        &self,
+        material: &Material,
+        halfspace: Option<&[[f32; 3]]>,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Option<(Vec<[f32; 3]>, TermReport)>> {
+        let Some(terms) = &self.terms else {
+            return Ok(None);
+        };
+        let mut t = terms.lock().unwrap_or_else(|e| e.into_inner());
+        if !t.current {
+            let rep = t.rep.unwrap_or(*material);
+            let fresh = t.rep.is_none();
+            let rep_resolved = Resolved::new(self.profile, &rep)?;
+            let half = match halfspace.filter(|_| rep == *material) {
+                Some(h) => h.to_vec(),
+                None => splat_radiosity(&self.scene, &rep_resolved, &self.settings, None)?.values,
+            };
+            let mesh = &self.scene.mesh;
+            let tracer = self.scene.tracer();
+            let irradiance = IrradianceSettings {
+                eta: rep_resolved.irradiance_eta(),
+                ..Default::default()
+            };
+            let (vertices, _) = irradiance_of_scene(
+                &self.scene,
+                &tracer,
+                mesh.positions(),
+                mesh.normals(),
+                &irradiance,
+            )?;
+            let lit = surface_terms::Lit {
+                scene: &self.scene,
+                tracer: &tracer,
+                irradiance,
+                vertices: &vertices,
+                halfspace: &half,
+            };
+            t.update(&lit, &rep_resolved, fresh, progress)?;
+        }
+        let resolved = Resolved::new(self.profile, material)?;
+        let mut added = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];
+        let mut error = [0.0; 3];
+        t.add_to(&mut added, &resolved, &mut error)?;
+        Ok(Some((added, t.report.clone())))
+    }
+
+    /// What the walks take out of `skipped` and put in the report.
+    fn with_terms(e: &mut Evaluation, report: TermReport) {
+        e.skipped
+            .retain(|s| s.what != "walks through the mesh" && s.what != "the object's own light");
+        e.details.terms = Some(report);
+    }
+
+    /// `splat_radiosity` of `material` under the kept profile (tables built if needed), with
+    /// the walks' term and own light where they are on.
     pub fn radiosity(
         &self,
         material: &Material,
         progress: Option<&ProgressFn>,
     ) -> Result<Evaluation> {
+        let start = Instant::now();
         let resolved = Resolved::new(self.profile, material)?;
-        splat_radiosity(&self.scene, &resolved, &self.settings, progress)
+        let mut e = splat_radiosity(&self.scene, &resolved, &self.settings, progress)?;
+        if let Some((added, report)) = self.layer(material, Some(&e.values), None)? {
+            for (b, a) in e.values.iter_mut().zip(&added) {
+                *b = std::array::from_fn(|c| b[c] + a[c]);
+            }
+            Self::with_terms(&mut e, report);
+            e.seconds = start.elapsed().as_secs_f64();
+        }
+        Ok(e)
     }
 
-    /// `splat_render` of `material` seen by `camera`.
+    /// `splat_render` of `material` seen by `camera`, the walks' term and own light (per
+    /// vertex) interpolated into the image where they are on.
     pub fn render(
         &self,
         material: &Material,
         camera: &Camera,
         progress: Option<&ProgressFn>,
     ) -> Result<Render> {
+        let start = Instant::now();
         let resolved = Resolved::new(self.profile, material)?;
-        splat_render(&self.scene, &resolved, &self.settings, camera, progress)
+        let layer = self.layer(material, None, None)?;
+        let mut r = render_with_layer(
+            &self.scene,
+            &resolved,
+            &self.settings,
+            camera,
+            layer.as_ref().map(|(a, _)| a.as_slice()),
+            progress,
+        )?;
+        if let Some((_, report)) = layer {
+            Self::with_terms(&mut r.evaluation, report);
+            r.evaluation.seconds = start.elapsed().as_secs_f64();
+        }
+        Ok(r)
     }
 
-    /// `splat_radiance` of `material` toward `eye` or along each normal.
+    /// `radiosity` as radiance toward `eye` or along each normal.
     pub fn radiance(
         &self,
         material: &Material,
         eye: Option<Vec3>,
         progress: Option<&ProgressFn>,
     ) -> Result<Evaluation> {
+        check_eye(eye)?;
+        let start = Instant::now();
         let resolved = Resolved::new(self.profile, material)?;
-        splat_radiance(&self.scene, &resolved, &self.settings, eye, progress)
+        let mut e = self.radiosity(material, progress)?;
+        let mesh = &self.scene.mesh;
+        radiance_from_radiosity(
+            &mut e.values,
+            mesh.positions(),
+            mesh.normals(),
+            eye,
+            &|cos| resolved.exit_weights(cos),
+        );
+        e.quantity = Quantity::Radiance;
+        e.seconds = start.elapsed().as_secs_f64();
+        Ok(e)
     }
 }

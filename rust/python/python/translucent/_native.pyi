@@ -376,7 +376,18 @@ class Splat:
     eqs. 4-5's threshold in (0, 1); `max_grid` the largest light-view side in [1, 4096] (eq. 5's
     grid is cut to it, the cut reported). ValueError naming eps, max_grid or profile."""
 
-    def __init__(self, scene: Scene, profile: Profile = "cycles", eps: float = 0.01, max_grid: int = 1024) -> None: ...
+    def __init__(
+        self,
+        scene: Scene,
+        profile: Profile = "cycles",
+        eps: float = 0.01,
+        max_grid: int = 1024,
+        walks: bool = False,
+        walk_rays: int | None = None,
+    ) -> None:
+        """`walks` (Cycles' profile only): the walks' geometry term and the object's own light,
+        walked at the first evaluation (`walk_rays` in all, default as PRT's) and carried to a
+        new light or pose. ValueError naming eps, max_grid, profile, walks or walk_rays."""
     def radiosity(self, material: Material, progress: Progress | None = None) -> npt.NDArray[np.float32]:
         """(N, 3) radiosity B per vertex; Cancelled when `progress` returns False."""
     def radiance(
@@ -415,8 +426,11 @@ class Splat:
     @property
     def max_grid(self) -> int: ...
     @property
+    def walks(self) -> bool: ...
+    @property
     def report(self) -> dict[str, object] | None:
-        """The last evaluation's r_max, overlap, splats, stage seconds (a render's camera view
+        """The last evaluation's r_max, overlap, splats, "terms" (the walks' and own light's
+        rays and seconds; None without walks), stage seconds (a render's camera view
         too, with the pixels that see the mesh) and per-light grid and ray counts; None before
         the first."""
     @property

@@ -1,10 +1,12 @@
-//! What the half-space profile cannot see, for the hierarchy: the walks' geometry term
-//! (`walks::WalkTerm`) and the object's own light (`own_light::Bounce`), the shared kernels
-//! PRT holds too, so both methods show the same Cycles-matching answer (issue 29, point 3).
+//! What the half-space profile cannot see, for a method that sums it (the hierarchy, the
+//! splatting): the walks' geometry term (`walks::WalkTerm`) and the object's own light
+//! (`own_light::Bounce`), the shared kernels PRT holds too, so every method shows the same
+//! Cycles-matching answer (issue 29, point 3; issue 31, point 6).
 //!
-//! They are computed at the first evaluation with walks on (`HierarchySettings::terms`), for
-//! that evaluation's material (the representative): D = B_walk - B_half against the
-//! hierarchy's own half-space B, carried to every vertex by the walks' kernels; the own light
+//! They are computed at the first evaluation with walks on (`HierarchySettings::terms`,
+//! `Splatting::with_walks`), for that evaluation's material (the representative):
+//! D = B_walk - B_half against the method's own half-space B, carried to every vertex by the
+//! walks' kernels; the own light
 //! cast from the direct B over kept rays. After a new light or a pose they are carried, not
 //! traced again: the walks' exits and the own light's hits are a triangle and barycentrics,
 //! read on the same triangles under the new light and shape (exact for a rigid motion with the
@@ -50,30 +52,30 @@ pub struct TermReport {
 }
 
 /// The terms and the state they are in.
-pub(super) struct Terms {
-    pub(super) settings: TermSettings,
+pub struct Terms {
+    pub settings: TermSettings,
     /// The material they were walked for; None before the first evaluation.
-    pub(super) rep: Option<Material>,
+    pub rep: Option<Material>,
     walks: Option<WalkTerm>,
     bounce: Option<Bounce>,
-    /// Lit and shaped as the hierarchy now is.
-    pub(super) current: bool,
-    pub(super) report: TermReport,
+    /// Lit and shaped as the method now is.
+    pub current: bool,
+    pub report: TermReport,
 }
 
-/// The hierarchy's state the terms read.
-pub(super) struct Lit<'a> {
-    pub(super) scene: &'a Scene,
-    pub(super) tracer: &'a Tracer,
-    pub(super) irradiance: IrradianceSettings,
+/// The method's state the terms read.
+pub struct Lit<'a> {
+    pub scene: &'a Scene,
+    pub tracer: &'a Tracer,
+    pub irradiance: IrradianceSettings,
     /// Irradiance per vertex (with the representative's Fresnel factor).
-    pub(super) vertices: &'a [[f32; 3]],
+    pub vertices: &'a [[f32; 3]],
     /// The representative's half-space B per vertex.
-    pub(super) halfspace: &'a [[f32; 3]],
+    pub halfspace: &'a [[f32; 3]],
 }
 
 impl Terms {
-    pub(super) fn new(settings: TermSettings) -> Terms {
+    pub fn new(settings: TermSettings) -> Terms {
         Terms {
             settings,
             rep: None,
@@ -85,7 +87,7 @@ impl Terms {
     }
 
     /// The lights or the shape changed: carried at the next evaluation.
-    pub(super) fn stale(&mut self, posed: bool) {
+    pub fn stale(&mut self, posed: bool) {
         self.current = false;
         if posed && self.walks.is_some() {
             self.report.carried_pose = true;
@@ -94,7 +96,7 @@ impl Terms {
 
     /// Computes the terms under `lit` (walked anew when `fresh` or never walked; else the kept
     /// walks and rays read again).
-    pub(super) fn update(
+    pub fn update(
         &mut self,
         lit: &Lit<'_>,
         rep: &Resolved,
@@ -209,7 +211,7 @@ impl Terms {
     }
 
     /// Adds the terms for `material` to `radiosity` (B per vertex) and their noise to `error`.
-    pub(super) fn add_to(
+    pub fn add_to(
         &self,
         radiosity: &mut [[f32; 3]],
         material: &Resolved,
