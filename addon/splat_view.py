@@ -4,6 +4,10 @@ images put together by their object masks (each material's render hides the othe
 so no pixel is shown twice and no light passes between them), written into the add-on's own
 image `IMAGE` and drawn over the 3D viewports while the scene's "Show in viewport" is on.
 
+Under Cycles' profile the image has the walks' geometry term and the object's own light
+(`Splat(walks=True)`): walked at a material's first render and carried to a new light or pose
+after, its `Splat` kept between renders (`SPLATS`).
+
 While it is on, the image follows by itself: a moved light, a deformed or animated mesh, a
 material edit or a new viewport view changes the scene's key (`state_key`: the view, each
 material's settings, its objects' and occluders' geometry keys, the lights and the world), and
@@ -130,6 +134,37 @@ class Rendered:
     reports: dict = field(default_factory=dict)
 
 
+# Per material: its `translucent.Splat` and what it was made for, kept between renders so the
+# walks' term (Cycles' profile) is walked once and carried to a new light or pose after.
+SPLATS: dict = {}
+_SPLATS_LOCK = threading.Lock()
+
+
+def _splat_for(name: str, scene, names: list, profile: str, settings: tuple):
+    """The kept Splat of material `name` updated to `scene` (same objects, vertex and triangle
+    counts, profile and settings), or a new one: with the walks under Cycles' profile."""
+    import translucent
+
+    made_for = (tuple(names), scene.vertex_count, scene.triangle_count, profile, settings)
+    with _SPLATS_LOCK:
+        kept = SPLATS.get(name)
+    positions = np.asarray(scene.positions)
+    if kept is not None and kept[1] == made_for:
+        splat = kept[0]
+        if np.array_equal(kept[2], positions):
+            splat.update(lights=scene)  # a pose carries the walks differently: only when posed
+        else:
+            splat.update(positions=positions, normals=scene.normals, lights=scene)
+            with _SPLATS_LOCK:
+                SPLATS[name] = (splat, made_for, positions)
+        return splat
+    eps, max_grid = settings
+    splat = translucent.Splat(scene, profile=profile, eps=eps, max_grid=max_grid, walks=profile == "cycles")
+    with _SPLATS_LOCK:
+        SPLATS[name] = (splat, made_for, positions)
+    return splat
+
+
 class RenderJob:
     """Each material's splatting rendered on a worker thread that never touches bpy (the scenes
     were exported before); `progress` in [0, 1], `cancel` stops it at the next tick."""
@@ -152,7 +187,7 @@ class RenderJob:
             mask = np.zeros((h, w), np.int32)
             objects, reports = [], {}
             for k, (name, scene, names, profile, material) in enumerate(self.parts):
-                splat = translucent.Splat(scene, profile=profile, eps=self.eps, max_grid=self.max_grid)
+                splat = _splat_for(name, scene, names, profile, (self.eps, self.max_grid))
                 span = (k / len(self.parts), (k + 1) / len(self.parts))
 
                 def tick(f, span=span):
@@ -358,3 +393,5 @@ def unregister() -> None:
 def forget() -> None:
     """A new file: no image of its own yet."""
     STATE.update(last=None, job=None, wanted=None, dirty=False, renders=0, message="", texture=None)
+    with _SPLATS_LOCK:
+        SPLATS.clear()

@@ -119,6 +119,8 @@ def test_the_image_follows_a_moved_light_and_a_deformed_mesh_by_itself(addon):
     splat_view.tick()
     first = splat_view.STATE["last"]
     assert splat_view.STATE["renders"] == 1 and first.radiance.shape == (30, 40, 3)
+    # Cycles' profile: the walks' term and own light are in the image, walked once and kept.
+    assert mat.translucent.profile == "CYCLES" and first.reports[mat.name]["report"]["terms"] is not None
     assert (first.mask > 0).sum() > 50
     # Nothing changed: nothing rendered. The per-vertex preview's own colour writes are no change.
     bpy.context.view_layer.update()
@@ -134,6 +136,7 @@ def test_the_image_follows_a_moved_light_and_a_deformed_mesh_by_itself(addon):
     splat_view.tick()
     moved = splat_view.STATE["last"]
     assert splat_view.STATE["renders"] == 2 and not np.allclose(moved.radiance, first.radiance, rtol=0.05)
+    assert splat_view.SPLATS[mat.name][0].report["terms"]["carried_pose"] is False  # carried to the light
     assert bpy.ops.translucent.render_splatting() == {"FINISHED"}
     np.testing.assert_array_equal(splat_view.STATE["last"].radiance, moved.radiance)
     # The mesh deforms (a Displace modifier: the sphere grows by 2 cm toward the light).
