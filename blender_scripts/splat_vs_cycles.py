@@ -41,16 +41,7 @@ from blender_scripts.lib.metrics import image_error  # noqa: E402
 
 def render(engine: str, samples: int, size: int) -> tuple[np.ndarray, float]:
     """The scene's camera at `size` square through `engine`, transparent film: RGBA, seconds."""
-    scene = bpy.context.scene
-    if engine == "CYCLES":
-        cr.use_cycles(samples)
-    else:
-        names = [e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items]
-        eevee = next((n for n in ("BLENDER_EEVEE", "BLENDER_EEVEE_NEXT") if n in names), None)
-        if eevee is None:
-            raise RuntimeError(f"no EEVEE engine in this Blender (engines: {names})")
-        scene.render.engine = eevee
-        scene.eevee.taa_render_samples = samples
+    scene = cr.use_engine(engine, samples)
     scene.render.film_transparent = True
     scene.render.resolution_x = scene.render.resolution_y = size
     scene.render.resolution_percentage = 100

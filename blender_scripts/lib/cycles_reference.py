@@ -277,6 +277,21 @@ def render_exr(scene: bpy.types.Scene) -> np.ndarray:
             bpy.data.images.remove(img)
 
 
+def use_engine(engine: str, samples: int) -> bpy.types.Scene:
+    """The scene set to render with "CYCLES" (`use_cycles`, no denoising) or "EEVEE" (Blender
+    5.0's EEVEE at `samples`); RuntimeError where this Blender has no EEVEE."""
+    if engine == "CYCLES":
+        return use_cycles(samples)
+    scene = bpy.context.scene
+    names = [e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items]
+    eevee = next((n for n in ("BLENDER_EEVEE", "BLENDER_EEVEE_NEXT") if n in names), None)
+    if eevee is None:
+        raise RuntimeError(f"no EEVEE engine in this Blender (engines: {names})")
+    scene.render.engine = eevee
+    scene.eevee.taa_render_samples = samples
+    return scene
+
+
 def render_image(obj: bpy.types.Object, material: translucent.Material, samples: int, engine: str = "CYCLES",
                  size: int = 128) -> tuple[np.ndarray, float]:
     """A camera render of the scene with `obj` in the mapped material: (size, size, 4) linear
@@ -286,16 +301,7 @@ def render_image(obj: bpy.types.Object, material: translucent.Material, samples:
                                *_material_key(material)[4:])).encode()).hexdigest()[:24]
 
     def compute():
-        scene = bpy.context.scene
-        if engine == "CYCLES":
-            use_cycles(samples)
-        else:
-            names = [e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items]
-            eevee = next((n for n in ("BLENDER_EEVEE", "BLENDER_EEVEE_NEXT") if n in names), None)
-            if eevee is None:
-                raise RuntimeError(f"no EEVEE engine in this Blender (engines: {names})")
-            scene.render.engine = eevee
-            scene.eevee.taa_render_samples = samples
+        scene = use_engine(engine, samples)
         scene.render.film_transparent = True
         scene.render.resolution_x = scene.render.resolution_y = size
         scene.view_settings.view_transform = "Standard"

@@ -55,6 +55,28 @@ pub struct Evaluation<D> {
     pub details: D,
 }
 
+impl<D> Evaluation<D> {
+    /// This radiosity evaluation of `mesh`'s vertices turned into radiance toward `eye` (or
+    /// along each normal) by `radiance_from_radiosity`, its seconds counted from `start`.
+    pub fn into_radiance(
+        &mut self,
+        mesh: &crate::mesh::Mesh,
+        eye: Option<Vec3>,
+        exit_weights: &(dyn Fn(f64) -> [f64; 3] + Sync),
+        start: std::time::Instant,
+    ) {
+        radiance_from_radiosity(
+            &mut self.values,
+            mesh.positions(),
+            mesh.normals(),
+            eye,
+            exit_weights,
+        );
+        self.quantity = Quantity::Radiance;
+        self.seconds = start.elapsed().as_secs_f64();
+    }
+}
+
 /// Turns radiosity into outgoing radiance in place: L = W(cos_o) V(cos_o) B / pi, with
 /// `exit_weights(cos_o)` the profile's exit weight and view factor per channel (dipole: F_t,
 /// Xu 2007 eq. 2; Cycles: what the Principled layers let through). Toward `eye`, or along each

@@ -30,7 +30,7 @@ pub use crate::surface_terms::{TermReport, TermSettings};
 pub use settings::{HierarchyReport, HierarchySettings, Mode};
 
 use crate::error::{Error, Result};
-use crate::evaluation::{radiance_from_radiosity, Quantity, Skipped};
+use crate::evaluation::{Quantity, Skipped};
 use crate::irradiance::{Density, IrradianceSettings, PerSource};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
@@ -867,20 +867,12 @@ impl Hierarchy {
         progress: Option<&ProgressFn>,
     ) -> Result<Evaluation> {
         crate::evaluation::check_eye(eye)?;
+        let start = Instant::now();
         let mut e = self.radiosity_with_progress(material, progress)?;
-        let t = Instant::now();
         let model = self.settings.profile;
         let profiles = model.profiles(material)?;
-        let mesh = &self.scene.mesh;
-        radiance_from_radiosity(
-            &mut e.values,
-            mesh.positions(),
-            mesh.normals(),
-            eye,
-            &|cos_o| model.exit_weights(material, &profiles, cos_o),
-        );
-        e.quantity = Quantity::Radiance;
-        e.seconds += t.elapsed().as_secs_f64();
+        let exit = |cos_o| model.exit_weights(material, &profiles, cos_o);
+        e.into_radiance(&self.scene.mesh, eye, &exit, start);
         Ok(e)
     }
 

@@ -499,6 +499,24 @@ pub fn barycentric(corners: &[Vec3; 3], y: Vec3) -> Option<[f32; 3]> {
     Some([1.0 - bv - bw, bv, bw])
 }
 
+/// What a ray hit at `p` on triangle `t` of `mesh`: the triangle's own unit normal, the
+/// barycentric (u, v) of its corners 1 and 2 at `p` (the centroid where the projection fails)
+/// and the shading normal there (the vertex normals interpolated, as Cycles' smooth shading);
+/// None for a degenerate triangle (it carries no surface).
+pub fn hit_surface(mesh: &Mesh, t: u32, p: Vec3) -> Option<(Vec3, [f32; 2], Vec3)> {
+    let tri = mesh.triangles()[t as usize];
+    let corners = tri.map(|v| mesh.positions()[v as usize]);
+    let flat = (corners[1] - corners[0])
+        .cross(corners[2] - corners[0])
+        .try_normalize()?;
+    let uv = match barycentric(&corners, p) {
+        Some([_, u, v]) => [u, v],
+        None => [1.0 / 3.0; 2],
+    };
+    let normals = tri.map(|v| mesh.normals()[v as usize]);
+    Some((flat, uv, interpolated_normal(&normals, uv[0], uv[1], flat)))
+}
+
 /// The corner normals [n_a, n_b, n_c] interpolated at barycentric (1 - u - v, u, v) and
 /// normalised; `flat` where they cancel. Shared with the reference so both see the same surface.
 pub fn interpolated_normal(corners: &[Vec3; 3], u: f32, v: f32, flat: Vec3) -> Vec3 {

@@ -11,7 +11,7 @@
 //! as Cycles' smooth shading and the light view take it) and its object.
 
 use crate::error::{Error, Result};
-use crate::mesh::{barycentric, interpolated_normal, Mesh};
+use crate::mesh::{hit_surface, Mesh};
 use crate::progress::Ticker;
 use crate::raytrace::Tracer;
 use glam::{DVec3, Vec3};
@@ -191,21 +191,10 @@ pub fn camera_view(
                 if tracer.occluded_by_rest(eye, dir, hit.t) {
                     continue; // the rest of the scene stands in front
                 }
-                let tri = mesh.triangles()[hit.triangle as usize];
-                let corners = tri.map(|v| mesh.positions()[v as usize]);
-                let Some(flat) = (corners[1] - corners[0])
-                    .cross(corners[2] - corners[0])
-                    .try_normalize()
-                else {
+                let p = eye + dir * hit.t;
+                let Some((_, uv, normal)) = hit_surface(mesh, hit.triangle, p) else {
                     continue;
                 };
-                let p = eye + dir * hit.t;
-                let uv = match barycentric(&corners, p) {
-                    Some([_, u, v]) => [u, v],
-                    None => [1.0 / 3.0; 2],
-                };
-                let normals = tri.map(|v| mesh.normals()[v as usize]);
-                let normal = interpolated_normal(&normals, uv[0], uv[1], flat);
                 out.push(PixelHit {
                     pixel: row * camera.width + column,
                     position: p,

@@ -16,7 +16,7 @@
 
 use crate::error::{Error, Result};
 use crate::lights::Light;
-use crate::mesh::{barycentric, interpolated_normal, Mesh};
+use crate::mesh::{hit_surface, Mesh};
 use crate::optics::fresnel_transmittance;
 use crate::progress::Ticker;
 use crate::raytrace::Tracer;
@@ -341,27 +341,15 @@ fn cast(
         return;
     };
     counts.hits += 1;
-    let tri = mesh.triangles()[hit.triangle as usize];
-    let corners = tri.map(|v| mesh.positions()[v as usize]);
-    let Some(flat) = (corners[1] - corners[0])
-        .cross(corners[2] - corners[0])
-        .try_normalize()
-    else {
+    let p = cell.origin + cell.direction * hit.t;
+    // Light enters where the surface's own normal faces it, as the irradiance estimator
+    // takes it: the vertex normals interpolated at the hit.
+    let Some((flat, _, shading)) = hit_surface(mesh, hit.triangle, p) else {
         return; // a degenerate triangle carries no surface
     };
     // The cell covers footprint / |n . w| of the triangle's plane, whichever way it is wound
     // (and no more than the triangle, or `GRAZING_CAP` footprints, edge-on).
     let cos = flat.dot(cell.direction).abs();
-    let p = cell.origin + cell.direction * hit.t;
-    // Light enters where the surface's own normal faces it, as the irradiance estimator
-    // takes it: the vertex normals interpolated at the hit.
-    let shading = match barycentric(&corners, p) {
-        Some([_, u, v]) => {
-            let normals = tri.map(|v| mesh.normals()[v as usize]);
-            interpolated_normal(&normals, u, v, flat)
-        }
-        None => flat,
-    };
     let Some(inc) = light.incident(p, [0.5; 2]) else {
         counts.unlit += 1; // outside a spot's cone
         return;

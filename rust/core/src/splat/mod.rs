@@ -26,7 +26,7 @@ pub mod sizes;
 mod tests;
 
 use crate::error::{Error, Result};
-use crate::evaluation::{check_eye, radiance_from_radiosity, Quantity, Skipped};
+use crate::evaluation::{check_eye, Quantity, Skipped};
 use crate::irradiance::{
     irradiance as irradiance_of_scene, irradiance_of_lights, IrradianceSettings,
 };
@@ -375,16 +375,7 @@ pub fn splat_radiance(
     check_eye(eye)?;
     let start = Instant::now();
     let mut e = splat_radiosity(scene, resolved, settings, progress)?;
-    let mesh = &scene.mesh;
-    radiance_from_radiosity(
-        &mut e.values,
-        mesh.positions(),
-        mesh.normals(),
-        eye,
-        &|cos| resolved.exit_weights(cos),
-    );
-    e.quantity = Quantity::Radiance;
-    e.seconds = start.elapsed().as_secs_f64();
+    e.into_radiance(&scene.mesh, eye, &|cos| resolved.exit_weights(cos), start);
     Ok(e)
 }
 
@@ -676,16 +667,12 @@ impl Splatting {
         let start = Instant::now();
         let resolved = Resolved::new(self.profile, material)?;
         let mut e = self.radiosity(material, progress)?;
-        let mesh = &self.scene.mesh;
-        radiance_from_radiosity(
-            &mut e.values,
-            mesh.positions(),
-            mesh.normals(),
+        e.into_radiance(
+            &self.scene.mesh,
             eye,
             &|cos| resolved.exit_weights(cos),
+            start,
         );
-        e.quantity = Quantity::Radiance;
-        e.seconds = start.elapsed().as_secs_f64();
         Ok(e)
     }
 }

@@ -70,6 +70,23 @@ pub fn sphere(n: usize, radius: f32) -> Mesh {
     mesh(sphere_parts(n, radius))
 }
 
+/// Two `sphere_parts(n, radius)` centred at x = -`centre` (object 0) and x = +`centre`
+/// (object 1), one mesh.
+pub fn sphere_pair(n: usize, radius: f32, centre: f32) -> Mesh {
+    let (mut p, mut t) = sphere_parts(n, radius);
+    let count = p.len() as u32;
+    for x in p.iter_mut() {
+        x.x -= centre;
+    }
+    let (q, u) = sphere_parts(n, radius);
+    p.extend(q.iter().map(|x| *x + Vec3::X * centre));
+    t.extend(u.iter().map(|tri| tri.map(|v| v + count)));
+    let objects = (0..p.len() as u32).map(|v| u32::from(v >= count)).collect();
+    Mesh::new(p, t, None)
+        .and_then(|m| m.with_objects(objects))
+        .expect("a valid test mesh")
+}
+
 pub fn mesh((p, t): (Vec<Vec3>, Vec<[u32; 3]>)) -> Mesh {
     Mesh::new(p, t, None).expect("a valid test mesh")
 }

@@ -6,8 +6,7 @@
 use super::super::camera::{camera_view, Camera};
 use super::super::*;
 use crate::mesh::test_meshes::oracles::rd_total;
-use crate::mesh::test_meshes::{plane, sphere_parts};
-use crate::mesh::Mesh;
+use crate::mesh::test_meshes::{plane, sphere_pair};
 use crate::optics::{fresnel_transmittance, Material};
 use crate::raytrace::Tracer;
 use std::f64::consts::PI;
@@ -94,19 +93,7 @@ fn a_sunlit_plane_shows_the_closed_form_through_the_exit_fresnel() {
 
 /// Two unit spheres, object 0 at x = -1.5 and object 1 at x = +1.5, lit by a sun from above.
 fn two_spheres() -> Scene {
-    let (mut p, mut t) = sphere_parts(16, 1.0);
-    let n = p.len() as u32;
-    for x in p.iter_mut() {
-        x.x -= 1.5;
-    }
-    let (q, u) = sphere_parts(16, 1.0);
-    p.extend(q.iter().map(|x| *x + Vec3::X * 1.5));
-    t.extend(u.iter().map(|tri| tri.map(|v| v + n)));
-    let objects = (0..p.len() as u32).map(|v| u32::from(v >= n)).collect();
-    let mesh = Mesh::new(p, t, None)
-        .unwrap()
-        .with_objects(objects)
-        .unwrap();
+    let mesh = sphere_pair(16, 1.0, 1.5);
     let mut scene = Scene::new(mesh);
     scene
         .lights

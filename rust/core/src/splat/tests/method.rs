@@ -5,7 +5,7 @@
 use super::super::*;
 use crate::irradiance::{irradiance, Density, IrradianceSettings};
 use crate::mesh::test_meshes::oracles::rd_total;
-use crate::mesh::test_meshes::{nearest, plane, sphere, sphere_parts};
+use crate::mesh::test_meshes::{nearest, plane, sphere, sphere_pair};
 use crate::mesh::Mesh;
 use crate::metrics::relative_error;
 use crate::optics::{fresnel_transmittance, Material};
@@ -209,19 +209,8 @@ fn no_light_passes_between_objects() {
     // Two touching spheres, object 0 at x < 0 and object 1 at x > 0, a sun from -x: object 1
     // lies wholly in object 0's shadow, and object 0's lit side is within r_max of it, so any
     // light on object 1 would have crossed between objects (Shah, "Rendering Multiple Objects").
-    let (mut p, mut t) = sphere_parts(16, 1.0);
-    let n = p.len() as u32;
-    for x in p.iter_mut() {
-        x.x -= 1.001;
-    }
-    let (q, u) = sphere_parts(16, 1.0);
-    p.extend(q.iter().map(|x| *x + Vec3::X * 1.001));
-    t.extend(u.iter().map(|tri| tri.map(|v| v + n)));
-    let objects = (0..p.len() as u32).map(|v| u32::from(v >= n)).collect();
-    let mesh = Mesh::new(p, t, None)
-        .unwrap()
-        .with_objects(objects)
-        .unwrap();
+    let mesh = sphere_pair(16, 1.0, 1.001);
+    let n = mesh.vertex_count() / 2;
     let r = dipole("marble", 10.0); // r_max 1.8 units in red
     let scene = sunlit(mesh.clone(), Vec3::X);
     let settings = SplatSettings {
@@ -234,7 +223,7 @@ fn no_light_passes_between_objects() {
             assert_eq!(e.values[v], [0.0; 3], "vertex {v}");
         }
     }
-    assert!(e.values[..n as usize].iter().any(|b| b[0] > 0.0));
+    assert!(e.values[..n].iter().any(|b| b[0] > 0.0));
 }
 
 #[test]
