@@ -37,6 +37,38 @@ def _resolve(op, context, needs_preview: bool):
     return mat
 
 
+def _run_modal(op, context, job) -> set:
+    """`job` started off the UI thread with a progress bar; `op.modal` polls it (`_poll`)."""
+    op._job = job
+    job.start()
+    wm = context.window_manager
+    wm.progress_begin(0, 100)
+    op._timer = wm.event_timer_add(0.1, window=context.window)
+    wm.modal_handler_add(op)
+    return {"RUNNING_MODAL"}
+
+
+def _poll(op, context, event, what: str):
+    """One modal event for `op._job`: Esc cancels it; on a timer the progress bar and status
+    say how far `what` is. None once the job is done (the bar and status cleared), else the
+    modal's answer."""
+    wm = context.window_manager
+    if event.type == "ESC":
+        op._job.cancel = True
+    if event.type != "TIMER":
+        return {"PASS_THROUGH"}
+    wm.progress_update(int(100 * op._job.progress))
+    context.workspace.status_text_set(f"Translucent: {what} {100 * op._job.progress:.0f} % (Esc cancels)")
+    if not op._job.done:
+        return {"RUNNING_MODAL"}
+    wm.event_timer_remove(op._timer)
+    wm.progress_end()
+    context.workspace.status_text_set(None)
+    for area in context.screen.areas:
+        area.tag_redraw()
+    return None
+
+
 class TRANSLUCENT_OT_precompute(bpy.types.Operator):
     """Precompute light transport for the objects using this material (Xu 2007 PRT, or the hierarchy)"""
 
@@ -108,34 +140,16 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
         if job is None:
             return {"CANCELLED"}
         JOBS[self._mat] = job
-        job.start()
-        wm = context.window_manager
-        wm.progress_begin(0, 100)
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return _run_modal(self, context, job)
 
     def modal(self, context, event):
-        wm = context.window_manager
-        if event.type == "ESC":
-            self._job.cancel = True
-        if event.type != "TIMER":
-            return {"PASS_THROUGH"}
-        if not self._first_shown and self._job.first is not None:
+        if event.type == "TIMER" and not self._first_shown and self._job.first is not None:
             mat = bpy.data.materials.get(self._mat)
             if mat is not None:
                 edits.show_first(mat, self._job, self._objects, self._info, self._lighting)
             self._first_shown = True
-        wm.progress_update(int(100 * self._job.progress))
-        context.workspace.status_text_set(f"Translucent: precompute {100 * self._job.progress:.0f} % (Esc cancels)")
-        if not self._job.done:
-            return {"RUNNING_MODAL"}
-        wm.event_timer_remove(self._timer)
-        wm.progress_end()
-        context.workspace.status_text_set(None)
-        for area in context.screen.areas:
-            area.tag_redraw()
-        return self._finish(context)
+        answer = _poll(self, context, event, "precompute")
+        return answer if answer is not None else self._finish(context)
 
 
 class TRANSLUCENT_OT_clear(bpy.types.Operator):
@@ -241,30 +255,11 @@ class TRANSLUCENT_OT_render_splatting(bpy.types.Operator):
         job = self._prepare(context)
         if job is None:
             return {"CANCELLED"}
-        self._job = job
-        job.start()
-        wm = context.window_manager
-        wm.progress_begin(0, 100)
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return _run_modal(self, context, job)
 
     def modal(self, context, event):
-        wm = context.window_manager
-        if event.type == "ESC":
-            self._job.cancel = True
-        if event.type != "TIMER":
-            return {"PASS_THROUGH"}
-        wm.progress_update(int(100 * self._job.progress))
-        context.workspace.status_text_set(f"Translucent: splatting {100 * self._job.progress:.0f} % (Esc cancels)")
-        if not self._job.done:
-            return {"RUNNING_MODAL"}
-        wm.event_timer_remove(self._timer)
-        wm.progress_end()
-        context.workspace.status_text_set(None)
-        for area in context.screen.areas:
-            area.tag_redraw()
-        return self._finish(context, self._job)
+        answer = _poll(self, context, event, "splatting")
+        return answer if answer is not None else self._finish(context, self._job)
 
 
 classes = (TRANSLUCENT_OT_precompute, TRANSLUCENT_OT_clear, TRANSLUCENT_OT_render_splatting)

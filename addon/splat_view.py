@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import export
+from . import export, jobs
 from .session import objects_with, params
 
 IMAGE = "Translucent Splatting"
@@ -165,21 +165,16 @@ def _splat_for(name: str, scene, names: list, profile: str, settings: tuple):
     return splat
 
 
-class RenderJob:
+class RenderJob(jobs.Job):
     """Each material's splatting rendered on a worker thread that never touches bpy (the scenes
     were exported before); `progress` in [0, 1], `cancel` stops it at the next tick."""
 
     def __init__(self, parts, view: View, key: tuple, settings: tuple):
+        super().__init__(None, [])
         self.parts, self.view, self.key = parts, view, key
         self.eps, self.max_grid = settings
-        self.progress, self.cancel = 0.0, False
-        self.result: Rendered | None = None
-        self.error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, daemon=True)
 
-    def _run(self):
-        import translucent
-
+    def _run(self, scene, materials, kwargs):
         try:
             t0 = time.perf_counter()
             w, h = self.view.size
@@ -204,16 +199,6 @@ class RenderJob:
             self.result = Rendered(radiance, mask, objects, self.view, self.key, time.perf_counter() - t0, reports)
         except BaseException as e:  # reported by whoever polls the job
             self.error = e
-
-    def start(self):
-        self._thread.start()
-
-    def run_here(self):
-        self._thread.run()
-
-    @property
-    def done(self) -> bool:
-        return not self._thread.is_alive() and (self.result is not None or self.error is not None)
 
 
 def prepare(bl_scene: bpy.types.Scene, view: View, materials=None) -> RenderJob:
