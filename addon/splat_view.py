@@ -201,9 +201,10 @@ class RenderJob(jobs.Job):
             self.error = e
 
 
-def prepare(bl_scene: bpy.types.Scene, view: View, materials=None) -> RenderJob:
+def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | None = None) -> RenderJob:
     """Exports each material's scene (on this thread: bpy) and returns the job that renders
-    them, not started. ValueError when no previewed material is in the scene."""
+    them, not started; `key`: the scene's `state_key` where the caller has just computed it.
+    ValueError when no previewed material is in the scene."""
     materials = materials_in(bl_scene) if materials is None else materials
     if not materials:
         raise ValueError("no previewed material in the scene: turn the preview on for a material")
@@ -218,7 +219,8 @@ def prepare(bl_scene: bpy.types.Scene, view: View, materials=None) -> RenderJob:
     if not parts:
         raise ValueError("no mesh object uses a previewed material")
     settings = bl_scene.translucent_splat
-    return RenderJob(parts, view, state_key(bl_scene, view, materials), (settings.eps, settings.max_grid))
+    key = state_key(bl_scene, view, materials) if key is None else key
+    return RenderJob(parts, view, key, (settings.eps, settings.max_grid))
 
 
 # The last image shown, the job rendering the next one, and the view the viewport asked for.
@@ -296,10 +298,11 @@ def tick() -> float | None:
             STATE["message"] = "splatting image: no scene camera and no perspective viewport to render"
             return POLL_S
         materials = materials_in(bl_scene)
+        key = state_key(bl_scene, view, materials) if materials else None
         last = STATE["last"]
-        if last is not None and materials and last.key == state_key(bl_scene, view, materials):
+        if last is not None and key is not None and last.key == key:
             return POLL_S
-        job = prepare(bl_scene, view, materials)
+        job = prepare(bl_scene, view, materials, key)
     except ValueError as e:
         STATE["message"] = f"splatting image: {e}"
         return POLL_S

@@ -64,15 +64,13 @@ def main() -> int:
     scene, info = export.export_scene([obj])
     m = translucent.Material.preset(args.material, scenes.MM_PER_UNIT)
     shown = scenes.preview_object(obj)  # the evaluated mesh, the attribute as emission
-    preview_mat = shown.data.materials[0]
-    source = obj
 
     # Cycles: the source in the mapped Principled BSDF, its specular layer off.
     mat = cr.principled_material(m)
     mat.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
-    source.data.materials.clear()
-    source.data.materials.append(mat)
-    source.hide_render, shown.hide_render = False, True
+    obj.data.materials.clear()
+    obj.data.materials.append(mat)
+    obj.hide_render, shown.hide_render = False, True
     truth, truth_s = render("CYCLES", args.spp, args.size)
     rows = [("Cycles random walk", f"{args.spp} spp", "(the reference)", truth_s)]
     try:
@@ -81,7 +79,7 @@ def main() -> int:
         rows.append(("EEVEE", "64 samples", f"{100 * rms:.2f}", s))
     except RuntimeError as e:
         rows.append(("EEVEE", "64 samples", f"not run: {e}", float("nan")))
-    source.hide_render, shown.hide_render = True, False
+    obj.hide_render, shown.hide_render = True, False
 
     # The per-vertex preview, as the viewport shows it.
     t0 = time.perf_counter()
@@ -94,7 +92,6 @@ def main() -> int:
     rows.append(("PRT per-vertex preview (Cycles' profile, walks)", "32 coefficients", f"{100 * rms:.2f}",
                  pre + prt.last_eval["seconds"]))
     shown.hide_render = True
-    del preview_mat
 
     # The splatting's image of the same camera.
     mw = np.array(cam.matrix_world, dtype=np.float64)

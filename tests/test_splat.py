@@ -178,7 +178,7 @@ def test_the_walks_term_brings_the_splatting_to_prt_and_follows_a_light_and_the_
     far = max(translucent.relative_error(plain.radiosity(m), b_prt, w)["rms"])
     near = max(translucent.relative_error(walked.radiosity(m), b_prt, w)["rms"])
     assert far > 0.04 and near < 0.015, (far, near)  # measured: 7.8 % and 0.31 %
-    assert walked.report["terms"]["walk_rays"] > 0 and plain.report["terms"] is None
+    assert walked.report["terms"]["walks"]["rays"] > 0 and plain.report["terms"] is None
     assert "walks through the mesh" not in {x["what"] for x in walked.last_eval["skipped"]}
     # The image carries the same layer: at the vertex facing the camera, the pixels there are
     # that vertex's radiance.

@@ -57,3 +57,25 @@ pub fn walks_dict<'py>(
     w.set_item("seconds_relight", g.seconds_relight)?;
     Ok(w)
 }
+
+/// The walks' term and own light's report (`surface_terms::TermReport`) as the hierarchy's and
+/// the splatting's reports give it.
+pub fn terms_dict<'py>(
+    py: Python<'py>,
+    t: &translucent_core::surface_terms::TermReport,
+) -> PyResult<Bound<'py, PyDict>> {
+    let w = PyDict::new(py);
+    match &t.walks {
+        Some(g) => w.set_item("walks", walks_dict(py, g)?)?,
+        None => w.set_item("walks", py.None())?,
+    }
+    match &t.walks_indirect {
+        Some(g) => w.set_item("walks_indirect", walks_dict(py, g)?)?,
+        None => w.set_item("walks_indirect", py.None())?,
+    }
+    w.set_item("own_light_rays", t.own_light_rays)?;
+    w.set_item("own_light_share", t.own_light_share)?;
+    w.set_item("carried_pose", t.carried_pose)?;
+    w.set_item("seconds", t.seconds)?;
+    Ok(w)
+}

@@ -240,24 +240,7 @@ impl PyHierarchy {
         d.set_item("seconds", r.seconds)?;
         d.set_item("error_estimate", r.error_estimate.map(|x| x.to_vec()))?;
         match &r.terms {
-            Some(t) => {
-                let w = PyDict::new(py);
-                match &t.walks {
-                    Some(g) => w.set_item("walks", crate::evaluation::walks_dict(py, g)?)?,
-                    None => w.set_item("walks", py.None())?,
-                }
-                match &t.walks_indirect {
-                    Some(g) => {
-                        w.set_item("walks_indirect", crate::evaluation::walks_dict(py, g)?)?
-                    }
-                    None => w.set_item("walks_indirect", py.None())?,
-                }
-                w.set_item("own_light_rays", t.own_light_rays)?;
-                w.set_item("own_light_share", t.own_light_share)?;
-                w.set_item("carried_pose", t.carried_pose)?;
-                w.set_item("seconds", t.seconds)?;
-                d.set_item("terms", w)?;
-            }
+            Some(t) => d.set_item("terms", crate::evaluation::terms_dict(py, t)?)?,
             None => d.set_item("terms", py.None())?,
         }
         d.set_item("method", "hierarchy")?;

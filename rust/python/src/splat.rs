@@ -47,16 +47,9 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
     report.set_item("seconds_point_mass", r.seconds_point_mass)?;
     report.set_item("seconds_camera_view", r.seconds_camera_view)?;
     report.set_item("pixels", r.pixels)?;
-    if let Some(t) = &r.terms {
-        let d = PyDict::new(py);
-        d.set_item("own_light_rays", t.own_light_rays)?;
-        d.set_item("own_light_share", t.own_light_share)?;
-        d.set_item("carried_pose", t.carried_pose)?;
-        d.set_item("seconds", t.seconds)?;
-        d.set_item("walk_rays", t.walks.as_ref().map(|w| w.rays))?;
-        report.set_item("terms", d)?;
-    } else {
-        report.set_item("terms", py.None())?;
+    match &r.terms {
+        Some(t) => report.set_item("terms", crate::evaluation::terms_dict(py, t)?)?,
+        None => report.set_item("terms", py.None())?,
     }
     let lights = PyList::empty(py);
     for l in &r.lights {

@@ -430,7 +430,8 @@ class Splat:
     @property
     def report(self) -> dict[str, object] | None:
         """The last evaluation's r_max, overlap, splats, "terms" (the walks' and own light's
-        rays and seconds; None without walks), stage seconds (a render's camera view
+        report as the Hierarchy's: "walks", "walks_indirect", "own_light_rays",
+        "own_light_share", "carried_pose", "seconds"; None without walks), stage seconds (a render's camera view
         too, with the pixels that see the mesh) and per-light grid and ray counts; None before
         the first."""
     @property
