@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import export, jobs
+from . import export, jobs, principled
 from .session import objects_with, params
 
 IMAGE = "Translucent Splatting"
@@ -173,6 +173,7 @@ class RenderJob(jobs.Job):
         super().__init__(None, [])
         self.parts, self.view, self.key = parts, view, key
         self.eps, self.max_grid = settings
+        self.notes: dict = {}  # per material, what the image does not follow (a `skipped` entry)
 
     def _run(self, scene, materials, kwargs):
         try:
@@ -196,6 +197,8 @@ class RenderJob(jobs.Job):
                 mask[seen] = m[seen] + len(objects)
                 objects.extend(names)
                 reports[name] = {**splat.last_eval, "report": splat.report}
+                if name in self.notes:
+                    reports[name]["skipped"] = [*reports[name]["skipped"], self.notes[name]]
             self.result = Rendered(radiance, mask, objects, self.view, self.key, time.perf_counter() - t0, reports)
         except BaseException as e:  # reported by whoever polls the job
             self.error = e
@@ -208,7 +211,7 @@ def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | 
     materials = materials_in(bl_scene) if materials is None else materials
     if not materials:
         raise ValueError("no previewed material in the scene: turn the preview on for a material")
-    parts = []
+    parts, notes = [], {}
     for mat in materials:
         objects = objects_with(mat, bl_scene)
         if not objects:
@@ -216,11 +219,18 @@ def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | 
         scene, info = export.export_scene(objects, bl_scene=bl_scene, material=mat)
         s = mat.translucent
         parts.append((mat.name, scene, [r.name for r in info.objects], s.profile_name(), s.material()))
+        if s.source == "PRINCIPLED" and principled.connected_inputs(mat):
+            # Said, not shown silently: the image takes the sockets' own values everywhere.
+            notes[mat.name] = {"what": "linked inputs: " + ", ".join(principled.connected_inputs(mat)),
+                               "why": "not followed by the splatting image yet: the socket's own value is "
+                                      "used everywhere (the per-vertex preview follows a linked Base Color)"}
     if not parts:
         raise ValueError("no mesh object uses a previewed material")
     settings = bl_scene.translucent_splat
     key = state_key(bl_scene, view, materials) if key is None else key
-    return RenderJob(parts, view, key, (settings.eps, settings.max_grid))
+    job = RenderJob(parts, view, key, (settings.eps, settings.max_grid))
+    job.notes = notes
+    return job
 
 
 # The last image shown, the job rendering the next one, and the view the viewport asked for.
@@ -245,6 +255,10 @@ def store(result: Rendered) -> bpy.types.Image:
     seconds = sum(r["seconds"] for r in result.reports.values())
     pixels = int((result.mask > 0).sum())
     STATE["message"] = f"splatting image: {pixels:,} pixels of {len(result.reports)} material(s) in {seconds:.2f} s"
+    unfollowed = [name for name, r in result.reports.items()
+                  if any(x["what"].startswith("linked inputs") for x in r["skipped"])]
+    if unfollowed:
+        STATE["message"] += f"; textures not followed in {', '.join(unfollowed)}"
     return image
 
 

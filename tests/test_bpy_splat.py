@@ -171,3 +171,25 @@ def test_a_viewports_view_is_read_from_its_matrices(addon):
     np.testing.assert_allclose(ahead, (target - eye).normalized(), atol=1e-6)
     rv3d.is_perspective = False
     assert splat_view.region_view(SimpleNamespace(width=1000, height=500), rv3d, 320) is None
+
+
+def test_a_texture_the_image_does_not_follow_is_said_not_hidden(addon):
+    import bpy
+
+    from addon import splat_view
+
+    # A Principled material whose Base Color comes from a checker: the image takes the socket's
+    # own value everywhere, and the report and the panel's line say so.
+    mat = bpy.data.materials.new("Checked")
+    mat.translucent.enabled, mat.translucent.source = True, "PRINCIPLED"
+    checker = mat.node_tree.nodes.new("ShaderNodeTexChecker")
+    mat.node_tree.links.new(checker.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=16, ring_count=8)
+    bpy.context.active_object.data.materials.append(mat)
+    key_light(bpy)
+    add_camera(bpy, (0.0, -0.3, 0.05))
+    assert bpy.ops.translucent.render_splatting(width=24, height=18) == {"FINISHED"}
+    report = splat_view.STATE["last"].reports[mat.name]
+    said = [x for x in report["skipped"] if x["what"].startswith("linked inputs")]
+    assert len(said) == 1 and "Base Color (Checker Texture)" in said[0]["what"], report["skipped"]
+    assert "textures not followed in Checked" in splat_view.STATE["message"]
