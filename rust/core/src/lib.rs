@@ -6,6 +6,7 @@
 pub mod bake_points; // where Cycles' vertex bake samples a vertex (its corners, 0.1 mm in)
 pub mod error; // the one error type
 pub mod evaluation; // the one answer every method gives: values, error estimate, seconds, skips
+pub mod gpu; // the wgpu adapter the GPU paths share (a real GPU, or lavapipe where allowed)
 pub mod irradiance; // shadowed irradiance from the scene's lights (Xu 2007 eq. 3)
 pub mod light_scale; // new lights that are the old ones times one factor per channel
 pub mod lights; // Blender/Cycles lights and the world

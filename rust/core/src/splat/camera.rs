@@ -166,6 +166,52 @@ impl Camera {
     }
 }
 
+impl Camera {
+    /// The pixels whose centres may see a point within `radius` of `centre`: [x0, y0, x1, y1]
+    /// in pixel-edge coordinates (whole numbers, clipped to the image; the centre of pixel
+    /// (c, r) is (c + 0.5, r + 0.5)), None where it lies wholly outside the image or behind the
+    /// eye. A point p of the sphere has depth z in [z_c - r, z_c + r] and lateral offset x in
+    /// [x_c - r, x_c + r], and x / z is monotone in z for either sign of x, so the box's
+    /// corners bound its image; a sphere that reaches the eye's plane may be anywhere.
+    pub fn sphere_rect(&self, centre: Vec3, radius: f32) -> Option<[f32; 4]> {
+        let d = centre.as_dvec3() - self.eye;
+        let r = f64::from(radius);
+        let z = d.dot(self.forward);
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        if z + r <= 0.0 {
+            return None;
+        }
+        let (x0, x1, y0, y1) = if z - r <= 1e-9 * (z.abs() + r) {
+            (0.0, w, 0.0, h)
+        } else {
+            let bound = |c: f64| {
+                let hi = if c + r >= 0.0 {
+                    (c + r) / (z - r)
+                } else {
+                    (c + r) / (z + r)
+                };
+                let lo = if c - r <= 0.0 {
+                    (c - r) / (z - r)
+                } else {
+                    (c - r) / (z + r)
+                };
+                (lo, hi)
+            };
+            let (xl, xh) = bound(d.dot(self.right));
+            let (yl, yh) = bound(d.dot(self.up));
+            (
+                0.5 * (xl / self.tan_x + 1.0) * w,
+                0.5 * (xh / self.tan_x + 1.0) * w,
+                0.5 * (1.0 - yh / self.tan_y) * h,
+                0.5 * (1.0 - yl / self.tan_y) * h,
+            )
+        };
+        let (x0, y0) = (x0.floor().max(0.0), y0.floor().max(0.0));
+        let (x1, y1) = (x1.ceil().min(w), y1.ceil().min(h));
+        (x0 < x1 && y0 < y1).then_some([x0 as f32, y0 as f32, x1 as f32, y1 as f32])
+    }
+}
+
 /// The pixels of `camera`'s image that see `mesh` first (before the rest of the scene in
 /// `tracer`), in pixel order. One tick per pixel on `ticker`; a cancel returns
 /// `Error::Cancelled`.

@@ -19,6 +19,7 @@
 //! centre (`receivers`).
 
 pub mod camera;
+pub mod gpu;
 pub mod light_view;
 pub mod receivers;
 pub mod sizes;
@@ -38,10 +39,11 @@ use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use crate::surface_terms::{self, TermReport, TermSettings, Terms};
-use camera::{camera_view, Camera};
+use camera::{camera_view, Camera, PixelHit};
 use glam::Vec3;
+use gpu::{GpuPassReport, GpuSplatter};
 use light_view::{light_samples, BoundingSphere, View, ViewCounts};
-use receivers::{gather, Splat};
+use receivers::{gather, Prepared, Splat};
 use sizes::{Sizes, Spread};
 use std::time::Instant;
 
@@ -115,6 +117,9 @@ pub struct SplatReport {
     pub pixels: usize,
     /// The walks' term and the object's own light, where they are on (`Splatting::with_walks`).
     pub terms: Option<TermReport>,
+    /// A render whose pass 3 ran on the GPU (`gpu`): the adapter, target and quads; None on
+    /// the CPU.
+    pub gpu: Option<GpuPassReport>,
 }
 
 fn light_kind(light: &Light) -> &'static str {
@@ -283,12 +288,14 @@ fn sources(
 /// Pass 3 and the point mass: B at `points` (with their shading `normals` and `objects`), the
 /// splats gathered with R cut at each channel's r_max (`progress` from `from` to `to`, per
 /// receiver), plus the profile's point mass times the irradiance there from the lights
-/// splatted, as the ground truth adds it.
+/// splatted, as the ground truth adds it. With `on_gpu` (the device, the camera and the pixels
+/// the points are) the splats are drawn into those pixels by `gpu::GpuSplatter` instead.
 fn radiosity_at(
     src: &mut Sources,
     resolved: &Resolved,
     settings: &SplatSettings,
     (points, normals, objects): (&[Vec3], &[Vec3], &[u32]),
+    on_gpu: Option<(&GpuSplatter, &Camera, &[PixelHit])>,
     progress: Option<&ProgressFn>,
     (from, to): (f32, f32),
 ) -> Result<Vec<[f64; 3]>> {
@@ -301,10 +308,22 @@ fn radiosity_at(
         .copied()
         .zip(objects.iter().copied())
         .collect();
-    let ticker = Ticker::span(progress, receivers.len() as u64, from, to);
     let reach = src.report.r_max.iter().cloned().fold(0.0, f64::max);
     let splats = std::mem::take(&mut src.splats);
-    let mut b = gather(splats, &table, reach, &receivers, Some(&ticker))?;
+    let mut b = match on_gpu {
+        Some((gpu, camera, hits)) => match Prepared::new(splats, &table, reach) {
+            Some(p) => {
+                let (b, r) = gpu.splat(&p, &table, camera, hits, progress, (from, to))?;
+                src.report.gpu = Some(r);
+                b
+            }
+            None => vec![[0.0; 3]; receivers.len()],
+        },
+        None => {
+            let ticker = Ticker::span(progress, receivers.len() as u64, from, to);
+            gather(splats, &table, reach, &receivers, Some(&ticker))?
+        }
+    };
     src.report.seconds_splat = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -348,6 +367,7 @@ pub fn splat_radiosity(
         resolved,
         settings,
         (mesh.positions(), mesh.normals(), &objects),
+        None,
         progress,
         (0.45, 0.95),
     )?;
@@ -400,18 +420,20 @@ pub fn splat_render(
     camera: &Camera,
     progress: Option<&ProgressFn>,
 ) -> Result<Render> {
-    render_with_layer(scene, resolved, settings, camera, None, progress)
+    render_with_layer(scene, resolved, settings, camera, None, None, progress)
 }
 
 /// `splat_render` with `layer` (B per vertex: the walks' term and the object's own light,
 /// `surface_terms`) interpolated across each hit triangle and added to the gathered B: the
-/// per-vertex layer rasterised in the camera pass (Shah's pass 2 with an extra target).
+/// per-vertex layer rasterised in the camera pass (Shah's pass 2 with an extra target). With
+/// `gpu`, pass 3 draws the splats on it (`gpu::GpuSplatter`) instead of gathering on the CPU.
 pub fn render_with_layer(
     scene: &Scene,
     resolved: &Resolved,
     settings: &SplatSettings,
     camera: &Camera,
     layer: Option<&[[f32; 3]]>,
+    gpu: Option<&GpuSplatter>,
     progress: Option<&ProgressFn>,
 ) -> Result<Render> {
     let start = Instant::now();
@@ -432,6 +454,7 @@ pub fn render_with_layer(
         resolved,
         settings,
         (&points, &normals, &objects),
+        gpu.map(|g| (g, camera, hits.as_slice())),
         progress,
         (0.4, 0.95),
     )?;
@@ -483,6 +506,8 @@ pub struct Splatting {
     profile: ProfileKind,
     settings: SplatSettings,
     terms: Option<std::sync::Mutex<Terms>>,
+    /// Where a render's pass 3 runs: this device, or the CPU (None).
+    gpu: Option<GpuSplatter>,
 }
 
 impl Splatting {
@@ -495,7 +520,19 @@ impl Splatting {
             profile,
             settings,
             terms: None,
+            gpu: None,
         })
+    }
+
+    /// Renders draw their splats on `gpu` from now on (None: gather on the CPU). The vertex
+    /// radiosity is gathered on the CPU either way.
+    pub fn set_gpu(&mut self, gpu: Option<GpuSplatter>) {
+        self.gpu = gpu;
+    }
+
+    /// The device renders draw on, if any.
+    pub fn gpu(&self) -> Option<&GpuSplatter> {
+        self.gpu.as_ref()
     }
 
     /// This splatting with the walks' term and the object's own light (`surface_terms`).
@@ -647,6 +684,7 @@ impl Splatting {
             &self.settings,
             camera,
             layer.as_ref().map(|(a, _)| a.as_slice()),
+            self.gpu.as_ref(),
             progress,
         )?;
         if let Some((_, report)) = layer {

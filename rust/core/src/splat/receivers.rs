@@ -337,53 +337,127 @@ impl Bins {
     }
 }
 
+/// The splats made ready for pass 3, on the CPU (`gather`) or the GPU (`splat::gpu`): each
+/// splat's near zone scaled (`near_scale`), binned and grouped (`Bins`).
+pub struct Prepared {
+    bins: Bins,
+    /// The largest channel's r_max: R is 0 beyond it.
+    pub reach: f64,
+    /// How far a receiver looks: r_max, or the widest near zone where it is wider.
+    pub search: f64,
+    /// The splats' disc radii (lo, hi); None where no splat has a disc.
+    pub radii: Option<(f64, f64)>,
+}
+
+/// One group as the GPU draws it: taken as its sum at its centroid by a receiver at least
+/// `near` from `centre`, splat by splat (`Prepared::splats_of`) by one nearer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GroupView {
+    pub centre: Vec3,
+    pub near: f32,
+    pub centroid: Vec3,
+    pub power: [f32; 3],
+    pub object: u32,
+}
+
+impl Prepared {
+    /// `splats` ready for `profile` cut at `reach` (the largest channel's r_max); None where
+    /// there is nothing to splat.
+    pub fn new(mut splats: Vec<Splat>, profile: &LookupRgb, reach: f64) -> Option<Prepared> {
+        if splats.is_empty() || reach.is_nan() || reach <= 0.0 {
+            return None;
+        }
+        // Cells a third of the search radius, no smaller than a millionth of the splats'
+        // spread (so their indices stay small).
+        let (lo, hi) = (splats.iter()).fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), s| (lo.min(s.position), hi.max(s.position)),
+        );
+        let rule = gauss_legendre(DISC_NODES);
+        // The near zone carries the kernel's full integral (`near_scale`); a receiver looks as
+        // far as r_max, or as the widest near zone where the grid is coarser than r_max / 8.
+        let (mut a_lo, mut a_hi) = (f64::INFINITY, 0.0f64);
+        for s in splats.iter().filter(|s| s.radius > 0.0) {
+            a_lo = a_lo.min(f64::from(s.radius));
+            a_hi = a_hi.max(f64::from(s.radius));
+        }
+        let search = reach.max(NEAR_DISCS * a_hi);
+        if a_hi > 0.0 {
+            let scales = NearScales::new(profile, a_lo, a_hi, rule);
+            splats
+                .par_iter_mut()
+                .filter(|s| s.radius > 0.0)
+                .for_each(|s| {
+                    let k = scales.at(f64::from(s.radius));
+                    s.near_power = std::array::from_fn(|c| (f64::from(s.power[c]) * k[c]) as f32);
+                });
+        }
+        // Cells from the reach alone (not from the splats' sizes), so that a light's groups do
+        // not depend on the other lights' splats; from the near zone where a grid far coarser
+        // than r_max makes it wider than twice the reach (Shah's 8-32 a side: cells of r_max /
+        // 3 made each receiver visit ~1e5 of them, 32 s for an 8 x 8 grid at 128 x 128 pixels).
+        let base = if search > 2.0 * reach { search } else { reach };
+        let cell = (base as f32 / CELLS_PER_REACH as f32).max(1e-6 * (hi - lo).max_element());
+        Some(Prepared {
+            bins: Bins::new(splats, cell, search as f32),
+            reach,
+            search,
+            radii: (a_hi > 0.0).then_some((a_lo, a_hi)),
+        })
+    }
+
+    /// Every group, with the range of its splats in `splats`.
+    pub fn groups(&self) -> impl Iterator<Item = (GroupView, &[Splat])> + '_ {
+        self.bins.groups.iter().map(|g| {
+            (
+                GroupView {
+                    centre: g.centre,
+                    near: g.near,
+                    centroid: g.centroid,
+                    power: g.power,
+                    object: g.object,
+                },
+                &self.bins.splats[g.start..g.end],
+            )
+        })
+    }
+
+    pub fn group_count(&self) -> usize {
+        self.bins.groups.len()
+    }
+
+    pub fn splat_count(&self) -> usize {
+        self.bins.splats.len()
+    }
+}
+
 /// B at each of `receivers` (a point and its object): the sum over `splats` of `profile`
 /// (R = 0 beyond `reach`, the largest channel's r_max) times E dA. One tick per receiver on
 /// `ticker`; a cancel returns `Error::Cancelled`.
 pub fn gather(
-    mut splats: Vec<Splat>,
+    splats: Vec<Splat>,
     profile: &LookupRgb,
     reach: f64,
     receivers: &[(Vec3, u32)],
     ticker: Option<&Ticker>,
 ) -> Result<Vec<[f64; 3]>> {
-    if splats.is_empty() || reach.is_nan() || reach <= 0.0 {
-        return Ok(vec![[0.0; 3]; receivers.len()]);
+    match Prepared::new(splats, profile, reach) {
+        Some(p) => gather_prepared(&p, profile, receivers, ticker),
+        None => Ok(vec![[0.0; 3]; receivers.len()]),
     }
-    // Cells a third of the search radius, no smaller than a millionth of the splats' spread
-    // (so their indices stay small).
-    let (lo, hi) = (splats.iter()).fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), s| (lo.min(s.position), hi.max(s.position)),
-    );
-    let reach2 = (reach * reach) as f32;
+}
+
+/// `gather` of splats already `Prepared`.
+pub fn gather_prepared(
+    prepared: &Prepared,
+    profile: &LookupRgb,
+    receivers: &[(Vec3, u32)],
+    ticker: Option<&Ticker>,
+) -> Result<Vec<[f64; 3]>> {
+    let bins = &prepared.bins;
+    let reach2 = (prepared.reach * prepared.reach) as f32;
+    let search2 = (prepared.search * prepared.search) as f32;
     let rule = gauss_legendre(DISC_NODES);
-    // The near zone carries the kernel's full integral (`near_scale`); a receiver looks as far
-    // as r_max, or as the widest near zone where the grid is coarser than r_max / 8.
-    let (mut a_lo, mut a_hi) = (f64::INFINITY, 0.0f64);
-    for s in splats.iter().filter(|s| s.radius > 0.0) {
-        a_lo = a_lo.min(f64::from(s.radius));
-        a_hi = a_hi.max(f64::from(s.radius));
-    }
-    let search = reach.max(NEAR_DISCS * a_hi);
-    let search2 = (search * search) as f32;
-    if a_hi > 0.0 {
-        let scales = NearScales::new(profile, a_lo, a_hi, rule);
-        splats
-            .par_iter_mut()
-            .filter(|s| s.radius > 0.0)
-            .for_each(|s| {
-                let k = scales.at(f64::from(s.radius));
-                s.near_power = std::array::from_fn(|c| (f64::from(s.power[c]) * k[c]) as f32);
-            });
-    }
-    // Cells from the reach alone (not from the splats' sizes), so that a light's groups do not
-    // depend on the other lights' splats; from the near zone where a grid far coarser than
-    // r_max makes it wider than twice the reach (Shah's 8-32 a side: cells of r_max / 3 made
-    // each receiver visit ~1e5 of them, 32 s for an 8 x 8 grid at 128 x 128 pixels).
-    let base = if search > 2.0 * reach { search } else { reach };
-    let cell = (base as f32 / CELLS_PER_REACH as f32).max(1e-6 * (hi - lo).max_element());
-    let bins = &Bins::new(splats, cell, search as f32);
     // R far from the splats from the f32 nodes, uniform in sqrt(r): u = sqrt(r) scale.
     let (nodes, scale, _) = profile.f32_table();
     let (scale, last) = (scale as f32, nodes.len() - 2);
