@@ -175,7 +175,9 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
         row = box.row()
         row.prop(sv, "eps")
         row.prop(sv, "max_grid")
-        box.prop(sv, "max_side")
+        row = box.row()
+        row.prop(sv, "max_side")
+        row.prop(sv, "backend")
         if splat_view.STATE["message"]:
             box.label(text=splat_view.STATE["message"])
 

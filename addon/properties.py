@@ -206,6 +206,10 @@ def _show_toggle(self, context):
     splat_view.show_toggle(self, context)
 
 
+def _splat_changed(self, context):
+    splat_view.settings_changed(self, context)
+
+
 class TranslucentSplatSettings(bpy.types.PropertyGroup):
     """The splatting image's settings (Shah 2009), stored on the scene: one image for every
     previewed material in it."""
@@ -218,9 +222,17 @@ class TranslucentSplatSettings(bpy.types.PropertyGroup):
     )
     eps: FloatProperty(name="Threshold", description="Shah 2009 eqs. 4-5: the share of each splat's light left "
                        "beyond its radius, and Weber's fraction for the overlap", min=1e-4, max=0.5, default=0.01,
-                       precision=4)
+                       precision=4, update=_splat_changed)
     max_grid: IntProperty(name="Light grid", description="The largest side of each light's view grid (eq. 5's "
-                          "grid is cut to it; more is finer and slower)", min=16, max=4096, default=1024)
+                          "grid is cut to it; more is finer and slower)", min=16, max=4096, default=1024,
+                          update=_splat_changed)
+    backend: EnumProperty(
+        name="Splats on", description="Where the splats are drawn into the image (Shah 2009's pass 3)",
+        items=[("AUTO", "Auto", "A hardware GPU that blends float-32 images if there is one, else the CPU"),
+               ("GPU", "GPU", "Any Vulkan adapter, Mesa's software lavapipe included (slower than the CPU there)"),
+               ("CPU", "CPU", "The gather on the CPU's cores")],
+        default="AUTO", update=_splat_changed,
+    )
     max_side: IntProperty(name="Viewport size", description="The largest side in pixels of the image rendered for "
                           "a viewport (the CPU render takes seconds at 800 x 600)", min=16, max=4096, default=320)
 

@@ -109,7 +109,7 @@ def state_key(bl_scene: bpy.types.Scene, view: View, materials) -> tuple:
     geometry of its objects and of the rest of the scene, the lights and the world."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
     parts = [view.key(), tuple(sorted(export.lighting_keys(bl_scene).items())),
-             bl_scene.translucent_splat.eps, bl_scene.translucent_splat.max_grid]
+             bl_scene.translucent_splat.eps, bl_scene.translucent_splat.max_grid, bl_scene.translucent_splat.backend]
     everything = set()
     for mat in materials:
         objects = objects_with(mat, bl_scene)
@@ -158,8 +158,9 @@ def _splat_for(name: str, scene, names: list, profile: str, settings: tuple):
             with _SPLATS_LOCK:
                 SPLATS[name] = (splat, made_for, positions)
         return splat
-    eps, max_grid = settings
-    splat = translucent.Splat(scene, profile=profile, eps=eps, max_grid=max_grid, walks=profile == "cycles")
+    eps, max_grid, backend = settings
+    splat = translucent.Splat(scene, profile=profile, eps=eps, max_grid=max_grid, walks=profile == "cycles",
+                              backend=backend.lower())
     with _SPLATS_LOCK:
         SPLATS[name] = (splat, made_for, positions)
     return splat
@@ -172,7 +173,7 @@ class RenderJob(jobs.Job):
     def __init__(self, parts, view: View, key: tuple, settings: tuple):
         super().__init__(None, [])
         self.parts, self.view, self.key = parts, view, key
-        self.eps, self.max_grid = settings
+        self.settings = settings  # (eps, max_grid, backend)
         self.notes: dict = {}  # per material, what the image does not follow (a `skipped` entry)
 
     def _run(self, scene, materials, kwargs):
@@ -183,7 +184,7 @@ class RenderJob(jobs.Job):
             mask = np.zeros((h, w), np.int32)
             objects, reports = [], {}
             for k, (name, scene, names, profile, material) in enumerate(self.parts):
-                splat = _splat_for(name, scene, names, profile, (self.eps, self.max_grid))
+                splat = _splat_for(name, scene, names, profile, self.settings)
                 span = (k / len(self.parts), (k + 1) / len(self.parts))
 
                 def tick(f, span=span):
@@ -228,7 +229,7 @@ def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | 
         raise ValueError("no mesh object uses a previewed material")
     settings = bl_scene.translucent_splat
     key = state_key(bl_scene, view, materials) if key is None else key
-    job = RenderJob(parts, view, key, (settings.eps, settings.max_grid))
+    job = RenderJob(parts, view, key, (settings.eps, settings.max_grid, settings.backend))
     job.notes = notes
     return job
 
@@ -254,7 +255,10 @@ def store(result: Rendered) -> bpy.types.Image:
     STATE["renders"] += 1
     seconds = sum(r["seconds"] for r in result.reports.values())
     pixels = int((result.mask > 0).sum())
-    STATE["message"] = f"splatting image: {pixels:,} pixels of {len(result.reports)} material(s) in {seconds:.2f} s"
+    gpus = sorted({r["report"]["gpu"]["adapter"] for r in result.reports.values() if r["report"].get("gpu")})
+    where = f"splats drawn on {', '.join(gpus)}" if gpus else "splats gathered on the CPU"
+    STATE["message"] = (f"splatting image: {pixels:,} pixels of {len(result.reports)} material(s) in {seconds:.2f} s"
+                        f" ({where})")
     unfollowed = [name for name, r in result.reports.items()
                   if any(x["what"].startswith("linked inputs") for x in r["skipped"])]
     if unfollowed:
@@ -326,6 +330,11 @@ def tick() -> float | None:
         return tick()
     job.start()
     return POLL_S
+
+
+def settings_changed(settings, context) -> None:
+    """A setting of the image changed: the next `tick` compares the key (it holds the settings)."""
+    STATE["dirty"] = True
 
 
 def show_toggle(settings, context) -> None:

@@ -5,9 +5,11 @@ view, the splats gathered at the pixels, the point mass) and in all, median of s
 Then the bunny against the bunny subdivided once (4x the triangles): Shah's Fig. 9 finds the
 frame time nearly independent of the triangle count. Timings live here, never in tests.
 
-This is the CPU path (ray casts and a gather on rayon); the wgpu render passes are not built yet,
-so there is no GPU figure. Run: `make bench` (or .venv/bin/python blender_scripts/bench_splat.py
-[--runs N] [--size W H]).
+Each row runs on the CPU (ray casts and the gather on rayon) and again with pass 3 drawn on wgpu
+(`Splat.set_backend("gpu")`): on this machine's adapter, which is Mesa's software lavapipe where
+there is no GPU (the adapter is printed). Passes 1, 2 and 4 are on the CPU either way. Run:
+`make bench` (or .venv/bin/python blender_scripts/bench_splat.py [--runs N] [--size W H]
+[--backends cpu gpu]).
 """
 
 from __future__ import annotations
@@ -44,19 +46,22 @@ def save_png(image: np.ndarray, path: str) -> None:
     plt.imsave(path, np.clip(image, 0.0, 1.0) ** (1.0 / 2.2))
 
 
-def bench(p, t, preset: str, size, runs: int, png: str | None = None) -> tuple[dict, int, int]:
+def bench(p, t, preset: str, size, runs: int, backend: str, png: str | None = None) -> tuple[dict, int, int]:
     scene = models.standard_scene(p, t)
     m = translucent.Material.preset(preset, mm_per_unit=1000.0)
-    splat = translucent.Splat(scene, profile="cycles")
+    splat = translucent.Splat(scene, profile="cycles", backend="cpu")
+    if backend == "gpu":
+        splat.set_backend("gpu")
     view = camera(p)
     times: dict[str, list[float]] = {k: [] for k, _ in PASSES}
-    times["total"] = []
+    times["total"], times["draw"] = [], []
     for _ in range(runs):
         image, _mask = splat.render(m, size=size, **view)
         r = splat.report
         for k, _ in PASSES:
             times[k].append(r[k])
         times["total"].append(splat.last_eval["seconds"])
+        times["draw"].append(r["gpu"]["seconds_draw"] if r["gpu"] else float("nan"))
     if png:
         save_png(image, png)
     return {k: statistics.median(v) for k, v in times.items()}, splat.report["splats"], splat.report["pixels"]
@@ -68,12 +73,23 @@ def main() -> int:
     ap.add_argument("--size", type=int, nargs=2, default=(800, 600))
     ap.add_argument("--models", nargs="+", default=["stanford-bunny.obj", "horse.ply"])
     ap.add_argument("--png", help="save the first model's marble image here")
+    ap.add_argument("--backends", nargs="+", default=["cpu", "gpu"], choices=["cpu", "gpu"])
     args = ap.parse_args()
     size = tuple(args.size)
-    print(f"machine: {machine()}; CPU path (no GPU passes yet); {size[0]} x {size[1]}, eps 0.01, "
-          f"light grid 1024, median of {args.runs}")
-    print("| model | triangles | preset | splats | pixels | " + " | ".join(n for _, n in PASSES) + " | frame s |")
-    print("|---|---|---|---|---|" + "---|" * len(PASSES) + "---|")
+    backends = list(args.backends)
+    if "gpu" in backends:
+        try:
+            words = translucent.Splat(models.standard_scene(*models.load(args.models[0], diagonal=0.1)),
+                                      backend="cpu").set_backend("gpu")
+        except RuntimeError as e:
+            print(f"no GPU row: {e}")
+            backends.remove("gpu")
+        else:
+            print(f"pass 3 on the GPU: {words}")
+    print(f"machine: {machine()}; {size[0]} x {size[1]}, eps 0.01, light grid 1024, median of {args.runs}")
+    print("| model | triangles | preset | pass 3 on | splats | pixels | " + " | ".join(n for _, n in PASSES)
+          + " | of which GPU draw | frame s |")
+    print("|---|---|---|---|---|---|" + "---|" * len(PASSES) + "---|---|")
     for name in args.models:
         p, t = models.load(name, diagonal=0.1)
         meshes = [(name, p, t)]
@@ -83,11 +99,14 @@ def main() -> int:
             for preset in ("marble", "skimmilk"):
                 if label.endswith("subdivided") and preset != "marble":
                     continue
-                first = args.png if (label == args.models[0] and preset == "marble") else None
-                med, splats, pixels = bench(q, u, preset, size, args.runs, first)
-                cells = " | ".join(f"{med[k]:.3f}" for k, _ in PASSES)
-                print(f"| {label} | {len(u):,} | {preset} | {splats:,} | {pixels:,} | {cells} | {med['total']:.2f} |",
-                      flush=True)
+                for backend in backends:
+                    first = args.png if (label == args.models[0] and preset == "marble"
+                                         and backend == backends[0]) else None
+                    med, splats, pixels = bench(q, u, preset, size, args.runs, backend, first)
+                    cells = " | ".join(f"{med[k]:.3f}" for k, _ in PASSES)
+                    draw = "" if backend == "cpu" else f"{med['draw']:.3f}"
+                    print(f"| {label} | {len(u):,} | {preset} | {backend} | {splats:,} | {pixels:,} | {cells} "
+                          f"| {draw} | {med['total']:.2f} |", flush=True)
     return 0
 
 

@@ -193,3 +193,31 @@ def test_a_texture_the_image_does_not_follow_is_said_not_hidden(addon):
     said = [x for x in report["skipped"] if x["what"].startswith("linked inputs")]
     assert len(said) == 1 and "Base Color (Checker Texture)" in said[0]["what"], report["skipped"]
     assert "textures not followed in Checked" in splat_view.STATE["message"]
+
+
+def test_the_splats_drawn_on_the_gpu_give_the_cpus_image(addon):
+    import bpy
+
+    from addon import splat_view
+
+    mat, obj, light = lit_sphere(bpy)
+    add_camera(bpy, (0.0, -0.3, 0.05))
+    bl_scene = bpy.context.scene
+    bl_scene.render.resolution_x, bl_scene.render.resolution_y, bl_scene.render.resolution_percentage = 40, 30, 100
+    settings = bl_scene.translucent_splat
+    settings.max_grid, settings.backend = 128, "CPU"
+    settings.show_in_viewport = True
+    splat_view.tick()
+    cpu = splat_view.STATE["last"]
+    assert "gathered on the CPU" in splat_view.STATE["message"]
+    # The setting is part of the image's key: switching it renders again by itself.
+    settings.backend = "GPU"
+    splat_view.tick()
+    if splat_view.STATE["message"].startswith("splatting image failed"):
+        pytest.skip(f"no Vulkan adapter: CI installs Mesa's lavapipe ({splat_view.STATE['message']})")
+    gpu = splat_view.STATE["last"]
+    assert gpu is not cpu and gpu.reports[mat.name]["report"]["gpu"]["target"] == "Rgba32Float"
+    assert "splats drawn on" in splat_view.STATE["message"]
+    np.testing.assert_array_equal(gpu.mask, cpu.mask)
+    assert np.abs(gpu.radiance - cpu.radiance).max() < 2e-3 * cpu.radiance.max()
+    settings.show_in_viewport = False

@@ -7,11 +7,12 @@ use crate::evaluation::evaluation_dict;
 use crate::material::{profile_kind, PyMaterial};
 use crate::scene::PyScene;
 use numpy::{PyArray2, PyArray3};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::sync::{Mutex, RwLock};
 use translucent_core::splat::camera::{Camera, DEFAULT_FOV, MAX_SIDE};
+use translucent_core::splat::gpu::GpuSplatter;
 use translucent_core::splat::{Evaluation, SplatReport, SplatSettings, Splatting, MAX_GRID};
 use translucent_core::Vec3;
 
@@ -33,6 +34,36 @@ impl PySplat {
     fn read(&self) -> std::sync::RwLockReadGuard<'_, Splatting> {
         self.inner.read().unwrap_or_else(|e| e.into_inner())
     }
+
+    /// Where renders draw their splats: "cpu", "gpu" (any adapter, lavapipe included; an
+    /// error when none) or "auto" (a hardware GPU that blends float-32 targets, else the CPU).
+    /// Returns what was chosen, in words.
+    fn choose_backend(&self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
+        if !matches!(backend, "auto" | "gpu" | "cpu") {
+            return Err(PyValueError::new_err(format!(
+                "backend {backend:?}: choose 'auto', 'gpu' or 'cpu'"
+            )));
+        }
+        let device = match backend {
+            "cpu" => Ok(None),
+            _ => run(py, None, |_| Ok(GpuSplatter::new(backend == "gpu", half)))?.map(Some),
+        };
+        let words = match (&device, backend) {
+            (Ok(Some(g)), _) => format!(
+                "GPU: {} ({}, {}), target {}",
+                g.adapter().name,
+                g.adapter().device_type,
+                g.adapter().backend,
+                g.target()
+            ),
+            (Ok(None), _) => "CPU (rayon)".to_string(),
+            (Err(e), "gpu") => return Err(PyRuntimeError::new_err(e.to_string())),
+            (Err(e), _) => format!("CPU (rayon): {e}"),
+        };
+        let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
+        inner.set_gpu(device.ok().flatten());
+        Ok(words)
+    }
 }
 
 /// What the splatting did, as a dict.
@@ -50,6 +81,23 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
     match &r.terms {
         Some(t) => report.set_item("terms", crate::evaluation::terms_dict(py, t)?)?,
         None => report.set_item("terms", py.None())?,
+    }
+    match &r.gpu {
+        Some(g) => {
+            let d = PyDict::new(py);
+            d.set_item("adapter", &g.adapter.name)?;
+            d.set_item("device_type", &g.adapter.device_type)?;
+            d.set_item("software", g.adapter.is_software)?;
+            d.set_item("target", g.target)?;
+            d.set_item("groups", g.groups)?;
+            d.set_item("splats", g.splats)?;
+            d.set_item("culled", g.culled)?;
+            d.set_item("seconds_upload", g.seconds_upload)?;
+            d.set_item("seconds_draw", g.seconds_draw)?;
+            d.set_item("seconds_readback", g.seconds_readback)?;
+            report.set_item("gpu", d)?;
+        }
+        None => report.set_item("gpu", py.None())?,
     }
     let lights = PyList::empty(py);
     for l in &r.lights {
@@ -107,14 +155,17 @@ impl PySplat {
     /// `eps` is eqs. 4-5's threshold in (0, 1), `max_grid` the light view's largest side in
     /// [1, 4096]. Nothing is computed until an evaluation.
     #[new]
-    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None))]
+    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None, backend = "auto"))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
+        py: Python<'_>,
         scene: PyRef<'_, PyScene>,
         profile: &str,
         eps: f64,
         #[pyo3(from_py_with = int)] max_grid: i64,
         walks: bool,
         #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
+        backend: &str,
     ) -> PyResult<Self> {
         let kind = profile_kind(profile)?;
         let max_grid = u32::try_from(max_grid).map_err(|_| {
@@ -129,10 +180,32 @@ impl PySplat {
         if let Some(t) = terms {
             inner = inner.with_walks(t).map_err(crate::convert::to_py)?;
         }
-        Ok(Self {
+        let splat = Self {
             inner: RwLock::new(inner),
             last: Mutex::new(None),
-        })
+        };
+        splat.choose_backend(py, backend, false)?;
+        Ok(splat)
+    }
+
+    /// Where `render` draws its splats (Shah 2009's pass 3): "auto" (a hardware GPU that
+    /// blends float-32 targets, else the CPU), "gpu" (any adapter, Mesa's lavapipe included;
+    /// RuntimeError when there is none) or "cpu". `half=True` draws into half floats, which
+    /// every adapter blends but which lose up to 16 % (docs/splat.md). Per-vertex radiosity is
+    /// gathered on the CPU either way. Returns a sentence saying what was chosen.
+    #[pyo3(signature = (backend, half = false))]
+    fn set_backend(&self, py: Python<'_>, backend: &str, half: bool) -> PyResult<String> {
+        self.choose_backend(py, backend, half)
+    }
+
+    /// "gpu" where renders draw on a GPU, else "cpu".
+    #[getter]
+    fn backend(&self) -> &'static str {
+        if self.read().gpu().is_some() {
+            "gpu"
+        } else {
+            "cpu"
+        }
     }
 
     /// Radiosity B per vertex, (N, 3) float32: the quantity `reference_radiosity` integrates.
@@ -293,12 +366,13 @@ impl PySplat {
     fn __repr__(&self) -> String {
         let s = self.read();
         format!(
-            "Splat({} vertices, profile {}, eps {}, max_grid {}, walks {})",
+            "Splat({} vertices, profile {}, eps {}, max_grid {}, walks {}, backend {})",
             s.scene().mesh.vertex_count(),
             s.profile().name(),
             s.settings().eps,
             s.settings().max_grid,
-            s.walks()
+            s.walks(),
+            if s.gpu().is_some() { "gpu" } else { "cpu" }
         )
     }
 }

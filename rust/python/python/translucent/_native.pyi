@@ -25,6 +25,7 @@ CYCLES_CLAMPS: dict[str, tuple[float, float]]
 raises ValueError naming it."""
 
 Profile = Literal["cycles", "dipole", "multipole"]
+Backend = Literal["auto", "gpu", "cpu"]
 
 class Material:
     """A homogeneous translucent material: the medium (coefficients in 1/scene unit, g, eta)
@@ -384,10 +385,21 @@ class Splat:
         max_grid: int = 1024,
         walks: bool = False,
         walk_rays: int | None = None,
+        backend: Backend = "auto",
     ) -> None:
         """`walks` (Cycles' profile only): the walks' geometry term and the object's own light,
         walked at the first evaluation (`walk_rays` in all, default as PRT's) and carried to a
-        new light or pose. ValueError naming eps, max_grid, profile, walks or walk_rays."""
+        new light or pose. `backend`: where `render` draws its splats (see `set_backend`).
+        ValueError naming eps, max_grid, profile, walks, walk_rays or backend."""
+    def set_backend(self, backend: Backend, half: bool = False) -> str:
+        """Where `render` draws its splats (pass 3): "auto" (a hardware GPU that blends float-32
+        targets, else the CPU), "gpu" (any Vulkan adapter, Mesa's lavapipe included;
+        RuntimeError when none) or "cpu". `half=True` uses half-float targets (up to 16 % off,
+        docs/splat.md). Per-vertex radiosity is gathered on the CPU either way. Returns what was
+        chosen, in words."""
+    @property
+    def backend(self) -> Literal["gpu", "cpu"]:
+        """"gpu" where renders draw on a GPU, else "cpu"."""
     def radiosity(self, material: Material, progress: Progress | None = None) -> npt.NDArray[np.float32]:
         """(N, 3) radiosity B per vertex; Cancelled when `progress` returns False."""
     def radiance(
@@ -432,8 +444,10 @@ class Splat:
         """The last evaluation's r_max, overlap, splats, "terms" (the walks' and own light's
         report as the Hierarchy's: "walks", "walks_indirect", "own_light_rays",
         "own_light_share", "carried_pose", "seconds"; None without walks), stage seconds (a render's camera view
-        too, with the pixels that see the mesh) and per-light grid and ray counts; None before
-        the first."""
+        too, with the pixels that see the mesh), per-light grid and ray counts, and "gpu" (a
+        render drawn on a GPU: "adapter", "software", "target", the "groups" and "splats" drawn,
+        "culled", "seconds_upload", "seconds_draw", "seconds_readback"; None on the CPU); None
+        before the first."""
     @property
     def last_eval(self) -> dict[str, object] | None:
         """The keys every method shares ("method" "splat", "quantity", "error_estimate" None:
