@@ -528,17 +528,13 @@ fn quads(prepared: &Prepared, camera: &Camera, unit: f32) -> (Vec<Quad>, usize, 
         .par_iter()
         .map(|(g, splats)| {
             let object = g.object as f32;
+            let power = |p: [f32; 3]| [p[0] * unit, p[1] * unit, p[2] * unit, object];
             let centre_near = [g.centre.x, g.centre.y, g.centre.z, g.near];
             let mut out = Vec::with_capacity(splats.len() + 1);
             let mut culled = 0;
             let sum = camera.sphere_rect(g.centroid, reach).map(|rect| Quad {
                 position_radius: [g.centroid.x, g.centroid.y, g.centroid.z, -1.0],
-                power_object: [
-                    g.power[0] * unit,
-                    g.power[1] * unit,
-                    g.power[2] * unit,
-                    object,
-                ],
+                power_object: power(g.power),
                 centre_near,
                 rect,
             });
@@ -551,12 +547,7 @@ fn quads(prepared: &Prepared, camera: &Camera, unit: f32) -> (Vec<Quad>, usize, 
                 match camera.sphere_rect(s.position, r) {
                     Some(rect) => out.push(Quad {
                         position_radius: [s.position.x, s.position.y, s.position.z, s.radius],
-                        power_object: [
-                            s.power[0] * unit,
-                            s.power[1] * unit,
-                            s.power[2] * unit,
-                            object,
-                        ],
+                        power_object: power(s.power),
                         centre_near,
                         rect,
                     }),
