@@ -54,6 +54,7 @@ bench: build
 	$(PY) blender_scripts/bench_prt.py
 	$(PY) blender_scripts/bench_hierarchy.py
 	$(PY) blender_scripts/bench_splat.py
+	$(PY) blender_scripts/flicker_splat.py
 
 # The installable Blender extension (zip with the native wheel) in dist/.
 addon: setup

@@ -159,8 +159,10 @@ def _splat_for(name: str, scene, names: list, profile: str, settings: tuple):
                 SPLATS[name] = (splat, made_for, positions)
         return splat
     eps, max_grid, backend = settings
+    # reuse: each render keeps the earlier renders' splat sources that still see the light
+    # (Shah 2009's sampling coherence): a dragged light or a turning object does not flicker.
     splat = translucent.Splat(scene, profile=profile, eps=eps, max_grid=max_grid, walks=profile == "cycles",
-                              backend=backend.lower())
+                              backend=backend.lower(), reuse=True)
     with _SPLATS_LOCK:
         SPLATS[name] = (splat, made_for, positions)
     return splat

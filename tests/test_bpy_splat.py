@@ -138,7 +138,10 @@ def test_the_image_follows_a_moved_light_and_a_deformed_mesh_by_itself(addon):
     assert splat_view.STATE["renders"] == 2 and not np.allclose(moved.radiance, first.radiance, rtol=0.05)
     assert splat_view.SPLATS[mat.name][0].report["terms"]["carried_pose"] is False  # carried to the light
     assert bpy.ops.translucent.render_splatting() == {"FINISHED"}
-    np.testing.assert_array_equal(splat_view.STATE["last"].radiance, moved.radiance)
+    # The same scene rendered again (the kept samples all cover the new ones: a fixed point to
+    # f32 rounding).
+    again = splat_view.STATE["last"].radiance
+    assert np.abs(again - moved.radiance).max() <= 1e-4 * moved.radiance.max()
     # The mesh deforms (a Displace modifier: the sphere grows by 2 cm toward the light).
     obj.modifiers["Displace"].strength = 0.02
     bpy.context.view_layer.update()

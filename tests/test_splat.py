@@ -178,6 +178,31 @@ def test_render_draws_its_splats_on_the_gpu_as_the_cpu_gathers_them():
         gpu.set_backend("fast")
 
 
+def test_reuse_keeps_earlier_frames_samples_and_still_meets_the_closed_form():
+    # Shah 2009's sampling coherence: with reuse=True each frame keeps the splat sources that
+    # still see the light. A sun turned from overhead to 30 degrees in steps: the kept samples,
+    # lit anew, give the plane's closed form at 30 degrees (Jensen 2001) within eq. 4's eps.
+    p, s = sun_plane(81, 100.0)
+    v = centre_index(p)
+    splat = translucent.Splat(s, profile="dipole", reuse=True)
+    assert splat.reuse
+    splat.radiosity(MARBLE_MM)
+    assert splat.report["lights"][0]["reuse"]["fresh"]
+    for deg in (10, 20, 30):
+        splat.update(lights=sun_plane(81, 100.0, theta=math.radians(deg))[1])
+        b = splat.radiosity(MARBLE_MM)
+    r = splat.report["lights"][0]["reuse"]
+    assert not r["fresh"] and r["kept"] > 0.9 * splat.report["splats"], r
+    expect = np.array([entering(MARBLE_MM.eta, math.cos(math.radians(30)))
+                       * rd_total(MARBLE_MM.sigma_a[c], MARBLE_MM.sigma_s[c], MARBLE_MM.eta) for c in range(3)])
+    assert np.all(np.abs(b[v] / expect - 0.995) < 0.006), b[v] / expect
+    # Off: the kept samples are forgotten and the report says nothing of them.
+    splat.reuse = False
+    splat.radiosity(MARBLE_MM)
+    assert not splat.reuse and splat.report["lights"][0]["reuse"] is None
+    assert translucent.Splat(s).report is None and not translucent.Splat(s).reuse
+
+
 def test_render_refuses_bad_cameras_naming_them_and_cancels():
     p, s = sun_plane(21, 20.0)
     splat = translucent.Splat(s, profile="dipole", max_grid=64)

@@ -118,6 +118,18 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
         x.set_item("shadowed", l.counts.shadowed)?;
         x.set_item("unlit", l.counts.unlit)?;
         x.set_item("seconds", l.seconds)?;
+        match &l.reuse {
+            Some(r) => {
+                let d = PyDict::new(py);
+                d.set_item("kept", r.kept)?;
+                d.set_item("dropped", r.dropped)?;
+                d.set_item("covered", r.covered)?;
+                d.set_item("added", r.added)?;
+                d.set_item("fresh", r.fresh)?;
+                x.set_item("reuse", d)?;
+            }
+            None => x.set_item("reuse", py.None())?,
+        }
         lights.append(x)?;
     }
     report.set_item("lights", lights)?;
@@ -155,7 +167,7 @@ impl PySplat {
     /// `eps` is eqs. 4-5's threshold in (0, 1), `max_grid` the light view's largest side in
     /// [1, 4096]. Nothing is computed until an evaluation.
     #[new]
-    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None, backend = "auto"))]
+    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None, backend = "auto", reuse = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -166,6 +178,7 @@ impl PySplat {
         walks: bool,
         #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
         backend: &str,
+        reuse: bool,
     ) -> PyResult<Self> {
         let kind = profile_kind(profile)?;
         let max_grid = u32::try_from(max_grid).map_err(|_| {
@@ -180,6 +193,7 @@ impl PySplat {
         if let Some(t) = terms {
             inner = inner.with_walks(t).map_err(crate::convert::to_py)?;
         }
+        inner.set_reuse(reuse);
         let splat = Self {
             inner: RwLock::new(inner),
             last: Mutex::new(None),
@@ -355,6 +369,19 @@ impl PySplat {
         let d = evaluation_dict(py, "splat", e)?;
         d.set_item("refresh_advised", false)?;
         Ok(Some(d))
+    }
+
+    /// Whether each frame keeps the earlier frames' splat sources (Shah 2009's sampling
+    /// coherence); setting it False forgets them.
+    #[getter]
+    fn get_reuse(&self) -> bool {
+        self.read().reuse()
+    }
+
+    #[setter]
+    fn set_reuse(&self, on: bool) {
+        let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
+        inner.set_reuse(on);
     }
 
     /// Whether the walks' term and the object's own light are on.

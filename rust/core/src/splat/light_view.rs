@@ -258,6 +258,10 @@ pub struct LightSample {
     pub irradiance: [f32; 3],
     /// The object of the hit triangle (`Mesh::object_of_triangle`).
     pub object: u32,
+    /// The hit triangle and the barycentric (u, v) of its corners 1 and 2 there: where the
+    /// sample sits on the surface (what `reuse` keeps across frames).
+    pub triangle: u32,
+    pub uv: [f32; 2],
 }
 
 /// What one light's view cast and found.
@@ -344,7 +348,7 @@ fn cast(
     let p = cell.origin + cell.direction * hit.t;
     // Light enters where the surface's own normal faces it, as the irradiance estimator
     // takes it: the vertex normals interpolated at the hit.
-    let Some((flat, _, shading)) = hit_surface(mesh, hit.triangle, p) else {
+    let Some((flat, uv, shading)) = hit_surface(mesh, hit.triangle, p) else {
         return; // a degenerate triangle carries no surface
     };
     // The cell covers footprint / |n . w| of the triangle's plane, whichever way it is wound
@@ -400,5 +404,7 @@ fn cast(
         cos,
         irradiance,
         object: mesh.object_of_triangle(hit.triangle as usize),
+        triangle: hit.triangle,
+        uv,
     });
 }

@@ -22,6 +22,7 @@ pub mod camera;
 pub mod gpu;
 pub mod light_view;
 pub mod receivers;
+pub mod reuse;
 pub mod sizes;
 #[cfg(test)]
 mod tests;
@@ -44,7 +45,9 @@ use glam::Vec3;
 use gpu::{GpuPassReport, GpuSplatter};
 use light_view::{light_samples, BoundingSphere, View, ViewCounts};
 use receivers::{gather, Prepared, Splat};
+use reuse::{Reuse, ReuseCounts};
 use sizes::{Sizes, Spread};
+use std::sync::Mutex;
 use std::time::Instant;
 
 pub use sizes::{DEFAULT_EPS, DEFAULT_MAX_GRID, MAX_GRID};
@@ -90,6 +93,8 @@ pub struct LightReport {
     /// profile, rising as 1/r at the entry, wants it finer still (`tests::method`).
     pub spacing: f64,
     pub counts: ViewCounts,
+    /// What the reuse of earlier frames' samples did (`reuse`), where it is on.
+    pub reuse: Option<ReuseCounts>,
     pub seconds: f64,
 }
 
@@ -203,11 +208,21 @@ struct Sources {
     skipped: Vec<Skipped>,
 }
 
-/// Pass 1: each light's view of `scene.mesh` (`progress` from `from` to `to`, per row of rays).
+/// What a frame may use beyond the scene: a GPU for pass 3 of a render, and the samples kept
+/// from earlier frames (`reuse`, Shah's sampling coherence).
+#[derive(Clone, Copy, Default)]
+pub struct Passes<'a> {
+    pub gpu: Option<&'a GpuSplatter>,
+    pub reuse: Option<&'a Mutex<Reuse>>,
+}
+
+/// Pass 1: each light's view of `scene.mesh` (`progress` from `from` to `to`, per row of rays),
+/// merged with the samples kept from earlier frames where `reuse` is given.
 fn sources(
     scene: &Scene,
     resolved: &Resolved,
     settings: &SplatSettings,
+    reuse: Option<&Mutex<Reuse>>,
     progress: Option<&ProgressFn>,
     (from, to): (f32, f32),
 ) -> Result<Sources> {
@@ -245,6 +260,14 @@ fn sources(
         let t_light = Instant::now();
         let (s, counts) =
             light_samples(view, light, mesh, &tracer, sizes.grid, eta, Some(&ticker))?;
+        let (s, reused) = match reuse {
+            Some(r) => {
+                let mut r = r.lock().unwrap_or_else(|e| e.into_inner());
+                let (s, c) = r.merge(*k, sizes.grid, light, mesh, &tracer, eta, s);
+                (s, Some(c))
+            }
+            None => (s, None),
+        };
         if s.is_empty() && sizes.grid > 0 {
             skipped.push(Skipped::new(
                 format!("light {k} ({})", light_kind(light)),
@@ -268,6 +291,7 @@ fn sources(
             },
             sizes,
             counts,
+            reuse: reused,
             seconds: t_light.elapsed().as_secs_f64(),
         });
     }
@@ -356,8 +380,19 @@ pub fn splat_radiosity(
     settings: &SplatSettings,
     progress: Option<&ProgressFn>,
 ) -> Result<Evaluation> {
+    radiosity_with(scene, resolved, settings, None, progress)
+}
+
+/// `splat_radiosity` with the samples kept from earlier frames where `reuse` is given.
+fn radiosity_with(
+    scene: &Scene,
+    resolved: &Resolved,
+    settings: &SplatSettings,
+    reuse: Option<&Mutex<Reuse>>,
+    progress: Option<&ProgressFn>,
+) -> Result<Evaluation> {
     let start = Instant::now();
-    let mut src = sources(scene, resolved, settings, progress, (0.0, 0.45))?;
+    let mut src = sources(scene, resolved, settings, reuse, progress, (0.0, 0.45))?;
     let mesh = &scene.mesh;
     let objects: Vec<u32> = (0..mesh.vertex_count())
         .map(|v| mesh.object_of_vertex(v))
@@ -420,24 +455,41 @@ pub fn splat_render(
     camera: &Camera,
     progress: Option<&ProgressFn>,
 ) -> Result<Render> {
-    render_with_layer(scene, resolved, settings, camera, None, None, progress)
+    render_with_layer(
+        scene,
+        resolved,
+        settings,
+        camera,
+        None,
+        Passes::default(),
+        progress,
+    )
 }
 
 /// `splat_render` with `layer` (B per vertex: the walks' term and the object's own light,
 /// `surface_terms`) interpolated across each hit triangle and added to the gathered B: the
 /// per-vertex layer rasterised in the camera pass (Shah's pass 2 with an extra target). With
-/// `gpu`, pass 3 draws the splats on it (`gpu::GpuSplatter`) instead of gathering on the CPU.
+/// `passes.gpu`, pass 3 draws the splats on it (`gpu::GpuSplatter`) instead of gathering on
+/// the CPU; with `passes.reuse`, pass 1 keeps earlier frames' samples (`reuse`).
 pub fn render_with_layer(
     scene: &Scene,
     resolved: &Resolved,
     settings: &SplatSettings,
     camera: &Camera,
     layer: Option<&[[f32; 3]]>,
-    gpu: Option<&GpuSplatter>,
+    passes: Passes,
     progress: Option<&ProgressFn>,
 ) -> Result<Render> {
     let start = Instant::now();
-    let mut src = sources(scene, resolved, settings, progress, (0.0, 0.3))?;
+    let gpu = passes.gpu;
+    let mut src = sources(
+        scene,
+        resolved,
+        settings,
+        passes.reuse,
+        progress,
+        (0.0, 0.3),
+    )?;
     // Pass 2: the receivers, hidden by every object of the rest of the scene in front.
     let t = Instant::now();
     let seen = src.mesh_tracer.with_occluders(scene.occluders.triangles());
@@ -508,6 +560,8 @@ pub struct Splatting {
     terms: Option<std::sync::Mutex<Terms>>,
     /// Where a render's pass 3 runs: this device, or the CPU (None).
     gpu: Option<GpuSplatter>,
+    /// The samples kept between frames (`reuse`), where the reuse is on.
+    reuse: Option<Mutex<Reuse>>,
 }
 
 impl Splatting {
@@ -521,7 +575,19 @@ impl Splatting {
             settings,
             terms: None,
             gpu: None,
+            reuse: None,
         })
+    }
+
+    /// Shah 2009's sampling coherence between frames on (`reuse`: each frame keeps the
+    /// earlier frames' splat sources that still see the light) or off.
+    pub fn set_reuse(&mut self, on: bool) {
+        self.reuse = on.then(|| Mutex::new(Reuse::default()));
+    }
+
+    /// Whether earlier frames' samples are kept.
+    pub fn reuse(&self) -> bool {
+        self.reuse.is_some()
     }
 
     /// Renders draw their splats on `gpu` from now on (None: gather on the CPU). The vertex
@@ -656,7 +722,13 @@ impl Splatting {
     ) -> Result<Evaluation> {
         let start = Instant::now();
         let resolved = Resolved::new(self.profile, material)?;
-        let mut e = splat_radiosity(&self.scene, &resolved, &self.settings, progress)?;
+        let mut e = radiosity_with(
+            &self.scene,
+            &resolved,
+            &self.settings,
+            self.reuse.as_ref(),
+            progress,
+        )?;
         if let Some((added, report)) = self.layer(material, Some(&e.values), None)? {
             for (b, a) in e.values.iter_mut().zip(&added) {
                 *b = std::array::from_fn(|c| b[c] + a[c]);
@@ -684,7 +756,10 @@ impl Splatting {
             &self.settings,
             camera,
             layer.as_ref().map(|(a, _)| a.as_slice()),
-            self.gpu.as_ref(),
+            Passes {
+                gpu: self.gpu.as_ref(),
+                reuse: self.reuse.as_ref(),
+            },
             progress,
         )?;
         if let Some((_, report)) = layer {

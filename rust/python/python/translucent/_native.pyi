@@ -386,11 +386,21 @@ class Splat:
         walks: bool = False,
         walk_rays: int | None = None,
         backend: Backend = "auto",
+        reuse: bool = False,
     ) -> None:
         """`walks` (Cycles' profile only): the walks' geometry term and the object's own light,
         walked at the first evaluation (`walk_rays` in all, default as PRT's) and carried to a
         new light or pose. `backend`: where `render` draws its splats (see `set_backend`).
-        ValueError naming eps, max_grid, profile, walks, walk_rays or backend."""
+        `reuse`: each evaluation keeps the earlier ones' splat sources that still see the light
+        (Shah 2009's sampling coherence; see the `reuse` property). ValueError naming eps,
+        max_grid, profile, walks, walk_rays or backend."""
+    @property
+    def reuse(self) -> bool:
+        """Whether each evaluation keeps the earlier ones' splat sources (lit anew, moved with a
+        pose) and adds the light view's new samples only where none covers them: a slow light
+        sweep or turn changes B smoothly. Setting it False forgets them."""
+    @reuse.setter
+    def reuse(self, on: bool) -> None: ...
     def set_backend(self, backend: Backend, half: bool = False) -> str:
         """Where `render` draws its splats (pass 3): "auto" (a hardware GPU that blends float-32
         targets, else the CPU), "gpu" (any Vulkan adapter, Mesa's lavapipe included;
@@ -444,7 +454,8 @@ class Splat:
         """The last evaluation's r_max, overlap, splats, "terms" (the walks' and own light's
         report as the Hierarchy's: "walks", "walks_indirect", "own_light_rays",
         "own_light_share", "carried_pose", "seconds"; None without walks), stage seconds (a render's camera view
-        too, with the pixels that see the mesh), per-light grid and ray counts, and "gpu" (a
+        too, with the pixels that see the mesh), per-light grid and ray counts and "reuse" (with
+        reuse on: "kept", "dropped", "covered", "added", "fresh"; else None), and "gpu" (a
         render drawn on a GPU: "adapter", "software", "target", the "groups" and "splats" drawn,
         "culled", "seconds_upload", "seconds_draw", "seconds_readback"; None on the CPU); None
         before the first."""

@@ -85,7 +85,19 @@ fn the_gpu_shows_a_sunlit_planes_closed_form() {
     let eye = Vec3::new(0.0, -30.0, 60.0);
     let cam = Camera::new(eye, Vec3::ZERO, Vec3::Z, 0.6, (33, 25)).unwrap();
     let settings = SplatSettings::default();
-    let out = render_with_layer(&scene, &r, &settings, &cam, None, Some(&gpu), None).unwrap();
+    let out = render_with_layer(
+        &scene,
+        &r,
+        &settings,
+        &cam,
+        None,
+        Passes {
+            gpu: Some(&gpu),
+            ..Default::default()
+        },
+        None,
+    )
+    .unwrap();
     let report = out
         .evaluation
         .details
@@ -134,8 +146,20 @@ fn the_gpu_draws_the_sum_the_cpu_gathers_and_keeps_objects_apart() {
         ("cycles", ProfileKind::Cycles),
     ] {
         let r = Resolved::new(profile, &Material::preset("marble", 10.0).unwrap()).unwrap();
-        let cpu = render_with_layer(&scene, &r, &s, &cam, None, None, None).unwrap();
-        let on = render_with_layer(&scene, &r, &s, &cam, None, Some(&gpu), None).unwrap();
+        let cpu = render_with_layer(&scene, &r, &s, &cam, None, Passes::default(), None).unwrap();
+        let on = render_with_layer(
+            &scene,
+            &r,
+            &s,
+            &cam,
+            None,
+            Passes {
+                gpu: Some(&gpu),
+                ..Default::default()
+            },
+            None,
+        )
+        .unwrap();
         assert_eq!(on.mask, cpu.mask);
         assert!(on.mask.contains(&1) && on.mask.contains(&2));
         let gap = worst_gap(&on, &cpu);
@@ -169,8 +193,32 @@ fn half_float_targets_lose_what_falls_under_their_precision() {
         eps: 0.01,
         max_grid: 128,
     };
-    let a = render_with_layer(&scene, &r, &s, &cam, None, Some(&full), None).unwrap();
-    let b = render_with_layer(&scene, &r, &s, &cam, None, Some(&half), None).unwrap();
+    let a = render_with_layer(
+        &scene,
+        &r,
+        &s,
+        &cam,
+        None,
+        Passes {
+            gpu: Some(&full),
+            ..Default::default()
+        },
+        None,
+    )
+    .unwrap();
+    let b = render_with_layer(
+        &scene,
+        &r,
+        &s,
+        &cam,
+        None,
+        Passes {
+            gpu: Some(&half),
+            ..Default::default()
+        },
+        None,
+    )
+    .unwrap();
     let gap = worst_gap(&b, &a);
     eprintln!(
         "{} against Rgba16Float: worst pixel {:.3} % of the brightest",

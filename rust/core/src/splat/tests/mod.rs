@@ -8,3 +8,4 @@ mod gpu;
 mod light_view;
 mod method;
 mod receivers;
+mod reuse;
