@@ -20,6 +20,21 @@ fn device(half: bool) -> Option<GpuSplatter> {
     }
 }
 
+/// `render_with_layer` with pass 3 on `gpu` (None: the CPU gather).
+fn drawn(
+    scene: &Scene,
+    r: &Resolved,
+    s: &SplatSettings,
+    cam: &Camera,
+    gpu: Option<&GpuSplatter>,
+) -> Render {
+    let passes = Passes {
+        gpu,
+        ..Default::default()
+    };
+    render_with_layer(scene, r, s, cam, None, passes, None).unwrap()
+}
+
 fn dipole(name: &str, mm_per_unit: f64) -> Resolved {
     Resolved::new(
         ProfileKind::Dipole,
@@ -85,19 +100,7 @@ fn the_gpu_shows_a_sunlit_planes_closed_form() {
     let eye = Vec3::new(0.0, -30.0, 60.0);
     let cam = Camera::new(eye, Vec3::ZERO, Vec3::Z, 0.6, (33, 25)).unwrap();
     let settings = SplatSettings::default();
-    let out = render_with_layer(
-        &scene,
-        &r,
-        &settings,
-        &cam,
-        None,
-        Passes {
-            gpu: Some(&gpu),
-            ..Default::default()
-        },
-        None,
-    )
-    .unwrap();
+    let out = drawn(&scene, &r, &settings, &cam, Some(&gpu));
     let report = out
         .evaluation
         .details
@@ -146,20 +149,8 @@ fn the_gpu_draws_the_sum_the_cpu_gathers_and_keeps_objects_apart() {
         ("cycles", ProfileKind::Cycles),
     ] {
         let r = Resolved::new(profile, &Material::preset("marble", 10.0).unwrap()).unwrap();
-        let cpu = render_with_layer(&scene, &r, &s, &cam, None, Passes::default(), None).unwrap();
-        let on = render_with_layer(
-            &scene,
-            &r,
-            &s,
-            &cam,
-            None,
-            Passes {
-                gpu: Some(&gpu),
-                ..Default::default()
-            },
-            None,
-        )
-        .unwrap();
+        let cpu = drawn(&scene, &r, &s, &cam, None);
+        let on = drawn(&scene, &r, &s, &cam, Some(&gpu));
         assert_eq!(on.mask, cpu.mask);
         assert!(on.mask.contains(&1) && on.mask.contains(&2));
         let gap = worst_gap(&on, &cpu);
@@ -193,32 +184,8 @@ fn half_float_targets_lose_what_falls_under_their_precision() {
         eps: 0.01,
         max_grid: 128,
     };
-    let a = render_with_layer(
-        &scene,
-        &r,
-        &s,
-        &cam,
-        None,
-        Passes {
-            gpu: Some(&full),
-            ..Default::default()
-        },
-        None,
-    )
-    .unwrap();
-    let b = render_with_layer(
-        &scene,
-        &r,
-        &s,
-        &cam,
-        None,
-        Passes {
-            gpu: Some(&half),
-            ..Default::default()
-        },
-        None,
-    )
-    .unwrap();
+    let a = drawn(&scene, &r, &s, &cam, Some(&full));
+    let b = drawn(&scene, &r, &s, &cam, Some(&half));
     let gap = worst_gap(&b, &a);
     eprintln!(
         "{} against Rgba16Float: worst pixel {:.3} % of the brightest",
