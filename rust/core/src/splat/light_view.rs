@@ -193,6 +193,37 @@ impl View {
         }
     }
 
+    /// Where `p` lies in the light's image plane: its coordinates across the light (lengths
+    /// at the window for a sun, tangents of the angle off the axis for a point or spot), how
+    /// many of those coordinates a length across the light at `p` spans, and its depth along
+    /// the light.
+    pub fn plane(&self, p: Vec3) -> ([f64; 2], f64, f64) {
+        let p = p.as_dvec3();
+        match *self {
+            View::Orthographic {
+                centre,
+                direction,
+                u,
+                v,
+                ..
+            } => {
+                let d = p - centre;
+                ([d.dot(u), d.dot(v)], 1.0, d.dot(direction))
+            }
+            View::Perspective {
+                position,
+                axis,
+                u,
+                v,
+                ..
+            } => {
+                let d = p - position;
+                let z = d.dot(axis).max(f64::MIN_POSITIVE);
+                ([d.dot(u) / z, d.dot(v) / z], 1.0 / z, z)
+            }
+        }
+    }
+
     pub fn kind(&self) -> &'static str {
         match self {
             View::Orthographic { .. } => "orthographic",

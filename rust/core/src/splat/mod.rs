@@ -263,7 +263,7 @@ fn sources(
         let (s, reused) = match reuse {
             Some(r) => {
                 let mut r = r.lock().unwrap_or_else(|e| e.into_inner());
-                let (s, c) = r.merge(*k, sizes.grid, light, mesh, &tracer, eta, s);
+                let (s, c) = r.merge(*k, sizes.grid, light, mesh, &tracer, eta, (view, s));
                 (s, Some(c))
             }
             None => (s, None),
