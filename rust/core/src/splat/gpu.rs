@@ -15,7 +15,7 @@
 //! it used.
 
 use super::camera::{Camera, PixelHit};
-use super::receivers::{disc_mean, near_scale, Prepared, NEAR_DISCS};
+use super::receivers::{disc_mean, Prepared, DISC_NODES, NEAR_DISCS};
 use crate::error::{Error, Result};
 use crate::gpu::{adapter, AdapterDescription};
 use crate::profiles::LookupRgb;
@@ -36,8 +36,6 @@ pub const NEAR_PER_OCTAVE: f64 = 16.0;
 const BATCH: usize = 1 << 16;
 /// Object IDs travel as f32 (exact below 2^24).
 const MAX_OBJECT: u32 = 1 << 24;
-/// Gauss-Legendre nodes of the disc mean (as the CPU gather takes it).
-const DISC_NODES: usize = 16;
 
 /// One quad: a splat, or a group's sum (radius < 0).
 #[repr(C)]
@@ -280,7 +278,7 @@ impl GpuSplatter {
         let unit = unit(prepared);
         let (quads, groups, culled) = quads(prepared, camera, unit as f32);
         let splats = quads.len() - groups;
-        let (near, near_params) = near_table(profile, prepared.radii);
+        let (near, near_params) = near_table(profile, prepared);
         let (nodes, scale, _) = profile.f32_table();
         let params = Params {
             size: [width as f32, height as f32],
@@ -586,11 +584,12 @@ fn unit(prepared: &Prepared) -> f64 {
 
 /// The near table: for radii a_k geometric over `radii` (`NEAR_PER_OCTAVE` an octave) and
 /// d_j = (j / `NEAR_INTERVALS`) `NEAR_DISCS` a_k, the disc mean (`receivers::disc_mean`) times
-/// the near zone's factor (`receivers::near_scale`), row k after row; with (radii, log a_0,
-/// the step in log a). A single unused row where no splat has a disc.
-fn near_table(profile: &LookupRgb, radii: Option<(f64, f64)>) -> (Vec<[f32; 4]>, (u32, f32, f32)) {
+/// the near zone's factor the CPU gather gives splats of that radius (`Prepared::near_scale`),
+/// row k after row; with (radii, log a_0, the step in log a). A single unused row where no
+/// splat has a disc.
+fn near_table(profile: &LookupRgb, prepared: &Prepared) -> (Vec<[f32; 4]>, (u32, f32, f32)) {
     let rows = NEAR_INTERVALS as usize + 1;
-    let Some((lo, hi)) = radii else {
+    let Some((lo, hi)) = prepared.radii else {
         return (vec![[0.0; 4]; rows], (1, 0.0, 1.0));
     };
     let (log_lo, log_hi) = (lo.ln(), hi.max(lo).ln());
@@ -605,7 +604,7 @@ fn near_table(profile: &LookupRgb, radii: Option<(f64, f64)>) -> (Vec<[f32; 4]>,
         .into_par_iter()
         .flat_map_iter(|row| {
             let a = (log_lo + step * row as f64).exp();
-            let scale = near_scale(profile, a, rule);
+            let scale = prepared.near_scale(a);
             (0..rows).map(move |j| {
                 let d = j as f64 / NEAR_INTERVALS as f64 * NEAR_DISCS * a;
                 let m = disc_mean(profile, d, a, rule);

@@ -67,7 +67,7 @@ pub const NEAR_DISCS: f64 = 8.0;
 const SCALES_PER_OCTAVE: f64 = 4.0;
 
 /// Gauss-Legendre nodes of the disc mean's angular integral.
-const DISC_NODES: usize = 16;
+pub const DISC_NODES: usize = 16;
 
 impl Splat {
     /// The splat of `s`. The disc has the patch's area, dA = pi a^2, but is held within twice
@@ -347,10 +347,12 @@ pub struct Prepared {
     pub search: f64,
     /// The splats' disc radii (lo, hi); None where no splat has a disc.
     pub radii: Option<(f64, f64)>,
+    /// The near zone's factor over those radii (None where no splat has a disc).
+    scales: Option<NearScales>,
 }
 
 /// One group as the GPU draws it: taken as its sum at its centroid by a receiver at least
-/// `near` from `centre`, splat by splat (`Prepared::splats_of`) by one nearer.
+/// `near` from `centre`, splat by splat (its splats, `Prepared::groups`) by one nearer.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GroupView {
     pub centre: Vec3,
@@ -382,8 +384,8 @@ impl Prepared {
             a_hi = a_hi.max(f64::from(s.radius));
         }
         let search = reach.max(NEAR_DISCS * a_hi);
-        if a_hi > 0.0 {
-            let scales = NearScales::new(profile, a_lo, a_hi, rule);
+        let scales = (a_hi > 0.0).then(|| NearScales::new(profile, a_lo, a_hi, rule));
+        if let Some(scales) = &scales {
             splats
                 .par_iter_mut()
                 .filter(|s| s.radius > 0.0)
@@ -403,7 +405,14 @@ impl Prepared {
             reach,
             search,
             radii: (a_hi > 0.0).then_some((a_lo, a_hi)),
+            scales,
         })
+    }
+
+    /// The near zone's factor (`near_scale`) at disc radius `a`, as every splat's near power
+    /// takes it (interpolated in log a); 1 where no splat has a disc.
+    pub fn near_scale(&self, a: f64) -> [f64; 3] {
+        self.scales.as_ref().map_or([1.0; 3], |s| s.at(a))
     }
 
     /// Every group, with the range of its splats in `splats`.
@@ -420,14 +429,6 @@ impl Prepared {
                 &self.bins.splats[g.start..g.end],
             )
         })
-    }
-
-    pub fn group_count(&self) -> usize {
-        self.bins.groups.len()
-    }
-
-    pub fn splat_count(&self) -> usize {
-        self.bins.splats.len()
     }
 }
 
