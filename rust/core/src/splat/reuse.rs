@@ -77,11 +77,6 @@ pub struct Reuse {
 }
 
 impl Reuse {
-    /// Forgets every kept sample: the next frame starts afresh.
-    pub fn clear(&mut self) {
-        self.lights.clear();
-    }
-
     /// This frame's sources of light `k` (its view `grid` cells a side): the kept samples lit
     /// anew by `light` on `mesh` (shadowed through `tracer`, entering with Fresnel index
     /// `eta`), plus the `fresh` samples of `view` that no kept one covers (compared in the
@@ -119,48 +114,27 @@ impl Reuse {
         counts.kept = out.len();
         // The kept samples in the light's image plane (where the paper compares them), hashed
         // by cells as wide as the widest cover there.
-        let placed: Vec<([f64; 2], f64, f64)> = out
-            .iter()
-            .map(|s| {
-                let (at, scale, depth) = view.plane(s.position);
-                (at, f64::from(COVER * footprint(s)) * scale, depth)
-            })
-            .collect();
-        let cell = placed.iter().fold(0.0f64, |m, p| m.max(p.1));
+        let covers: Vec<Cover> = out.iter().map(|s| Cover::of(s, view)).collect();
+        let cell = covers.iter().fold(0.0f64, |m, c| m.max(c.radius));
         let key = |at: [f64; 2]| {
             let k = |x: f64| (x / cell).floor().clamp(-1e15, 1e15) as i64;
             (k(at[0]), k(at[1]))
         };
         let mut cells: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
         if cell > 0.0 {
-            for (i, p) in placed.iter().enumerate() {
-                cells.entry(key(p.0)).or_default().push(i);
+            for (i, c) in covers.iter().enumerate() {
+                cells.entry(key(c.at)).or_default().push(i);
             }
         }
         let covered: Vec<bool> = fresh
             .par_iter()
             .map(|f| {
-                if cells.is_empty() {
-                    return false;
-                }
                 let (at, _, depth) = view.plane(f.position);
                 let (kx, ky) = key(at);
-                (-1..=1).any(|x| {
-                    (-1..=1).any(|y| {
-                        cells.get(&(kx + x, ky + y)).is_some_and(|list| {
-                            list.iter().any(|&i| {
-                                let (c, r, z) = placed[i];
-                                let s = &out[i];
-                                let (dx, dy) = (at[0] - c[0], at[1] - c[1]);
-                                // The same layer of the surface: near along the light too.
-                                let along = f64::from(ALONG * footprint(s) / s.cos.max(0.05));
-                                s.object == f.object
-                                    && dx * dx + dy * dy < r * r
-                                    && (depth - z).abs() < along
-                            })
-                        })
-                    })
-                })
+                let near = (-1..=1).flat_map(|x| (-1..=1).map(move |y| (kx + x, ky + y)));
+                near.filter_map(|k| cells.get(&k))
+                    .flatten()
+                    .any(|&i| covers[i].covers(at, depth, f.object))
             })
             .collect();
         for (f, c) in fresh.into_iter().zip(covered) {
@@ -187,9 +161,38 @@ impl Reuse {
     }
 }
 
-/// A sample's footprint's side across the light, sqrt(dA |n . w|).
-fn footprint(s: &LightSample) -> f32 {
-    (s.area * s.cos).sqrt()
+/// A kept sample as the new ones are tested against it: where it lies in the light's image
+/// plane, how far across it covers there (`COVER` footprints), its depth along the light and
+/// how far along the light it still counts as the same layer (`ALONG`).
+struct Cover {
+    at: [f64; 2],
+    radius: f64,
+    depth: f64,
+    along: f64,
+    object: u32,
+}
+
+impl Cover {
+    fn of(s: &LightSample, view: &View) -> Cover {
+        let (at, scale, depth) = view.plane(s.position);
+        // The footprint's side across the light, sqrt(dA |n . w|).
+        let side = (s.area * s.cos).sqrt();
+        Cover {
+            at,
+            radius: f64::from(COVER * side) * scale,
+            depth,
+            along: f64::from(ALONG * side / s.cos.max(0.05)),
+            object: s.object,
+        }
+    }
+
+    /// Whether it covers a new sample of `object` at `at` and `depth` in the image plane.
+    fn covers(&self, at: [f64; 2], depth: f64, object: u32) -> bool {
+        let (dx, dy) = (at[0] - self.at[0], at[1] - self.at[1]);
+        self.object == object
+            && dx * dx + dy * dy < self.radius * self.radius
+            && (depth - self.depth).abs() < self.along
+    }
 }
 
 /// A kept sample lit by `light` now: None where it faces away, is shadowed, or nothing

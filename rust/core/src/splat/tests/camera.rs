@@ -19,10 +19,25 @@ fn dipole(name: &str, mm_per_unit: f64) -> Resolved {
     .unwrap()
 }
 
-/// A sun-lit (irradiance 1, from the normal) half-space's pixel seen at cos_o: within 0.2 % of
-/// L = F_t(eta, cos_o) B / pi, B = F_t(eta, 1) R_total less eq. 4's eps = 0.01 (Jensen 2001).
-pub(super) fn assert_plane_pixel(m: &Material, cos_o: f64, got: [f32; 3]) {
-    for (c, got) in got.iter().enumerate() {
+/// 100 mm of marble under a unit sun from +z (the dipole, in mm), and a 33 x 25 camera
+/// looking at its centre obliquely from (0, -30, 60).
+pub(super) fn sunlit_plane_view() -> (Scene, Resolved, Camera) {
+    let mut scene = Scene::new(plane(81, 100.0));
+    scene.lights.push(Light::sun(-Vec3::Z, [1.0; 3]).unwrap());
+    let eye = Vec3::new(0.0, -30.0, 60.0);
+    let cam = Camera::new(eye, Vec3::ZERO, Vec3::Z, 0.6, (33, 25)).unwrap();
+    (scene, dipole("marble", 1.0), cam)
+}
+
+/// The pixel of `sunlit_plane_view` through the plane's centre.
+pub(super) const PLANE_CENTRE: usize = 12 * 33 + 16;
+
+/// `sunlit_plane_view`'s centre pixel in `values`: within 0.2 % of L = F_t(eta, cos_o) B / pi,
+/// B = F_t(eta, 1) R_total less eq. 4's eps = 0.01 (Jensen 2001).
+pub(super) fn assert_plane_centre(r: &Resolved, cam: &Camera, values: &[[f32; 3]]) {
+    let (m, eye) = (r.material, cam.eye());
+    let cos_o = f64::from(eye.z / eye.length());
+    for (c, got) in values[PLANE_CENTRE].iter().enumerate() {
         let b = (1.0 - 0.01)
             * fresnel_transmittance(m.eta, 1.0)
             * rd_total(m.sigma_a[c], m.sigma_s_prime()[c], m.eta);
@@ -77,22 +92,12 @@ fn a_sunlit_plane_shows_the_closed_form_through_the_exit_fresnel() {
     // 100 mm of marble under a sun from +z, seen obliquely: at the pixel through the plane's
     // centre L = F_t(eta, cos_o) B / pi with B = F_t(eta, 1) E R_total less eq. 4's eps
     // (Jensen 2001; the dipole's exit is its Fresnel transmittance).
-    let mut scene = Scene::new(plane(81, 100.0));
-    scene.lights.push(Light::sun(-Vec3::Z, [1.0; 3]).unwrap());
-    let r = dipole("marble", 1.0);
-    let m = r.material;
-    let eye = Vec3::new(0.0, -30.0, 60.0);
-    let cam = Camera::new(eye, Vec3::ZERO, Vec3::Z, 0.6, (33, 25)).unwrap();
+    let (scene, r, cam) = sunlit_plane_view();
     let out = splat_render(&scene, &r, &SplatSettings::default(), &cam, None).unwrap();
     assert_eq!((out.width, out.height), (33, 25));
     assert_eq!(out.evaluation.values.len(), 33 * 25);
-    let centre = (12 * 33 + 16) as usize;
-    assert_eq!(out.mask[centre], 1);
-    assert_plane_pixel(
-        &m,
-        60.0 / f64::from(eye.length()),
-        out.evaluation.values[centre],
-    );
+    assert_eq!(out.mask[PLANE_CENTRE], 1);
+    assert_plane_centre(&r, &cam, &out.evaluation.values);
     // The whole image looks at the plane (it spans 100 mm; the view about 42 mm at the
     // centre), and the report says what the camera pass did.
     assert!(out.mask.iter().all(|&m| m == 1));

@@ -6,8 +6,8 @@
 use super::super::camera::Camera;
 use super::super::gpu::GpuSplatter;
 use super::super::*;
-use super::camera::assert_plane_pixel;
-use crate::mesh::test_meshes::{plane, sphere_pair};
+use super::camera::{assert_plane_centre, sunlit_plane_view};
+use crate::mesh::test_meshes::sphere_pair;
 use crate::optics::Material;
 
 fn device(half: bool) -> Option<GpuSplatter> {
@@ -93,12 +93,7 @@ fn a_spheres_rectangle_holds_every_pixel_its_points_land_in() {
 #[test]
 fn the_gpu_shows_a_sunlit_planes_closed_form() {
     let Some(gpu) = device(false) else { return };
-    let mut scene = Scene::new(plane(81, 100.0));
-    scene.lights.push(Light::sun(-Vec3::Z, [1.0; 3]).unwrap());
-    let r = dipole("marble", 1.0);
-    let m = r.material;
-    let eye = Vec3::new(0.0, -30.0, 60.0);
-    let cam = Camera::new(eye, Vec3::ZERO, Vec3::Z, 0.6, (33, 25)).unwrap();
+    let (scene, r, cam) = sunlit_plane_view();
     let settings = SplatSettings::default();
     let out = drawn(&scene, &r, &settings, &cam, Some(&gpu));
     let report = out
@@ -108,13 +103,8 @@ fn the_gpu_shows_a_sunlit_planes_closed_form() {
         .as_ref()
         .expect("drawn on the GPU");
     assert!(report.groups + report.splats > 0);
-    let centre = (12 * 33 + 16) as usize;
     assert_eq!(report.target, "Rgba32Float");
-    assert_plane_pixel(
-        &m,
-        60.0 / f64::from(eye.length()),
-        out.evaluation.values[centre],
-    );
+    assert_plane_centre(&r, &cam, &out.evaluation.values);
 }
 
 /// Pixel by pixel, the worst |gpu - cpu| relative to the CPU's brightest pixel, per channel.

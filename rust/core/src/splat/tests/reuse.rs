@@ -56,15 +56,29 @@ fn assert_plane(m: &Material, cos_i: f64, got: [f32; 3]) {
     }
 }
 
-#[test]
-fn a_still_frame_is_a_fixed_point_and_a_turned_sun_keeps_the_closed_form() {
+/// 100 mm of marble (the dipole, in mm), its centre vertex, and the first frame under a sun
+/// straight down with the reuse on.
+fn plane_first_frame() -> (Mesh, usize, Resolved, Mutex<Reuse>, Evaluation) {
     let mesh = plane(81, 100.0);
     let centre = nearest(&mesh, Vec3::ZERO);
     let r = marble(ProfileKind::Dipole, 1.0);
-    let s = SplatSettings::default();
     let reuse = Mutex::new(Reuse::default());
-    let down = Vec3::new(0.0, 0.0, -1.0);
-    let first = frame(&sun(&mesh, down), &r, &s, Some(&reuse));
+    let first = frame(
+        &sun(&mesh, DOWN),
+        &r,
+        &SplatSettings::default(),
+        Some(&reuse),
+    );
+    (mesh, centre, r, reuse, first)
+}
+
+const DOWN: Vec3 = Vec3::new(0.0, 0.0, -1.0);
+
+#[test]
+fn a_still_frame_is_a_fixed_point_and_a_turned_sun_keeps_the_closed_form() {
+    let (mesh, centre, r, reuse, first) = plane_first_frame();
+    let s = SplatSettings::default();
+    let down = DOWN;
     let again = frame(&sun(&mesh, down), &r, &s, Some(&reuse));
     let c = again.details.lights[0].reuse.unwrap();
     assert!(!c.fresh && c.added == 0 && c.dropped == 0, "{c:?}");
@@ -86,13 +100,9 @@ fn a_still_frame_is_a_fixed_point_and_a_turned_sun_keeps_the_closed_form() {
 
 #[test]
 fn a_stretched_plane_keeps_its_samples_areas_and_a_shadowed_sample_is_dropped() {
-    let mesh = plane(81, 100.0);
-    let centre = nearest(&mesh, Vec3::ZERO);
-    let r = marble(ProfileKind::Dipole, 1.0);
+    let (mesh, centre, r, reuse, _) = plane_first_frame();
     let s = SplatSettings::default();
-    let reuse = Mutex::new(Reuse::default());
-    let down = Vec3::new(0.0, 0.0, -1.0);
-    frame(&sun(&mesh, down), &r, &s, Some(&reuse));
+    let down = DOWN;
     // Stretched 1.5x along x: each kept sample stands for 1.5x its area, and E is unchanged,
     // so B at the centre is still the closed form at normal incidence.
     let wide: Vec<Vec3> = mesh
