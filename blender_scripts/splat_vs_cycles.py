@@ -1,7 +1,7 @@
 """The splatting's camera image against a Cycles render of the same camera (issue 31's second
-done-when): the demo's Suzanne (10 cm, Subdivision 2) under its point light, the world black
-(the splatting does not light by the world yet), the Principled BSDF random walk mapped from the
-material with its specular layer off (Specular IOR Level 0), 128 x 128, 1024 spp, no denoising.
+done-when): the demo's Suzanne (10 cm, Subdivision 2) under its point light and its dim world
+(`--world black` drops the world), the Principled BSDF random walk mapped from the material with
+its specular layer off (Specular IOR Level 0), 128 x 128, 1024 spp, no denoising.
 Against that one image, object pixels, relative RMS worst channel (`metrics.image_error`):
 
 - `Splat.render` (Cycles' profile), with eps as the knob at the default 1024 grid, and at the
@@ -13,7 +13,7 @@ Against that one image, object pixels, relative RMS worst channel (`metrics.imag
 - EEVEE's own subsurface scattering at 64 samples (skipped, saying why, where it cannot run).
 
 Each with its wall time. Run: .venv/bin/python blender_scripts/splat_vs_cycles.py [--material
-marble] [--size 128] [--spp 1024].
+marble] [--size 128] [--spp 1024] [--world demo|black].
 """
 
 from __future__ import annotations
@@ -56,11 +56,13 @@ def main() -> int:
     ap.add_argument("--material", default="marble")
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--world", choices=["demo", "black"], default="demo")
     args = ap.parse_args()
 
     obj, cam = scenes.build_scene("suzanne")
     bl_scene = bpy.context.scene
-    bl_scene.world = None  # black: the splatting does not light by the world yet
+    if args.world == "black":
+        bl_scene.world = None
     scene, info = export.export_scene([obj])
     m = translucent.Material.preset(args.material, scenes.MM_PER_UNIT)
     shown = scenes.preview_object(obj)  # the evaluated mesh, the attribute as emission
@@ -115,7 +117,7 @@ def main() -> int:
             rows.append(("Splat.render, walks kept (a second render)", f"eps {eps:g}, grid {grid}",
                          f"{100 * rms:.2f}", time.perf_counter() - t0))
 
-    print(f"machine: {machine()}; Suzanne (demo scene, world black), {args.material}, {args.size} x {args.size}, "
+    print(f"machine: {machine()}; Suzanne (demo scene, world {args.world}: {info.world}), {args.material}, {args.size} x {args.size}, "
           f"against Cycles {args.spp} spp (specular off), object pixels")
     print("| method | setting | rel. RMS % (worst channel) | seconds |")
     print("|---|---|---|---|")

@@ -90,17 +90,28 @@ def test_the_plane_gives_the_closed_total_and_the_sphere_the_ground_truth():
     assert not np.allclose(splat.radiosity(MARBLE_MM), b, rtol=0.05)
 
 
-def test_what_it_cannot_splat_is_named_and_bad_arguments_raise():
+def test_peeled_sources_are_reported_and_bad_arguments_raise():
     p, s = sun_plane(21, 20.0)
     s.add_area_light((0.0, 0.0, 5.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0), 1.0, 1.0, 10.0)
-    splat = translucent.Splat(s, profile="dipole", max_grid=128)
-    assert (splat.profile, splat.eps, splat.max_grid) == ("dipole", 0.01, 128)
+    s.add_point_light((0.0, 0.0, 0.0), 5.0)  # on the plane: inside its bounding sphere
+    s.add_point_light((0.0, 0.0, 50.0), 0.0)  # black
+    s.set_world(color=(0.1, 0.1, 0.1))
+    splat = translucent.Splat(s, profile="dipole", max_grid=128, peel_grid=64)
+    assert (splat.profile, splat.eps, splat.max_grid, splat.peel_grid) == ("dipole", 0.01, 128, 64)
     splat.radiosity(MARBLE_MM)
-    area = [x for x in splat.last_eval["skipped"] if x["what"].startswith("light 1")]
-    assert len(area) == 1 and "area" in area[0]["what"], splat.last_eval["skipped"]
+    skipped = {x["what"]: x["why"] for x in splat.last_eval["skipped"]}
+    assert "emits nothing" in skipped["light 3 (point)"], skipped
+    assert not any(w.startswith(("light 1", "light 2", "the world")) for w in skipped), skipped
+    peel = splat.report["peel"]
+    assert [x["light"] for x in peel["lights"]] == [1, 2] and peel["world"], peel
+    assert "area" in peel["lights"][0]["why"] and "inside" in peel["lights"][1]["why"], peel
+    assert peel["grid"] == 64 and peel["layers"] == 1 and peel["rays"] == 3 * 64 * 64
+    assert 0 < peel["samples"] <= peel["crossings"] and peel["irradiance_rays"] > 0 and peel["seconds"] > 0
     assert splat.report["lights"][0]["grid"] == 128 and splat.report["lights"][0]["grid_capped"]
     for kw, name in [({"eps": 0.0}, "eps"), ({"eps": float("nan")}, "eps"), ({"max_grid": 0}, "max_grid"),
-                     ({"max_grid": 10**6}, "max_grid"), ({"max_grid": -1}, "max_grid"), ({"profile": "x"}, "profile")]:
+                     ({"max_grid": 10**6}, "max_grid"), ({"max_grid": -1}, "max_grid"), ({"profile": "x"}, "profile"),
+                     ({"peel_grid": 0}, "peel_grid"), ({"peel_grid": 5000}, "peel_grid"),
+                     ({"peel_grid": -3}, "peel_grid")]:
         with pytest.raises(ValueError, match=name):
             translucent.Splat(s, **kw)
     with pytest.raises(ValueError, match="positions"):

@@ -133,6 +133,32 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
         lights.append(x)?;
     }
     report.set_item("lights", lights)?;
+    match &r.peel {
+        Some(p) => {
+            let d = PyDict::new(py);
+            let peeled = PyList::empty(py);
+            for (k, why) in &p.lights {
+                let x = PyDict::new(py);
+                x.set_item("light", k)?;
+                x.set_item("why", why)?;
+                peeled.append(x)?;
+            }
+            d.set_item("lights", peeled)?;
+            d.set_item("world", p.world)?;
+            d.set_item("grid", p.counts.grid)?;
+            d.set_item("grid_capped", p.sizes.capped)?;
+            d.set_item("rays", p.counts.rays)?;
+            d.set_item("crossings", p.counts.crossings)?;
+            d.set_item("layers", p.counts.layers)?;
+            d.set_item("cut", p.counts.cut)?;
+            d.set_item("samples", p.counts.samples)?;
+            d.set_item("unlit", p.counts.unlit)?;
+            d.set_item("irradiance_rays", p.counts.irradiance_rays)?;
+            d.set_item("seconds", p.seconds)?;
+            report.set_item("peel", d)?;
+        }
+        None => report.set_item("peel", py.None())?,
+    }
     Ok(report)
 }
 
@@ -167,7 +193,7 @@ impl PySplat {
     /// `eps` is eqs. 4-5's threshold in (0, 1), `max_grid` the light view's largest side in
     /// [1, 4096]. Nothing is computed until an evaluation.
     #[new]
-    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None, backend = "auto", reuse = false))]
+    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None, backend = "auto", reuse = false, peel_grid = 1024))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -179,6 +205,7 @@ impl PySplat {
         #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
         backend: &str,
         reuse: bool,
+        #[pyo3(from_py_with = int)] peel_grid: i64,
     ) -> PyResult<Self> {
         let kind = profile_kind(profile)?;
         let max_grid = u32::try_from(max_grid).map_err(|_| {
@@ -186,10 +213,23 @@ impl PySplat {
                 "max_grid = {max_grid}: the light view's largest side must lie in [1, {MAX_GRID}]"
             ))
         })?;
+        let peel_grid = u32::try_from(peel_grid).map_err(|_| {
+            PyValueError::new_err(format!(
+                "peel_grid = {peel_grid}: each peeled view's side must lie in [1, {MAX_GRID}]"
+            ))
+        })?;
         let terms =
             crate::convert::term_settings(walks, walk_rays, scene.scene.mesh.vertex_count())?;
-        let mut inner = Splatting::new(scene.scene.clone(), kind, SplatSettings { eps, max_grid })
-            .map_err(crate::convert::to_py)?;
+        let mut inner = Splatting::new(
+            scene.scene.clone(),
+            kind,
+            SplatSettings {
+                eps,
+                max_grid,
+                peel_grid,
+            },
+        )
+        .map_err(crate::convert::to_py)?;
         if let Some(t) = terms {
             inner = inner.with_walks(t).map_err(crate::convert::to_py)?;
         }
@@ -344,6 +384,11 @@ impl PySplat {
     #[getter]
     fn max_grid(&self) -> u32 {
         self.read().settings().max_grid
+    }
+
+    #[getter]
+    fn peel_grid(&self) -> u32 {
+        self.read().settings().peel_grid
     }
 
     /// What the last evaluation did (None before the first): "eps", "r_max" and "overlap"

@@ -150,6 +150,25 @@ pub fn irradiance_of_lights(
     )
 }
 
+/// `irradiance` from `lights` and `world` (not the scene's own list: a caller that lights
+/// some of a scene's sources another way, the splatting's peeled samples), for a mesh whose
+/// box is `bounds`; `progress` as `irradiance_with_progress`.
+#[allow(clippy::too_many_arguments)]
+pub fn irradiance_of_sources(
+    bounds: (Vec3, Vec3),
+    lights: &[Light],
+    world: &World,
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+    progress: Option<&ProgressFn>,
+) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+    estimate(
+        bounds, lights, world, tracer, points, normals, settings, progress,
+    )
+}
+
 #[allow(clippy::too_many_arguments)]
 fn estimate(
     bounds: (Vec3, Vec3),

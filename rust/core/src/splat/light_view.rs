@@ -83,11 +83,11 @@ pub enum View {
 /// One cell's ray: where it starts, its unit direction, how far it looks, and the cell's
 /// measure (h^2 [unit^2] orthographic, its solid angle [sr] perspective).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Cell {
-    origin: Vec3,
-    direction: Vec3,
-    t_max: f32,
-    measure: f64,
+pub(super) struct Cell {
+    pub origin: Vec3,
+    pub direction: Vec3,
+    pub t_max: f32,
+    pub measure: f64,
 }
 
 /// The solid angle of the rectangle [x1, x2] x [y1, y2] of the plane at distance 1 seen from
@@ -99,9 +99,10 @@ pub fn rectangle_solid_angle(x1: f64, x2: f64, y1: f64, y2: f64) -> f64 {
 }
 
 impl View {
-    /// How `light` sees a mesh within `sphere`, or why the splatting cannot view it (a sentence
-    /// for `Skipped`): area lights are not yet viewed; a point light inside the sphere, or so
-    /// near it that the frustum would be wider than `MAX_HALF_ANGLE`, would need a cube map.
+    /// How `light` sees a mesh within `sphere`, or why no one view holds it (a sentence the
+    /// report keeps; such a light is peeled, `peel`): an area light has no one eye; a point
+    /// light inside the sphere, or so near it that the frustum would be wider than
+    /// `MAX_HALF_ANGLE`, would need a cube map.
     /// A spot whose cone is narrower than the sphere is viewed through its cone.
     pub fn for_light(light: &Light, sphere: &BoundingSphere) -> std::result::Result<View, String> {
         let (c, r) = (sphere.centre, sphere.radius);
@@ -125,8 +126,7 @@ impl View {
             if sin.is_nan() || sin >= MAX_HALF_ANGLE.sin() {
                 return Err(format!(
                     "the light lies {} of the mesh's bounding sphere (radius {r:.4e}, centre \
-                     {d:.4e} away): one frustum cannot hold the mesh (a cube map would); not \
-                     yet supported by the splatting",
+                     {d:.4e} away): one frustum cannot hold the mesh (a cube map would)",
                     if d <= r { "inside" } else { "too near" }
                 ));
             }
@@ -174,8 +174,8 @@ impl View {
                 }
             }
             Light::Area { .. } => Err(
-                "area lights are not yet supported by the splatting (Shah 2009 splats point \
-                 and directional lights)"
+                "area lights have no one eye to view them from (Shah 2009 splats point and \
+                 directional lights)"
                     .into(),
             ),
         }
@@ -232,7 +232,7 @@ impl View {
     }
 
     /// The ray through the centre of cell (i, j) of an n x n grid.
-    fn cell(&self, i: u32, j: u32, n: u32) -> Cell {
+    pub(super) fn cell(&self, i: u32, j: u32, n: u32) -> Cell {
         let at = |k: u32, half: f64| -half + 2.0 * half * (f64::from(k) + 0.5) / f64::from(n);
         match *self {
             View::Orthographic {

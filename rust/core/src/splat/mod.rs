@@ -9,9 +9,10 @@
 //!
 //! B is the quantity `reference::reference_radiosity` integrates (any profile of `profiles`),
 //! plus the profile's point mass times the vertex's own irradiance. Suns, point and spot lights
-//! are splatted; area lights, the world, point lights inside the mesh's bounding sphere and the
-//! light the rest of the scene sends back are not yet, and each evaluation says so in
-//! `skipped`.
+//! are splatted from their own views; the world, area lights and point lights inside the
+//! mesh's bounding sphere from the whole surface, found by depth peeling (`peel`, Shah's
+//! §Environment Lighting). The light the rest of the scene sends back is not yet, and each
+//! evaluation says so in `skipped`.
 //!
 //! Where the paper is not followed to the letter: eq. 5's grid is far beyond any budget and is
 //! capped (`sizes`); the pass-1 "render" is a ray cast per cell on the CPU (`light_view`); near
@@ -21,6 +22,7 @@
 pub mod camera;
 pub mod gpu;
 pub mod light_view;
+pub mod peel;
 pub mod receivers;
 pub mod reuse;
 pub mod sizes;
@@ -30,7 +32,7 @@ mod tests;
 use crate::error::{Error, Result};
 use crate::evaluation::{check_eye, Quantity, Skipped};
 use crate::irradiance::{
-    irradiance as irradiance_of_scene, irradiance_of_lights, IrradianceSettings,
+    irradiance as irradiance_of_scene, irradiance_of_sources, IrradianceSettings,
 };
 use crate::lights::{Light, World};
 use crate::occluders::Occluders;
@@ -44,12 +46,14 @@ use camera::{camera_view, Camera, PixelHit};
 use glam::Vec3;
 use gpu::{GpuPassReport, GpuSplatter};
 use light_view::{light_samples, BoundingSphere, View, ViewCounts};
+use peel::{peeled_samples, PeelCounts};
 use receivers::{gather, Prepared, Splat};
 use reuse::{Reuse, ReuseCounts};
 use sizes::{Sizes, Spread};
 use std::sync::Mutex;
 use std::time::Instant;
 
+pub use peel::DEFAULT_PEEL_GRID;
 pub use sizes::{DEFAULT_EPS, DEFAULT_MAX_GRID, MAX_GRID};
 
 /// One material evaluated by the splatting (`evaluation::Evaluation`), with its report.
@@ -64,6 +68,9 @@ pub struct SplatSettings {
     /// The largest side of a light's grid, in [1, `MAX_GRID`]: eq. 5's grid is cut to it (and
     /// the cut reported).
     pub max_grid: u32,
+    /// The largest side of each of the three peeled views' grids (`peel`: the world, area
+    /// lights, point lights no frustum holds), in [1, `MAX_GRID`].
+    pub peel_grid: u32,
 }
 
 impl Default for SplatSettings {
@@ -71,9 +78,43 @@ impl Default for SplatSettings {
         Self {
             eps: DEFAULT_EPS,
             max_grid: DEFAULT_MAX_GRID,
+            peel_grid: DEFAULT_PEEL_GRID,
         }
     }
 }
+
+impl SplatSettings {
+    /// Errors: `eps`, `max_grid` or `peel_grid` out of range (`Error::InvalidArgument`,
+    /// naming it).
+    pub fn check(&self) -> Result<()> {
+        sizes::check_eps(self.eps)?;
+        sizes::check_max_grid(self.max_grid)?;
+        if !(1..=MAX_GRID).contains(&self.peel_grid) {
+            return Err(Error::InvalidArgument(format!(
+                "peel_grid = {}: each peeled view's side must lie in [1, {MAX_GRID}] (3 x \
+                 {MAX_GRID}^2 rays at most)",
+                self.peel_grid
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The peeled splat sources (`peel`, Shah's §Environment Lighting): which sources lit them,
+/// the grid and what was found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeelReport {
+    /// The scene's lights lit this way (their indices), each with why no light view holds it.
+    pub lights: Vec<(usize, String)>,
+    /// Whether the world lit them.
+    pub world: bool,
+    pub sizes: Sizes,
+    pub counts: PeelCounts,
+    pub seconds: f64,
+}
+
+/// The `Splat::light` of the peeled splats: no light index (groups never mix it with a light's).
+pub const PEELED: u32 = u32::MAX;
 
 /// One light's view: how it was looked through and what it found.
 #[derive(Debug, Clone, PartialEq)]
@@ -125,6 +166,9 @@ pub struct SplatReport {
     /// A render whose pass 3 ran on the GPU (`gpu`): the adapter, target and quads; None on
     /// the CPU.
     pub gpu: Option<GpuPassReport>,
+    /// The peeled sources (the world, area lights, point lights inside the bounding sphere),
+    /// where the scene has any.
+    pub peel: Option<PeelReport>,
 }
 
 fn light_kind(light: &Light) -> &'static str {
@@ -144,9 +188,15 @@ fn tick(progress: Option<&ProgressFn>, f: f32) -> Result<()> {
     }
 }
 
-/// What the splatting leaves out of every evaluation of `scene`, and the lights it splats
-/// with their views.
-fn plan(scene: &Scene, sphere: &BoundingSphere) -> (Vec<(usize, View)>, Vec<Skipped>) {
+/// How each source of `scene` is splatted: the lights seen through a view of their own, the
+/// lights peeled (`peel`: no single frustum holds them) with the reason, and what is left out.
+struct Plan {
+    views: Vec<(usize, View)>,
+    peeled: Vec<(usize, String)>,
+    skipped: Vec<Skipped>,
+}
+
+fn plan(scene: &Scene, sphere: &BoundingSphere) -> Plan {
     let mut skipped = vec![
         Skipped::new(
             "walks through the mesh",
@@ -162,13 +212,6 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> (Vec<(usize, View)>, Vec<Skip
              beyond r_max, and the light-view grid's sampling error is not measured",
         ),
     ];
-    if !scene.world.is_black() {
-        skipped.push(Skipped::new(
-            "the world",
-            "not yet supported by the splatting (Shah 2009 lights it by spherical harmonics \
-             and depth peeling, not built)",
-        ));
-    }
     if scene.occluders.bouncing().is_some() {
         skipped.push(Skipped::new(
             "the light the rest of the scene sends back",
@@ -177,6 +220,7 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> (Vec<(usize, View)>, Vec<Skip
     }
     let (lo, hi) = scene.mesh.bounds();
     let mut views = Vec::new();
+    let mut peeled = Vec::new();
     for (k, light) in scene.lights.iter().enumerate() {
         let what = format!("light {k} ({})", light_kind(light));
         if light.is_black() {
@@ -186,18 +230,24 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> (Vec<(usize, View)>, Vec<Skip
         } else {
             match View::for_light(light, sphere) {
                 Ok(view) => views.push((k, view)),
-                Err(why) => skipped.push(Skipped::new(what, why)),
+                Err(why) => peeled.push((k, why)),
             }
         }
     }
-    (views, skipped)
+    Plan {
+        views,
+        peeled,
+        skipped,
+    }
 }
 
 /// Pass 1's result: the splats of every light splatted, with what the receivers need.
 struct Sources {
     splats: Vec<Splat>,
-    /// The lights splatted (what the point mass's irradiance is taken from).
+    /// The lights splatted and the world where it is peeled (what the point mass's irradiance
+    /// is taken from).
     used: Vec<Light>,
+    world: World,
     /// The mesh and the occluders that can shadow it from those lights.
     tracer: Tracer,
     /// The mesh alone, for the camera to add every occluder to.
@@ -226,20 +276,24 @@ fn sources(
     progress: Option<&ProgressFn>,
     (from, to): (f32, f32),
 ) -> Result<Sources> {
-    sizes::check_eps(settings.eps)?;
-    sizes::check_max_grid(settings.max_grid)?;
+    settings.check()?;
     let eta = resolved.irradiance_eta();
     let spreads: [Option<Spread>; 3] = sizes::spreads(&resolved.profiles, settings.eps)?;
     tick(progress, from)?;
     let mesh = &scene.mesh;
     let sphere = BoundingSphere::of(mesh);
-    let (views, mut skipped) = plan(scene, &sphere);
-    let used: Vec<Light> = views
-        .iter()
-        .map(|(k, _)| scene.lights[*k].clone())
+    let Plan {
+        views,
+        peeled,
+        mut skipped,
+    } = plan(scene, &sphere);
+    let used: Vec<Light> = (views.iter().map(|(k, _)| *k))
+        .chain(peeled.iter().map(|(k, _)| *k))
+        .map(|k| scene.lights[k].clone())
         .collect();
-    // The rest of the scene that can shadow the mesh from the lights splatted.
-    let (kept, _) = (scene.occluders).relevant(mesh.bounds(), &used, &World::Black);
+    let world = scene.world.clone();
+    // The rest of the scene that can shadow the mesh from the lights splatted and the world.
+    let (kept, _) = (scene.occluders).relevant(mesh.bounds(), &used, &world);
     let mesh_tracer = Tracer::new(mesh);
     let tracer = mesh_tracer.with_occluders(&kept);
     let mut report = SplatReport {
@@ -253,7 +307,13 @@ fn sources(
         .map(|(_, v)| Sizes::from_spreads(&spreads, v.width(), settings.max_grid))
         .collect::<Result<_>>()?;
     let rays: u64 = planned.iter().map(|s| u64::from(s.grid).pow(2)).sum();
-    let ticker = Ticker::span(progress, rays, from, to);
+    // The peeled views take the rest of the stage, if there are any.
+    let peel_from = if peeled.is_empty() && world.is_black() {
+        to
+    } else {
+        from + 0.5 * (to - from)
+    };
+    let ticker = Ticker::span(progress, rays, from, peel_from);
     let mut splats = Vec::new();
     for ((k, view), sizes) in views.iter().zip(planned) {
         let light = &scene.lights[*k];
@@ -295,12 +355,46 @@ fn sources(
             seconds: t_light.elapsed().as_secs_f64(),
         });
     }
+    if peel_from < to {
+        let t_peel = Instant::now();
+        let sizes = Sizes::from_spreads(&spreads, 2.0 * sphere.radius, settings.peel_grid)?;
+        let lights: Vec<Light> = peeled
+            .iter()
+            .map(|(k, _)| scene.lights[*k].clone())
+            .collect();
+        let irradiance = IrradianceSettings {
+            eta,
+            ..Default::default()
+        };
+        let (s, counts) = peeled_samples(
+            mesh,
+            (&mesh_tracer, &tracer),
+            &sphere,
+            sizes.grid,
+            (&lights, &world),
+            &irradiance,
+            progress,
+            (peel_from, to),
+        )?;
+        splats.extend(s.iter().map(|s| Splat {
+            light: PEELED,
+            ..Splat::new(s)
+        }));
+        report.peel = Some(PeelReport {
+            lights: peeled,
+            world: !world.is_black(),
+            sizes,
+            counts,
+            seconds: t_peel.elapsed().as_secs_f64(),
+        });
+    }
     report.seconds_light_view = t.elapsed().as_secs_f64();
     report.splats = splats.len();
     tick(progress, to)?;
     Ok(Sources {
         splats,
         used,
+        world,
         tracer,
         mesh_tracer,
         bounds: mesh.bounds(),
@@ -352,13 +446,22 @@ fn radiosity_at(
 
     let t = Instant::now();
     let point: [f64; 3] = std::array::from_fn(|c| resolved.profiles[c].point_mass());
-    if point.iter().any(|m| *m > 0.0) && !src.used.is_empty() {
+    if point.iter().any(|m| *m > 0.0) && !(src.used.is_empty() && src.world.is_black()) {
         tick(progress, to)?;
         let s = IrradianceSettings {
             eta: resolved.irradiance_eta(),
             ..Default::default()
         };
-        let (e, _) = irradiance_of_lights(src.bounds, &src.used, &src.tracer, points, normals, &s)?;
+        let (e, _) = irradiance_of_sources(
+            src.bounds,
+            &src.used,
+            &src.world,
+            &src.tracer,
+            points,
+            normals,
+            &s,
+            Some(&crate::progress::cancel_only(progress)),
+        )?;
         for (bv, ev) in b.iter_mut().zip(&e) {
             for c in 0..3 {
                 bv[c] += point[c] * f64::from(ev[c]);
@@ -567,8 +670,7 @@ pub struct Splatting {
 impl Splatting {
     /// Errors: `eps` or `max_grid` out of range (`Error::InvalidArgument`, naming it).
     pub fn new(scene: Scene, profile: ProfileKind, settings: SplatSettings) -> Result<Self> {
-        sizes::check_eps(settings.eps)?;
-        sizes::check_max_grid(settings.max_grid)?;
+        settings.check()?;
         Ok(Self {
             scene,
             profile,

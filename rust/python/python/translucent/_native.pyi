@@ -372,10 +372,13 @@ class Prt:
 
 class Splat:
     """Image-space splatting (Shah et al. 2009) over a copy of `scene`, nothing precomputed:
-    every evaluation splats each sun, point or spot light's view (ray casts on the CPU) and
-    gathers the splats within r_max (eq. 4) at the vertices of their own object. `eps` is
-    eqs. 4-5's threshold in (0, 1); `max_grid` the largest light-view side in [1, 4096] (eq. 5's
-    grid is cut to it, the cut reported). ValueError naming eps, max_grid or profile."""
+    every evaluation splats each sun, point or spot light's view (ray casts on the CPU), peels
+    the whole surface for the world, area lights and point lights inside the mesh's bounding
+    sphere (Shah's §Environment Lighting: three axis views, every layer), and gathers the
+    splats within r_max (eq. 4) at the vertices of their own object. `eps` is eqs. 4-5's
+    threshold in (0, 1); `max_grid` the largest light-view side in [1, 4096] (eq. 5's grid is
+    cut to it, the cut reported); `peel_grid` each peeled view's side in [1, 4096].
+    ValueError naming eps, max_grid, peel_grid or profile."""
 
     def __init__(
         self,
@@ -387,13 +390,14 @@ class Splat:
         walk_rays: int | None = None,
         backend: Backend = "auto",
         reuse: bool = False,
+        peel_grid: int = 1024,
     ) -> None:
         """`walks` (Cycles' profile only): the walks' geometry term and the object's own light,
         walked at the first evaluation (`walk_rays` in all, default as PRT's) and carried to a
         new light or pose. `backend`: where `render` draws its splats (see `set_backend`).
         `reuse`: each evaluation keeps the earlier ones' splat sources that still see the light
         (Shah 2009's sampling coherence; see the `reuse` property). ValueError naming eps,
-        max_grid, profile, walks, walk_rays or backend."""
+        max_grid, peel_grid, profile, walks, walk_rays or backend."""
     @property
     def reuse(self) -> bool:
         """Whether each evaluation keeps the earlier ones' splat sources (lit anew, moved with a
@@ -448,6 +452,8 @@ class Splat:
     @property
     def max_grid(self) -> int: ...
     @property
+    def peel_grid(self) -> int: ...
+    @property
     def walks(self) -> bool: ...
     @property
     def report(self) -> dict[str, object] | None:
@@ -457,8 +463,11 @@ class Splat:
         too, with the pixels that see the mesh), per-light grid and ray counts and "reuse" (with
         reuse on: "kept", "dropped", "covered", "added", "fresh"; else None), and "gpu" (a
         render drawn on a GPU: "adapter", "software", "target", the "groups" and "splats" drawn,
-        "culled", "seconds_upload", "seconds_draw", "seconds_readback"; None on the CPU); None
-        before the first."""
+        "culled", "seconds_upload", "seconds_draw", "seconds_readback"; None on the CPU), and
+        "peel" (where the world, an area light or a point light inside the bounding sphere
+        lights the mesh: "lights" [{"light", "why"}], "world", "grid", "grid_capped", "rays",
+        "crossings", "layers", "cut", "samples", "unlit", "irradiance_rays", "seconds"; else
+        None); None before the first."""
     @property
     def last_eval(self) -> dict[str, object] | None:
         """The keys every method shares ("method" "splat", "quantity", "error_estimate" None:

@@ -133,6 +133,7 @@ fn the_mask_names_each_object_and_the_rest_of_the_scene_hides_what_it_covers() {
     let s = SplatSettings {
         eps: 0.01,
         max_grid: 96,
+        ..Default::default()
     };
     let out = splat_render(&scene, &r, &s, &cam, None).unwrap();
     assert_eq!(
@@ -192,6 +193,7 @@ fn a_render_cancels_and_reports_progress_from_zero_to_one() {
     let s = SplatSettings {
         eps: 0.01,
         max_grid: 48,
+        ..Default::default()
     };
     let stop = |_: f32| false;
     assert!(matches!(

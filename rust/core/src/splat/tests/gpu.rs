@@ -133,6 +133,7 @@ fn the_gpu_draws_the_sum_the_cpu_gathers_and_keeps_objects_apart() {
     let s = SplatSettings {
         eps: 0.01,
         max_grid: 128,
+        ..Default::default()
     };
     for (name, profile) in [
         ("dipole", ProfileKind::Dipole),
@@ -173,6 +174,7 @@ fn half_float_targets_lose_what_falls_under_their_precision() {
     let s = SplatSettings {
         eps: 0.01,
         max_grid: 128,
+        ..Default::default()
     };
     let a = drawn(&scene, &r, &s, &cam, Some(&full));
     let b = drawn(&scene, &r, &s, &cam, Some(&half));

@@ -93,6 +93,7 @@ fn radiosity_matches_the_ground_truth_on_a_sphere() {
     let settings = SplatSettings {
         eps: 0.01,
         max_grid: 512,
+        ..Default::default()
     };
     let e = splat_radiosity(&scene, &r, &settings, None).unwrap();
     let receivers: Vec<u32> = (0..mesh.vertex_count() as u32).step_by(5).collect();
@@ -144,6 +145,7 @@ fn lights_add_up_and_what_is_not_splatted_is_skipped_saying_why() {
     let settings = SplatSettings {
         eps: 0.01,
         max_grid: 128,
+        ..Default::default()
     };
     let sun = Light::sun(Vec3::new(0.0, 0.3, -1.0), [1.0, 0.5, 0.2]).unwrap();
     let point = Light::point(Vec3::new(3.0, 0.0, 1.0), [40.0; 3]).unwrap();
@@ -165,7 +167,12 @@ fn lights_add_up_and_what_is_not_splatted_is_skipped_saying_why() {
     ];
     scene.world = World::uniform([0.1; 3]).unwrap();
     let all = splat_radiosity(&scene, &r, &settings, None).unwrap();
-    let parts = [one(&sun), one(&point), one(&spot)];
+    // The area light, the point light inside the sphere and the world are peeled together.
+    let mut peeled = Scene::new(mesh.clone());
+    peeled.lights = vec![scene.lights[1].clone(), scene.lights[3].clone()];
+    peeled.world = scene.world.clone();
+    let peeled = splat_radiosity(&peeled, &r, &settings, None).unwrap();
+    let parts = [one(&sun), one(&point), one(&spot), peeled];
     for (v, b) in all.values.iter().enumerate() {
         for c in 0..3 {
             let sum: f32 = parts.iter().map(|p| p.values[v][c]).sum();
@@ -193,11 +200,16 @@ fn lights_add_up_and_what_is_not_splatted_is_skipped_saying_why() {
             .why
             .clone()
     };
-    assert!(why("light 1 (area)").contains("not yet supported"));
-    assert!(why("light 3 (point)").contains("inside"));
+    let p = d.peel.as_ref().unwrap();
+    assert_eq!(p.lights.iter().map(|l| l.0).collect::<Vec<_>>(), [1, 3]);
+    assert!(p.lights[0].1.contains("area lights"));
+    assert!(p.lights[1].1.contains("inside"));
+    assert!(p.world);
     assert!(why("light 4 (point)").contains("emits nothing"));
     assert!(why("light 5 (spot)").contains("cannot reach"));
-    assert!(why("the world").contains("not yet supported"));
+    assert!(!all.skipped.iter().any(|s| s.what.contains("world")
+        || s.what.contains("light 1")
+        || s.what.contains("light 3")));
     assert!(why("error estimate").contains("none"));
     assert_eq!(all.error_estimate, None);
     assert_eq!(all.quantity, Quantity::Radiosity);
@@ -216,6 +228,7 @@ fn no_light_passes_between_objects() {
     let settings = SplatSettings {
         eps: 0.01,
         max_grid: 128,
+        ..Default::default()
     };
     let e = splat_radiosity(&scene, &r, &settings, None).unwrap();
     for v in 0..mesh.vertex_count() {
@@ -274,6 +287,7 @@ fn a_cancel_stops_it_and_progress_runs_from_zero_to_one() {
     let s = SplatSettings {
         eps: 0.01,
         max_grid: 64,
+        ..Default::default()
     };
     let stop = |_: f32| false;
     assert_eq!(
@@ -306,6 +320,7 @@ fn radiance_is_the_exit_weight_over_pi() {
     let s = SplatSettings {
         eps: 0.01,
         max_grid: 64,
+        ..Default::default()
     };
     let b = splat_radiosity(&scene, &r, &s, None).unwrap().values;
     let l = splat_radiance(&scene, &r, &s, None, None).unwrap();

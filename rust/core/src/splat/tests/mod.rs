@@ -7,5 +7,6 @@ mod camera;
 mod gpu;
 mod light_view;
 mod method;
+mod peel;
 mod receivers;
 mod reuse;

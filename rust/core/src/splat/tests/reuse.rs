@@ -170,6 +170,7 @@ fn a_slow_sun_sweep_flickers_less_than_half_as_much_with_the_kept_samples() {
     let s = SplatSettings {
         eps: 0.01,
         max_grid: 128,
+        ..Default::default()
     };
     let base = Vec3::new(0.4, 0.3, -1.0).normalize();
     let reuse = Mutex::new(Reuse::default());
