@@ -32,6 +32,7 @@ sys.path.insert(0, str(REPO))
 import bpy  # noqa: E402
 
 import translucent  # noqa: E402
+from translucent import cycles  # noqa: E402
 from addon import export, writeback  # noqa: E402
 from blender_scripts.lib import cycles_reference as cr  # noqa: E402
 from blender_scripts.lib import scenes  # noqa: E402
@@ -64,12 +65,20 @@ def main() -> int:
     if args.world == "black":
         bl_scene.world = None
     scene, info = export.export_scene([obj])
-    m = translucent.Material.preset(args.material, scenes.MM_PER_UNIT)
+    # The material both sides render: the preset as Cycles' Principled BSDF with its specular
+    # layer off (Specular IOR Level 0), read back as a translucent.Material with that layer off
+    # too (its exit weight then leaves the subsurface lobe whole, as Cycles does).
+    p = cycles.principled_for(translucent.Material.preset(args.material, scenes.MM_PER_UNIT))
+    p.specular_ior_level = 0.0
+    m = p.material()
     shown = scenes.preview_object(obj)  # the evaluated mesh, the attribute as emission
 
     # Cycles: the source in the mapped Principled BSDF, its specular layer off.
-    mat = cr.principled_material(m)
-    mat.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+    mat = bpy.data.materials.new("Cycles reference")
+    if mat.node_tree is None:  # Blender < 5.0
+        mat.use_nodes = True
+    cycles.apply_to_principled(mat.node_tree.nodes["Principled BSDF"], p)
+    assert mat.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value == 0.0
     obj.data.materials.clear()
     obj.data.materials.append(mat)
     obj.hide_render, shown.hide_render = False, True

@@ -66,8 +66,17 @@ def test_the_plane_gives_the_closed_total_and_the_sphere_the_ground_truth():
     err = translucent.relative_error(b[idx], truth, s.vertex_areas[idx, 0])
     assert max(err["rms"]) < 0.02, err
     ev = splat.last_eval
-    assert ev["error_estimate"] is None  # none computed: said, not invented
-    assert {"walks through the mesh", "error estimate"} <= {x["what"] for x in ev["skipped"]}
+    # Its estimate: the ground truth at 16 other vertices says the same within 2x (or both are
+    # under 0.5 %, the estimate's own tolerance).
+    est, rms = ev["error_estimate"], err["rms"]
+    assert splat.report["estimate"]["receivers"] == splat.estimate_receivers == 16
+    assert all(0.5 * r <= e <= 2 * r or max(e, r) < 0.005 for e, r in zip(est, rms)), (est, rms)
+    assert "walks through the mesh" in {x["what"] for x in ev["skipped"]}
+    assert "error estimate" not in {x["what"] for x in ev["skipped"]}
+    off = translucent.Splat(s, profile="dipole", estimate_receivers=0)
+    off.radiosity(MARBLE_MM)
+    assert off.last_eval["error_estimate"] is None and off.report["estimate"] is None
+    assert "error estimate" in {x["what"] for x in off.last_eval["skipped"]}
     # Any profile: the multipole of 1.5 mm of skin over marble against its own ground truth.
     layered = MARBLE_MM.with_stack(top=translucent.Material.preset("skin1", mm_per_unit=1.0), top_thickness=1.5)
     truth_l = translucent.reference_radiosity(s, layered, rel_tol=3e-3, receivers=idx, profile="multipole")
@@ -111,7 +120,8 @@ def test_peeled_sources_are_reported_and_bad_arguments_raise():
     for kw, name in [({"eps": 0.0}, "eps"), ({"eps": float("nan")}, "eps"), ({"max_grid": 0}, "max_grid"),
                      ({"max_grid": 10**6}, "max_grid"), ({"max_grid": -1}, "max_grid"), ({"profile": "x"}, "profile"),
                      ({"peel_grid": 0}, "peel_grid"), ({"peel_grid": 5000}, "peel_grid"),
-                     ({"peel_grid": -3}, "peel_grid")]:
+                     ({"peel_grid": -3}, "peel_grid"), ({"estimate_receivers": -1}, "estimate_receivers"),
+                     ({"estimate_receivers": 10**5}, "estimate_receivers")]:
         with pytest.raises(ValueError, match=name):
             translucent.Splat(s, **kw)
     with pytest.raises(ValueError, match="positions"):

@@ -159,6 +159,16 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
         }
         None => report.set_item("peel", py.None())?,
     }
+    match &r.estimate {
+        Some(e) => {
+            let d = PyDict::new(py);
+            d.set_item("receivers", e.receivers)?;
+            d.set_item("level", e.level)?;
+            d.set_item("seconds", e.seconds)?;
+            report.set_item("estimate", d)?;
+        }
+        None => report.set_item("estimate", py.None())?,
+    }
     Ok(report)
 }
 
@@ -193,7 +203,7 @@ impl PySplat {
     /// `eps` is eqs. 4-5's threshold in (0, 1), `max_grid` the light view's largest side in
     /// [1, 4096]. Nothing is computed until an evaluation.
     #[new]
-    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None, backend = "auto", reuse = false, peel_grid = 1024))]
+    #[pyo3(signature = (scene, profile = "cycles", eps = 0.01, max_grid = 1024, walks = false, walk_rays = None, backend = "auto", reuse = false, peel_grid = 1024, estimate_receivers = 16))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -206,6 +216,7 @@ impl PySplat {
         backend: &str,
         reuse: bool,
         #[pyo3(from_py_with = int)] peel_grid: i64,
+        #[pyo3(from_py_with = int)] estimate_receivers: i64,
     ) -> PyResult<Self> {
         let kind = profile_kind(profile)?;
         let max_grid = u32::try_from(max_grid).map_err(|_| {
@@ -218,6 +229,11 @@ impl PySplat {
                 "peel_grid = {peel_grid}: each peeled view's side must lie in [1, {MAX_GRID}]"
             ))
         })?;
+        let estimate_receivers = usize::try_from(estimate_receivers).map_err(|_| {
+            PyValueError::new_err(format!(
+                "estimate_receivers = {estimate_receivers}: must be a count of vertices, >= 0"
+            ))
+        })?;
         let terms =
             crate::convert::term_settings(walks, walk_rays, scene.scene.mesh.vertex_count())?;
         let mut inner = Splatting::new(
@@ -227,6 +243,7 @@ impl PySplat {
                 eps,
                 max_grid,
                 peel_grid,
+                estimate_receivers,
             },
         )
         .map_err(crate::convert::to_py)?;
@@ -389,6 +406,11 @@ impl PySplat {
     #[getter]
     fn peel_grid(&self) -> u32 {
         self.read().settings().peel_grid
+    }
+
+    #[getter]
+    fn estimate_receivers(&self) -> usize {
+        self.read().settings().estimate_receivers
     }
 
     /// What the last evaluation did (None before the first): "eps", "r_max" and "overlap"

@@ -20,6 +20,7 @@
 //! centre (`receivers`).
 
 pub mod camera;
+pub mod estimate;
 pub mod gpu;
 pub mod light_view;
 pub mod peel;
@@ -53,6 +54,8 @@ use sizes::{Sizes, Spread};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use estimate::EstimateReport;
+pub use estimate::DEFAULT_ESTIMATE_RECEIVERS;
 pub use peel::DEFAULT_PEEL_GRID;
 pub use sizes::{DEFAULT_EPS, DEFAULT_MAX_GRID, MAX_GRID};
 
@@ -69,9 +72,15 @@ pub struct SplatSettings {
     /// the cut reported).
     pub max_grid: u32,
     /// The largest side of each of the three peeled views' grids (`peel`: the world, area
-    /// lights, point lights no frustum holds), in [1, `MAX_GRID`].
+    /// lights, point lights no frustum holds), in [1, `MAX_GRID`]; `max_grid` where that is
+    /// smaller.
     pub peel_grid: u32,
+    /// The vertices the error estimate reads the ground truth at (`estimate`); 0: none.
+    pub estimate_receivers: usize,
 }
+
+/// The most vertices an error estimate may read the ground truth at.
+pub const MAX_ESTIMATE_RECEIVERS: usize = 4096;
 
 impl Default for SplatSettings {
     fn default() -> Self {
@@ -79,6 +88,7 @@ impl Default for SplatSettings {
             eps: DEFAULT_EPS,
             max_grid: DEFAULT_MAX_GRID,
             peel_grid: DEFAULT_PEEL_GRID,
+            estimate_receivers: DEFAULT_ESTIMATE_RECEIVERS,
         }
     }
 }
@@ -94,6 +104,13 @@ impl SplatSettings {
                 "peel_grid = {}: each peeled view's side must lie in [1, {MAX_GRID}] (3 x \
                  {MAX_GRID}^2 rays at most)",
                 self.peel_grid
+            )));
+        }
+        if self.estimate_receivers > MAX_ESTIMATE_RECEIVERS {
+            return Err(Error::InvalidArgument(format!(
+                "estimate_receivers = {}: at most {MAX_ESTIMATE_RECEIVERS} vertices (the ground \
+                 truth at each costs about a tenth of a second)",
+                self.estimate_receivers
             )));
         }
         Ok(())
@@ -169,6 +186,8 @@ pub struct SplatReport {
     /// The peeled sources (the world, area lights, point lights inside the bounding sphere),
     /// where the scene has any.
     pub peel: Option<PeelReport>,
+    /// What the error estimate cost (`estimate`), where one was computed.
+    pub estimate: Option<EstimateReport>,
 }
 
 fn light_kind(light: &Light) -> &'static str {
@@ -205,11 +224,6 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> Plan {
         Skipped::new(
             "the object's own light",
             "the splatting gathers the direct light only",
-        ),
-        Skipped::new(
-            "error estimate",
-            "the splatting states none yet: eq. 4 leaves up to eps of each splat's light \
-             beyond r_max, and the light-view grid's sampling error is not measured",
         ),
     ];
     if scene.occluders.bouncing().is_some() {
@@ -357,7 +371,9 @@ fn sources(
     }
     if peel_from < to {
         let t_peel = Instant::now();
-        let sizes = Sizes::from_spreads(&spreads, 2.0 * sphere.radius, settings.peel_grid)?;
+        // Never finer than the light views (`max_grid`, the knob of Shah's Fig. 12).
+        let cap = settings.peel_grid.min(settings.max_grid);
+        let sizes = Sizes::from_spreads(&spreads, 2.0 * sphere.radius, cap)?;
         let lights: Vec<Light> = peeled
             .iter()
             .map(|(k, _)| scene.lights[*k].clone())
@@ -472,8 +488,31 @@ fn radiosity_at(
     Ok(b)
 }
 
+/// The error estimate of `values`, B at the vertices `at` (`estimate`), with its report in
+/// `src`; None, and a skip saying so, where no vertex is asked for.
+fn estimated(
+    scene: &Scene,
+    resolved: &Resolved,
+    src: &mut Sources,
+    at: &[u32],
+    values: &[[f64; 3]],
+    progress: Option<&ProgressFn>,
+) -> Result<Option<[f64; 3]>> {
+    if at.is_empty() {
+        src.skipped.push(Skipped::new(
+            "error estimate",
+            "estimate_receivers = 0: the ground truth is read at no vertex",
+        ));
+        return Ok(None);
+    }
+    let sources = (src.used.as_slice(), &src.world, &src.tracer);
+    let (e, report) = estimate::estimate(scene, resolved, sources, at, values, progress)?;
+    src.report.estimate = Some(report);
+    Ok(Some(e))
+}
+
 /// Radiosity B per vertex of `scene.mesh` for the material `resolved` by splatting, with the
-/// shared evaluation's seconds and skips (no error estimate: None). `progress` hears of the
+/// shared evaluation's seconds, skips and error estimate (`estimate`). `progress` hears of the
 /// light views (the first 45 %, per row of rays) and the gather (to 95 %, per vertex); false
 /// cancels (`Error::Cancelled`). Errors: `eps` or `max_grid` out of range
 /// (`Error::InvalidArgument`, naming it).
@@ -509,11 +548,14 @@ fn radiosity_with(
         progress,
         (0.45, 0.95),
     )?;
+    let at = estimate::receivers(mesh.vertex_count(), settings.estimate_receivers);
+    let values: Vec<[f64; 3]> = at.iter().map(|&v| b[v as usize]).collect();
+    let error_estimate = estimated(scene, resolved, &mut src, &at, &values, progress)?;
     tick(progress, 1.0)?;
     Ok(Evaluation {
         values: b.iter().map(|v| v.map(|x| x as f32)).collect(),
         quantity: Quantity::Radiosity,
-        error_estimate: None,
+        error_estimate,
         seconds: start.elapsed().as_secs_f64(),
         skipped: src.skipped,
         details: src.report,
@@ -601,6 +643,30 @@ pub fn render_with_layer(
     drop(seen);
     src.report.seconds_camera_view = t.elapsed().as_secs_f64();
     src.report.pixels = hits.len();
+    // The error estimate's vertices, gathered from the same splats first (on the CPU).
+    let mesh = &scene.mesh;
+    let at = estimate::receivers(mesh.vertex_count(), settings.estimate_receivers);
+    let at_vertices = if at.is_empty() {
+        Vec::new()
+    } else {
+        let kept = src.splats.clone();
+        let pick = |x: &[Vec3]| at.iter().map(|&v| x[v as usize]).collect::<Vec<_>>();
+        let objects: Vec<u32> = at
+            .iter()
+            .map(|&v| mesh.object_of_vertex(v as usize))
+            .collect();
+        let b = radiosity_at(
+            &mut src,
+            resolved,
+            settings,
+            (&pick(mesh.positions()), &pick(mesh.normals()), &objects),
+            None,
+            progress,
+            (0.4, 0.4),
+        )?;
+        src.splats = kept;
+        b
+    };
     let points: Vec<Vec3> = hits.iter().map(|h| h.position).collect();
     let normals: Vec<Vec3> = hits.iter().map(|h| h.normal).collect();
     let objects: Vec<u32> = hits.iter().map(|h| h.object).collect();
@@ -635,12 +701,13 @@ pub fn render_with_layer(
             std::array::from_fn(|c| (bv[c] * k[c] / std::f64::consts::PI) as f32);
         mask[h.pixel as usize] = h.object + 1;
     }
+    let error_estimate = estimated(scene, resolved, &mut src, &at, &at_vertices, progress)?;
     tick(progress, 1.0)?;
     Ok(Render {
         evaluation: Evaluation {
             values,
             quantity: Quantity::Radiance,
-            error_estimate: None,
+            error_estimate,
             seconds: start.elapsed().as_secs_f64(),
             skipped: src.skipped,
             details: src.report,

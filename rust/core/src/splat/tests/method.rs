@@ -210,8 +210,17 @@ fn lights_add_up_and_what_is_not_splatted_is_skipped_saying_why() {
     assert!(!all.skipped.iter().any(|s| s.what.contains("world")
         || s.what.contains("light 1")
         || s.what.contains("light 3")));
-    assert!(why("error estimate").contains("none"));
-    assert_eq!(all.error_estimate, None);
+    let est = all.error_estimate.expect("an error estimate");
+    assert!(est.iter().all(|e| e.is_finite() && *e >= 0.0), "{est:?}");
+    assert_eq!(d.estimate.unwrap().receivers, DEFAULT_ESTIMATE_RECEIVERS);
+    assert!(!all.skipped.iter().any(|s| s.what == "error estimate"));
+    let none = SplatSettings {
+        estimate_receivers: 0,
+        ..settings
+    };
+    let e = splat_radiosity(&scene, &r, &none, None).unwrap();
+    assert_eq!((e.error_estimate, e.details.estimate), (None, None));
+    assert!(e.skipped.iter().any(|s| s.what == "error estimate"));
     assert_eq!(all.quantity, Quantity::Radiosity);
     assert!(all.seconds > 0.0 && d.splats > 0);
 }

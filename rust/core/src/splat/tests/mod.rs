@@ -4,6 +4,7 @@
 //! (skips, bad input, cancelling).
 
 mod camera;
+mod estimate;
 mod gpu;
 mod light_view;
 mod method;
