@@ -134,6 +134,10 @@ class Rendered:
     reports: dict = field(default_factory=dict)
 
 
+# The vertices each render reads the ground truth at for its error estimate: half the API's
+# default, so a dragged light waits about a second less for its image on the 10 cm bunny.
+ESTIMATE_RECEIVERS = 8
+
 # Per material: its `translucent.Splat` and what it was made for, kept between renders so the
 # walks' term (Cycles' profile) is walked once and carried to a new light or pose after.
 SPLATS: dict = {}
@@ -162,7 +166,7 @@ def _splat_for(name: str, scene, names: list, profile: str, settings: tuple):
     # reuse: each render keeps the earlier renders' splat sources that still see the light
     # (Shah 2009's sampling coherence): a dragged light or a turning object does not flicker.
     splat = translucent.Splat(scene, profile=profile, eps=eps, max_grid=max_grid, walks=profile == "cycles",
-                              backend=backend.lower(), reuse=True)
+                              backend=backend.lower(), reuse=True, estimate_receivers=ESTIMATE_RECEIVERS)
     with _SPLATS_LOCK:
         SPLATS[name] = (splat, made_for, positions)
     return splat
@@ -265,6 +269,10 @@ def store(result: Rendered) -> bpy.types.Image:
                   if any(x["what"].startswith("linked inputs") for x in r["skipped"])]
     if unfollowed:
         STATE["message"] += f"; textures not followed in {', '.join(unfollowed)}"
+    errors = [max(r["error_estimate"]) for r in result.reports.values() if r.get("error_estimate") is not None]
+    if errors:
+        STATE["message"] += (f"; estimated error up to {100 * max(errors):.1f} % (the ground truth at "
+                             f"{ESTIMATE_RECEIVERS} vertices)")
     return image
 
 

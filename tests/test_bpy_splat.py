@@ -96,7 +96,10 @@ def test_two_touching_objects_exchange_no_light_and_the_render_is_saved(addon, t
     np.testing.assert_array_equal(px[..., 3] > 0, last.mask > 0)
     # The user's meshes were not written, and each material's report says what it left out.
     assert (mesh_hash(a.data), mesh_hash(b.data)) == hashes
-    assert all(r["method"] == "splat" and r["error_estimate"] is None for r in last.reports.values())
+    # Each states its error against the ground truth at 8 vertices (here the cubes' corners,
+    # whose smooth normals the ground truth lights edge-on where no light view sees them).
+    assert all(r["method"] == "splat" and len(r["error_estimate"]) == 3 for r in last.reports.values())
+    assert all(r["report"]["estimate"]["receivers"] == 8 for r in last.reports.values())
     # Bad input: a named error, nothing rendered.
     with pytest.raises(RuntimeError, match="camera"):
         bpy.ops.translucent.render_splatting(camera="Nope")
@@ -213,6 +216,10 @@ def test_the_splats_drawn_on_the_gpu_give_the_cpus_image(addon):
     splat_view.tick()
     cpu = splat_view.STATE["last"]
     assert "gathered on the CPU" in splat_view.STATE["message"]
+    # The panel states the error the render estimated for itself (8 vertices' ground truth).
+    est = cpu.reports[mat.name]["error_estimate"]
+    assert est is not None and cpu.reports[mat.name]["report"]["estimate"]["receivers"] == 8
+    assert f"estimated error up to {100 * max(est):.1f} %" in splat_view.STATE["message"]
     # The setting is part of the image's key: switching it renders again by itself.
     settings.backend = "GPU"
     splat_view.tick()
