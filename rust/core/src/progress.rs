@@ -104,6 +104,15 @@ pub fn cancel_only<'a>(progress: Option<&'a ProgressFn<'a>>) -> impl Fn(f32) -> 
     move |_| progress.is_none_or(|p| p(f32::NAN))
 }
 
+/// The callback that holds the bar at `at` while asking whether to stop: a stage after the
+/// last tick of a longer call (an estimate, a point mass) that has no share of its own.
+pub fn held_at<'a>(
+    progress: Option<&'a ProgressFn<'a>>,
+    at: f32,
+) -> impl Fn(f32) -> bool + Sync + 'a {
+    move |_| progress.is_none_or(|p| p(at))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -129,24 +129,8 @@ pub fn irradiance_with_progress(
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
     let (lights, world) = (&scene.lights, &scene.world);
     let bounds = scene.mesh.bounds();
-    estimate(
+    irradiance_of_sources(
         bounds, lights, world, tracer, points, normals, settings, progress,
-    )
-}
-
-/// `irradiance` from `lights` alone (no world), for a mesh whose box is `bounds`: the caller
-/// holds no `Scene` of its own (the splatting's receivers).
-pub fn irradiance_of_lights(
-    bounds: (Vec3, Vec3),
-    lights: &[Light],
-    tracer: &Tracer,
-    points: &[Vec3],
-    normals: &[Vec3],
-    settings: &IrradianceSettings,
-) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
-    let world = World::Black;
-    estimate(
-        bounds, lights, &world, tracer, points, normals, settings, None,
     )
 }
 
@@ -155,22 +139,6 @@ pub fn irradiance_of_lights(
 /// box is `bounds`; `progress` as `irradiance_with_progress`.
 #[allow(clippy::too_many_arguments)]
 pub fn irradiance_of_sources(
-    bounds: (Vec3, Vec3),
-    lights: &[Light],
-    world: &World,
-    tracer: &Tracer,
-    points: &[Vec3],
-    normals: &[Vec3],
-    settings: &IrradianceSettings,
-    progress: Option<&ProgressFn>,
-) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
-    estimate(
-        bounds, lights, world, tracer, points, normals, settings, progress,
-    )
-}
-
-#[allow(clippy::too_many_arguments)]
-fn estimate(
     bounds: (Vec3, Vec3),
     lights: &[Light],
     world: &World,
@@ -460,7 +428,7 @@ impl PerSource {
                         Source::Light(l) => (std::slice::from_ref(l), &World::Black),
                         Source::World(w) => (&[][..], w),
                     };
-                    let (v, r) = estimate(
+                    let (v, r) = irradiance_of_sources(
                         bounds, lights, world, tracer, points, normals, settings, progress,
                     )?;
                     rays += r.rays;

@@ -40,7 +40,7 @@ pub fn receivers(n: usize, k: usize) -> Vec<u32> {
 
 /// The relative RMS per channel (area-weighted) of `values`, B at `at`, against the ground
 /// truth of `resolved` lit by `lights` and `world` through `tracer` (the mesh and what shadows
-/// it). `progress` is asked only whether to go on.
+/// it). `progress` is asked only whether to go on (the bar held at 0.95).
 pub fn estimate(
     scene: &Scene,
     resolved: &Resolved,
@@ -66,7 +66,7 @@ pub fn estimate(
         profile: resolved.kind,
         ..Default::default()
     };
-    let cancel = crate::progress::cancel_only(progress);
+    let cancel = crate::progress::held_at(progress, 0.95);
     let truth = reference_radiosity(
         mesh,
         &resolved.material,

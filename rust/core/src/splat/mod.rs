@@ -476,7 +476,7 @@ fn radiosity_at(
             points,
             normals,
             &s,
-            Some(&crate::progress::cancel_only(progress)),
+            Some(&crate::progress::held_at(progress, to)),
         )?;
         for (bv, ev) in b.iter_mut().zip(&e) {
             for c in 0..3 {

@@ -3,12 +3,9 @@
 //! vertices, none of them the estimate's own.
 
 use super::super::*;
-use crate::irradiance::{irradiance, Density, IrradianceSettings};
 use crate::mesh::test_meshes::sphere;
-use crate::metrics::relative_error;
 use crate::optics::Material;
 use crate::profiles::ProfileKind;
-use crate::reference::{reference_radiosity, ReferenceSettings};
 
 #[test]
 fn the_estimate_follows_the_error_from_a_coarse_grid_to_a_fine_one() {
@@ -31,23 +28,6 @@ fn the_estimate_follows_the_error_from_a_coarse_grid_to_a_fine_one() {
         .step_by(5)
         .filter(|v| !own.contains(v))
         .collect();
-    let tracer = scene.tracer();
-    let s = IrradianceSettings {
-        eta: r.irradiance_eta(),
-        seed: 3,
-        ..Default::default()
-    };
-    let irr = |p: &[Vec3], n: &[Vec3], d: Density| {
-        irradiance(&scene, &tracer, p, n, &s.for_density(d)).map(|(v, _)| v)
-    };
-    let rs = ReferenceSettings {
-        max_level: 3,
-        ..Default::default()
-    };
-    let truth = reference_radiosity(&mesh, &r.material, &irr, Some(&others), &rs, None).unwrap();
-    let weights: Vec<f32> = (others.iter())
-        .map(|&v| mesh.vertex_areas()[v as usize])
-        .collect();
     let mut measured = Vec::new();
     for max_grid in [24, 512] {
         let settings = SplatSettings {
@@ -55,8 +35,7 @@ fn the_estimate_follows_the_error_from_a_coarse_grid_to_a_fine_one() {
             ..Default::default()
         };
         let e = splat_radiosity(&scene, &r, &settings, None).unwrap();
-        let got: Vec<[f32; 3]> = others.iter().map(|&v| e.values[v as usize]).collect();
-        let err = relative_error(&got, &truth.radiosity, &weights).unwrap();
+        let (err, _) = super::against_ground_truth(&scene, &r, &e.values, &others, 3);
         let est = e.error_estimate.unwrap();
         let rep = e.details.estimate.unwrap();
         eprintln!(

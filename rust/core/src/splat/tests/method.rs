@@ -3,14 +3,11 @@
 //! is not splatted skipped with a reason, objects kept apart, bad input refused, cancelling.
 
 use super::super::*;
-use crate::irradiance::{irradiance, Density, IrradianceSettings};
 use crate::mesh::test_meshes::oracles::rd_total;
 use crate::mesh::test_meshes::{nearest, plane, sphere, sphere_pair};
 use crate::mesh::Mesh;
-use crate::metrics::relative_error;
 use crate::optics::{fresnel_transmittance, Material};
 use crate::profiles::{ProfileKind, RadialProfile};
-use crate::reference::{reference_radiosity, ReferenceSettings};
 
 fn dipole(name: &str, mm_per_unit: f64) -> Resolved {
     Resolved::new(
@@ -97,25 +94,7 @@ fn radiosity_matches_the_ground_truth_on_a_sphere() {
     };
     let e = splat_radiosity(&scene, &r, &settings, None).unwrap();
     let receivers: Vec<u32> = (0..mesh.vertex_count() as u32).step_by(5).collect();
-    let weights: Vec<f32> = (receivers.iter())
-        .map(|&v| mesh.vertex_areas()[v as usize])
-        .collect();
-    let tracer = scene.tracer();
-    let s = IrradianceSettings {
-        eta: r.irradiance_eta(),
-        seed: 1,
-        ..Default::default()
-    };
-    let irr = |p: &[Vec3], n: &[Vec3], d: Density| {
-        irradiance(&scene, &tracer, p, n, &s.for_density(d)).map(|(v, _)| v)
-    };
-    let rs = ReferenceSettings {
-        max_level: 3,
-        ..Default::default()
-    };
-    let truth = reference_radiosity(&mesh, &r.material, &irr, Some(&receivers), &rs, None).unwrap();
-    let got: Vec<[f32; 3]> = receivers.iter().map(|&v| e.values[v as usize]).collect();
-    let err = relative_error(&got, &truth.radiosity, &weights).unwrap();
+    let (err, truth) = super::against_ground_truth(&scene, &r, &e.values, &receivers, 1);
     let d = &e.details;
     eprintln!(
         "sphere 10 mm marble, eps 0.01, grid {} (capped {}): {} splats, light view {:.3} s, \
@@ -177,7 +156,8 @@ fn lights_add_up_and_what_is_not_splatted_is_skipped_saying_why() {
         for c in 0..3 {
             let sum: f32 = parts.iter().map(|p| p.values[v][c]).sum();
             assert!(
-                (b[c] - sum).abs() <= 1e-5 * sum.max(1e-6),
+                // f32 sums of the same splats in another order: a few ulps of each part.
+                (b[c] - sum).abs() <= 3e-5 * sum.max(1e-6),
                 "vertex {v}: {b:?} vs {sum}"
             );
         }

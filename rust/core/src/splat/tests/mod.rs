@@ -11,3 +11,44 @@ mod method;
 mod peel;
 mod receivers;
 mod reuse;
+
+use super::Resolved;
+use crate::irradiance::{irradiance, Density, IrradianceSettings};
+use crate::metrics::{relative_error, ErrorStats};
+use crate::reference::{reference_radiosity, ReferenceResult, ReferenceSettings};
+use crate::scene::Scene;
+use glam::Vec3;
+
+/// `values` (B per vertex of `scene.mesh`) at `receivers` against the ground truth there:
+/// `reference_radiosity` under `r`'s profile (level 3 at most), lit by the scene's own sources
+/// through the shared irradiance estimate (seed `seed`); area-weighted.
+fn against_ground_truth(
+    scene: &Scene,
+    r: &Resolved,
+    values: &[[f32; 3]],
+    receivers: &[u32],
+    seed: u64,
+) -> (ErrorStats, ReferenceResult) {
+    let mesh = &scene.mesh;
+    let tracer = scene.tracer();
+    let s = IrradianceSettings {
+        eta: r.irradiance_eta(),
+        seed,
+        ..Default::default()
+    };
+    let irr = |p: &[Vec3], n: &[Vec3], d: Density| {
+        irradiance(scene, &tracer, p, n, &s.for_density(d)).map(|(v, _)| v)
+    };
+    let rs = ReferenceSettings {
+        max_level: 3,
+        profile: r.kind,
+        ..Default::default()
+    };
+    let truth = reference_radiosity(mesh, &r.material, &irr, Some(receivers), &rs, None).unwrap();
+    let got: Vec<[f32; 3]> = receivers.iter().map(|&v| values[v as usize]).collect();
+    let weights: Vec<f32> = (receivers.iter())
+        .map(|&v| mesh.vertex_areas()[v as usize])
+        .collect();
+    let err = relative_error(&got, &truth.radiosity, &weights).unwrap();
+    (err, truth)
+}

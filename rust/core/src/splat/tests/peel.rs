@@ -4,15 +4,14 @@
 //! (`reference_radiosity` with the scene's own irradiance estimate).
 
 use super::super::*;
-use crate::irradiance::{irradiance, Density, IrradianceSettings};
+use crate::irradiance::IrradianceSettings;
 use crate::mesh::test_meshes::oracles::rd_total;
 use crate::mesh::test_meshes::{nearest, plane, sphere, sphere_pair};
 use crate::mesh::Mesh;
-use crate::metrics::{relative_error, ErrorStats};
+use crate::metrics::ErrorStats;
 use crate::optics::{fresnel_transmittance, Material};
 use crate::profiles::ProfileKind;
 use crate::raytrace::Tracer;
-use crate::reference::{reference_radiosity, ReferenceSettings};
 use light_view::{BoundingSphere, LightSample};
 use peel::PeelCounts;
 
@@ -30,25 +29,7 @@ fn against_truth(scene: &Scene, r: &Resolved, step: usize) -> (ErrorStats, Evalu
     let mesh = &scene.mesh;
     let e = splat_radiosity(scene, r, &SplatSettings::default(), None).unwrap();
     let receivers: Vec<u32> = (0..mesh.vertex_count() as u32).step_by(step).collect();
-    let weights: Vec<f32> = (receivers.iter())
-        .map(|&v| mesh.vertex_areas()[v as usize])
-        .collect();
-    let tracer = scene.tracer();
-    let s = IrradianceSettings {
-        eta: r.irradiance_eta(),
-        seed: 1,
-        ..Default::default()
-    };
-    let irr = |p: &[Vec3], n: &[Vec3], d: Density| {
-        irradiance(scene, &tracer, p, n, &s.for_density(d)).map(|(v, _)| v)
-    };
-    let rs = ReferenceSettings {
-        max_level: 3,
-        ..Default::default()
-    };
-    let truth = reference_radiosity(mesh, &r.material, &irr, Some(&receivers), &rs, None).unwrap();
-    let got: Vec<[f32; 3]> = receivers.iter().map(|&v| e.values[v as usize]).collect();
-    let err = relative_error(&got, &truth.radiosity, &weights).unwrap();
+    let (err, truth) = super::against_ground_truth(scene, r, &e.values, &receivers, 1);
     let p = e.details.peel.as_ref().expect("peeled sources");
     eprintln!(
         "{} vertices: {} splats ({} peeled: grid {}, {} layers, {} irradiance rays, {:.2} s), \
