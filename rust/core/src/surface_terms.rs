@@ -211,11 +211,15 @@ impl Terms {
     }
 
     /// Adds the terms for `material` to `radiosity` (B per vertex) and their noise to `error`.
+    /// `signed`: `radiosity` is a layer of its own, not B (the splatting adds it to B at each
+    /// pixel): a term that takes light away stays negative in it, where added to B it floors
+    /// B at 0.
     pub fn add_to(
         &self,
         radiosity: &mut [[f32; 3]],
         material: &Resolved,
         error: &mut [f64; 3],
+        signed: bool,
     ) -> Result<()> {
         if !self.current {
             return Err(Error::InvalidArgument(
@@ -223,7 +227,11 @@ impl Terms {
             ));
         }
         if let Some(w) = &self.walks {
-            let added = w.add_to(radiosity, &material.profiles);
+            let added = if signed {
+                w.add_signed_to(radiosity, &material.profiles, [1.0; 3])
+            } else {
+                w.add_to(radiosity, &material.profiles)
+            };
             for (e, a) in error.iter_mut().zip(added) {
                 *e += a;
             }
@@ -235,6 +243,7 @@ impl Terms {
                 true,
                 self.report.own_light_share,
                 error,
+                signed,
             );
         }
         Ok(())

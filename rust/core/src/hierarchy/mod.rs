@@ -523,7 +523,7 @@ impl Hierarchy {
         let resolved = crate::profiles::Resolved::new(ProfileKind::Cycles, material)?;
         let terms = self.terms.as_ref().expect("checked above");
         let mut error = self.report.error_estimate.unwrap_or([0.0; 3]);
-        terms.add_to(values, &resolved, &mut error)?;
+        terms.add_to(values, &resolved, &mut error, false)?;
         if self.report.error_estimate.is_some() {
             self.report.error_estimate = Some(error);
         }

@@ -54,6 +54,7 @@ impl Bounce {
         walks: bool,
         share: f64,
         error: &mut [f64; 3],
+        signed: bool,
     ) {
         use rayon::prelude::*;
         let receiving = material.totals();
@@ -71,7 +72,12 @@ impl Bounce {
             .zip(self.irradiance.par_iter())
             .for_each(|(b, e)| *b = std::array::from_fn(|ch| b[ch] + k[ch] * e[ch]));
         if let Some(g) = self.walked.as_ref().filter(|_| walks) {
-            let added = g.add_scaled_to(radiosity, &material.profiles, ratio.map(|r| r as f32));
+            let factor = ratio.map(|r| r as f32);
+            let added = if signed {
+                g.add_signed_to(radiosity, &material.profiles, factor)
+            } else {
+                g.add_scaled_to(radiosity, &material.profiles, factor)
+            };
             // A term whose edit left the walked range says 1: kept whole.
             for (e, a) in error.iter_mut().zip(added) {
                 *e += if a >= 1.0 { a } else { a * share };

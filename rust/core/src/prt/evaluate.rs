@@ -203,7 +203,14 @@ impl Prt {
         }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
             let share = self.report.interreflection_share;
-            bounce.add_to(&mut radiosity, material, walks, share, &mut error_estimate);
+            bounce.add_to(
+                &mut radiosity,
+                material,
+                walks,
+                share,
+                &mut error_estimate,
+                false,
+            );
         }
         self.apply_light_scale(&mut radiosity);
         let dot_seconds = t1.elapsed().as_secs_f64();

@@ -690,9 +690,12 @@ pub fn render_with_layer(
             let [i, j, k] = tris[h.triangle as usize].map(|v| v as usize);
             let [u, v] = h.uv.map(f64::from);
             for c in 0..3 {
-                bv[c] += (1.0 - u - v) * f64::from(layer[i][c])
+                // The layer is signed (a walk that loses light takes it away): B floored at 0.
+                bv[c] = (bv[c]
+                    + (1.0 - u - v) * f64::from(layer[i][c])
                     + u * f64::from(layer[j][c])
-                    + v * f64::from(layer[k][c]);
+                    + v * f64::from(layer[k][c]))
+                .max(0.0);
             }
         }
         let to_eye = (eye - h.position).normalize_or_zero();
@@ -871,7 +874,8 @@ impl Splatting {
         let resolved = Resolved::new(self.profile, material)?;
         let mut added = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];
         let mut error = [0.0; 3];
-        t.add_to(&mut added, &resolved, &mut error)?;
+        // A layer of its own (added to B at each vertex or pixel): signed, floored with B.
+        t.add_to(&mut added, &resolved, &mut error, true)?;
         Ok(Some((added, t.report.clone())))
     }
 
@@ -900,7 +904,7 @@ impl Splatting {
         )?;
         if let Some((added, report)) = self.layer(material, Some(&e.values), None)? {
             for (b, a) in e.values.iter_mut().zip(&added) {
-                *b = std::array::from_fn(|c| b[c] + a[c]);
+                *b = std::array::from_fn(|c| (b[c] + a[c]).max(0.0));
             }
             Self::with_terms(&mut e, report);
             e.seconds = start.elapsed().as_secs_f64();

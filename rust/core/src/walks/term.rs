@@ -297,6 +297,27 @@ impl WalkTerm {
         profiles: &[Profile; 3],
         factor: [f32; 3],
     ) -> [f64; 3] {
+        self.add_with_floor(radiosity, profiles, factor, 0.0)
+    }
+
+    /// As `add_scaled_to` into a layer of its own (what the term adds, not B): no floor at 0,
+    /// a term that takes light away stays negative there (the caller floors B + layer).
+    pub fn add_signed_to(
+        &self,
+        layer: &mut [[f32; 3]],
+        profiles: &[Profile; 3],
+        factor: [f32; 3],
+    ) -> [f64; 3] {
+        self.add_with_floor(layer, profiles, factor, f32::NEG_INFINITY)
+    }
+
+    fn add_with_floor(
+        &self,
+        radiosity: &mut [[f32; 3]],
+        profiles: &[Profile; 3],
+        factor: [f32; 3],
+        floor: f32,
+    ) -> [f64; 3] {
         if self.lengths.is_empty() {
             return [0.0; 3];
         }
@@ -317,7 +338,7 @@ impl WalkTerm {
             .for_each(|(b, d)| {
                 for c in 0..3 {
                     let ([i, j], [wi, wj]) = picks[c];
-                    b[c] = (b[c] + scale[c] * (wi * d[i] + wj * d[j])).max(0.0);
+                    b[c] = (b[c] + scale[c] * (wi * d[i] + wj * d[j])).max(floor);
                 }
             });
         error
