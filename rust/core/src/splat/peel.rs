@@ -22,8 +22,9 @@
 //! What enters at each crossing is the shared irradiance estimate (`irradiance`) with the
 //! shading normal there, shadowed by the mesh and the rest of the scene, as the ground truth
 //! and Cycles take it: not the paper's unshadowed spherical harmonics, which see no concavity
-//! and no floor (`IrradianceSettings::world_unshadowed` gives them; `docs/splat.md` measures
-//! both). The crossings are dense points summed many at a time (`Density::Dense`: 8 world
+//! and no floor (`IrradianceSettings::world_unshadowed` gives them: on the 10 cm bunny in a
+//! grey world they left B 10.6 % too bright, 16 % from the ground truth where the shadowed
+//! estimate is 2.2 %; `docs/splat.md`). The crossings are dense points summed many at a time (`Density::Dense`: 8 world
 //! rays each at the defaults).
 
 use super::light_view::{BoundingSphere, LightSample, View};
