@@ -8,9 +8,11 @@ frame time nearly independent of the triangle count. Timings live here, never in
 Each row runs on the CPU (ray casts and the gather on rayon) and again with pass 3 drawn on wgpu
 (`Splat.set_backend("gpu")`) on this machine's adapter (printed). On a hardware GPU every case
 gets a GPU row; on Mesa's software lavapipe (no GPU) only the bunny in marble and its subdivided
-twin do, since each lavapipe frame takes about 40 s. Passes 1, 2 and 4 are on the CPU either way. Run:
-`make bench` (or .venv/bin/python blender_scripts/bench_splat.py [--runs N] [--size W H]
-[--backends cpu gpu]).
+twin do, since each lavapipe frame takes about 40 s (`--all-gpu` draws every case there too).
+Passes 1, 2 and 4 are on the CPU either way. The frame includes the error estimate (the ground
+truth at 16 vertices), shown in its own column. Run: `make bench` (or .venv/bin/python
+blender_scripts/bench_splat.py [--runs N] [--size W H] [--backends cpu gpu] [--presets marble]
+[--all-gpu] [--models horse.ply]).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from blender_scripts.lib.machine import describe as machine  # noqa: E402
 import translucent  # noqa: E402
 
 PASSES = (("seconds_light_view", "light views"), ("seconds_camera_view", "camera view"),
-          ("seconds_splat", "splats gathered"), ("seconds_point_mass", "point mass"))
+          ("seconds_splat", "splats gathered"), ("seconds_point_mass", "point mass"),
+          ("seconds_estimate", "error estimate"))
 
 
 def camera(p: np.ndarray) -> dict:
@@ -59,6 +62,7 @@ def bench(p, t, preset: str, size, runs: int, backend: str, png: str | None = No
     for _ in range(runs):
         image, _mask = splat.render(m, size=size, **view)
         r = splat.report
+        r = {**r, "seconds_estimate": r["estimate"]["seconds"] if r["estimate"] else 0.0}
         for k, _ in PASSES:
             times[k].append(r[k])
         times["total"].append(splat.last_eval["seconds"])
@@ -75,6 +79,8 @@ def main() -> int:
     ap.add_argument("--models", nargs="+", default=["stanford-bunny.obj", "horse.ply"])
     ap.add_argument("--png", help="save the first model's marble image here")
     ap.add_argument("--backends", nargs="+", default=["cpu", "gpu"], choices=["cpu", "gpu"])
+    ap.add_argument("--presets", nargs="+", default=["marble", "skimmilk"])
+    ap.add_argument("--all-gpu", action="store_true", help="on a software adapter too, every case")
     args = ap.parse_args()
     size = tuple(args.size)
     backends, software = list(args.backends), False
@@ -98,11 +104,12 @@ def main() -> int:
         if name == args.models[0]:
             meshes.append((f"{name} subdivided", *models.subdivide(p, t)))
         for label, q, u in meshes:
-            for preset in ("marble", "skimmilk"):
+            for preset in args.presets:
                 if label.endswith("subdivided") and preset != "marble":
                     continue
                 for backend in backends:
-                    if backend == "gpu" and software and (preset != "marble" or name != args.models[0]):
+                    if (backend == "gpu" and software and not args.all_gpu
+                            and (preset != "marble" or name != args.models[0])):
                         continue  # lavapipe: the marble bunny and its subdivided twin only
                     first = args.png if (label == args.models[0] and preset == "marble"
                                          and backend == backends[0]) else None
