@@ -1,4 +1,5 @@
-"""Error against run time (issue 5, point 3; issue 9, point 7): every method, setting and
+"""Error against run time (issue 5, point 3; issue 9, point 7; issue 31): every method (PRT,
+the hierarchy, the splatting with eps and Shah's Fig. 12 grids as its knobs), setting and
 profile measured against the brute-force ground truth of the same profile
 (`translucent.reference_radiosity`) and against Cycles, next to the wall time of its precompute
 and of one edit. Both profiles are measured: Cycles' random walk (the default: PRT with the
@@ -199,6 +200,37 @@ def hierarchy_rows(scene, material, name, truth, receivers, weights, cycles=None
     return rows
 
 
+# The splatting's knob (Shah 2009 eqs. 4-5) at the default grid, then Shah's Fig. 12 grids.
+SPLAT_SETTINGS = ((0.1, 1024), (0.03, 1024), (0.01, 1024), (0.003, 1024), (0.01, 8), (0.01, 16), (0.01, 32))
+
+
+def splat_rows(scene, material, name, truth, receivers, weights, cycles=None, profile="cycles") -> list[Row]:
+    """The splatting (Shah 2009) at each (eps, grid): nothing precomputed, each evaluation timed
+    whole (its own error estimate included); against the ground truth and, at the default with
+    the walks' term and own light (Cycles' profile), against Cycles along the normal."""
+    rows = []
+    method = f"Splatting (Shah 2009), {profile} profile"
+    for eps, grid in SPLAT_SETTINGS:
+        splat = translucent.Splat(scene, profile=profile, eps=eps, max_grid=grid)
+        b = splat.radiosity(material)
+        ev, r = splat.last_eval, splat.report
+        rms, mx = worst(translucent.relative_error(b[receivers], truth, weights))
+        setting = f"eps {eps:g}, grid {grid}: {r['splats']:,} splats"
+        rows.append(Row(method, setting, name, "ground truth", rms, mx, 0.0, ev["seconds"],
+                        float(max(ev["error_estimate"])), extra=dict(splats=r["splats"])))
+        if cycles is not None and profile == "cycles" and (eps, grid) == (0.01, 1024):
+            walked = translucent.Splat(scene, profile=profile, eps=eps, max_grid=grid, walks=True)
+            t0 = time.perf_counter()
+            radiance = walked.radiance(material)
+            first = time.perf_counter() - t0
+            rms, mx = worst(translucent.relative_error(radiance, cycles["all"], cycles["weights"]))
+            rows.append(Row(method, setting + ", walks and own light", name, cycles["label"] + ", all vertices",
+                            rms, mx, first - walked.last_eval["seconds"], walked.last_eval["seconds"],
+                            notes="what the artist sees against what Cycles renders (walks traced once: "
+                                  "'precompute')"))
+    return rows
+
+
 def cycles_rows(obj, material, name, spp_list, reference_spp, receivers, weights):
     """Cycles vertex bakes at each sample count against the high-sample bake."""
     ref, ref_s = cr.bake_vertices(obj, material, reference_spp)
@@ -273,6 +305,16 @@ def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
                 ax.scatter([r.edit_s for r in prt_c], [r.rms for r in prt_c], color=c,
                            marker="^" if profile == "cycles" else "v", s=60,
                            label=f"PRT edit, {profile}, {mat} (vs Cycles)")
+            for prefix, mk, mk_cycles, what in (("Hierarchy", "h", "p", "hierarchy evaluation"),
+                                                ("Splatting", "x", "P", "splatting evaluation (eps, grid)")):
+                theirs = [r for r in rows if r.method.startswith(prefix) and profile in r.method
+                          and r.material == mat]
+                for against, filled in (("ground truth", True), ("Cycles", False)):
+                    pts = [r for r in theirs if r.against.startswith(against)]
+                    if pts:
+                        ax.scatter([r.edit_s for r in pts], [r.rms for r in pts], color=c,
+                                   marker=mk if filled else mk_cycles, s=40,
+                                   label=f"{what}, {profile}, {mat} (vs {against})")
         cyc = sorted((r for r in rows if r.method.startswith("Cycles") and r.material == mat), key=lambda r: r.time_s)
         if cyc:
             ax.plot([r.time_s for r in cyc], [r.rms for r in cyc], color=c, marker="s", linestyle="--",
@@ -344,6 +386,8 @@ def main(argv=None) -> int:
             rows += prt_rows(scene, m, name, truth, receivers, weights, cyc, profile)
             progress(i, steps, f"{name}: hierarchy thresholds, {profile}")
             rows += hierarchy_rows(scene, m, name, truth, receivers, weights, cyc, profile)
+            progress(i, steps, f"{name}: splatting thresholds and grids, {profile}")
+            rows += splat_rows(scene, m, name, truth, receivers, weights, cyc, profile)
             rows.append(Row(f"Reference (brute force), {profile}", f"rel. tol. {args.rel_tol:g}, level "
                             f"{ref_info.get('level')}", name, "ground truth",
                             float(ref_info.get("estimated_rel_error", 0.0)), float("nan"), ref_s, 0.0,
