@@ -20,7 +20,8 @@ use crate::scene::Scene;
 use std::time::Instant;
 
 /// The vertices an estimate reads by default: 16, about 18 % of the estimate's own value as
-/// its sampling spread (an RMS over 16 values).
+/// its sampling spread where the error is even (an RMS over 16 values); where one vertex is far
+/// off it weighs more (Suzanne: 5.8 % estimated, 3.0 % over 100 receivers; `docs/splat.md`).
 pub const DEFAULT_ESTIMATE_RECEIVERS: usize = 16;
 
 /// What the estimate cost.
