@@ -70,7 +70,8 @@ pub struct PeelCounts {
     pub irradiance_rays: u64,
 }
 
-/// One crossing: where, the hit triangle's normal, the shading normal, its patch and triangle.
+/// One crossing: where, the shading normal there, the patch it stands for, and its triangle
+/// with the barycentric (u, v) of corners 1 and 2.
 struct Crossing {
     position: Vec3,
     shading: Vec3,
@@ -142,7 +143,6 @@ fn crossings(
 }
 
 /// One cell's ray, peeled layer by layer.
-#[allow(clippy::too_many_arguments)]
 fn peel_ray(
     mesh: &Mesh,
     tracer: &Tracer,
