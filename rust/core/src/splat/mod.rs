@@ -94,8 +94,8 @@ impl Default for SplatSettings {
 }
 
 impl SplatSettings {
-    /// Errors: `eps`, `max_grid` or `peel_grid` out of range (`Error::InvalidArgument`,
-    /// naming it).
+    /// Errors: `eps`, `max_grid`, `peel_grid` or `estimate_receivers` out of range
+    /// (`Error::InvalidArgument`, naming it).
     pub fn check(&self) -> Result<()> {
         sizes::check_eps(self.eps)?;
         sizes::check_max_grid(self.max_grid)?;
@@ -374,10 +374,6 @@ fn sources(
         // Never finer than the light views (`max_grid`, the knob of Shah's Fig. 12).
         let cap = settings.peel_grid.min(settings.max_grid);
         let sizes = Sizes::from_spreads(&spreads, 2.0 * sphere.radius, cap)?;
-        let lights: Vec<Light> = peeled
-            .iter()
-            .map(|(k, _)| scene.lights[*k].clone())
-            .collect();
         let irradiance = IrradianceSettings {
             eta,
             ..Default::default()
@@ -387,7 +383,7 @@ fn sources(
             (&mesh_tracer, &tracer),
             &sphere,
             sizes.grid,
-            (&lights, &world),
+            (&used[views.len()..], &world),
             &irradiance,
             progress,
             (peel_from, to),
@@ -514,8 +510,7 @@ fn estimated(
 /// Radiosity B per vertex of `scene.mesh` for the material `resolved` by splatting, with the
 /// shared evaluation's seconds, skips and error estimate (`estimate`). `progress` hears of the
 /// light views (the first 45 %, per row of rays) and the gather (to 95 %, per vertex); false
-/// cancels (`Error::Cancelled`). Errors: `eps` or `max_grid` out of range
-/// (`Error::InvalidArgument`, naming it).
+/// cancels (`Error::Cancelled`). Errors: a setting out of range (`SplatSettings::check`).
 pub fn splat_radiosity(
     scene: &Scene,
     resolved: &Resolved,
@@ -643,34 +638,36 @@ pub fn render_with_layer(
     drop(seen);
     src.report.seconds_camera_view = t.elapsed().as_secs_f64();
     src.report.pixels = hits.len();
-    // The error estimate's vertices, gathered from the same splats first (on the CPU).
+    // The error estimate's vertices: gathered with the pixels on the CPU (one binning of the
+    // splats); beside a GPU's draw, by a CPU gather of their own first.
     let mesh = &scene.mesh;
     let at = estimate::receivers(mesh.vertex_count(), settings.estimate_receivers);
-    let at_vertices = if at.is_empty() {
-        Vec::new()
-    } else {
+    let pick = |x: &[Vec3]| at.iter().map(|&v| x[v as usize]).collect::<Vec<_>>();
+    let at_objects: Vec<u32> = (at.iter())
+        .map(|&v| mesh.object_of_vertex(v as usize))
+        .collect();
+    let mut points: Vec<Vec3> = hits.iter().map(|h| h.position).collect();
+    let mut normals: Vec<Vec3> = hits.iter().map(|h| h.normal).collect();
+    let mut objects: Vec<u32> = hits.iter().map(|h| h.object).collect();
+    let mut at_vertices = Vec::new();
+    if gpu.is_none() {
+        points.extend(pick(mesh.positions()));
+        normals.extend(pick(mesh.normals()));
+        objects.extend(&at_objects);
+    } else if !at.is_empty() {
         let kept = src.splats.clone();
-        let pick = |x: &[Vec3]| at.iter().map(|&v| x[v as usize]).collect::<Vec<_>>();
-        let objects: Vec<u32> = at
-            .iter()
-            .map(|&v| mesh.object_of_vertex(v as usize))
-            .collect();
-        let b = radiosity_at(
+        at_vertices = radiosity_at(
             &mut src,
             resolved,
             settings,
-            (&pick(mesh.positions()), &pick(mesh.normals()), &objects),
+            (&pick(mesh.positions()), &pick(mesh.normals()), &at_objects),
             None,
             progress,
             (0.4, 0.4),
         )?;
         src.splats = kept;
-        b
-    };
-    let points: Vec<Vec3> = hits.iter().map(|h| h.position).collect();
-    let normals: Vec<Vec3> = hits.iter().map(|h| h.normal).collect();
-    let objects: Vec<u32> = hits.iter().map(|h| h.object).collect();
-    let b = radiosity_at(
+    }
+    let mut b = radiosity_at(
         &mut src,
         resolved,
         settings,
@@ -679,6 +676,9 @@ pub fn render_with_layer(
         progress,
         (0.4, 0.95),
     )?;
+    if gpu.is_none() {
+        at_vertices = b.split_off(hits.len());
+    }
     // Pass 4: what leaves toward the eye.
     let eye = camera.eye();
     let mut values = vec![[0.0f32; 3]; camera.pixels()];
@@ -738,7 +738,7 @@ pub struct Splatting {
 }
 
 impl Splatting {
-    /// Errors: `eps` or `max_grid` out of range (`Error::InvalidArgument`, naming it).
+    /// Errors: a setting out of range (`SplatSettings::check`).
     pub fn new(scene: Scene, profile: ProfileKind, settings: SplatSettings) -> Result<Self> {
         settings.check()?;
         Ok(Self {
