@@ -124,6 +124,7 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
                 d.set_item("kept", r.kept)?;
                 d.set_item("dropped", r.dropped)?;
                 d.set_item("covered", r.covered)?;
+                d.set_item("stretched", r.stretched)?;
                 d.set_item("added", r.added)?;
                 d.set_item("fresh", r.fresh)?;
                 x.set_item("reuse", d)?;
@@ -449,6 +450,12 @@ impl PySplat {
     fn set_reuse(&self, on: bool) {
         let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
         inner.set_reuse(on);
+    }
+
+    /// The next evaluation walks the walks' term and own light anew on the current shape and
+    /// light (after a pose, which carries them: `report["terms"]["carried_pose"]`).
+    fn retrace_walks(&self) {
+        self.read().retrace_walks();
     }
 
     /// Whether the walks' term and the object's own light are on.

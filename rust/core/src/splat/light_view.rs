@@ -193,6 +193,15 @@ impl View {
         }
     }
 
+    /// A grid cell's side in the image plane's coordinates (`plane`) for an `n` x `n` grid.
+    pub fn cell_side(&self, n: u32) -> f64 {
+        let half = match *self {
+            View::Orthographic { half, .. } => half,
+            View::Perspective { tan_half, .. } => tan_half,
+        };
+        2.0 * half / f64::from(n.max(1))
+    }
+
     /// Where `p` lies in the light's image plane: its coordinates across the light (lengths
     /// at the window for a sun, tangents of the angle off the axis for a point or spot), how
     /// many of those coordinates a length across the light at `p` spans, and its depth along
