@@ -50,10 +50,39 @@ def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting,
     session.follow_message = getattr(job, "stage_message", "")
     session.remap = nearest_original_vertices(objects, info)
     _take_texture(session, job)
+    if getattr(job, "colors", None) is not None:
+        session.evaluated = (job.key, job.colors, job.last_eval)  # the splatting's evaluation
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
     return session
+
+
+def _splatted(material: bpy.types.Material, s: Session):
+    """Method = Splatting: the radiance for the material as it is now, when the session's last
+    evaluation was for it; else None, and the scene is splatted again for it on a worker thread
+    (headless: at once), the edit shown when that is done. The old preview stays meanwhile; an
+    edit made while one runs is splatted after it (the job's end runs the edit again)."""
+    key = params(material.translucent)
+    if s.evaluated is not None and s.evaluated[0] == key:
+        return s.evaluated[1]
+    name = material.name
+    if name in JOBS:
+        return None  # the Splat is busy on a worker thread: its end runs this edit again
+    job = jobs.SplatJob(None, material.translucent.material(), key, previous=s.transport)
+    s.edit_message = "splatting the edit in the background (nothing precomputed)"
+
+    def done(mat):
+        if SESSIONS.get(name) is s:
+            s.evaluated = (job.key, job.colors, job.last_eval)
+            s.edit_message = ""
+            edit(mat)
+
+    def failed(error):
+        s.edit_message = f"not shown: {error}"
+
+    jobs.in_background(name, job, done, failed)
+    return None
 
 
 def _take_texture(session: Session, job: jobs.Job) -> None:
@@ -90,6 +119,8 @@ def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, light
     session.method_message = getattr(job, "first_message", "") or FIRST_PREVIEW_MESSAGE.format(job.first_seconds)
     session.remap = nearest_original_vertices(objects, info)
     _take_texture(session, job)
+    if getattr(job, "first_colors", None) is not None:
+        session.evaluated = (job.key, job.first_colors, job.first_eval)  # the splatting's carried pose
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
@@ -160,14 +191,20 @@ def edit(material: bpy.types.Material) -> None:
     # viewport's eye where single scattering makes it depend on the view.
     # A Base Color read per vertex (`follow_texture`): each vertex scatters as its own medium.
     textured = {"base_color": s.base_color} if s.base_color is not None and s.method == "prt" else {}
-    try:
-        eye = s.eye if s.eye is not None and view_dependent(s) else None
-        colors = transport.radiance(m, eye, **textured)
-    except ValueError as e:
-        s.edit_message = f"not shown: {e}"
-        return
-    # The method's own evaluation (the keys every method reports), kept as it gave it.
-    s.last_eval = dict(transport.last_eval)
+    if s.method == "splat":
+        colors = _splatted(material, s)
+        if colors is None:
+            return  # splatting on a worker thread: this edit runs again when it is done
+        s.last_eval = dict(s.evaluated[2])
+    else:
+        try:
+            eye = s.eye if s.eye is not None and view_dependent(s) else None
+            colors = transport.radiance(m, eye, **textured)
+        except ValueError as e:
+            s.edit_message = f"not shown: {e}"
+            return
+        # The method's own evaluation (the keys every method reports), kept as it gave it.
+        s.last_eval = dict(transport.last_eval)
     estimate = s.last_eval["error_estimate"]
     s.last_error = None if estimate is None else list(estimate)
     s.last_seconds = s.last_eval["seconds"]

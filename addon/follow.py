@@ -241,7 +241,7 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
     except ValueError as e:
         s.follow_message = f"following the scene failed: {e}"
         return
-    s.follow_message = f"refreshing ({'PRT' if method == 'prt' else 'hierarchy'}): {s.changed}"
+    s.follow_message = f"refreshing ({jobs.METHOD_NAMES[method]}): {s.changed}"
 
     def failed(error):
         cur = SESSIONS.get(name)

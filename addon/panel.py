@@ -22,6 +22,12 @@ def summary(sess: Session) -> str:
         scene += f", {', '.join(info.without_faces)} holding it on no face left out"
     if info.occluders:
         scene += f", {len(info.occluders)} occluder(s)"
+    if sess.method == "splat":
+        peel = r.get("peel")
+        peeled = f", {peel['samples']:,} peeled samples (world, area lights)" if peel else ""
+        return (f"{scene}, {len(info.lights)} light(s), {len(info.skipped_lights)} dark skipped, "
+                f"world: {info.world}; splatting (Shah 2009), nothing precomputed: {r['splats']:,} splats{peeled}, "
+                f"eps {r['eps']:g}, r_max {max(r['r_max']):.4g} units")
     if sess.method == "hierarchy":
         own = ", ".join([f"{r[k]} {label}" for k, label in HIERARCHY_SHOWN if k in r] + [f"{r['seconds']:.2f} s"])
         return (f"{scene}, {len(info.lights)} light(s), {len(info.skipped_lights)} dark skipped, "
@@ -56,7 +62,7 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     once the scene is still)."""
     s = mat.translucent
     lines = []
-    if s.method != "PRT" and not jobs.hierarchy_available():
+    if s.method in ("AUTO", "HIERARCHY") and not jobs.hierarchy_available():
         lines.append((jobs.HIERARCHY_MISSING, "INFO"))
     st = state(mat)
     if st == "running":

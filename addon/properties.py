@@ -151,7 +151,10 @@ class TranslucentMaterialSettings(bpy.types.PropertyGroup):
                ("PRT", "PRT", "Precomputed radiance transfer (Xu 2007): live material edits; a moved light is "
                 "relit and a pose carried at once, then refined in the background"),
                ("HIERARCHY", "Hierarchy", "Hierarchical boundary elements (Mertens 2003): deforming scenes, "
-                "nothing precomputed that a deformation invalidates")],
+                "nothing precomputed that a deformation invalidates"),
+               ("SPLAT", "Splatting", "Image-space splatting (Shah 2009) at the vertices: nothing precomputed, so "
+                "every edit, light move or pose splats the scene again in the background (seconds); its "
+                "Threshold, Light grid and Splats on are the Splatting image's")],
         default="AUTO",
     )
     follow_scene: BoolProperty(

@@ -13,7 +13,7 @@ from . import export
 
 @dataclass
 class Session:
-    transport: object  # what the method built: a translucent.Prt or a translucent.Hierarchy
+    transport: object  # what the method built: a translucent.Prt, Hierarchy or Splat
     info: export.ExportInfo
     objects: list[str]
     # export.lighting_keys at the precompute: what each light and the world were.
@@ -40,7 +40,7 @@ class Session:
     chosen_for: tuple = ()
     refresh_advised: bool = False
     refresh_message: str = ""
-    # "prt" or "hierarchy": what built the transport, and why it is not the method asked for.
+    # "prt", "hierarchy" or "splat": what built the transport, and why it is not the method asked for.
     method: str = "prt"
     method_message: str = ""
     # Objects whose evaluated geometry differs from the transport's: name -> "deformed",
@@ -62,6 +62,9 @@ class Session:
     base_color: object = None
     texture_key: str = ""
     texture_message: str = ""
+    # Method = Splatting (nothing precomputed: each evaluation splats again, on a worker
+    # thread): the last evaluation as (what it was for: `params`, (N, 3) radiance, last_eval).
+    evaluated: tuple | None = None
 
 
 # material name -> Session

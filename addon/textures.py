@@ -209,11 +209,13 @@ class Reading:
 def read(mat: bpy.types.Material, info, method: str) -> Reading:
     """The Base Color of `mat` per vertex of the exported scene `info`, for a transport built by
     `method`: read by Cycles (`for_export`) where a link drives it and PRT previews it; the
-    hierarchy does not read it yet, and the line says so; nothing where no link drives it."""
+    hierarchy and the splatting do not read it yet, and the line says so; nothing where no link
+    drives it."""
     if mat.translucent.source != "PRINCIPLED" or not linked_base_color(mat):
         return Reading()
     if method != "prt":
-        return Reading(message=f"Base Color from {base_color_source(mat)}: not followed by the hierarchy yet, "
+        who = "the splatting" if method == "splat" else "the hierarchy"
+        return Reading(message=f"Base Color from {base_color_source(mat)}: not followed by {who} yet, "
                                "its socket's value shown (PRT follows it)")
     key = tree_key(mat)
     try:

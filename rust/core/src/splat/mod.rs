@@ -751,6 +751,17 @@ impl Splatting {
         })
     }
 
+    /// The next evaluation walks the walks' term and the object's own light anew, on the shape
+    /// and under the light it has then, for the material it evaluates (a pose carries them,
+    /// `carried_pose`, until this). Nothing without the walks.
+    pub fn retrace_walks(&self) {
+        if let Some(t) = &self.terms {
+            let mut t = t.lock().unwrap_or_else(|e| e.into_inner());
+            t.rep = None;
+            t.current = false;
+        }
+    }
+
     /// Shah 2009's sampling coherence between frames on (`reuse`: each frame keeps the
     /// earlier frames' splat sources that still see the light) or off.
     pub fn set_reuse(&mut self, on: bool) {

@@ -463,13 +463,17 @@ class Splat:
         (`reference_radiosity` at 1 % tolerance; 0: none, and `skipped` says so)."""
     @property
     def walks(self) -> bool: ...
+    def retrace_walks(self) -> None:
+        """The next evaluation walks the walks' term and the object's own light anew, on the
+        current shape and light, for the material it evaluates: a pose (`update(positions=...)`)
+        carries them (`report["terms"]["carried_pose"]`) until then. Nothing without walks."""
     @property
     def report(self) -> dict[str, object] | None:
         """The last evaluation's r_max, overlap, splats, "terms" (the walks' and own light's
         report as the Hierarchy's: "walks", "walks_indirect", "own_light_rays",
         "own_light_share", "carried_pose", "seconds"; None without walks), stage seconds (a render's camera view
         too, with the pixels that see the mesh), per-light grid and ray counts and "reuse" (with
-        reuse on: "kept", "dropped", "covered", "added", "fresh"; else None), and "gpu" (a
+        reuse on: "kept", "dropped", "stretched", "covered", "added", "fresh"; else None), and "gpu" (a
         render drawn on a GPU: "adapter", "software", "target", the "groups" and "splats" drawn,
         "culled", "seconds_upload", "seconds_draw", "seconds_readback"; None on the CPU), and
         "peel" (where the world, an area light or a point light inside the bounding sphere
