@@ -136,10 +136,12 @@ def test_a_power_or_colour_change_of_every_light_is_a_rescale_with_no_ray():
 
 def test_moving_one_light_of_several_casts_that_lights_rays_only():
     """The irradiance is kept light by light (and the world) between updates: after a first
-    update, moving the point light again under the same sun and world casts exactly the rays a
-    precompute lit by that point light alone casts (the same samples and vertices), and the
-    preview is a fresh precompute's under the moved scene (the dipole: nothing else depends on
-    the light, and the sources add in the same order)."""
+    update, moving the point light again under the same sun and world casts rays for that
+    light alone: fewer than a precompute lit by it alone casts, since the samples read its
+    shadow from their triangles' corners (one ray a vertex, and one a sample only where a
+    shadow's edge crosses its triangle: `irradiance::corners`). The preview is a fresh
+    precompute's under the moved scene (the dipole: nothing else depends on the light, and
+    the sources add in the same order), so each sample's light is what its own ray gives."""
     marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
     p, t = sphere(16, 0.01)
 
@@ -158,7 +160,8 @@ def test_moving_one_light_of_several_casts_that_lights_rays_only():
     second = prt.update(lights=moved)
     alone = translucent.Prt(scene((0.0, -0.03, -0.01), sun=False, world=False), marble, profile="dipole",
                             backend="cpu", world_samples=16)
-    assert second["rays"] == alone.report["rays"] < first["rays"], (second["rays"], alone.report["rays"], first["rays"])
+    assert 0 < second["rays"] < alone.report["rays"] < first["rays"], (second["rays"], alone.report["rays"],
+                                                                       first["rays"])
     fresh = translucent.Prt(moved, marble, profile="dipole", backend="cpu", world_samples=16)
     np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=1e-6, atol=1e-12)
     # Only the latest lights are kept (memory: one layer a source): the point light put back
@@ -166,7 +169,11 @@ def test_moving_one_light_of_several_casts_that_lights_rays_only():
     third = prt.update(lights=scene((0.03, 0.0, 0.01)))
     back = translucent.Prt(scene((0.03, 0.0, 0.01), sun=False, world=False), marble, profile="dipole",
                            backend="cpu", world_samples=16)
-    assert third["rays"] == back.report["rays"], (third["rays"], back.report["rays"])
+    assert 0 < third["rays"] < back.report["rays"], (third["rays"], back.report["rays"])
+    np.testing.assert_allclose(prt.radiosity(marble), translucent.Prt(scene((0.03, 0.0, 0.01)), marble,
+                                                                      profile="dipole", backend="cpu",
+                                                                      world_samples=16).radiosity(marble),
+                               rtol=1e-6, atol=1e-12)
 
 
 def test_one_lights_power_among_several_is_a_rescale_of_its_own_layer():

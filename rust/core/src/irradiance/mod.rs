@@ -3,6 +3,10 @@
 //! the rest of the scene sends back by one diffuse bounce (`Estimator::bounce`).
 //! Deterministic: every random number comes from a hash of (seed, point, sample).
 
+pub mod corners;
+
+pub use corners::OnMesh;
+
 use crate::error::{Error, Result};
 use crate::lights::{Light, World};
 use crate::limits;
@@ -386,6 +390,47 @@ impl PerSource {
         settings: &IrradianceSettings,
         progress: Option<&ProgressFn>,
     ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+        self.evaluate_sources(scene, tracer, points, normals, None, settings, progress)
+    }
+
+    /// `evaluate_with_progress` at dense points of `scene.mesh`, `triangles[i]` holding point
+    /// i: a sun, point or spot light cast anew reads its shadow from the triangles' corners
+    /// where they agree (`corners`: one ray per vertex, and one per point only where a
+    /// shadow's edge crosses its triangle); area lights, the world and the rest of the
+    /// scene's bounce as `evaluate`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn evaluate_on_mesh(
+        &mut self,
+        scene: &Scene,
+        tracer: &Tracer,
+        points: &[Vec3],
+        normals: &[Vec3],
+        triangles: &[u32],
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+        self.evaluate_sources(
+            scene,
+            tracer,
+            points,
+            normals,
+            Some(triangles),
+            settings,
+            progress,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn evaluate_sources(
+        &mut self,
+        scene: &Scene,
+        tracer: &Tracer,
+        points: &[Vec3],
+        normals: &[Vec3],
+        triangles: Option<&[u32]>,
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
         if self.settings.as_ref() != Some(settings) {
             self.clear();
             self.settings = Some(settings.clone());
@@ -415,12 +460,29 @@ impl PerSource {
                         .map(|k| (i, k))
                 })
             };
+            // A sun, point or spot light at points on the mesh: its shadow from the corners.
+            let on_mesh = match (&src, triangles) {
+                (Source::Light(l), Some(t)) if corners::applies(l, tracer) => Some((l, t)),
+                _ => None,
+            };
             let values = match (kept, kept.is_none().then(rescaled).flatten()) {
                 (Some(i), _) => old.swap_remove(i).1,
                 (None, Some((i, k))) => {
                     let mut v = old.swap_remove(i).1;
                     v.par_iter_mut()
                         .for_each(|x| *x = std::array::from_fn(|c| x[c] * k[c]));
+                    v
+                }
+                (None, None) if on_mesh.is_some() => {
+                    let (light, triangles) = on_mesh.expect("checked");
+                    let on = OnMesh {
+                        mesh: &scene.mesh,
+                        triangles,
+                    };
+                    let (v, r) = corners::delta_light_on_mesh(
+                        light, tracer, settings, points, normals, on, progress,
+                    )?;
+                    rays += r;
                     v
                 }
                 (None, None) => {

@@ -356,3 +356,76 @@ fn mismatched_inputs_are_errors() {
     let r = irradiance(&s, &t, &[Vec3::ZERO], &[], &IrradianceSettings::default());
     assert!(r.is_err());
 }
+
+#[test]
+fn corners_give_each_samples_own_shadow_ray_answer_with_a_ray_per_vertex() {
+    // A 10 mm sphere under a point light and a sun, a square blocker casting a shadow across
+    // it, samples at 0.3 mm: read from the corners (`corners`), every sample's irradiance is
+    // the one its own shadow ray gives, but for the few triangles a shadow's edge crosses
+    // without touching a corner; the rays fall to the vertices plus the samples of the
+    // triangles the edges cross.
+    use crate::mesh::test_meshes::sphere;
+    let mesh = sphere(24, 5.0);
+    let mut scene = Scene::new(mesh.clone());
+    scene
+        .lights
+        .push(Light::point(Vec3::new(3.0, -4.0, 30.0), [4.0e3; 3]).unwrap());
+    scene
+        .lights
+        .push(Light::sun(Vec3::new(-0.6, 0.3, -0.74), [1.0; 3]).unwrap());
+    let b = 3.0;
+    let wall = [
+        Vec3::new(-b, -b, 12.0),
+        Vec3::new(b, -b, 12.0),
+        Vec3::new(b, b, 12.0),
+        Vec3::new(-b, b, 12.0),
+    ];
+    scene
+        .occluders
+        .add("blocker", &wall, &[[0, 1, 2], [0, 2, 3]], [0.0; 3])
+        .unwrap();
+    let tracer = scene.tracer();
+    let samples = mesh.surface_samples(0.3).unwrap();
+    let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
+    let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
+    let triangles: Vec<u32> = samples.iter().map(|s| s.triangle).collect();
+    let settings = IrradianceSettings {
+        eta: 1.4,
+        ..Default::default()
+    };
+    let (each, r_each) = PerSource::default()
+        .evaluate(&scene, &tracer, &points, &normals, &settings)
+        .unwrap();
+    let (read, r_read) = PerSource::default()
+        .evaluate_on_mesh(
+            &scene, &tracer, &points, &normals, &triangles, &settings, None,
+        )
+        .unwrap();
+    let (mut total, mut off, mut differing) = (0.0f64, 0.0f64, 0usize);
+    for ((a, b), s) in each.iter().zip(&read).zip(&samples) {
+        total += f64::from(a[0] * s.area);
+        off += f64::from((a[0] - b[0]).abs() * s.area);
+        differing += usize::from(a != b);
+    }
+    eprintln!(
+        "{} samples, {differing} differ, {:.4} % of the light; rays {} -> {}",
+        samples.len(),
+        100.0 * off / total,
+        r_each.rays,
+        r_read.rays
+    );
+    assert!(off < 2e-3 * total, "{off} of {total}");
+    assert!(
+        differing * 200 < samples.len(),
+        "{differing} of {}",
+        samples.len()
+    );
+    assert!(
+        4 * r_read.rays < r_each.rays,
+        "{} vs {}",
+        r_read.rays,
+        r_each.rays
+    );
+    // Shadow edges and terminators do cross triangles: some samples cast their own ray.
+    assert!(r_read.rays > 2 * mesh.vertex_count() as u64);
+}

@@ -101,6 +101,10 @@ pub struct Prt {
     /// `relit_scene` calls (shared with the transports relit from this one: the samples and
     /// vertices are the same), so an update casts rays only for the lights that changed.
     kept_irradiance: std::sync::Arc<std::sync::Mutex<relight::KeptIrradiance>>,
+    /// The sample tree's shape over `samples` (`tree::TreeShape`, light-independent): a new
+    /// light refills it instead of splitting the samples again. None after a pose until the
+    /// next transport.
+    tree_shape: Option<std::sync::Arc<tree::TreeShape>>,
 }
 
 impl Prt {

@@ -6,7 +6,7 @@ use super::knots::{default_spacing, Knots};
 use super::layout::Transport;
 use super::rows::{transport_rows, within, FarField};
 use super::settings::check_settings;
-use super::tree::{SampleTree, WeightedSample};
+use super::tree::{SampleTree, TreeShape, WeightedSample};
 use super::{Density, IrradianceFn, ProgressFn, Prt, PrtReport, PrtSettings};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, SurfaceSample};
@@ -99,9 +99,15 @@ impl Prt {
         // Transport T_j per vertex (Xu 2007 eq. 10). With walks through the mesh, it is the
         // first 60 % of the progress bar.
         let transport_end = if settings.walks.is_some() { 0.6 } else { 1.0 };
-        let transport = transport_under(mesh, &lit, &knots.basis, settings, &mut report, &|f| {
-            tick(0.15 + (transport_end - 0.15) * f)
-        })?;
+        let (transport, shape) = transport_under(
+            mesh,
+            &lit,
+            &knots.basis,
+            settings,
+            &mut report,
+            None,
+            &|f| tick(0.15 + (transport_end - 0.15) * f),
+        )?;
         report.seconds_total = start.elapsed().as_secs_f64();
         let mut prt = Prt {
             fitter: knots.fitter,
@@ -125,6 +131,7 @@ impl Prt {
             representatives: representatives.to_vec(),
             light_scale: [1.0; 3],
             kept_irradiance: Default::default(),
+            tree_shape: Some(std::sync::Arc::new(shape)),
         };
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);
@@ -290,17 +297,21 @@ impl Prt {
 /// The half of the precompute that depends on the light: the colour projection, the sample
 /// tree weighted by the samples' irradiance, the receiver's disc and the transport rows T_j
 /// (Xu 2007 eq. 10) on `basis`; fills the report's counters and seconds.
+/// The transport rows under `lit` (Xu 2007 eq. 10), with the sample tree's `shape` from an
+/// earlier light of the same samples where there is one (else the tree is built); returns the
+/// shape for the next.
 pub(super) fn transport_under(
     mesh: &Mesh,
     lit: &SampledLight,
     basis: &Basis,
     settings: &PrtSettings,
     report: &mut PrtReport,
+    shape: Option<&TreeShape>,
     tick: &dyn Fn(f32) -> Result<()>,
-) -> Result<Transport> {
+) -> Result<(Transport, TreeShape)> {
     let colour = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
     let t_tree = Instant::now();
-    let tree = lit.tree(mesh, &colour);
+    let tree = lit.tree(mesh, &colour, shape);
     report.seconds_tree = t_tree.elapsed().as_secs_f64();
     let disc = ReceiverDisc::new(mesh, &tree, lit.spacing);
     let t_transport = Instant::now();
@@ -324,7 +335,7 @@ pub(super) fn transport_under(
     report.transport_bytes = transport.bytes();
     report.stored_channels = colour.channels;
     report.seconds_transport = t_transport.elapsed().as_secs_f64();
-    Ok(transport)
+    Ok((transport, tree.into_shape()))
 }
 
 /// Samples and their irradiance (Xu 2007 §6.1), and the irradiance at the receivers.
@@ -397,18 +408,27 @@ impl SampledLight {
 
     /// The samples weighted by their projected irradiance times their area, in a moment tree,
     /// each on its triangle's object of `mesh`.
-    fn tree(&self, mesh: &Mesh, colour: &Projection) -> SampleTree {
+    /// The samples' tree, weighted by their light: `shape`'s nodes refilled where it was built
+    /// for these samples, else split afresh.
+    fn tree(&self, mesh: &Mesh, colour: &Projection, shape: Option<&TreeShape>) -> SampleTree {
         let weighted: Vec<WeightedSample> = self
             .samples
-            .iter()
+            .par_iter()
             .zip(&self.sample_irradiance)
-            .map(|(s, i)| WeightedSample {
+            .enumerate()
+            .map(|(k, (s, i))| WeightedSample {
                 position: s.position,
                 area: s.area,
                 weight: colour.project(i).map(|x| x * s.area),
                 object: mesh.object_of_triangle(s.triangle as usize),
+                index: k as u32,
             })
             .collect();
+        if let Some(tree) =
+            shape.and_then(|s| SampleTree::with_shape(s, &weighted, colour.channels))
+        {
+            return tree;
+        }
         SampleTree::build(weighted, colour.channels)
     }
 }

@@ -137,8 +137,10 @@ impl Prt {
             representatives: self.representatives.clone(),
             light_scale: [1.0; 3],
             kept_irradiance: self.kept_irradiance.clone(),
+            tree_shape: self.tree_shape.clone(),
         };
         if pose {
+            next.tree_shape = None; // the samples move: the tree is split anew
             next.positions = mesh.positions().to_vec();
             next.normals = mesh.normals().to_vec();
             next.samples = mesh.surface_samples(self.spacing)?;
@@ -221,12 +223,16 @@ impl Prt {
             let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
             let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
             let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
+            let triangles: Vec<u32> = samples.iter().map(|s| s.triangle).collect();
             let dense = settings.for_density(Density::Dense);
-            let (at_samples, r) = kept.samples.evaluate_with_progress(
+            // A sun, point or spot light cast anew reads its shadow at the samples from their
+            // triangles' corners where all three agree (`irradiance::corners`).
+            let (at_samples, r) = kept.samples.evaluate_on_mesh(
                 scene,
                 tracer,
                 &points,
                 &normals,
+                &triangles,
                 &dense,
                 Some(&ask),
             )?;
@@ -294,14 +300,17 @@ impl Prt {
         let t = Instant::now();
         let mut report = self.report.clone();
         let settings = self.settings.clone();
-        self.transport = transport_under(
+        let (transport, shape) = transport_under(
             mesh,
             &lit,
             self.fitter.basis(),
             &settings,
             &mut report,
+            self.tree_shape.as_deref(),
             &|f| tick(0.2 + 0.5 * f),
         )?;
+        self.transport = transport;
+        self.tree_shape = Some(std::sync::Arc::new(shape));
         out.seconds_transport = t.elapsed().as_secs_f64();
         self.vertex_irradiance = lit.vertex_irradiance;
         self.samples = lit.samples;

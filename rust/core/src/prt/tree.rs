@@ -21,6 +21,8 @@ pub(crate) struct WeightedSample {
     pub weight: [f32; 3],
     /// The object the sample lies on (`Mesh::object_of_triangle`).
     pub object: u32,
+    /// Its index among the samples the tree was built from (`TreeShape::order`).
+    pub index: u32,
 }
 
 /// `Node::object` of a node holding samples of several objects.
@@ -103,6 +105,17 @@ impl Node {
     }
 }
 
+/// What a tree's nodes are, without the weights: their split, bounds and objects, and which
+/// input sample each place holds. All of it depends on the samples' positions only, so a new
+/// light (the same samples) refills the weights and moments instead of splitting 2 M samples
+/// again (`SampleTree::with_shape`: about 0.4 s of a relight on the 10 cm bunny).
+#[derive(Debug, Clone)]
+pub(crate) struct TreeShape {
+    nodes: Vec<Node>,
+    /// The input index of the sample at each place of the tree.
+    order: Vec<u32>,
+}
+
 #[derive(Debug, Clone)]
 pub(crate) struct SampleTree {
     pub nodes: Vec<Node>,
@@ -161,6 +174,62 @@ impl SampleTree {
             tree.summarise(ni);
         }
         tree
+    }
+
+    /// The tree of `shape` over `samples`, the samples it was built from (in their input
+    /// order, same positions) with new weights: the nodes kept, the moments summed anew.
+    /// None when the count differs.
+    pub fn with_shape(
+        shape: &TreeShape,
+        samples: &[WeightedSample],
+        channels: usize,
+    ) -> Option<Self> {
+        if samples.len() != shape.order.len() {
+            return None;
+        }
+        let mut tree = SampleTree {
+            nodes: shape.nodes.clone(),
+            moments: vec![Moments::default(); shape.nodes.len() * channels],
+            samples: shape.order.iter().map(|&i| samples[i as usize]).collect(),
+            channels,
+        };
+        for ni in (0..tree.nodes.len()).rev() {
+            tree.sum_moments(ni);
+        }
+        Some(tree)
+    }
+
+    /// The shape of this tree (`TreeShape`), the tree given up for it.
+    pub fn into_shape(self) -> TreeShape {
+        TreeShape {
+            order: self.samples.iter().map(|s| s.index).collect(),
+            nodes: self.nodes,
+        }
+    }
+
+    /// A node's moments and darkness from its samples or children, its bounds as they are.
+    fn sum_moments(&mut self, ni: usize) {
+        let ch = self.channels;
+        let node = &self.nodes[ni];
+        let (first, center) = (node.first_child as usize, node.center);
+        let mut m = vec![Moments::default(); ch];
+        if first == 0 {
+            for x in &self.samples[node.start as usize..node.end as usize] {
+                let d = x.position.as_dvec3() - center;
+                for (c, mc) in m.iter_mut().enumerate() {
+                    mc.add_point(f64::from(x.weight[c]), d);
+                }
+            }
+        } else {
+            for k in [first, first + 1] {
+                let e = self.nodes[k].center - center;
+                for (c, mc) in m.iter_mut().enumerate() {
+                    mc.add_shifted(&self.moments[k * ch + c], e);
+                }
+            }
+        }
+        self.nodes[ni].dark = m.iter().all(|x| x.w == 0.0);
+        self.moments[ni * ch..(ni + 1) * ch].copy_from_slice(&m);
     }
 
     fn summarise(&mut self, ni: usize) {
@@ -273,6 +342,7 @@ mod tests {
                     area: 1.0 + (i % 3) as f32,
                     weight: [(i % 7) as f32, 1.0, 0.5],
                     object: 0,
+                    index: i,
                 }
             })
             .collect();
@@ -293,5 +363,43 @@ mod tests {
         for s in &samples {
             assert!((s.position.as_dvec3() - root.center).length() <= root.radius + 1e-6);
         }
+    }
+
+    #[test]
+    fn a_kept_shape_with_new_weights_is_the_tree_built_afresh() {
+        // The same samples under another light: the tree refilled from the first one's shape
+        // has the nodes, moments and darkness of a tree built from scratch (to rounding).
+        let make = |k: u32| -> Vec<WeightedSample> {
+            (0..1000u32)
+                .map(|i| {
+                    let t = i as f32 * 0.37;
+                    WeightedSample {
+                        position: Vec3::new(t.sin() * 3.0, (t * 1.3).cos(), t * 0.01),
+                        area: 1.0,
+                        weight: [((i * k) % 5) as f32, 0.0, 0.0],
+                        object: 0,
+                        index: i,
+                    }
+                })
+                .collect()
+        };
+        let first = SampleTree::build(make(1), 1);
+        let shape = first.into_shape();
+        let kept = SampleTree::with_shape(&shape, &make(3), 1).unwrap();
+        let fresh = SampleTree::build(make(3), 1);
+        assert_eq!(kept.nodes.len(), fresh.nodes.len());
+        for (k, (a, b)) in kept.nodes.iter().zip(&fresh.nodes).enumerate() {
+            assert_eq!(
+                (a.start, a.end, a.first_child, a.dark),
+                (b.start, b.end, b.first_child, b.dark)
+            );
+            let (ma, mb) = (&kept.moments[k], &fresh.moments[k]);
+            assert!((ma.w - mb.w).abs() <= 1e-9 * mb.w.max(1.0));
+            assert!((ma.s - mb.s).length() <= 1e-9 * mb.w.max(1.0));
+        }
+        for (a, b) in kept.samples.iter().zip(&fresh.samples) {
+            assert_eq!((a.index, a.weight), (b.index, b.weight));
+        }
+        assert!(SampleTree::with_shape(&shape, &make(3)[..999], 1).is_none());
     }
 }
