@@ -159,17 +159,20 @@ impl Basis {
         &self.knots
     }
 
+    #[inline]
     pub fn domain(&self) -> (f64, f64) {
         (self.knots[0], self.knots[self.knots.len() - 1])
     }
 
     /// `lookup`'s cell of r (within the domain).
+    #[inline]
     fn cell(&self, r: f64) -> usize {
         (((r - self.knots[0]) * self.cells_per_unit) as usize).min(LOOKUP_CELLS - 1)
     }
 
     /// The interval containing r (the last one for r = r_max), or None outside the domain:
     /// the last knot <= r, from `lookup`'s lower bound forward.
+    #[inline]
     pub fn interval(&self, r: f64) -> Option<usize> {
         let (lo, hi) = self.domain();
         if !(r >= lo && r <= hi) {
@@ -187,6 +190,7 @@ impl Basis {
     /// `degree + 1` consecutive functions (unused slots 0). All zero outside the domain.
     /// An O(log m) binary search for the interval, then that interval's polynomial pieces;
     /// no allocation (the per-vertex hot path).
+    #[inline]
     pub fn eval(&self, r: f64) -> (usize, [f64; 3]) {
         let Some(i) = self.interval(r) else {
             return (0, [0.0; 3]);
