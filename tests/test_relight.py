@@ -135,13 +135,14 @@ def test_a_power_or_colour_change_of_every_light_is_a_rescale_with_no_ray():
 
 
 def test_moving_one_light_of_several_casts_that_lights_rays_only():
-    """The irradiance is kept light by light (and the world) between updates: after a first
-    update, moving the point light again under the same sun and world casts rays for that
-    light alone: fewer than a precompute lit by it alone casts, since the samples read its
-    shadow from their triangles' corners (one ray a vertex, and one a sample only where a
-    shadow's edge crosses its triangle: `irradiance::corners`). The preview is a fresh
-    precompute's under the moved scene (the dipole: nothing else depends on the light, and
-    the sources add in the same order), so each sample's light is what its own ray gives."""
+    """The irradiance is kept light by light (and the world) from the precompute on: moving the
+    point light under the same sun and world casts rays for that light alone, already at the
+    first update after the precompute, and fewer than a precompute lit by it alone casts, since
+    the samples read its shadow from their triangles' corners (one ray a vertex, and one a
+    sample only where a shadow's edge crosses its triangle: `irradiance::corners`). The preview
+    is a fresh precompute's under the moved scene (the dipole: nothing else depends on the
+    light, and the sources add in the same order), so each sample's light is what its own ray
+    gives."""
     marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
     p, t = sphere(16, 0.01)
 
@@ -154,32 +155,23 @@ def test_moving_one_light_of_several_casts_that_lights_rays_only():
             s.set_world(color=(0.05, 0.05, 0.05))
         return s
 
-    prt = translucent.Prt(scene((0.0, 0.03, 0.01)), marble, profile="dipole", backend="cpu", world_samples=16)
-    first = prt.update(lights=scene((0.03, 0.0, 0.01)))
-    moved = scene((0.0, -0.03, -0.01))
-    second = prt.update(lights=moved)
-    alone = translucent.Prt(scene((0.0, -0.03, -0.01), sun=False, world=False), marble, profile="dipole",
-                            backend="cpu", world_samples=16)
-    assert 0 < second["rays"] < alone.report["rays"] < first["rays"], (second["rays"], alone.report["rays"],
-                                                                       first["rays"])
-    fresh = translucent.Prt(moved, marble, profile="dipole", backend="cpu", world_samples=16)
-    np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=1e-6, atol=1e-12)
-    # Only the latest lights are kept (memory: one layer a source): the point light put back
-    # where it was casts its own rays again, and still none for the sun or the world.
-    third = prt.update(lights=scene((0.03, 0.0, 0.01)))
-    back = translucent.Prt(scene((0.03, 0.0, 0.01), sun=False, world=False), marble, profile="dipole",
-                           backend="cpu", world_samples=16)
-    assert 0 < third["rays"] < back.report["rays"], (third["rays"], back.report["rays"])
-    np.testing.assert_allclose(prt.radiosity(marble), translucent.Prt(scene((0.03, 0.0, 0.01)), marble,
-                                                                      profile="dipole", backend="cpu",
-                                                                      world_samples=16).radiosity(marble),
-                               rtol=1e-6, atol=1e-12)
+    def fresh(point, **kw):
+        return translucent.Prt(scene(point, **kw), marble, profile="dipole", backend="cpu", world_samples=16)
+
+    prt = fresh((0.0, 0.03, 0.01))
+    everything = prt.report["rays"]  # the sun's, the point light's and the world's
+    for point in ((0.03, 0.0, 0.01), (0.0, -0.03, -0.01), (0.03, 0.0, 0.01)):
+        r = prt.update(lights=scene(point))
+        alone = fresh(point, sun=False, world=False)
+        assert 0 < r["rays"] < alone.report["rays"] < everything, (r["rays"], alone.report["rays"], everything)
+        np.testing.assert_allclose(prt.radiosity(marble), fresh(point).radiosity(marble), rtol=1e-6, atol=1e-12)
 
 
 def test_one_lights_power_among_several_is_a_rescale_of_its_own_layer():
-    """The point light's power and colour changed, the sun and the world as they were: after a
-    first update has kept the irradiance light by light, no ray at all, and the answer a fresh
-    precompute gives (the dipole: nothing else depends on the light)."""
+    """The point light's power and colour changed, the sun and the world as they were: the
+    precompute kept the irradiance light by light, so already its first update casts no ray at
+    all, and gives the answer a fresh precompute gives (the dipole: nothing else depends on the
+    light)."""
     marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
     p, t = sphere(16, 0.01)
 
@@ -191,9 +183,9 @@ def test_one_lights_power_among_several_is_a_rescale_of_its_own_layer():
         return s
 
     prt = translucent.Prt(scene(0.5), marble, profile="dipole", backend="cpu", world_samples=16)
-    assert prt.update(lights=scene(0.8))["rays"] > 0  # the first update keeps each light's layer
-    brighter = scene(1.5, color=(1.0, 0.5, 0.2))
-    r = prt.update(lights=brighter)
-    assert r["rays"] == 0 and r["rescaled"] is None, r  # not every light by one factor
-    fresh = translucent.Prt(brighter, marble, profile="dipole", backend="cpu", world_samples=16)
-    np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=1e-5, atol=1e-12)
+    for power, color in ((0.8, None), (1.5, (1.0, 0.5, 0.2))):
+        changed = scene(power, color=color)
+        r = prt.update(lights=changed)
+        assert r["rays"] == 0 and r["rescaled"] is None, r  # not every light by one factor
+        fresh = translucent.Prt(changed, marble, profile="dipole", backend="cpu", world_samples=16)
+        np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=1e-5, atol=1e-12)

@@ -9,12 +9,9 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::{Mutex, MutexGuard, RwLock, RwLockReadGuard};
-use translucent_core::irradiance::{
-    irradiance_with_progress, Density, IrradianceReport, IrradianceSettings,
-};
+use translucent_core::irradiance::{IrradianceReport, IrradianceSettings};
 use translucent_core::optics::principled::PrincipledInputs;
 use translucent_core::optics::Material;
-use translucent_core::progress::cancel_only;
 
 use translucent_core::prt::{path_settings, single, Backend, Evaluation, Prt, PrtRequest};
 use translucent_core::single_scattering::Phase;
@@ -256,26 +253,6 @@ impl PyPrt {
         *held(&self.backend_request) = (backend.to_string(), half);
         Ok(result)
     }
-
-    /// The irradiance callback of `scene` under `irr`, its estimates' report merged into
-    /// `lighting`, stopping when `tick` says so.
-    fn lit_by<'a>(
-        scene: &'a translucent_core::scene::Scene,
-        tracer: &'a translucent_core::raytrace::Tracer,
-        irr: &'a IrradianceSettings,
-        lighting: &'a Mutex<IrradianceReport>,
-        ask: &'a (dyn Fn(f32) -> bool + Sync),
-    ) -> impl Fn(&[Vec3], &[Vec3], Density) -> translucent_core::Result<Vec<[f32; 3]>> + Sync + 'a
-    {
-        move |p: &[Vec3], n: &[Vec3], d: Density| {
-            let s = irr.for_density(d);
-            irradiance_with_progress(scene, tracer, p, n, &s, Some(ask)).map(|(v, r)| {
-                let mut total = held(lighting);
-                *total = total.merge(&r);
-                v
-            })
-        }
-    }
 }
 
 fn backend_name(prt: &Prt) -> &'static str {
@@ -397,19 +374,18 @@ impl PyPrt {
         let core_scene = &scene.scene;
         let lighting = Mutex::new(IrradianceReport::default());
         let inner = run(py, progress, |tick| {
-            // The irradiance's rays stop on a cancel too.
-            let ask = cancel_only(Some(tick));
-            let irradiance_fn = Self::lit_by(core_scene, &tracer, &irr, &lighting, &ask);
             // The walks and the own light through the scene's tracer: the own light's rays stop
-            // at the rest of the scene (the walks never see it).
-            let mut prt = Prt::precompute_traced(
-                &core_scene.mesh,
-                Some(&tracer),
+            // at the rest of the scene (the walks never see it). The samples' and vertices'
+            // irradiance is kept source by source for `update`.
+            let (mut prt, lit) = Prt::precompute_in_scene(
+                core_scene,
+                &tracer,
                 &materials,
                 &settings,
-                &irradiance_fn,
+                &irr,
                 Some(tick),
             )?;
+            *held(&lighting) = lit;
             // Single scattering (Xu 2007 eq. 15) only when decided on: no rays, memory or
             // evaluation otherwise.
             if single.on {

@@ -46,6 +46,28 @@ impl Prt {
         irradiance: &IrradianceFn,
         progress: Option<&ProgressFn>,
     ) -> Result<Prt> {
+        Self::precompute_sampled(
+            mesh,
+            tracer,
+            representatives,
+            settings,
+            irradiance,
+            None,
+            progress,
+        )
+    }
+
+    /// `precompute_traced` with the samples' and vertices' irradiance from `sampler` (the
+    /// samples at their spacing) where given, else from `irradiance`.
+    pub(super) fn precompute_sampled(
+        mesh: &Mesh,
+        tracer: Option<&Tracer>,
+        representatives: &[Material],
+        settings: &PrtSettings,
+        irradiance: &IrradianceFn,
+        sampler: Option<&Sampler>,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Prt> {
         let start = Instant::now();
         check_settings(representatives, settings)?;
         // The object's own light beyond its limit is refused now, not after the transport.
@@ -80,7 +102,7 @@ impl Prt {
             .flat_map(|r| r.profiles.iter().cloned())
             .collect();
 
-        let lit = SampledLight::new(mesh, &profiles, settings, irradiance)?;
+        let lit = SampledLight::new(mesh, &profiles, settings, irradiance, sampler)?;
         report.samples = lit.samples.len();
         report.first_preview = settings.first_preview;
         report.sample_spacing = f64::from(lit.spacing);
@@ -346,12 +368,16 @@ pub(super) struct SampledLight {
     pub(super) vertex_irradiance: Vec<[f32; 3]>,
 }
 
+/// The irradiance at a transport's samples (taken at the given spacing) and at its vertices.
+pub(super) type Sampler<'a> = dyn Fn(Vec<SurfaceSample>, f32) -> Result<SampledLight> + 'a;
+
 impl SampledLight {
     fn new(
         mesh: &Mesh,
         profiles: &[Profile],
         settings: &PrtSettings,
         irradiance: &IrradianceFn,
+        sampler: Option<&Sampler>,
     ) -> Result<Self> {
         let spacing = match settings.samples {
             Some(count) if count <= mesh.min_sample_count() => {
@@ -370,7 +396,11 @@ impl SampledLight {
                     .then_some(super::request::FIRST_PREVIEW_SAMPLES),
             ),
         };
-        Self::lit(mesh, spacing, mesh.surface_samples(spacing)?, irradiance)
+        let samples = mesh.surface_samples(spacing)?;
+        match sampler {
+            Some(f) => f(samples, spacing),
+            None => Self::lit(mesh, spacing, samples, irradiance),
+        }
     }
 
     /// The `samples` (at `spacing`) and the vertices with their irradiance already estimated

@@ -171,7 +171,7 @@ impl Prt {
     /// `relit` under the lights and world of `scene` (the precomputed mesh), estimated here
     /// with `settings`: the irradiance at the samples and the vertices is kept source by source
     /// (`KeptIrradiance`), so only the lights (or world) not seen at an earlier update cast
-    /// rays; the first update after a precompute casts them all. Also returns what the
+    /// rays (`precompute_in_scene` keeps its own, so its first update too). Also returns what the
     /// irradiance cost (its rays: those cast now).
     pub fn relit_scene(
         &self,
@@ -219,38 +219,11 @@ impl Prt {
             self.kept_irradiance.clone()
         };
         let spacing = self.spacing;
-        let sampled = |samples: Vec<SurfaceSample>| {
-            let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
-            let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
-            let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
-            let triangles: Vec<u32> = samples.iter().map(|s| s.triangle).collect();
-            let dense = settings.for_density(Density::Dense);
-            // A sun, point or spot light cast anew reads its shadow at the samples from their
-            // triangles' corners where all three agree (`irradiance::corners`).
-            let (at_samples, r) = kept.samples.evaluate_on_mesh(
-                scene,
-                tracer,
-                &points,
-                &normals,
-                &triangles,
-                &dense,
-                Some(&ask),
-            )?;
-            merge(&r);
-            let receivers = settings.for_density(Density::Receivers);
-            let (at_vertices, r) = kept.vertices.evaluate_with_progress(
-                scene,
-                tracer,
-                mesh.positions(),
-                mesh.normals(),
-                &receivers,
-                Some(&ask),
-            )?;
-            merge(&r);
-            SampledLight::from_values(mesh, spacing, samples, at_samples, at_vertices)
-        };
+        let sample = kept_sampler(scene, tracer, settings, &kept, &merge, &ask, true);
+        let sampled = |samples: Vec<SurfaceSample>| sample(samples, spacing);
         let (mut next, mut out) = self.relit_with(mesh, &irradiance, &sampled, progress, pose)?;
         next.kept_irradiance = kept.clone();
+        drop(sample); // it borrows `lighting` through `merge`
         let report = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
         out.irradiance_rays = report.rays;
         next.report.last_relight = Some(out.clone());
@@ -401,5 +374,118 @@ impl Prt {
         }
         out.seconds_own_light = t.elapsed().as_secs_f64();
         Ok(())
+    }
+}
+
+/// The irradiance at a transport's samples and vertices through `kept` (source by source: what
+/// an earlier lighting left is reused, `irradiance::PerSource`), under `scene`'s lights and
+/// world, each estimate's report passed to `merge`; `corners`: a sun, point or spot light cast
+/// anew reads its shadow at the samples from their triangles' corners (`irradiance::corners`),
+/// else every sample casts its own ray.
+fn kept_sampler<'a>(
+    scene: &'a Scene,
+    tracer: &'a Tracer,
+    settings: &'a IrradianceSettings,
+    kept: &'a Mutex<KeptIrradiance>,
+    merge: &'a (dyn Fn(&IrradianceReport) + Sync),
+    ask: &'a (dyn Fn(f32) -> bool + Sync),
+    corners: bool,
+) -> impl Fn(Vec<SurfaceSample>, f32) -> Result<SampledLight> + 'a {
+    move |samples: Vec<SurfaceSample>, spacing: f32| {
+        let mesh = &scene.mesh;
+        let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+        let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
+        let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
+        let dense = settings.for_density(Density::Dense);
+        let (at_samples, r) = if corners {
+            let triangles: Vec<u32> = samples.iter().map(|s| s.triangle).collect();
+            kept.samples.evaluate_on_mesh(
+                scene,
+                tracer,
+                &points,
+                &normals,
+                &triangles,
+                &dense,
+                Some(ask),
+            )?
+        } else {
+            kept.samples.evaluate_with_progress(
+                scene,
+                tracer,
+                &points,
+                &normals,
+                &dense,
+                Some(ask),
+            )?
+        };
+        merge(&r);
+        let receivers = settings.for_density(Density::Receivers);
+        let (at_vertices, r) = kept.vertices.evaluate_with_progress(
+            scene,
+            tracer,
+            mesh.positions(),
+            mesh.normals(),
+            &receivers,
+            Some(ask),
+        )?;
+        merge(&r);
+        SampledLight::from_values(mesh, spacing, samples, at_samples, at_vertices)
+    }
+}
+
+impl Prt {
+    /// `precompute_traced` lit by `scene`'s lights and world, estimated with `settings`, its
+    /// samples' and vertices' irradiance kept source by source (`KeptIrradiance`), so that the
+    /// first `relit_scene` casts rays only for the sources that changed (every sample still
+    /// casts its own rays here). Also returns what the irradiance cost.
+    pub fn precompute_in_scene(
+        scene: &Scene,
+        tracer: &Tracer,
+        representatives: &[crate::optics::Material],
+        settings: &super::PrtSettings,
+        irradiance_settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<(Prt, IrradianceReport)> {
+        let ask = cancel_only(progress);
+        let lighting = Mutex::new(IrradianceReport::default());
+        let merge = |r: &IrradianceReport| {
+            let mut total = lighting.lock().unwrap_or_else(|e| e.into_inner());
+            *total = total.merge(r);
+        };
+        let irradiance = |p: &[Vec3], n: &[Vec3], d: Density| {
+            let (v, r) = irradiance_with_progress(
+                scene,
+                tracer,
+                p,
+                n,
+                &irradiance_settings.for_density(d),
+                Some(&ask),
+            )?;
+            merge(&r);
+            Ok(v)
+        };
+        let kept = std::sync::Arc::new(Mutex::new(KeptIrradiance::default()));
+        let sampler = kept_sampler(
+            scene,
+            tracer,
+            irradiance_settings,
+            &kept,
+            &merge,
+            &ask,
+            false,
+        );
+        let mut prt = Prt::precompute_sampled(
+            &scene.mesh,
+            Some(tracer),
+            representatives,
+            settings,
+            &irradiance,
+            Some(&sampler),
+            progress,
+        )?;
+        drop(sampler); // it borrows `lighting` and `kept`
+        prt.kept_irradiance = kept;
+        let report = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
+        Ok((prt, report))
     }
 }
