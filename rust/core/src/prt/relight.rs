@@ -199,18 +199,7 @@ impl Prt {
             *total = total.merge(r);
         };
         // Elsewhere (the shadow edges' points, a walk term traced anew): every source at once.
-        let irradiance = |p: &[Vec3], n: &[Vec3], d: Density| {
-            let (v, r) = irradiance_with_progress(
-                scene,
-                tracer,
-                p,
-                n,
-                &settings.for_density(d),
-                Some(&ask),
-            )?;
-            merge(&r);
-            Ok(v)
-        };
+        let irradiance = scene_irradiance(scene, tracer, settings, &merge, &ask);
         // A pose moves every sample and vertex: nothing kept holds, the posed transport keeps
         // its own from here.
         let kept = if pose {
@@ -223,8 +212,7 @@ impl Prt {
         let sampled = |samples: Vec<SurfaceSample>| sample(samples, spacing);
         let (mut next, mut out) = self.relit_with(mesh, &irradiance, &sampled, progress, pose)?;
         next.kept_irradiance = kept.clone();
-        drop(sample); // it borrows `lighting` through `merge`
-        let report = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
+        let report = lighting.lock().unwrap_or_else(|e| e.into_inner()).clone();
         out.irradiance_rays = report.rays;
         next.report.last_relight = Some(out.clone());
         Ok((next, out, report))
@@ -377,6 +365,23 @@ impl Prt {
     }
 }
 
+/// The irradiance callback of `scene` (every source at once) with `settings` at each
+/// density, each estimate's report passed to `merge`, stopping when `ask` says so.
+fn scene_irradiance<'a>(
+    scene: &'a Scene,
+    tracer: &'a Tracer,
+    settings: &'a IrradianceSettings,
+    merge: &'a (dyn Fn(&IrradianceReport) + Sync),
+    ask: &'a (dyn Fn(f32) -> bool + Sync),
+) -> impl Fn(&[Vec3], &[Vec3], Density) -> Result<Vec<[f32; 3]>> + Sync + 'a {
+    move |p: &[Vec3], n: &[Vec3], d: Density| {
+        let (v, r) =
+            irradiance_with_progress(scene, tracer, p, n, &settings.for_density(d), Some(ask))?;
+        merge(&r);
+        Ok(v)
+    }
+}
+
 /// The irradiance at a transport's samples and vertices through `kept` (source by source: what
 /// an earlier lighting left is reused, `irradiance::PerSource`), under `scene`'s lights and
 /// world, each estimate's report passed to `merge`; `corners`: a sun, point or spot light cast
@@ -452,18 +457,7 @@ impl Prt {
             let mut total = lighting.lock().unwrap_or_else(|e| e.into_inner());
             *total = total.merge(r);
         };
-        let irradiance = |p: &[Vec3], n: &[Vec3], d: Density| {
-            let (v, r) = irradiance_with_progress(
-                scene,
-                tracer,
-                p,
-                n,
-                &irradiance_settings.for_density(d),
-                Some(&ask),
-            )?;
-            merge(&r);
-            Ok(v)
-        };
+        let irradiance = scene_irradiance(scene, tracer, irradiance_settings, &merge, &ask);
         let kept = std::sync::Arc::new(Mutex::new(KeptIrradiance::default()));
         let sampler = kept_sampler(
             scene,
@@ -483,9 +477,8 @@ impl Prt {
             Some(&sampler),
             progress,
         )?;
-        drop(sampler); // it borrows `lighting` and `kept`
-        prt.kept_irradiance = kept;
-        let report = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
+        prt.kept_irradiance = kept.clone();
+        let report = lighting.lock().unwrap_or_else(|e| e.into_inner()).clone();
         Ok((prt, report))
     }
 }
