@@ -327,23 +327,26 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
     # transport chosen for the media it spans.
     texture = textures.read(material, info, method)
     materials = texture.materials or [s.material()]
-    if method == "splat":
-        same = (previous is not None and previous.method == "splat" and (relight or pose)
+    # The previous session's transport is taken over only when built by this method for the
+    # same objects with the same vertex counts.
+    def carried(by: str) -> bool:
+        return (previous is not None and previous.method == by
                 and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
+
+    if method == "splat":
+        same = (relight or pose) and carried("splat")
         job = SplatJob(scene, s.material(), params(s), previous=previous.transport if same else None,
                        change="deformation" if pose else "light" if relight else "",
                        profile=s.profile_name(), settings=splat_settings(bl_scene))
     elif method == "hierarchy":
-        same = (previous is not None and previous.method == "hierarchy"
-                and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
+        same = carried("hierarchy")
         job = HierarchyJob(scene, s.material(), previous=previous.transport if same else None,
                            positions=info.positions if same else None,
                            profile=s.profile_name())
     else:
         kwargs = dict(coefficients=s.coefficients, degree=int(s.degree), backend=s.backend, profile=s.profile_name())
-        same = ((relight or pose) and previous is not None and previous.method == "prt"
-                and hasattr(previous.transport, "update") and previous.chosen_for == params(s)
-                and [(r.name, r.count) for r in previous.info.objects] == [(r.name, r.count) for r in info.objects])
+        same = ((relight or pose) and carried("prt") and hasattr(previous.transport, "update")
+                and previous.chosen_for == params(s))
         if same and pose:
             job = PoseJob(scene, materials, previous.transport, **kwargs)
         elif same:

@@ -28,31 +28,6 @@ from blender_scripts.lib import models  # noqa: E402
 SUN = (0.3, -0.4, -0.87)  # toward the ground, from the side: a terminator on the spheres
 
 
-def uv_sphere(rings: int, segments: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """A latitude-longitude sphere (outward winding) of (rings - 1) * segments + 2 vertices."""
-    p = [(0.0, 0.0, radius)]
-    for i in range(1, rings):
-        th = np.pi * i / rings
-        for j in range(segments):
-            ph = 2.0 * np.pi * j / segments
-            p.append((radius * np.sin(th) * np.cos(ph), radius * np.sin(th) * np.sin(ph), radius * np.cos(th)))
-    p.append((0.0, 0.0, -radius))
-    t = []
-    last = len(p) - 1
-    for j in range(segments):
-        t.append((0, 1 + j, 1 + (j + 1) % segments))
-    for i in range(rings - 2):
-        a, b = 1 + i * segments, 1 + (i + 1) * segments
-        for j in range(segments):
-            k = (j + 1) % segments
-            t.append((a + j, b + j, b + k))
-            t.append((a + j, b + k, a + k))
-    base = 1 + (rings - 2) * segments
-    for j in range(segments):
-        t.append((last, base + (j + 1) % segments, base + j))
-    return np.asarray(p, np.float32), np.asarray(t, np.int64)
-
-
 def grid_plane(n: int, side: float) -> tuple[np.ndarray, np.ndarray]:
     """An n x n vertex square of `side` in z = 0, facing +z."""
     xs = np.linspace(-side / 2, side / 2, n)
@@ -72,9 +47,9 @@ def case(name: str):
         return models.standard_scene(p, t), None, 0.02
     if name.startswith("sphere"):
         radius = float(name[len("sphere"):]) * 1e-3
-        p, t = uv_sphere(48, 96, radius)
+        p, t = models.uv_sphere(48, 96, radius)
     elif name == "coarse":
-        p, t = uv_sphere(12, 12, 0.02)  # 134 vertices
+        p, t = models.uv_sphere(12, 12, 0.02)  # 134 vertices
     elif name == "plane":
         p, t = grid_plane(81, 0.2)
         s = translucent.Scene(p, t)

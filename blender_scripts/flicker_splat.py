@@ -26,31 +26,6 @@ from blender_scripts.lib.machine import describe as machine  # noqa: E402
 import translucent  # noqa: E402
 
 
-def uv_sphere(n: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """A UV sphere of n rings and 2n segments."""
-    pts = [(0.0, 0.0, radius)]
-    for i in range(1, n):
-        th = math.pi * i / n
-        for j in range(2 * n):
-            ph = math.pi * j / n
-            pts.append((radius * math.sin(th) * math.cos(ph), radius * math.sin(th) * math.sin(ph),
-                        radius * math.cos(th)))
-    pts.append((0.0, 0.0, -radius))
-    tris, m = [], 2 * n
-    for j in range(m):
-        tris.append((0, 1 + j, 1 + (j + 1) % m))
-    for i in range(n - 2):
-        a, b = 1 + i * m, 1 + (i + 1) * m
-        for j in range(m):
-            j2 = (j + 1) % m
-            tris += [(a + j, b + j, b + j2), (a + j, b + j2, a + j2)]
-    last = len(pts) - 1
-    for j in range(m):
-        a = 1 + (n - 2) * m
-        tris.append((last, a + (j + 1) % m, a + j))
-    return np.array(pts, np.float32), np.array(tris, np.int64)
-
-
 def rot_z(a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -101,7 +76,7 @@ def main() -> int:
     ap.add_argument("--meshes", nargs="+", default=["sphere", "bunny"])
     args = ap.parse_args()
     print(f"machine: {machine()}; grid {args.grid}, {args.frames} frames of {args.step} degrees, Cycles' profile")
-    cases = [("sphere 1 cm", *uv_sphere(24, 0.005)), ("bunny 10 cm", *models.load("stanford-bunny.obj", diagonal=0.1))]
+    cases = [("sphere 1 cm", *models.uv_sphere(24, 48, 0.005)), ("bunny 10 cm", *models.load("stanford-bunny.obj", diagonal=0.1))]
     cases = [c for c in cases if c[0].split()[0] in args.meshes]
     m = translucent.Material.preset("marble", mm_per_unit=1000.0)
     print("| mesh | motion | flicker without reuse | with reuse | ratio | last frame with reuse vs a fresh frame |")

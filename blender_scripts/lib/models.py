@@ -89,3 +89,26 @@ def decimate(positions: np.ndarray, triangles: np.ndarray, vertices: int) -> tup
         bpy.data.objects.remove(ob)
         bpy.data.meshes.remove(me)
     return p.reshape(-1, 3), t.reshape(-1, 3)
+
+
+def uv_sphere(rings: int, segments: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """A latitude-longitude sphere (outward winding) of (rings - 1) * segments + 2 vertices."""
+    p = [(0.0, 0.0, radius)]
+    for i in range(1, rings):
+        th = np.pi * i / rings
+        for j in range(segments):
+            ph = 2.0 * np.pi * j / segments
+            p.append((radius * np.sin(th) * np.cos(ph), radius * np.sin(th) * np.sin(ph), radius * np.cos(th)))
+    p.append((0.0, 0.0, -radius))
+    t = []
+    for j in range(segments):
+        t.append((0, 1 + j, 1 + (j + 1) % segments))
+    for i in range(rings - 2):
+        a, b = 1 + i * segments, 1 + (i + 1) * segments
+        for j in range(segments):
+            k = (j + 1) % segments
+            t += [(a + j, b + j, b + k), (a + j, b + k, a + k)]
+    last, base = len(p) - 1, 1 + (rings - 2) * segments
+    for j in range(segments):
+        t.append((last, base + (j + 1) % segments, base + j))
+    return np.asarray(p, np.float32), np.asarray(t, np.int64)

@@ -10,7 +10,7 @@
 
 use super::{IrradianceSettings, ProgressFn};
 use crate::error::{Error, Result};
-use crate::lights::Light;
+use crate::lights::{Incident, Light};
 use crate::mesh::Mesh;
 use crate::optics::fresnel_transmittance;
 use crate::progress::Ticker;
@@ -75,10 +75,10 @@ pub fn delta_light_on_mesh(
     let corners: Vec<Corner> = positions
         .par_iter()
         .zip(vertex_normals)
-        .map(|(p, n)| match arriving(light, tracer, *p, *n) {
+        .map(|(p, n)| match facing(light, *p, *n) {
             None => Corner::Away,
-            Some((_, true)) => Corner::Lit,
-            Some((_, false)) => Corner::Shadowed,
+            Some((inc, _)) if seen(tracer, *p, *n, &inc) => Corner::Lit,
+            Some(_) => Corner::Shadowed,
         })
         .collect();
     let mut rays = positions.len() as u64;
@@ -115,22 +115,21 @@ pub fn delta_light_on_mesh(
     Ok((out.into_iter().map(|x| x.0).collect(), rays))
 }
 
-/// The cosine and visibility of `light` at `p` with normal `n`: None where it arrives from
-/// behind or not at all.
-fn arriving(light: &Light, tracer: &Tracer, p: Vec3, n: Vec3) -> Option<(f32, bool)> {
+/// What of `light` arrives at `p` with normal `n`, and the cosine there: None where it
+/// arrives from behind or not at all (outside a spot's cone), or `n` is no direction.
+fn facing(light: &Light, p: Vec3, n: Vec3) -> Option<(Incident, f32)> {
     if !(n.is_finite() && n.length_squared() > 0.0) {
         return None;
     }
     let inc = light.incident(p, [0.5; 2])?;
     let cos = n.dot(inc.direction);
-    if cos <= 0.0 {
-        return None;
-    }
+    (cos > 0.0).then_some((inc, cos))
+}
+
+/// Whether `p` (lifted off the surface along `n`) sees the light `inc` comes from.
+fn seen(tracer: &Tracer, p: Vec3, n: Vec3, inc: &Incident) -> bool {
     let o = tracer.offset_origin(p, n);
-    Some((
-        cos,
-        !tracer.occluded(o, inc.direction, inc.distance * (1.0 - 1e-5)),
-    ))
+    !tracer.occluded(o, inc.direction, inc.distance * (1.0 - 1e-5))
 }
 
 /// F_t cos L at `p` (Xu 2007 eq. 3 for one direction) and the rays cast: shadowed by a ray
@@ -143,22 +142,12 @@ fn entering(
     trace: bool,
     tracer: &Tracer,
 ) -> ([f32; 3], u64) {
-    if !(n.is_finite() && n.length_squared() > 0.0) {
-        return ([0.0; 3], 0);
-    }
-    let Some(inc) = light.incident(p, [0.5; 2]) else {
+    let Some((inc, cos)) = facing(light, p, n) else {
         return ([0.0; 3], 0);
     };
-    let cos = n.dot(inc.direction);
-    if cos <= 0.0 {
-        return ([0.0; 3], 0);
+    if trace && !seen(tracer, p, n, &inc) {
+        return ([0.0; 3], 1);
     }
     let k = fresnel_transmittance(eta, f64::from(cos)) as f32 * cos;
-    let value = inc.value.map(|x| x * k);
-    if !trace {
-        return (value, 0);
-    }
-    let o = tracer.offset_origin(p, n);
-    let seen = !tracer.occluded(o, inc.direction, inc.distance * (1.0 - 1e-5));
-    (if seen { value } else { [0.0; 3] }, 1)
+    (inc.value.map(|x| x * k), u64::from(trace))
 }

@@ -390,38 +390,16 @@ impl PerSource {
         settings: &IrradianceSettings,
         progress: Option<&ProgressFn>,
     ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
-        self.evaluate_sources(scene, tracer, points, normals, None, settings, progress)
+        self.evaluate_on_mesh(scene, tracer, points, normals, None, settings, progress)
     }
 
-    /// `evaluate_with_progress` at dense points of `scene.mesh`, `triangles[i]` holding point
-    /// i: a sun, point or spot light cast anew reads its shadow from the triangles' corners
-    /// where they agree (`corners`: one ray per vertex, and one per point only where a
-    /// shadow's edge crosses its triangle); area lights, the world and the rest of the
-    /// scene's bounce as `evaluate`.
+    /// `evaluate_with_progress`, the points lying on `scene.mesh` where `triangles` gives each
+    /// one's triangle: a sun, point or spot light cast anew then reads its shadow from the
+    /// triangles' corners where they agree (`corners`: one ray per vertex, and one per point
+    /// only where a shadow's edge crosses its triangle); area lights, the world and the rest
+    /// of the scene's bounce as without.
     #[allow(clippy::too_many_arguments)]
     pub fn evaluate_on_mesh(
-        &mut self,
-        scene: &Scene,
-        tracer: &Tracer,
-        points: &[Vec3],
-        normals: &[Vec3],
-        triangles: &[u32],
-        settings: &IrradianceSettings,
-        progress: Option<&ProgressFn>,
-    ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
-        self.evaluate_sources(
-            scene,
-            tracer,
-            points,
-            normals,
-            Some(triangles),
-            settings,
-            progress,
-        )
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn evaluate_sources(
         &mut self,
         scene: &Scene,
         tracer: &Tracer,
@@ -465,16 +443,15 @@ impl PerSource {
                 (Source::Light(l), Some(t)) if corners::applies(l, tracer) => Some((l, t)),
                 _ => None,
             };
-            let values = match (kept, kept.is_none().then(rescaled).flatten()) {
-                (Some(i), _) => old.swap_remove(i).1,
-                (None, Some((i, k))) => {
+            let values = match (kept, kept.is_none().then(rescaled).flatten(), on_mesh) {
+                (Some(i), _, _) => old.swap_remove(i).1,
+                (None, Some((i, k)), _) => {
                     let mut v = old.swap_remove(i).1;
                     v.par_iter_mut()
                         .for_each(|x| *x = std::array::from_fn(|c| x[c] * k[c]));
                     v
                 }
-                (None, None) if on_mesh.is_some() => {
-                    let (light, triangles) = on_mesh.expect("checked");
+                (None, None, Some((light, triangles))) => {
                     let on = OnMesh {
                         mesh: &scene.mesh,
                         triangles,
@@ -485,7 +462,7 @@ impl PerSource {
                     rays += r;
                     v
                 }
-                (None, None) => {
+                (None, None, None) => {
                     let (lights, world) = match &src {
                         Source::Light(l) => (std::slice::from_ref(l), &World::Black),
                         Source::World(w) => (&[][..], w),

@@ -398,7 +398,13 @@ fn corners_give_each_samples_own_shadow_ray_answer_with_a_ray_per_vertex() {
         .unwrap();
     let (read, r_read) = PerSource::default()
         .evaluate_on_mesh(
-            &scene, &tracer, &points, &normals, &triangles, &settings, None,
+            &scene,
+            &tracer,
+            &points,
+            &normals,
+            Some(&triangles),
+            &settings,
+            None,
         )
         .unwrap();
     let (mut total, mut off, mut differing) = (0.0f64, 0.0f64, 0usize);

@@ -317,11 +317,10 @@ impl Prt {
 }
 
 /// The half of the precompute that depends on the light: the colour projection, the sample
-/// tree weighted by the samples' irradiance, the receiver's disc and the transport rows T_j
-/// (Xu 2007 eq. 10) on `basis`; fills the report's counters and seconds.
-/// The transport rows under `lit` (Xu 2007 eq. 10), with the sample tree's `shape` from an
-/// earlier light of the same samples where there is one (else the tree is built); returns the
-/// shape for the next.
+/// tree weighted by the samples' irradiance (refilled from `shape`, an earlier light's tree
+/// over the same samples, where given; else split afresh), the receiver's disc and the
+/// transport rows T_j (Xu 2007 eq. 10) on `basis`; fills the report's counters and seconds.
+/// Returns the tree's shape for the next light.
 pub(super) fn transport_under(
     mesh: &Mesh,
     lit: &SampledLight,
@@ -437,9 +436,8 @@ impl SampledLight {
     }
 
     /// The samples weighted by their projected irradiance times their area, in a moment tree,
-    /// each on its triangle's object of `mesh`.
-    /// The samples' tree, weighted by their light: `shape`'s nodes refilled where it was built
-    /// for these samples, else split afresh.
+    /// each on its triangle's object of `mesh`: `shape`'s nodes refilled where it was built for
+    /// these samples, else split afresh.
     fn tree(&self, mesh: &Mesh, colour: &Projection, shape: Option<&TreeShape>) -> SampleTree {
         let weighted: Vec<WeightedSample> = self
             .samples

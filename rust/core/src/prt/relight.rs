@@ -402,27 +402,17 @@ fn kept_sampler<'a>(
         let points: Vec<Vec3> = samples.iter().map(|s| s.position).collect();
         let normals: Vec<Vec3> = samples.iter().map(|s| s.normal).collect();
         let dense = settings.for_density(Density::Dense);
-        let (at_samples, r) = if corners {
-            let triangles: Vec<u32> = samples.iter().map(|s| s.triangle).collect();
-            kept.samples.evaluate_on_mesh(
-                scene,
-                tracer,
-                &points,
-                &normals,
-                &triangles,
-                &dense,
-                Some(ask),
-            )?
-        } else {
-            kept.samples.evaluate_with_progress(
-                scene,
-                tracer,
-                &points,
-                &normals,
-                &dense,
-                Some(ask),
-            )?
-        };
+        let triangles: Option<Vec<u32>> =
+            corners.then(|| samples.iter().map(|s| s.triangle).collect());
+        let (at_samples, r) = kept.samples.evaluate_on_mesh(
+            scene,
+            tracer,
+            &points,
+            &normals,
+            triangles.as_deref(),
+            &dense,
+            Some(ask),
+        )?;
         merge(&r);
         let receivers = settings.for_density(Density::Receivers);
         let (at_vertices, r) = kept.vertices.evaluate_with_progress(

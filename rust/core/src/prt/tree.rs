@@ -232,11 +232,11 @@ impl SampleTree {
         self.moments[ni * ch..(ni + 1) * ch].copy_from_slice(&m);
     }
 
+    /// A node's bounds, area and object from its samples or children, then its moments
+    /// (`sum_moments`).
     fn summarise(&mut self, ni: usize) {
-        let ch = self.channels;
         let first = self.nodes[ni].first_child as usize;
-        let (center, radius, area);
-        let mut m = vec![Moments::default(); ch];
+        let (center, radius, area, object);
         if first == 0 {
             let s = &self.samples[self.nodes[ni].start as usize..self.nodes[ni].end as usize];
             area = s.iter().map(|x| f64::from(x.area)).sum::<f64>();
@@ -252,12 +252,11 @@ impl SampleTree {
                 .iter()
                 .map(|x| (x.position.as_dvec3() - center).length())
                 .fold(0.0, f64::max);
-            for x in s {
-                let d = x.position.as_dvec3() - center;
-                for (c, mc) in m.iter_mut().enumerate() {
-                    mc.add_point(f64::from(x.weight[c]), d);
-                }
-            }
+            object = match s.first() {
+                Some(x) if s.iter().all(|y| y.object == x.object) => x.object,
+                Some(_) => MIXED,
+                None => 0,
+            };
         } else {
             let (a, b) = (&self.nodes[first], &self.nodes[first + 1]);
             area = a.area + b.area;
@@ -268,32 +267,18 @@ impl SampleTree {
             };
             radius = ((a.center - center).length() + a.radius)
                 .max((b.center - center).length() + b.radius);
-            for k in [first, first + 1] {
-                let e = self.nodes[k].center - center;
-                for (c, mc) in m.iter_mut().enumerate() {
-                    mc.add_shifted(&self.moments[k * ch + c], e);
-                }
-            }
+            object = if a.object == b.object {
+                a.object
+            } else {
+                MIXED
+            };
         }
-        let object = if first == 0 {
-            let s = &self.samples[self.nodes[ni].start as usize..self.nodes[ni].end as usize];
-            match s.first() {
-                Some(x) if s.iter().all(|y| y.object == x.object) => x.object,
-                Some(_) => MIXED,
-                None => 0,
-            }
-        } else if self.nodes[first].object == self.nodes[first + 1].object {
-            self.nodes[first].object
-        } else {
-            MIXED
-        };
         let node = &mut self.nodes[ni];
         node.object = object;
         node.center = center;
         node.radius = radius;
         node.area = area;
-        node.dark = m.iter().all(|x| x.w == 0.0);
-        self.moments[ni * ch..(ni + 1) * ch].copy_from_slice(&m);
+        self.sum_moments(ni);
     }
 }
 
