@@ -77,3 +77,27 @@ def test_an_albedo_outside_0_1_is_refused_naming_it(bad):
     s = translucent.Scene(*wall(5))
     with pytest.raises(ValueError, match="albedo"):
         s.add_occluder(*floor(), name="floor", albedo=bad)
+
+
+def test_the_floor_sends_the_objects_own_light_back_to_it():
+    # The wall's own light reaches it only off the floor (a flat wall sees nothing of itself):
+    # the rays that meet the floor are relayed from there (the closed form of that relay is
+    # checked in the core, own_light::interreflection). What it adds grows toward the floor,
+    # where the floor sees most of the wall, and is nothing where the floor sends nothing back.
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    p, _ = wall(41)
+    low, high = p[:, 2] < 0.05, p[:, 2] > 0.17
+    added = {}
+    for albedo in (FLOOR_ALBEDO, 0.0):
+        prt = translucent.Prt(scene(albedo=albedo), m, walks=0)
+        with_own = prt.radiosity(m)
+        without = prt.radiosity(m, interreflection=False)
+        added[albedo] = with_own - without
+        relayed = prt.report["interreflection_relay_rays"]
+        assert (relayed > 0) == (albedo != 0.0), (albedo, relayed)
+    gain = added[FLOOR_ALBEDO]
+    assert np.all(gain >= 0.0)
+    assert np.all(gain[low].mean(axis=0) > 1.5 * gain[high].mean(axis=0))
+    # Per channel the floor's albedo: blue (0.8) reflects more of it than green (0.25).
+    assert gain[low, 2].mean() > gain[low, 1].mean()
+    assert np.all(added[0.0] == 0.0)

@@ -830,6 +830,7 @@ impl PyPrt {
         d.set_item("seconds_irradiance", r.seconds_irradiance)?;
         d.set_item("interreflection_rays", r.interreflection_rays)?;
         d.set_item("interreflection_bytes", r.interreflection_bytes)?;
+        d.set_item("interreflection_relay_rays", r.interreflection_relay_rays)?;
         d.set_item("interreflection_share", r.interreflection_share)?;
         d.set_item("seconds_interreflection", r.seconds_interreflection)?;
         d.set_item("shadow_edge_triangles", r.shadow_edge_triangles)?;

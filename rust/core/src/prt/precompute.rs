@@ -285,6 +285,7 @@ impl Prt {
         if cast.rays > 0 {
             // The precompute's rays (a new light gathers over their hits: none).
             self.report.interreflection_rays = cast.rays;
+            self.report.interreflection_relay_rays = cast.gather.relay_rays();
         }
         self.report.last_own_light_rays = cast.rays;
         self.report.seconds_interreflection = t_bounce.elapsed().as_secs_f64();

@@ -116,6 +116,9 @@ pub struct PrtReport {
     /// Rays cast for the object's own light (0 when interreflection is off), and the share of
     /// the representative's B it adds (area-weighted mean over the vertices, worst channel).
     pub interreflection_rays: u64,
+    /// Of `interreflection_rays`, those cast from the rest of the scene where a vertex's ray
+    /// met it first (its reflection of the object's own light, `RELAY_RAYS` each): 0 alone.
+    pub interreflection_relay_rays: u64,
     /// Bytes of the own light's rays' hits, kept for its later bounces and a new light.
     pub interreflection_bytes: usize,
     /// Rays the own light cast at the last precompute or relight (0 when its hits were reused).
