@@ -333,37 +333,40 @@ fn hit_along(mesh: &Mesh, tracer: &Tracer, origin: Vec3, dir: Vec3) -> Option<Hi
 mod tests {
     use super::*;
 
+    /// A 4 x 4 square of `n` x `n` vertices in the plane z = `z`, facing +z or, `down`, -z.
+    fn square(n: usize, z: f32, down: bool, p: &mut Vec<Vec3>, t: &mut Vec<[u32; 3]>) {
+        let base = p.len() as u32;
+        for j in 0..n {
+            for i in 0..n {
+                let x = 4.0 * (i as f32 / (n - 1) as f32 - 0.5);
+                let y = 4.0 * (j as f32 / (n - 1) as f32 - 0.5);
+                p.push(Vec3::new(x, y, z));
+            }
+        }
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = base + (j * n + i) as u32;
+                let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
+                if down {
+                    t.push([a, d, b]);
+                    t.push([a, c, d]);
+                } else {
+                    t.push([a, b, d]);
+                    t.push([a, d, c]);
+                }
+            }
+        }
+    }
+
     /// Two parallel unit-normal squares facing each other at distance h (a box without
     /// sides): the lower one receives from the upper one, of uniform radiosity B and a
     /// Lambertian exit (W = 1), E = B F with F the view factor of parallel squares (Howell's
     /// catalogue, C-11), at the centre of the lower square the point-to-square form factor.
     /// Two 4 x 4 squares of `n` x `n` vertices each, one unit apart, facing each other.
     fn facing_squares(n: usize) -> Mesh {
-        let mut p = Vec::new();
-        let mut t = Vec::new();
-        for (z, flip) in [(0.0f32, false), (1.0, true)] {
-            let base = p.len() as u32;
-            for j in 0..n {
-                for i in 0..n {
-                    let x = 4.0 * (i as f32 / (n - 1) as f32 - 0.5);
-                    let y = 4.0 * (j as f32 / (n - 1) as f32 - 0.5);
-                    p.push(Vec3::new(x, y, z));
-                }
-            }
-            for j in 0..n - 1 {
-                for i in 0..n - 1 {
-                    let a = base + (j * n + i) as u32;
-                    let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
-                    if flip {
-                        t.push([a, d, b]);
-                        t.push([a, c, d]);
-                    } else {
-                        t.push([a, b, d]);
-                        t.push([a, d, c]);
-                    }
-                }
-            }
-        }
+        let (mut p, mut t) = (Vec::new(), Vec::new());
+        square(n, 0.0, false, &mut p, &mut t);
+        square(n, 1.0, true, &mut p, &mut t);
         Mesh::new(p, t, None).unwrap()
     }
 
@@ -453,23 +456,8 @@ mod tests {
         // cosine-weighted directions. That mean by a 400 x 400 midpoint quadrature, at 9 x 9
         // vertices around the centre, against the relayed gather.
         let n: usize = 41;
-        let mut p = Vec::new();
-        let mut t = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                let x = 4.0 * (i as f32 / (n - 1) as f32 - 0.5);
-                let y = 4.0 * (j as f32 / (n - 1) as f32 - 0.5);
-                p.push(Vec3::new(x, y, 1.0));
-            }
-        }
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = (j * n + i) as u32;
-                let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
-                t.push([a, d, b]);
-                t.push([a, c, d]);
-            }
-        }
+        let (mut p, mut t) = (Vec::new(), Vec::new());
+        square(n, 1.0, true, &mut p, &mut t);
         let mesh = Mesh::new(p, t, None).unwrap();
         assert!(mesh.normals()[0].z < -0.99, "the square faces down");
         let floor = |z: f32| {
