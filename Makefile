@@ -53,6 +53,7 @@ test: lint test-rust test-python
 bench: build
 	$(PY) blender_scripts/bench_prt.py
 	$(PY) blender_scripts/bench_hierarchy.py
+	$(PY) blender_scripts/bench_hierarchy.py --receivers vertices
 	$(PY) blender_scripts/bench_splat.py
 	$(PY) blender_scripts/flicker_splat.py
 

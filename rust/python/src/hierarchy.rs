@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::{Mutex, MutexGuard};
 use translucent_core::hierarchy::{
-    Evaluation as HierarchyEvaluation, Hierarchy, HierarchySettings, Mode,
+    Evaluation as HierarchyEvaluation, Hierarchy, HierarchySettings, Mode, Receivers,
 };
 
 /// A face-cluster hierarchy over a scene (a copy: `update` changes it, not the Scene).
@@ -52,7 +52,8 @@ impl PyHierarchy {
     #[new]
     #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.5),
         mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32,
-        world_shadows = false, walks = false, walk_rays = None, progress = None))]
+        world_shadows = false, walks = false, walk_rays = None, receivers = "vertices",
+        progress = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -67,9 +68,11 @@ impl PyHierarchy {
         world_shadows: bool,
         walks: bool,
         #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
+        receivers: &str,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
         let model = crate::material::profile_kind(profile)?;
+        let receivers = Receivers::parse(receivers).map_err(crate::convert::to_py)?;
         let terms =
             crate::convert::term_settings(walks, walk_rays, scene.scene.mesh.vertex_count())?;
         let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
@@ -83,6 +86,7 @@ impl PyHierarchy {
             estimate_receivers: non_negative("estimate_receivers", estimate_receivers)?,
             world_shadows,
             terms,
+            receivers,
             ..HierarchySettings::default()
         };
         let core_scene = scene.scene.clone();
@@ -228,6 +232,7 @@ impl PyHierarchy {
         )?;
         d.set_item("oracle_tests", r.oracle_tests)?;
         d.set_item("dropped_beyond_support", r.dropped_beyond_support)?;
+        d.set_item("split_faces", r.split_faces)?;
         d.set_item("relinked", r.relinked)?;
         d.set_item("rays", r.rays)?;
         d.set_item("seconds_build", r.seconds_build)?;

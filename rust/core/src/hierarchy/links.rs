@@ -76,6 +76,26 @@ pub struct Context<'a> {
     /// Counts the receivers `visit` refines (one per node); once it says stop, `visit` leaves
     /// the rest of the tree untouched and its caller returns `Error::Cancelled`.
     pub ticker: Option<&'a Ticker<'a>>,
+    /// Each face's irradiance per midpoint sub-triangle (`sub_triangles`'s order).
+    pub sub: &'a [[[f32; 3]; 4]],
+    /// Which faces are split into their four sub-triangles.
+    pub split: &'a [bool],
+}
+
+/// A near link's form factors per channel, one per midpoint sub-triangle of the face.
+pub type NearFactors = [[f32; 3]; 4];
+
+/// A face split at its edges' midpoints: the middle sub-triangle, then those at corners 0, 1
+/// and 2 (the order of the hierarchy's `SUB_POINTS`).
+pub fn sub_triangles(face: &Triangle) -> [Triangle; 4] {
+    let [a, b, c] = face.corners;
+    let (ab, bc, ca) = (0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a));
+    [
+        Triangle::new(ab, bc, ca),
+        Triangle::new(a, ab, ca),
+        Triangle::new(ab, b, bc),
+        Triangle::new(ca, bc, c),
+    ]
 }
 
 /// The links gathered at one receiver node.
@@ -85,8 +105,9 @@ pub struct NodeLinks {
     pub far: Vec<u32>,
     /// Their factors from the geometric moments (stored links only; `far::FarEmitters`).
     pub far_factors: Vec<[f32; 4]>,
-    /// Emitter faces integrated, with the form factor per channel (geometry and profile only).
-    pub near: Vec<(u32, [f32; 3])>,
+    /// Emitter faces integrated, with the form factor per channel of each of the face's four
+    /// midpoint sub-triangles (geometry and profile only; `sub_triangles`).
+    pub near: Vec<(u32, NearFactors)>,
 }
 
 /// What the traversal leaves at each node.
@@ -202,28 +223,37 @@ impl Context<'_> {
         }
     }
 
-    /// The form factor F(A_E, c_R) per channel (Mertens eq. 7, §4).
-    pub fn form_factor(&self, r: u32, e: u32) -> [f32; 3] {
+    /// The form factors F(A_k, c_R) per channel over the face's sub-triangles A_k (Mertens
+    /// eq. 7, §4, on each quarter of the face).
+    pub fn form_factor(&self, r: u32, e: u32) -> NearFactors {
         self.form_factor_at(self.tree.centroid[r as usize], e)
     }
 
-    /// F(A_E, x) per channel.
-    fn form_factor_at(&self, x: DVec3, e: u32) -> [f32; 3] {
-        let face = &self.faces[self.tree.face[e as usize] as usize];
-        triangle_integral_rgb(x, face, self.rgb, &self.rule).map(|v| v as f32)
+    /// F(A_k, x) per channel and sub-triangle; a face that is not split has its whole F in
+    /// the first (its irradiance the same in all four).
+    fn form_factor_at(&self, x: DVec3, e: u32) -> NearFactors {
+        let f = self.tree.face[e as usize] as usize;
+        let face = &self.faces[f];
+        if !self.split.get(f).copied().unwrap_or(false) {
+            let whole = triangle_integral_rgb(x, face, self.rgb, &self.rule).map(|v| v as f32);
+            return [whole, [0.0; 3], [0.0; 3], [0.0; 3]];
+        }
+        sub_triangles(face)
+            .map(|t| triangle_integral_rgb(x, &t, self.rgb, &self.rule).map(|v| v as f32))
     }
 
-    /// F times the face's mean irradiance.
+    /// Sum over the face's sub-triangles of F times the irradiance sampled there.
     #[inline]
-    pub fn near_contribution(&self, e: u32, f: &[f32; 3]) -> [f64; 3] {
-        let t = self.tree;
-        let a = t.area[e as usize];
+    pub fn near_contribution(&self, e: u32, f: &NearFactors) -> [f64; 3] {
+        let face = self.tree.face[e as usize] as usize;
+        let sub = &self.sub[face];
+        if !self.split[face] {
+            return std::array::from_fn(|c| f64::from(f[0][c]) * f64::from(sub[0][c]));
+        }
         std::array::from_fn(|c| {
-            if a > 0.0 {
-                f64::from(f[c]) * t.power[e as usize][c] / a
-            } else {
-                0.0
-            }
+            (f.iter().zip(sub))
+                .map(|(f, e)| f64::from(f[c]) * f64::from(e[c]))
+                .sum()
         })
     }
 

@@ -506,9 +506,14 @@ class Hierarchy:
         world_shadows: bool = False,
         walks: bool = False,
         walk_rays: int | None = None,
+        receivers: Literal["vertices", "faces"] = "vertices",
         progress: Progress | None = None,
     ) -> None:
-        """Builds the hierarchy and evaluates `material` once. `walks` (Cycles' profile only):
+        """Builds the hierarchy and evaluates `material` once. `receivers`: "vertices" gathers
+        B at every vertex, each refined from the root (within 2 % of the ground truth on coarse
+        and held-out meshes); "faces" at the face centroids, averaged to the vertices (Mertens
+        §3.2: 2-6x faster, 2.4-6 % off where faces are as wide as the diffusion length). Either
+        way the light is sampled at four points of each face. `walks` (Cycles' profile only):
         the walks' geometry term and the object's own light as PRT has them (the shared
         `walks` and `own_light` kernels), walked at this first evaluation for `material`
         (`walk_rays` in all, default as PRT's) and carried to a new light or pose without a
@@ -549,7 +554,7 @@ class Hierarchy:
         seconds, skipped (a list of {"what", "why"}); and refresh_advised (always False)."""
     @property
     def report(self) -> dict[str, object]:
-        """The last evaluation: links, far_links, near_links, links_per_face, clusters, faces,
+        """The last evaluation: links, far_links, near_links, links_per_face, split_faces, clusters, faces,
         depth, oracle_tests, relinked, rays, seconds per phase (build, refit, irradiance, pull,
         links, push, estimate) and in all, error_estimate per channel (the walks' noise
         added), terms (None with walks off; else walks, walks_indirect, own_light_rays,
