@@ -334,9 +334,10 @@ impl Hierarchy {
         .for_density(density)
     }
 
-    /// Irradiance within each face, at its four midpoint sub-triangles' centroids with the
-    /// interpolated normals (`SUB_POINTS`), kept per sub-triangle for the near links; the face's
-    /// irradiance is their mean (a four-point rule for its average over the face). One sample
+    /// Irradiance within each face with the interpolated normals: a split face (`split`) at its
+    /// four midpoint sub-triangles' centroids (`SUB_POINTS`), kept per sub-triangle for the near
+    /// links, its irradiance their mean (a four-point rule for its average over the face); any
+    /// other face at its centroid alone, the value repeated in all four slots. One sample
     /// at the centroid could not follow light that changes across a face as wide as the
     /// diffusion length (spot at 10 cm, marble: 5-6 % off the ground truth). Returns rays cast.
     fn sample_faces(&mut self, eta: f64) -> Result<u64> {
