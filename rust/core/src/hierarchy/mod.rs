@@ -151,6 +151,26 @@ fn faces_of(mesh: &Mesh) -> Vec<Triangle> {
         .collect()
 }
 
+/// Area-weighted relative RMS per channel of (area, coarse, fine) triples against the fine.
+fn relative_rms(pairs: impl Iterator<Item = (f64, [f64; 3], [f64; 3])>) -> [f64; 3] {
+    let (mut num, mut den) = ([0.0f64; 3], [0.0f64; 3]);
+    for (a, coarse, fine) in pairs {
+        for c in 0..3 {
+            num[c] += a * (coarse[c] - fine[c]).powi(2);
+            den[c] += a * fine[c].powi(2);
+        }
+    }
+    std::array::from_fn(|c| {
+        if den[c] > 0.0 {
+            (num[c] / den[c]).sqrt()
+        } else if num[c] == 0.0 {
+            0.0 // dark on both: nothing to be wrong about
+        } else {
+            f64::INFINITY // lit where the finer answer is dark
+        }
+    })
+}
+
 impl Hierarchy {
     /// Builds the cluster hierarchy of `scene.mesh` (no evaluation yet).
     pub fn new(scene: Scene, settings: HierarchySettings) -> Result<Hierarchy> {
@@ -653,17 +673,53 @@ impl Hierarchy {
             .profiles
             .take()
             .ok_or_else(|| Error::InvalidArgument("no profiles prepared".into()))?;
-        let result = self.evaluate(
-            &lookup,
-            &rgb,
-            material_changed,
-            geometry_changed,
-            &mut report,
-            progress,
-        );
+        // With every vertex a receiver of its own the faces' B would be overwritten at every
+        // vertex: the faces' traversal is not run at all (the estimate is taken at vertices).
+        let every = self.settings.receivers == Receivers::Vertices;
+        let result = if every {
+            Ok(Vec::new())
+        } else {
+            self.evaluate(
+                &lookup,
+                &rgb,
+                material_changed,
+                geometry_changed,
+                &mut report,
+                progress,
+            )
+        };
         self.profiles = Some((*material, lookup, rgb));
         let face_b = result?;
-        tick(progress, 0.95)?;
+        if !every {
+            tick(progress, 0.95)?;
+        }
+
+        // A vertex on a hole's rim has surface on one side only: B falls toward the rim within
+        // the profile's near length, and the faces' centroids, inside, overstate it (measured
+        // +26 % for marble on the bunny's rim). Such a vertex is a receiver of its own, refined
+        // from the root (its nearest faces integrated from it); with `Receivers::Vertices` every
+        // vertex is. Render and incremental modes keep its links until the material or the
+        // shape changes.
+        let at_rim = if self.rim.is_empty() {
+            None
+        } else {
+            let t = Instant::now();
+            let b = self.gather_at_rim(
+                material_changed,
+                geometry_changed,
+                every,
+                &mut report,
+                progress,
+            )?;
+            if every {
+                report.seconds_links = t.elapsed().as_secs_f64();
+                let t = Instant::now();
+                report.error_estimate = self.estimate_at_vertices(&b);
+                report.seconds_estimate = t.elapsed().as_secs_f64();
+                tick(progress, 0.95)?;
+            }
+            Some(b)
+        };
 
         // Average to the vertices (§3.2), each face weighted by its angle at the vertex: where
         // the profile is short against the faces, B at a vertex is the irradiance of the faces
@@ -672,7 +728,7 @@ impl Hierarchy {
         let t = Instant::now();
         let mesh = &self.scene.mesh;
         let mut sum = vec![[0.0f64; 4]; mesh.vertex_count()];
-        for (f, tri) in mesh.triangles().iter().enumerate() {
+        for (f, tri) in mesh.triangles().iter().enumerate().take(face_b.len()) {
             for (k, &v) in tri.iter().enumerate() {
                 let a = self.corner_angles[f][k];
                 let s = &mut sum[v as usize];
@@ -684,39 +740,9 @@ impl Hierarchy {
             Some((_, p, _)) => std::array::from_fn(|c| p[c].point_mass()),
             None => [0.0; 3],
         };
-        // A vertex on a hole's rim has surface on one side only: B falls toward the rim within
-        // the profile's near length, and the faces' centroids, inside, overstate it (measured
-        // +26 % for marble on the bunny's rim). Such a vertex is a receiver of its own, refined
-        // from the root (its nearest faces integrated from it). Render and incremental modes
-        // keep its links until the material or the shape changes.
-        if !self.rim.is_empty() {
-            if let Some((_, lookup, rgb)) = &self.profiles {
-                let keep = self.settings.mode != Mode::OnTheFly;
-                let ctx = self.context(lookup, rgb, !keep, 1.0);
-                let positions = mesh.positions();
-                let fresh = !keep
-                    || material_changed
-                    || geometry_changed
-                    || self.rim_links.len() != self.rim.len();
-                let relinked: Vec<NodeLinks> = if fresh {
-                    self.rim
-                        .par_iter()
-                        .map(|&v| ctx.links_at(positions[v as usize].as_dvec3()))
-                        .collect()
-                } else {
-                    Vec::new()
-                };
-                let links = if fresh { &relinked } else { &self.rim_links };
-                // The vertices' own links count with the faces'.
-                report.far_links += links.iter().map(|l| l.far.len() as u64).sum::<u64>();
-                report.near_links += links.iter().map(|l| l.near.len() as u64).sum::<u64>();
-                let at_rim: Vec<[f64; 3]> = links.par_iter().map(|l| ctx.gather_at(l)).collect();
-                for (&v, b) in self.rim.iter().zip(at_rim) {
-                    sum[v as usize] = [b[0], b[1], b[2], 1.0];
-                }
-                if fresh {
-                    self.rim_links = if keep { relinked } else { Vec::new() };
-                }
+        if let Some(at_rim) = &at_rim {
+            for (&v, b) in self.rim.iter().zip(at_rim) {
+                sum[v as usize] = [b[0], b[1], b[2], 1.0];
             }
         }
         let mut out: Vec<[f32; 3]> = sum
@@ -759,6 +785,101 @@ impl Hierarchy {
         tick(progress, 1.0)?;
         self.report = report;
         Ok(out)
+    }
+
+    /// B at the rim's vertices (every vertex with `Receivers::Vertices`), each refined from the
+    /// root (Mertens 2003 §3.2's refinement with the vertex as a point receiver); render and
+    /// incremental modes keep the links until the material or the shape changes. `progress`
+    /// hears of [0.3, 0.9] over the vertices when they are every receiver ([0.9, 0.95] for a
+    /// rim beside the faces); a cancel drops the kept links.
+    fn gather_at_rim(
+        &mut self,
+        material_changed: bool,
+        geometry_changed: bool,
+        every: bool,
+        report: &mut HierarchyReport,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Vec<[f64; 3]>> {
+        let Some((_, lookup, rgb)) = &self.profiles else {
+            return Err(Error::InvalidArgument("no profiles prepared".into()));
+        };
+        let keep = self.settings.mode != Mode::OnTheFly;
+        let ctx = self.context(lookup, rgb, !keep, 1.0);
+        let positions = self.scene.mesh.positions();
+        let fresh =
+            !keep || material_changed || geometry_changed || self.rim_links.len() != self.rim.len();
+        let (from, to) = if every { (0.3, 0.9) } else { (0.9, 0.95) };
+        let ticker = Ticker::span(progress, self.rim.len() as u64, from, to);
+        if !keep {
+            // On-the-fly: each vertex's links gathered as soon as refined, none kept.
+            let gathered: Vec<([f64; 3], u64, u64)> = (self.rim.par_iter())
+                .map(|&v| {
+                    if !ticker.add(1) {
+                        return ([0.0; 3], 0, 0);
+                    }
+                    let l = ctx.links_at(positions[v as usize].as_dvec3());
+                    (ctx.gather_at(&l), l.far.len() as u64, l.near.len() as u64)
+                })
+                .collect();
+            if ticker.stopped() {
+                return Err(Error::Cancelled);
+            }
+            report.far_links += gathered.iter().map(|g| g.1).sum::<u64>();
+            report.near_links += gathered.iter().map(|g| g.2).sum::<u64>();
+            report.relinked |= every;
+            self.rim_links.clear();
+            return Ok(gathered.into_iter().map(|g| g.0).collect());
+        }
+        let relinked: Vec<NodeLinks> = if fresh {
+            (self.rim.par_iter())
+                .map(|&v| {
+                    if !ticker.add(1) {
+                        return NodeLinks::default();
+                    }
+                    ctx.links_at(positions[v as usize].as_dvec3())
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if ticker.stopped() {
+            self.rim_links.clear();
+            return Err(Error::Cancelled);
+        }
+        let links = if fresh { &relinked } else { &self.rim_links };
+        // The vertices' own links count with the faces'.
+        report.far_links += links.iter().map(|l| l.far.len() as u64).sum::<u64>();
+        report.near_links += links.iter().map(|l| l.near.len() as u64).sum::<u64>();
+        let at_rim: Vec<[f64; 3]> = links.par_iter().map(|l| ctx.gather_at(l)).collect();
+        if fresh {
+            report.relinked |= every;
+            self.rim_links = if keep { relinked } else { Vec::new() };
+        }
+        Ok(at_rim)
+    }
+
+    /// The error estimate with every vertex a receiver: `estimate_receivers` vertices spread
+    /// over the mesh refined again with ε/4, their area-weighted relative RMS against `b` (B
+    /// at `self.rim`, which is then every vertex).
+    fn estimate_at_vertices(&self, b: &[[f64; 3]]) -> Option<[f64; 3]> {
+        let k = self.settings.estimate_receivers.min(self.rim.len());
+        let (_, lookup, rgb) = self.profiles.as_ref()?;
+        if k == 0 {
+            return None;
+        }
+        let step = self.rim.len() as f64 / k as f64;
+        let picks: Vec<usize> = (0..k).map(|i| (i as f64 * step) as usize).collect();
+        let ctx = self.context(lookup, rgb, true, 0.25);
+        let positions = self.scene.mesh.positions();
+        let areas = self.scene.mesh.vertex_areas();
+        let fine: Vec<[f64; 3]> = (picks.par_iter())
+            .map(|&i| ctx.gather_at(&ctx.links_at(positions[self.rim[i] as usize].as_dvec3())))
+            .collect();
+        let pairs = picks.iter().zip(&fine).map(|(&i, f)| {
+            let a = f64::from(areas[self.rim[i] as usize]);
+            (a, b[i], *f)
+        });
+        Some(relative_rms(pairs))
     }
 
     /// Links and gather by mode; returns B per face. `progress` hears of [0.3, 0.9] over the
@@ -902,22 +1023,11 @@ impl Hierarchy {
                 slot[0].radiosity
             })
             .collect();
-        Some(std::array::from_fn(|c| {
-            let (mut num, mut den) = (0.0, 0.0);
-            for (i, &r) in picks.iter().enumerate() {
-                let f = self.tree.face[r as usize] as usize;
-                let a = self.faces[f].area;
-                num += a * (face_b[f][c] - fine[i][c]).powi(2);
-                den += a * fine[i][c].powi(2);
-            }
-            if den > 0.0 {
-                (num / den).sqrt()
-            } else if num == 0.0 {
-                0.0 // dark on both: nothing to be wrong about
-            } else {
-                f64::INFINITY // lit where the finer answer is dark
-            }
-        }))
+        let pairs = picks.iter().zip(&fine).map(|(&r, f)| {
+            let i = self.tree.face[r as usize] as usize;
+            (self.faces[i].area, face_b[i], *f)
+        });
+        Some(relative_rms(pairs))
     }
 
     /// Radiance toward `eye` (along each vertex normal without one): L = W(cos_o) B / π with
@@ -943,8 +1053,12 @@ impl Hierarchy {
         Ok(e)
     }
 
-    /// The links stored per cluster (render and incremental modes), for tests and tools.
+    /// The links stored per receiver (render and incremental modes), for tests and tools: per
+    /// vertex with `Receivers::Vertices`, per cluster with `Receivers::Faces`.
     pub fn links(&self) -> Option<Vec<&NodeLinks>> {
+        if self.settings.receivers == Receivers::Vertices {
+            return (!self.rim_links.is_empty()).then(|| self.rim_links.iter().collect());
+        }
         self.has_links
             .then(|| self.slots.iter().map(|s| &s.links).collect())
     }

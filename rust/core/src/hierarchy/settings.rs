@@ -50,15 +50,17 @@ pub struct HierarchySettings {
     pub world_shadows: bool,
     pub area_samples: u32,
     pub seed: u64,
-    /// Faces whose radiosity the error estimate recomputes with ε/4.
+    /// Receivers (vertices, or faces with `Receivers::Faces`) whose radiosity the error
+    /// estimate recomputes with ε/4.
     pub estimate_receivers: usize,
     /// The walks' geometry term and the object's own light (`terms`, Cycles' profile only);
     /// None: the half-space profile alone, as Mertens 2003 has it.
     pub terms: Option<crate::surface_terms::TermSettings>,
     /// Where B is gathered: at every vertex, each refined from the root (`Vertices`, the
     /// default: within 2 % of the ground truth on coarse and held-out meshes), or at the faces'
-    /// centroids and averaged to the vertices (`Faces`, Mertens' §3.2: 2-6x faster, 2.4-6 %
-    /// off on faces as wide as the diffusion length; docs/hierarchy.md).
+    /// centroids and averaged to the vertices (`Faces`, Mertens' §3.2: on-the-fly 258-301
+    /// against 377 ms at 130k triangles, 2.4-6 % off on faces as wide as the diffusion
+    /// length; docs/hierarchy.md).
     pub receivers: Receivers,
 }
 
@@ -127,8 +129,8 @@ pub struct HierarchyReport {
     pub seconds_push: f64,
     pub seconds_estimate: f64,
     pub seconds: f64,
-    /// Area-weighted relative RMS per channel between the faces' radiosity and the same
-    /// recomputed with ε/4 on `estimate_receivers` faces; None when `estimate_receivers` is 0
+    /// Area-weighted relative RMS per channel between the receivers' radiosity and the same
+    /// recomputed with ε/4 on `estimate_receivers` of them (vertices or faces); None when `estimate_receivers` is 0
     /// (no estimate computed, never a made-up zero). With the walks on, their noise added.
     pub error_estimate: Option<[f64; 3]>,
     /// The walks' term and the own light, when on (`HierarchySettings::terms`).

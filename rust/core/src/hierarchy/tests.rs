@@ -132,6 +132,13 @@ fn a_cancel_while_linking_drops_the_unfinished_links() {
     // The next evaluation refines from the root and answers as a fresh hierarchy does.
     let again = h.radiosity(&m).unwrap().values;
     assert!(h.report().relinked);
+    // Every vertex a receiver (the default): one vertex's links each, and no faces' links.
+    let kept = h.links().expect("render mode keeps its links");
+    assert_eq!(kept.len(), h.scene().mesh.vertex_count());
+    assert!(
+        h.slots.is_empty(),
+        "the faces' traversal ran with vertex receivers"
+    );
     let mut fresh = Hierarchy::new(sunlit(16), render()).unwrap();
     assert_eq!(again, fresh.radiosity(&m).unwrap().values);
 }
