@@ -105,9 +105,24 @@ pub struct NodeLinks {
     pub far: Vec<u32>,
     /// Their factors from the geometric moments (stored links only; `far::FarEmitters`).
     pub far_factors: Vec<[f32; 4]>,
-    /// Emitter faces integrated, with the form factor per channel of each of the face's four
-    /// midpoint sub-triangles (geometry and profile only; `sub_triangles`).
-    pub near: Vec<(u32, NearFactors)>,
+    /// Emitter faces integrated whole, with their form factor per channel (geometry and
+    /// profile only): faces that are not split, their light one sample.
+    pub near: Vec<(u32, [f32; 3])>,
+    /// Split faces integrated, with the form factor per channel of each of the face's four
+    /// midpoint sub-triangles (`sub_triangles`): 52 bytes a link where the others take 16.
+    pub near_split: Vec<(u32, NearFactors)>,
+}
+
+impl NodeLinks {
+    /// Near links, split faces' and the others'.
+    pub fn near_count(&self) -> usize {
+        self.near.len() + self.near_split.len()
+    }
+
+    /// The emitters of every near link.
+    pub fn near_emitters(&self) -> impl Iterator<Item = u32> + '_ {
+        (self.near.iter().map(|(e, _)| *e)).chain(self.near_split.iter().map(|(e, _)| *e))
+    }
 }
 
 /// What the traversal leaves at each node.
@@ -223,33 +238,39 @@ impl Context<'_> {
         }
     }
 
-    /// The form factors F(A_k, c_R) per channel over the face's sub-triangles A_k (Mertens
-    /// eq. 7, §4, on each quarter of the face).
-    pub fn form_factor(&self, r: u32, e: u32) -> NearFactors {
-        self.form_factor_at(self.tree.centroid[r as usize], e)
+    /// The near links of receiver `r` integrated again from its centroid (the profile or the
+    /// shape changed): the form factors F(A_k, c_R) per channel over the face, or over each of
+    /// its sub-triangles A_k where it is split (Mertens eq. 7, §4, on each quarter of the
+    /// face). A face whose split changed moves to its list.
+    pub fn refresh_near(&self, r: u32, links: &mut NodeLinks) {
+        let x = self.tree.centroid[r as usize];
+        let emitters: Vec<u32> = links.near_emitters().collect();
+        links.near.clear();
+        links.near_split.clear();
+        for e in emitters {
+            self.push_near(x, e, links);
+        }
     }
 
-    /// F(A_k, x) per channel and sub-triangle; a face that is not split has its whole F in
-    /// the first (its irradiance the same in all four).
-    fn form_factor_at(&self, x: DVec3, e: u32) -> NearFactors {
+    /// A near link from `x` to face cluster `e`: F(A, x) per channel for a face that is not
+    /// split (its light one sample), F(A_k, x) per sub-triangle for a split one.
+    fn push_near(&self, x: DVec3, e: u32, links: &mut NodeLinks) {
         let f = self.tree.face[e as usize] as usize;
         let face = &self.faces[f];
         if !self.split.get(f).copied().unwrap_or(false) {
             let whole = triangle_integral_rgb(x, face, self.rgb, &self.rule).map(|v| v as f32);
-            return [whole, [0.0; 3], [0.0; 3], [0.0; 3]];
+            links.near.push((e, whole));
+        } else {
+            let quarters = sub_triangles(face)
+                .map(|t| triangle_integral_rgb(x, &t, self.rgb, &self.rule).map(|v| v as f32));
+            links.near_split.push((e, quarters));
         }
-        sub_triangles(face)
-            .map(|t| triangle_integral_rgb(x, &t, self.rgb, &self.rule).map(|v| v as f32))
     }
 
-    /// Sum over the face's sub-triangles of F times the irradiance sampled there.
+    /// Sum over the split face's sub-triangles of F times the irradiance sampled there.
     #[inline]
-    pub fn near_contribution(&self, e: u32, f: &NearFactors) -> [f64; 3] {
-        let face = self.tree.face[e as usize] as usize;
-        let sub = &self.sub[face];
-        if !self.split[face] {
-            return std::array::from_fn(|c| f64::from(f[0][c]) * f64::from(sub[0][c]));
-        }
+    fn split_contribution(&self, e: u32, f: &NearFactors) -> [f64; 3] {
+        let sub = &self.sub[self.tree.face[e as usize] as usize];
         std::array::from_fn(|c| {
             (f.iter().zip(sub))
                 .map(|(f, e)| f64::from(f[c]) * f64::from(e[c]))
@@ -294,7 +315,7 @@ impl Context<'_> {
                 }
                 Verdict::Near => {
                     counts.near += 1;
-                    links.near.push((e, self.form_factor_at(at, e)));
+                    self.push_near(at, e, links);
                 }
                 Verdict::OpenEmitter => {
                     if let Some([a, b]) = self.tree.children[e as usize] {
@@ -346,8 +367,13 @@ impl Context<'_> {
 
     /// `b` plus the near links' form factors times their faces' irradiance.
     fn with_near(&self, mut b: [f64; 3], links: &NodeLinks) -> [f64; 3] {
+        // A face that is not split keeps its centroid's light in its first sub-sample.
         for (e, f) in &links.near {
-            let v = self.near_contribution(*e, f);
+            let i = &self.sub[self.tree.face[*e as usize] as usize][0];
+            (0..3).for_each(|c| b[c] += f64::from(f[c]) * f64::from(i[c]));
+        }
+        for (e, f) in &links.near_split {
+            let v = self.split_contribution(*e, f);
             (0..3).for_each(|c| b[c] += v[c]);
         }
         b
@@ -421,12 +447,7 @@ impl Context<'_> {
     /// §5.5 after Drettakis & Sillion 1997).
     fn promoted(&self, r: u32, old: &NodeLinks) -> Vec<u32> {
         let t = self.tree;
-        let mut emitters: Vec<u32> = old
-            .far
-            .iter()
-            .copied()
-            .chain(old.near.iter().map(|(e, _)| *e))
-            .collect();
+        let mut emitters: Vec<u32> = old.far.iter().copied().chain(old.near_emitters()).collect();
         emitters.sort_unstable();
         let mut out = Vec::with_capacity(emitters.len());
         let mut i = 0;

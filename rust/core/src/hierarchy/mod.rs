@@ -818,7 +818,7 @@ impl Hierarchy {
                         return ([0.0; 3], 0, 0);
                     }
                     let l = ctx.links_at(positions[v as usize].as_dvec3());
-                    (ctx.gather_at(&l), l.far.len() as u64, l.near.len() as u64)
+                    (ctx.gather_at(&l), l.far.len() as u64, l.near_count() as u64)
                 })
                 .collect();
             if ticker.stopped() {
@@ -849,7 +849,7 @@ impl Hierarchy {
         let links = if fresh { &relinked } else { &self.rim_links };
         // The vertices' own links count with the faces'.
         report.far_links += links.iter().map(|l| l.far.len() as u64).sum::<u64>();
-        report.near_links += links.iter().map(|l| l.near.len() as u64).sum::<u64>();
+        report.near_links += links.iter().map(|l| l.near_count() as u64).sum::<u64>();
         let at_rim: Vec<[f64; 3]> = links.par_iter().map(|l| ctx.gather_at(l)).collect();
         if fresh {
             report.relinked |= every;
@@ -951,9 +951,7 @@ impl Hierarchy {
             let ctx = self.context(lookup, rgb, false, 1.0);
             if material_changed || geometry_changed {
                 slots.par_iter_mut().enumerate().for_each(|(r, s)| {
-                    for (e, f) in s.links.near.iter_mut() {
-                        *f = ctx.form_factor(r as u32, *e);
-                    }
+                    ctx.refresh_near(r as u32, &mut s.links);
                     s.links.far_factors = ctx.far_factors(r as u32, &s.links.far);
                 });
             }
@@ -973,7 +971,7 @@ impl Hierarchy {
             let mut c = LinkCounts::default();
             for s in &slots {
                 c.far += s.links.far.len() as u64;
-                c.near += s.links.near.len() as u64;
+                c.near += s.links.near_count() as u64;
             }
             counts = c;
             self.slots = slots;
