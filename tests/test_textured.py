@@ -41,3 +41,40 @@ def test_base_colour_arguments_are_checked(prt):
         prt.radiance(_inputs(), base_color=np.full((n, 2), 0.5))
     with pytest.raises(ValueError, match="Material.from_principled"):
         prt.radiance(translucent.Material.preset("marble"), base_color=np.full((n, 3), 0.5))
+
+
+def _weighted(base_color=0.75, weight=1.0):
+    return translucent.Material.from_principled(base_color, (1.0, 0.5, 0.25), 0.002, subsurface_weight=weight)
+
+
+def test_one_subsurface_weight_per_vertex_is_the_uniform_material_of_that_weight(prt):
+    # The uniform material holds its diffuse lobe as the profile's point mass (Cycles' walk
+    # table), an independent route; per vertex the lobes are split at each vertex instead.
+    n = len(prt.radiance(_inputs()))
+    for w in (0.0, 0.4, 0.9):
+        uniform = prt.radiance(_weighted(0.75, w))
+        per_vertex = prt.radiance(_weighted(0.75, 0.2), subsurface_weight=np.full(n, w))
+        np.testing.assert_allclose(per_vertex, uniform, rtol=2e-3, atol=1e-9)
+    # Weight 0 is the diffuse lobe alone, w = 1 the medium alone: in between, per vertex, a
+    # vertex's radiosity is the blend of the two at its own weight.
+    w = np.linspace(0.0, 1.0, n)
+    diffuse = prt.radiosity(_weighted(0.75), subsurface_weight=np.zeros(n))
+    medium = prt.radiosity(_weighted(0.75), subsurface_weight=np.ones(n))
+    mixed = prt.radiosity(_weighted(0.75), subsurface_weight=w)
+    np.testing.assert_allclose(mixed, w[:, None] * medium + (1 - w[:, None]) * diffuse, rtol=1e-4, atol=1e-9)
+    assert np.abs(medium - diffuse).max() > 0.05 * np.abs(diffuse).max(), "the two lobes must differ here"
+
+
+def test_subsurface_weight_arguments_are_checked(prt):
+    n = len(prt.radiance(_inputs()))
+    with pytest.raises(ValueError, match="subsurface_weight has 3 values"):
+        prt.radiance(_inputs(), subsurface_weight=np.full(3, 0.5))
+    with pytest.raises(ValueError, match=r"subsurface_weight of vertex 1 is 1.5: must lie in \[0, 1\]"):
+        prt.radiance(_inputs(), subsurface_weight=np.array([0.5, 1.5] + [0.5] * (n - 2)))
+    with pytest.raises(ValueError, match="subsurface_weight must be a 1-D"):
+        prt.radiance(_inputs(), subsurface_weight=np.full((n, 2), 0.5))
+    with pytest.raises(ValueError, match="subsurface_weight per vertex needs a material made by"):
+        prt.radiance(translucent.Material.preset("marble"), subsurface_weight=np.full(n, 0.5))
+    # Both at once: a Base Color and a weight per vertex.
+    both = prt.radiance(_inputs(), base_color=np.full((n, 3), 0.5), subsurface_weight=np.full(n, 0.5))
+    assert np.isfinite(both).all() and both.shape == (n, 3)

@@ -59,7 +59,7 @@ pub fn rgb(name: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
     })
 }
 
-use numpy::{PyArray2, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use translucent_core::Vec3;
 
 fn as_contiguous<'py>(value: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<'py, PyAny>> {
@@ -98,6 +98,17 @@ pub fn float_rows(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]
     Ok(s.chunks_exact(3)
         .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
         .collect())
+}
+
+/// A 1-D float array as f32 values (read in double precision, as `float_rows`); the range is
+/// the core's to check.
+pub fn float_values(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<f32>> {
+    let arr = as_contiguous(value, "float64")
+        .map_err(|e| PyValueError::new_err(format!("{name} must be an (N,) float array: {e}")))?;
+    let arr: PyReadonlyArray1<f64> = arr
+        .extract()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be a 1-D (N,) float array")))?;
+    Ok(arr.as_slice()?.iter().map(|&v| v as f32).collect())
 }
 
 /// An (N, 3) float array as Vec3.

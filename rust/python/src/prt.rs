@@ -460,7 +460,10 @@ impl PyPrt {
     /// `base_color`: an (N, 3) array of the Principled Base Color per vertex (linear RGB,
     /// saturated to [0, 1] as Cycles does) for a material made by `Material.from_principled`:
     /// each vertex scatters as its own Base Color's medium (a texture, a colour attribute).
-    #[pyo3(signature = (material, interreflection = true, walks = true, base_color = None))]
+    /// `subsurface_weight`: an (N,) array of the Principled Subsurface Weight per vertex in
+    /// [0, 1] (Cycles' profile only): w of the subsurface lobe and 1 - w of the diffuse one,
+    /// both of the vertex's Base Color (the material's own where `base_color` is not given).
+    #[pyo3(signature = (material, interreflection = true, walks = true, base_color = None, subsurface_weight = None))]
     fn radiosity<'py>(
         &self,
         py: Python<'py>,
@@ -468,15 +471,21 @@ impl PyPrt {
         interreflection: bool,
         walks: bool,
         base_color: Option<&Bound<'_, PyAny>>,
+        subsurface_weight: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let varying = per_vertex_colour(&material, base_color)?;
+        let n = self.vertex_count()?;
+        let varying = per_vertex_inputs(&material, base_color, subsurface_weight, n)?;
         let e = run(py, None, |_| {
             let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
             match &varying {
-                Some((inputs, colours)) => {
-                    inner.radiosity_textured(inputs, colours, interreflection, walks)
-                }
+                Some((inputs, colours, weights)) => inner.radiosity_textured(
+                    inputs,
+                    colours,
+                    weights.as_deref(),
+                    interreflection,
+                    walks,
+                ),
                 None => inner.radiosity_parts(&m, interreflection, walks),
             }
         })?;
@@ -493,7 +502,7 @@ impl PyPrt {
     /// `phase` "hg" (exact Henyey–Greenstein per light group) or "eddington" (Xu eq. 11).
     /// `base_color` as `radiosity` (multiple scattering then: single scattering is not
     /// added with a Base Color per vertex yet, and `skipped` says so).
-    #[pyo3(signature = (material, eye = None, phase = "hg", base_color = None))]
+    #[pyo3(signature = (material, eye = None, phase = "hg", base_color = None, subsurface_weight = None))]
     fn radiance<'py>(
         &self,
         py: Python<'py>,
@@ -501,16 +510,18 @@ impl PyPrt {
         eye: Option<&Bound<'_, PyAny>>,
         phase: &str,
         base_color: Option<&Bound<'_, PyAny>>,
+        subsurface_weight: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
         let phase = Phase::parse(phase).map_err(to_py)?;
-        let varying = per_vertex_colour(&material, base_color)?;
+        let n = self.vertex_count()?;
+        let varying = per_vertex_inputs(&material, base_color, subsurface_weight, n)?;
         let (e, l1) = run(py, None, |_| {
             let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
             match &varying {
-                Some((inputs, colours)) => inner
-                    .radiance_textured(inputs, colours, eye)
+                Some((inputs, colours, weights)) => inner
+                    .radiance_textured(inputs, colours, weights.as_deref(), eye)
                     .map(|e| (e, None)),
                 None => inner.radiance_with(&m, eye, phase),
             }
@@ -879,22 +890,41 @@ impl PyPrt {
     }
 }
 
-/// The Principled inputs and the per-vertex Base Color of a `base_color=` argument, or None
-/// without one. A material not made by `Material.from_principled` has no Base Color to vary.
-fn per_vertex_colour(
+/// Principled inputs with the Base Color per vertex, and the Subsurface Weight per vertex
+/// where given.
+type PerVertex = (PrincipledInputs, Vec<[f32; 3]>, Option<Vec<f32>>);
+
+/// The Principled inputs and the per-vertex Base Color (`base_color=`, else the material's own
+/// at each of the `n` vertices) and Subsurface Weight (`subsurface_weight=`), or None with
+/// neither. A material not made by `Material.from_principled` has no inputs to vary.
+fn per_vertex_inputs(
     material: &PyMaterial,
     base_color: Option<&Bound<'_, PyAny>>,
-) -> PyResult<Option<(PrincipledInputs, Vec<[f32; 3]>)>> {
-    let Some(b) = base_color else {
+    subsurface_weight: Option<&Bound<'_, PyAny>>,
+    n: usize,
+) -> PyResult<Option<PerVertex>> {
+    if base_color.is_none() && subsurface_weight.is_none() {
         return Ok(None);
+    }
+    let name = if base_color.is_some() {
+        "base_color"
+    } else {
+        "subsurface_weight"
     };
     let inputs = material.principled.ok_or_else(|| {
-        PyValueError::new_err(
-            "base_color per vertex needs a material made by Material.from_principled \
-             (the Base Color is a Principled BSDF input)",
-        )
+        PyValueError::new_err(format!(
+            "{name} per vertex needs a material made by Material.from_principled \
+             (it is a Principled BSDF input)"
+        ))
     })?;
-    Ok(Some((inputs, crate::convert::float_rows("base_color", b)?)))
+    let colours = match base_color {
+        Some(b) => crate::convert::float_rows("base_color", b)?,
+        None => vec![inputs.base_color.map(|x| x as f32); n],
+    };
+    let weights = subsurface_weight
+        .map(|w| crate::convert::float_values("subsurface_weight", w))
+        .transpose()?;
+    Ok(Some((inputs, colours, weights)))
 }
 
 /// What `update` returns: its seconds per stage, rays and walks traced.

@@ -29,7 +29,7 @@ use crate::error::{Error, Result};
 use crate::evaluation::{radiance_from_radiosity_each, Quantity, Skipped};
 use crate::optics::principled::PrincipledInputs;
 use crate::optics::Material;
-use crate::profiles::Resolved;
+use crate::profiles::{ProfileKind, Resolved};
 use crate::walks::lengths_and_albedos;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -109,6 +109,23 @@ fn blend(per_node: &[[f64; 3]], p: &NodePick, c: usize) -> f64 {
     } else {
         below
     }
+}
+
+/// The Subsurface Weight per vertex checked: one value in [0, 1] per vertex.
+fn check_weights(weights: &[f32], vertices: usize) -> Result<()> {
+    if weights.len() != vertices {
+        return Err(Error::InvalidArgument(format!(
+            "subsurface_weight has {} values, the transport {vertices} vertices",
+            weights.len()
+        )));
+    }
+    if let Some(v) = (weights.iter()).position(|w| !(w.is_finite() && (0.0..=1.0).contains(w))) {
+        return Err(Error::InvalidArgument(format!(
+            "subsurface_weight of vertex {v} is {}: must lie in [0, 1]",
+            weights[v]
+        )));
+    }
+    Ok(())
 }
 
 /// The Base Color per vertex checked: one finite triple per vertex.
@@ -316,18 +333,27 @@ impl Prt {
     }
 
     /// Multiple-scattering radiosity with the Base Color per vertex (`colors`, linear RGB;
-    /// Cycles saturates it to [0, 1]) and the rest of the Principled inputs uniform
-    /// (`inputs.base_color` is not read). `bounce` and `walks` as `radiosity_parts`. The
-    /// estimate adds the interpolation error between the table's nodes; single scattering and
-    /// a GPU copy are not read (the dot product runs on the CPU).
+    /// Cycles saturates it to [0, 1]) and optionally the Subsurface Weight per vertex
+    /// (`weights`, in [0, 1]; Cycles' profile only), the rest of the Principled inputs
+    /// uniform (`inputs.base_color`, and `inputs.subsurface_weight` where `weights` is given,
+    /// are not read). `bounce` and `walks` as `radiosity_parts`. The estimate adds the
+    /// interpolation error between the table's nodes; single scattering and a GPU copy are not
+    /// read (the dot product runs on the CPU).
+    ///
+    /// The weight splits the Principled BSDF's lobes under its layers (Cycles'
+    /// `principled::lobe_weights`): subsurface w and diffuse (1 - w), both times the Base
+    /// Color. Each part is linear in w, so the table is fitted at w = 1 and each vertex takes
+    /// w of that medium's answer (the transport, the walks, the own light it receives) and
+    /// (1 - w) of the diffuse lobe's, its Base Color times its irradiance plus the own light.
     pub fn radiosity_textured(
         &self,
         inputs: &PrincipledInputs,
         colors: &[[f32; 3]],
+        weights: Option<&[f32]>,
         bounce: bool,
         walks: bool,
     ) -> Result<Evaluation> {
-        self.textured(inputs, colors, bounce, walks).map(|(e, _)| e)
+        (self.textured(inputs, colors, weights, bounce, walks)).map(|(e, _)| e)
     }
 
     /// `radiosity_textured` and the table it read.
@@ -335,11 +361,32 @@ impl Prt {
         &self,
         inputs: &PrincipledInputs,
         colors: &[[f32; 3]],
+        weights: Option<&[f32]>,
         bounce: bool,
         walks: bool,
     ) -> Result<(Evaluation, Table)> {
         let t0 = Instant::now();
         check_colors(colors, self.positions.len())?;
+        if let Some(w) = weights {
+            if self.profile != ProfileKind::Cycles {
+                return Err(Error::InvalidArgument(
+                    "subsurface_weight per vertex splits the Principled lobes: Cycles' profile \
+                     only (the dipole has no lobes)"
+                        .into(),
+                ));
+            }
+            check_weights(w, self.positions.len())?;
+        }
+        // With a weight per vertex the media are fitted whole (w = 1), their diffuse part apart.
+        let fitted = PrincipledInputs {
+            subsurface_weight: if weights.is_some() {
+                1.0
+            } else {
+                inputs.subsurface_weight
+            },
+            ..*inputs
+        };
+        let inputs = &fitted;
         let table = self.table(inputs, colors)?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
@@ -349,6 +396,21 @@ impl Prt {
             .map(|n| n.as_ref().map(|n| n.coefficients.vectors.clone()))
             .collect();
         let mut radiosity = self.transport.dot_interpolated(&vectors, &table.picks);
+        // The lobes' split per vertex: the subsurface share w, and the diffuse lobe's albedo
+        // (1 - w) x below x Base Color (saturated), below = (1 - Metallic)(1 - Transmission).
+        let below = (1.0 - inputs.metallic) * (1.0 - inputs.transmission);
+        let share = |v: usize| weights.map_or(1.0, |w| f64::from(w[v]));
+        let diffuse =
+            |v: usize, c: usize| (1.0 - share(v)) * below * f64::from(colors[v][c]).clamp(0.0, 1.0);
+        if let Some(w) = weights {
+            (radiosity.par_iter_mut().enumerate()).for_each(|(v, b)| {
+                let i = self.vertex_irradiance[v];
+                for c in 0..3 {
+                    let d = diffuse(v, c) * f64::from(i[c]);
+                    b[c] = (f64::from(w[v]) * f64::from(b[c]) + d) as f32;
+                }
+            });
+        }
         // Per node, the quantities a vertex blends as it blends the coefficients.
         let per_node = |f: &dyn Fn(&Node) -> [f64; 3]| -> Vec<[f64; 3]> {
             table
@@ -379,10 +441,12 @@ impl Prt {
             table
                 .picks
                 .par_iter()
-                .map(|p| {
+                .enumerate()
+                .map(|(v, p)| {
                     let x: [f64; 3] = std::array::from_fn(|c| blend(&ln_lengths, p, c));
-                    let k: [f32; 3] =
-                        std::array::from_fn(|c| (blend(&walk_albedos, p, c) * factor[c]) as f32);
+                    let k: [f32; 3] = std::array::from_fn(|c| {
+                        (share(v) * blend(&walk_albedos, p, c) * factor[c]) as f32
+                    });
                     (x, k)
                 })
                 .unzip()
@@ -400,11 +464,16 @@ impl Prt {
             // representative's: the indirect light's scale.
             let n = table.picks.len().max(1) as f64;
             let sent_per_node = per_node(&|n| n.sent);
+            let (totals, along) = (per_node(&|n| n.totals), per_node(&|n| n.along_normal));
+            // A vertex of weight w sends w of its medium's and (1 - w) of its diffuse lobe's:
+            // the same exit weight and specular layer, the lobe's albedo for the medium's total.
             let sent: [f64; 3] = std::array::from_fn(|c| {
-                table
-                    .picks
-                    .par_iter()
-                    .map(|p| blend(&sent_per_node, p, c))
+                (table.picks.par_iter().enumerate())
+                    .map(|(v, p)| {
+                        let whole = blend(&sent_per_node, p, c);
+                        let lobe = (1.0 - share(v)) * blend(&totals, p, c) - diffuse(v, c);
+                        whole - blend(&along, p, c) * lobe
+                    })
                     .sum::<f64>()
                     / n
             });
@@ -415,13 +484,13 @@ impl Prt {
                     0.0
                 }
             });
-            let totals = per_node(&|n| n.totals);
             radiosity
                 .par_iter_mut()
                 .zip(table.picks.par_iter().zip(own.irradiance.par_iter()))
-                .for_each(|(b, (p, e))| {
+                .enumerate()
+                .for_each(|(v, (b, (p, e)))| {
                     for c in 0..3 {
-                        let receiving = blend(&totals, p, c);
+                        let receiving = share(v) * blend(&totals, p, c) + diffuse(v, c);
                         b[c] += (receiving * ratio[c] * f64::from(e[c])) as f32;
                     }
                 });
@@ -472,10 +541,11 @@ impl Prt {
         &self,
         inputs: &PrincipledInputs,
         colors: &[[f32; 3]],
+        weights: Option<&[f32]>,
         eye: Option<Vec3>,
     ) -> Result<Evaluation> {
         crate::evaluation::check_eye(eye)?;
-        let (mut e, table) = self.textured(inputs, colors, true, true)?;
+        let (mut e, table) = self.textured(inputs, colors, weights, true, true)?;
         let t = Instant::now();
         // Along the normals (no eye) each node's weights once; toward an eye, per vertex the
         // shared exit weight and each channel's view factor at its two nodes.
@@ -538,6 +608,7 @@ mod tests {
     use crate::irradiance::Density;
     use crate::mesh::test_meshes::oracles::rd_total;
     use crate::mesh::test_meshes::plane;
+    use crate::mesh::Mesh;
     use crate::optics::fresnel_transmittance;
     use crate::prt::PrtSettings;
 
@@ -615,7 +686,7 @@ mod tests {
             .map(|_| [0.05 + 0.8 * next(), 0.85 * next(), 0.3 + 0.55 * next()])
             .collect();
         let got = prt
-            .radiosity_textured(&inputs(), &colors, true, true)
+            .radiosity_textured(&inputs(), &colors, None, true, true)
             .unwrap();
         let estimate = got.error_estimate.unwrap();
         let mut expected = vec![[0.0f64; 3]; colors.len()];
@@ -660,6 +731,135 @@ mod tests {
         }
     }
 
+    /// A uniformly lit plane under Cycles' profile, `inputs` with Base Colour 0.75 (a node:
+    /// no interpolation between media), precomputed for the whole medium (weight 1).
+    fn cycles_plane() -> (Mesh, Prt, PrincipledInputs) {
+        let mesh = plane(61, 200.0);
+        let light = |p: &[Vec3], _: &[Vec3], _: Density| Ok(vec![[1.0f32; 3]; p.len()]);
+        let at = PrincipledInputs {
+            base_color: [0.75; 3],
+            ..inputs()
+        };
+        let settings = PrtSettings {
+            eta: 1.0, // Cycles' irradiance: the specular layer takes the Fresnel part
+            profile: ProfileKind::Cycles,
+            ..Default::default()
+        };
+        let m = Material::from_principled(&at).unwrap();
+        let prt = Prt::precompute(&mesh, &[m], &settings, &light, None).unwrap();
+        (mesh, prt, at)
+    }
+
+    #[test]
+    fn a_subsurface_weight_per_vertex_splits_each_vertex_between_its_lobes() {
+        // Under uniform irradiance E = 1 on a large plane, B at a vertex of weight w is
+        // w T + (1 - w) a: T the whole medium's total (its profile's integral, from the walk
+        // table, not from the transport) and a the diffuse lobe's albedo, the Base Colour
+        // (Metallic and Transmission 0). Weights drawn at random per vertex.
+        let (mesh, prt, at) = cycles_plane();
+        let whole = Material::from_principled(&at).unwrap();
+        let total = Resolved::new(ProfileKind::Cycles, &whole).unwrap().totals();
+        let n = mesh.vertex_count();
+        let mut seed = 11u64;
+        let weights: Vec<f32> = (0..n)
+            .map(|_| {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((seed >> 40) as f32) / (1u64 << 24) as f32
+            })
+            .collect();
+        let colors = vec![[0.75f32; 3]; n];
+        let got = prt
+            .radiosity_textured(&at, &colors, Some(&weights), true, true)
+            .unwrap();
+        let support = prt.report().support_radius;
+        let inner = |p: &Vec3| (p.x.abs().max(p.y.abs()) as f64) < 100.0 - support;
+        let mut worst = 0.0f64;
+        let mut checked = 0;
+        for (v, p) in mesh.positions().iter().enumerate() {
+            if !inner(p) {
+                continue;
+            }
+            checked += 1;
+            let w = f64::from(weights[v]);
+            for c in 0..3 {
+                let expect = w * total[c] + (1.0 - w) * 0.75;
+                let rel = (f64::from(got.values[v][c]) - expect).abs() / expect;
+                worst = worst.max(rel);
+            }
+        }
+        assert!(checked > 100, "{checked} vertices inside the rim");
+        assert!(worst < 0.02, "worst vertex {:.2} %", 100.0 * worst);
+        // Weight 0 everywhere is the diffuse lobe alone: the Base Colour times E, exactly.
+        let zero = prt
+            .radiosity_textured(&at, &colors, Some(&vec![0.0; n]), true, true)
+            .unwrap();
+        assert!(zero
+            .values
+            .iter()
+            .flatten()
+            .all(|b| (b - 0.75).abs() < 1e-6));
+    }
+
+    #[test]
+    fn one_weight_at_every_vertex_is_the_uniform_material_of_that_weight() {
+        // The uniform material carries its diffuse lobe as the profile's point mass (the walk
+        // table's, `profiles::table`), an independent route to the same answer.
+        let (mesh, prt, at) = cycles_plane();
+        let n = mesh.vertex_count();
+        let colors = vec![[0.75f32; 3]; n];
+        for w in [0.0f64, 0.35, 0.8] {
+            let uniform = Material::from_principled(&PrincipledInputs {
+                subsurface_weight: w,
+                ..at
+            })
+            .unwrap();
+            let expect = prt.radiosity(&uniform).unwrap().values;
+            let got = prt
+                .radiosity_textured(&at, &colors, Some(&vec![w as f32; n]), true, true)
+                .unwrap()
+                .values;
+            for (a, b) in expect.iter().zip(&got) {
+                for c in 0..3 {
+                    assert!(
+                        (a[c] - b[c]).abs() <= 2e-3 * a[c].abs().max(1e-6),
+                        "w {w}: {a:?} {b:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_subsurface_weights_are_errors_that_name_the_argument() {
+        let (mesh, prt, at) = cycles_plane();
+        let n = mesh.vertex_count();
+        let colors = vec![[0.75f32; 3]; n];
+        for (weights, says) in [
+            (vec![0.5f32; n - 1], "values"),
+            (vec![1.5f32; n], "[0, 1]"),
+            (vec![-0.1f32; n], "[0, 1]"),
+            (vec![f32::NAN; n], "[0, 1]"),
+        ] {
+            let got = prt.radiosity_textured(&at, &colors, Some(&weights), true, true);
+            let Err(Error::InvalidArgument(m)) = got else {
+                panic!("accepted {:?}", &weights[..1]);
+            };
+            assert!(m.contains("subsurface_weight") && m.contains(says), "{m}");
+        }
+        // The dipole has no lobes to split.
+        let light = |p: &[Vec3], _: &[Vec3], _: Density| Ok(vec![[1.0f32; 3]; p.len()]);
+        let m = Material::from_principled(&at).unwrap();
+        let settings = PrtSettings {
+            eta: 1.5,
+            ..Default::default()
+        };
+        let dipole = Prt::precompute(&mesh, &[m], &settings, &light, None).unwrap();
+        let got = dipole.radiosity_textured(&at, &colors, Some(&vec![0.5; n]), true, true);
+        assert!(matches!(got, Err(Error::InvalidArgument(m)) if m.contains("Cycles")));
+    }
+
     #[test]
     fn a_uniform_base_colour_on_a_node_is_the_uniform_edit() {
         // Base Colour 0.75 in every channel lies on a node (12/16): the table reads that node
@@ -679,7 +879,7 @@ mod tests {
         let uniform = prt.radiosity(&m).unwrap().values;
         let colors = vec![[0.75f32; 3]; mesh.vertex_count()];
         let textured = prt
-            .radiosity_textured(&inputs(), &colors, true, true)
+            .radiosity_textured(&inputs(), &colors, None, true, true)
             .unwrap();
         for (a, b) in uniform.iter().zip(&textured.values) {
             for c in 0..3 {
@@ -703,23 +903,23 @@ mod tests {
         let prt = Prt::precompute(&mesh, &[m], &settings, &light, None).unwrap();
         let short = vec![[0.5f32; 3]; 3];
         let e = prt
-            .radiosity_textured(&inputs(), &short, true, true)
+            .radiosity_textured(&inputs(), &short, None, true, true)
             .unwrap_err();
         assert!(e.to_string().contains("base_color has 3 rows"), "{e}");
         let mut nan = vec![[0.5f32; 3]; mesh.vertex_count()];
         nan[4][1] = f32::NAN;
         let e = prt
-            .radiosity_textured(&inputs(), &nan, true, true)
+            .radiosity_textured(&inputs(), &nan, None, true, true)
             .unwrap_err();
         assert!(e.to_string().contains("base_color of vertex 4"), "{e}");
         // Beyond [0, 1] Cycles saturates: 1.7 is 1, -0.2 is 0.
         let over = vec![[1.7f32, -0.2, 1.0]; mesh.vertex_count()];
         let clamped = vec![[1.0f32, 0.0, 1.0]; mesh.vertex_count()];
         let a = prt
-            .radiosity_textured(&inputs(), &over, true, true)
+            .radiosity_textured(&inputs(), &over, None, true, true)
             .unwrap();
         let b = prt
-            .radiosity_textured(&inputs(), &clamped, true, true)
+            .radiosity_textured(&inputs(), &clamped, None, true, true)
             .unwrap();
         assert_eq!(a.values, b.values);
     }

@@ -277,6 +277,7 @@ class Prt:
         interreflection: bool = True,
         walks: bool = True,
         base_color: npt.ArrayLike | None = None,
+        subsurface_weight: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiosity B per vertex: the profile summed over the lit surface (with the
         object's own light where it was precomputed, unless `interreflection` is False, and
@@ -284,21 +285,25 @@ class Prt:
         profile alone, what `reference_radiosity` integrates).
         `base_color`: (N, 3) Principled Base Color per vertex (linear RGB, saturated to [0, 1]
         as Cycles does) for a `Material.from_principled` material: each vertex scatters as its
-        own Base Color's medium; the estimate adds the table's interpolation error."""
+        own Base Color's medium; the estimate adds the table's interpolation error.
+        `subsurface_weight`: (N,) Principled Subsurface Weight per vertex in [0, 1] (Cycles'
+        profile only; the material's own Base Color where `base_color` is not given): w of the
+        subsurface lobe and 1 - w of the diffuse lobe beside it, as Cycles splits them."""
     def radiance(
         self,
         material: Material,
         eye: Vec3 | None = None,
         phase: Literal["hg", "eddington"] = "hg",
         base_color: npt.ArrayLike | None = None,
+        subsurface_weight: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiance toward the point `eye`, W(w_o) V(w_o) B / pi (W: F_t for the dipole, what
         the specular layer leaves for Cycles; V: Cycles' view factor, see `Material.slab_reflectance`,
         1 for the dipole); without an eye, along each vertex normal (a bake).
         With single scattering (report["single_scattering"]) plus L^(1) toward the eye, with
         the Henyey-Greenstein ("hg") or Eddington (Xu eq. 11) phase function.
-        `base_color` as `radiosity` (multiple scattering alone then; `last_eval["skipped"]`
-        says so)."""
+        `base_color` and `subsurface_weight` as `radiosity` (multiple scattering alone then;
+        `last_eval["skipped"]` says so)."""
     def single_radiance(
         self,
         material: Material,
