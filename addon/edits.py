@@ -86,8 +86,10 @@ def _splatted(material: bpy.types.Material, s: Session):
 
 
 def _take_texture(session: Session, job: jobs.Job) -> None:
-    """The Base Color the job read per vertex (`jobs.start`), kept with the session."""
+    """The Base Color and Subsurface Weight the job read per vertex (`jobs.start`), kept with
+    the session."""
     session.base_color = getattr(job, "base_color", None)
+    session.subsurface_weight = getattr(job, "subsurface_weight", None)
     session.texture_key = getattr(job, "texture_key", "")
     session.texture_message = getattr(job, "texture_message", "")
 
@@ -97,11 +99,12 @@ def follow_texture(material: bpy.types.Material, s: Session, force: bool = False
     or `force`: an image it reads was edited), when a link now drives it, or drop it when none
     does. PRT only (the hierarchy says it shows the socket's value)."""
     followed = (s.method == "prt" and material.translucent.source == "PRINCIPLED"
-                and textures.linked_base_color(material))
-    if followed and not force and s.base_color is not None and textures.tree_key(material) == s.texture_key:
+                and textures.linked_any(material))
+    if followed and not force and s.texture_key and textures.tree_key(material) == s.texture_key:
         return
     texture = textures.read(material, s.info, s.method)
     s.base_color, s.texture_key, s.texture_message = texture.colours, texture.key, texture.message
+    s.subsurface_weight = texture.weights
 
 
 FIRST_PREVIEW_MESSAGE = "first preview after {:.2f} s (no walks yet): refining with the walks"
@@ -190,7 +193,9 @@ def edit(material: bpy.types.Material) -> None:
     # Radiance leaving along each normal (a view-independent viewport colour), or toward the
     # viewport's eye where single scattering makes it depend on the view.
     # A Base Color read per vertex (`follow_texture`): each vertex scatters as its own medium.
-    textured = {"base_color": s.base_color} if s.base_color is not None and s.method == "prt" else {}
+    textured = {}
+    if s.method == "prt":
+        textured = textures.Reading(colours=s.base_color, weights=s.subsurface_weight).kwargs()
     if s.method == "splat":
         colors = _splatted(material, s)
         if colors is None:
@@ -303,7 +308,7 @@ def follow_principled(_scene=None, depsgraph=None) -> None:
         mat = bpy.data.materials.get(name)
         if mat is None or not mat.translucent.enabled or mat.translucent.source != "PRINCIPLED":
             continue
-        images = textures.images_of(mat) if s.base_color is not None else set()
+        images = textures.images_of(mat) if s.texture_key else set()
         painted = bool(images) and any(isinstance(u.id.original, bpy.types.Image) and u.id.original.name in images
                                        for u in getattr(depsgraph, "updates", ()))
         if painted:
@@ -314,9 +319,10 @@ def follow_principled(_scene=None, depsgraph=None) -> None:
 
 
 def _texture_changed(mat: bpy.types.Material, s: Session) -> bool:
-    """A link now drives the Base Color, or no longer does, or what drives it changed."""
-    linked = textures.linked_base_color(mat)
-    return linked != (s.base_color is not None) or (linked and textures.tree_key(mat) != s.texture_key)
+    """A link now drives the Base Color or the Subsurface Weight, or no longer does, or what
+    drives them changed."""
+    linked = textures.linked_any(mat)
+    return linked != bool(s.texture_key) or (linked and textures.tree_key(mat) != s.texture_key)
 
 
 def refresh(material: bpy.types.Material) -> None:

@@ -139,10 +139,12 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
                 connected = principled.connected_inputs(mat)
                 sess = SESSIONS.get(mat.name)
                 if sess is not None and sess.texture_message:
-                    followed = sess.base_color is not None
+                    followed = sess.base_color is not None or sess.subsurface_weight is not None
                     col.label(text=sess.texture_message, icon="TEXTURE" if followed else "ERROR")
-                    if followed:
+                    if sess.base_color is not None:
                         connected = [c for c in connected if not c.startswith("Base Color (")]
+                    if sess.subsurface_weight is not None:
+                        connected = [c for c in connected if not c.startswith("Subsurface Weight (")]
                 if connected:
                     col.label(text=f"Connected, not followed: {', '.join(connected)}; the socket's own value is "
                                    "used everywhere", icon="ERROR")

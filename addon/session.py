@@ -60,6 +60,8 @@ class Session:
     # The Base Color per exported vertex where a link drives it (`textures`), None where it is
     # uniform; the node tree's key it was baked for; and the panel's line about it.
     base_color: object = None
+    # The Subsurface Weight per exported vertex where a link drives it (Cycles' profile), else None.
+    subsurface_weight: object = None
     texture_key: str = ""
     texture_message: str = ""
     # Method = Splatting (nothing precomputed: each evaluation splats again, on a worker

@@ -1,6 +1,6 @@
-"""A Base Color driven by a link (an image texture through any UV map, a colour attribute, a
-procedural, a mix of them): Blender evaluates it, per vertex, by a Cycles emission bake on
-temporary copies (issue 30, point 2); the add-on re-implements no node.
+"""A Base Color or a Subsurface Weight driven by a link (an image texture through any UV map, a
+colour attribute, a procedural, a mix of them): Blender evaluates it, per vertex, by a Cycles
+emission bake on temporary copies (issue 30, point 2); the add-on re-implements no node.
 
 The copies: the material (its Base Color's link routed into an Emission shader, the only
 output), each object's evaluated mesh (UV maps and colour attributes kept, every face on that
@@ -26,19 +26,34 @@ BAKE_SCENE = "Translucent Base Color bake"
 BAKING = False
 
 
+# The Principled inputs read per vertex where a link drives them (PRT).
+FOLLOWED = ("Base Color", "Subsurface Weight")
+
+
+def linked(mat: bpy.types.Material, socket: str) -> bool:
+    """Whether a link drives the material's Principled input `socket`."""
+    node = principled_node(mat)
+    return node is not None and socket in node.inputs and node.inputs[socket].is_linked
+
+
 def linked_base_color(mat: bpy.types.Material) -> bool:
     """Whether a link drives the material's Principled Base Color."""
-    node = principled_node(mat)
-    return node is not None and node.inputs["Base Color"].is_linked
+    return linked(mat, "Base Color")
+
+
+def linked_any(mat: bpy.types.Material) -> bool:
+    """Whether a link drives any input read per vertex (`FOLLOWED`)."""
+    return any(linked(mat, s) for s in FOLLOWED)
 
 
 def _upstream(mat: bpy.types.Material) -> list:
-    """The nodes the Base Color's link reads from, directly or through other nodes (groups'
+    """The nodes the followed inputs' links read from, directly or through other nodes (groups'
     insides are in their own trees: a group node counts by its inputs and its tree's name)."""
     node = principled_node(mat)
-    if node is None or not node.inputs["Base Color"].is_linked:
+    if node is None:
         return []
-    seen, stack = {}, [node.inputs["Base Color"].links[0].from_node]
+    seen = {}
+    stack = [node.inputs[s].links[0].from_node for s in FOLLOWED if linked(mat, s)]
     while stack:
         n = stack.pop()
         if n.name in seen:
@@ -82,37 +97,48 @@ def tree_key(mat: bpy.types.Material) -> str:
     return hashlib.blake2b(repr(parts).encode(), digest_size=16).hexdigest()
 
 
-def _emission_copy(mat: bpy.types.Material) -> bpy.types.Material:
+def _emission_copy(mat: bpy.types.Material, socket: str = "Base Color") -> bpy.types.Material:
     """A copy of `mat` whose only output is an Emission of strength 1 fed by what drives its
-    Base Color: the bake's emission pass is then the Base Color itself (linear)."""
+    input `socket`: the bake's emission pass is then that input itself (linear; a value in every
+    channel)."""
     copy = mat.copy()
     tree = copy.node_tree
     node = principled_node(copy)
-    source = node.inputs["Base Color"].links[0].from_socket
+    source = node.inputs[socket].links[0].from_socket
     for n in [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]:
         tree.nodes.remove(n)
     emit = tree.nodes.new("ShaderNodeEmission")
     emit.inputs["Strength"].default_value = 1.0
     out = tree.nodes.new("ShaderNodeOutputMaterial")
     out.target = "ALL"
+    if node.inputs[socket].type == "VALUE":
+        # A value input: through a value socket of its own (x + 0), so a colour feeding it is
+        # converted as Blender converts it for the Principled input.
+        value = tree.nodes.new("ShaderNodeMath")
+        value.operation = "ADD"
+        value.inputs[1].default_value = 0.0
+        tree.links.new(source, value.inputs[0])
+        source = value.outputs[0]
     tree.links.new(source, emit.inputs["Color"])
     tree.links.new(emit.outputs["Emission"], out.inputs["Surface"])
     return copy
 
 
-def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], depsgraph=None) -> tuple[dict, float]:
-    """The Base Color of `mat` per evaluated vertex of each of `objects` ({name: (N, 3) float32
-    linear RGB}) as Cycles evaluates it, and the bake's seconds. Raises ValueError when the Base
-    Color is not linked or the bake fails (the message says why)."""
-    if not linked_base_color(mat):
-        raise ValueError(f"the Base Color of {mat.name!r} is not driven by a link")
+def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], depsgraph=None,
+                    socket: str = "Base Color") -> tuple[dict, float]:
+    """The Base Color (or the input `socket`) of `mat` per evaluated vertex of each of `objects`
+    ({name: (N, 3) float32 linear RGB; a value input in every channel}) as Cycles evaluates it,
+    and the bake's seconds. Raises ValueError when the input is not linked or the bake fails (the
+    message says why)."""
+    if not linked(mat, socket):
+        raise ValueError(f"the {socket} of {mat.name!r} is not driven by a link")
     global BAKING
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     t0 = time.perf_counter()
     made_meshes, made_objects, copy, scene = [], [], None, None
     BAKING = True
     try:
-        copy = _emission_copy(mat)
+        copy = _emission_copy(mat, socket)
         scene = bpy.data.scenes.new(BAKE_SCENE)
         scene.render.engine = "CYCLES"
         scene.cycles.device = "CPU"
@@ -141,7 +167,7 @@ def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], de
             layer.objects.active = made_objects[0]
             result = bpy.ops.object.bake(type="EMIT", target="VERTEX_COLORS")
         if result != {"FINISHED"}:
-            raise ValueError(f"Cycles' bake of the Base Color returned {result}")
+            raise ValueError(f"Cycles' bake of the {socket} returned {result}")
         out = {}
         for obj, mesh in zip(objects, made_meshes):
             px = np.empty(len(mesh.vertices) * 4, np.float32)
@@ -149,7 +175,7 @@ def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], de
             out[obj.name] = px.reshape(-1, 4)[:, :3].copy()
         return out, time.perf_counter() - t0
     except RuntimeError as e:
-        raise ValueError(f"Cycles' bake of the Base Color failed: {e}") from e
+        raise ValueError(f"Cycles' bake of the {socket} failed: {e}") from e
     finally:
         for tmp in made_objects:
             bpy.data.objects.remove(tmp)
@@ -172,57 +198,84 @@ def per_exported_vertex(baked: dict, info) -> np.ndarray:
     return np.concatenate(parts).astype(np.float32)
 
 
-def base_color_source(mat: bpy.types.Material) -> str:
-    """The node that drives the Base Color, as the panel names it ("Image Texture")."""
+def base_color_source(mat: bpy.types.Material, socket: str = "Base Color") -> str:
+    """The node that drives the Base Color (or `socket`), as the panel names it ("Image
+    Texture")."""
     node = principled_node(mat)
-    return node.inputs["Base Color"].links[0].from_node.bl_label if linked_base_color(mat) else ""
+    return node.inputs[socket].links[0].from_node.bl_label if linked(mat, socket) else ""
 
 
-def for_export(mat: bpy.types.Material, info, depsgraph=None) -> tuple[np.ndarray, str]:
-    """The Base Color per exported vertex (`per_exported_vertex`) baked for the objects of
-    `info`, and the panel's line about it. Raises ValueError when an object's evaluated mesh
-    no longer has the vertex count it was exported with (re-baking would misplace colours)."""
+def for_export(mat: bpy.types.Material, info, depsgraph=None, socket: str = "Base Color") -> tuple[np.ndarray, str]:
+    """The Base Color (or `socket`) per exported vertex (`per_exported_vertex`) baked for the
+    objects of `info`, and the panel's line about it. Raises ValueError when an object's
+    evaluated mesh no longer has the vertex count it was exported with (re-baking would
+    misplace colours)."""
     objects = [bpy.data.objects.get(r.name) for r in info.objects]
     if any(o is None for o in objects):
         raise ValueError("an object of the preview is gone")
-    baked, seconds = bake_base_color(mat, objects, depsgraph)
+    baked, seconds = bake_base_color(mat, objects, depsgraph, socket)
     for r in info.objects:
         if r.evaluated_count and len(baked[r.name]) != r.evaluated_count:
             raise ValueError(f"{r.name} has {len(baked[r.name])} vertices now, {r.evaluated_count} at the precompute")
     colours = per_exported_vertex(baked, info)
-    return colours, (f"Base Color from {base_color_source(mat)}: read by Cycles at {len(colours):,} vertices "
+    return colours, (f"{socket} from {base_color_source(mat, socket)}: read by Cycles at {len(colours):,} vertices "
                      f"in {1000 * seconds:.0f} ms")
 
 
 @dataclass
 class Reading:
-    """What `read` found: the Base Color per exported vertex (None where it is not read), the
-    node tree's key it was read for, the panel's line, and the materials a precompute chooses
-    its transport for (empty where the Base Color is uniform)."""
+    """What `read` found: the Base Color per exported vertex and the Subsurface Weight (each
+    None where it is not read), the node tree's key it was read for, the panel's line, and the
+    materials a precompute chooses its transport for (empty where the Base Color is uniform)."""
 
     colours: np.ndarray | None = None
     key: str = ""
     message: str = ""
     materials: list = field(default_factory=list)
+    weights: np.ndarray | None = None
+
+    def kwargs(self) -> dict:
+        """The per-vertex arguments of `Prt.radiance` (`base_color`, `subsurface_weight`)."""
+        out = {}
+        if self.colours is not None:
+            out["base_color"] = self.colours
+        if self.weights is not None:
+            out["subsurface_weight"] = self.weights
+        return out
 
 
 def read(mat: bpy.types.Material, info, method: str) -> Reading:
-    """The Base Color of `mat` per vertex of the exported scene `info`, for a transport built by
-    `method`: read by Cycles (`for_export`) where a link drives it and PRT previews it; the
-    hierarchy and the splatting do not read it yet, and the line says so; nothing where no link
-    drives it."""
-    if mat.translucent.source != "PRINCIPLED" or not linked_base_color(mat):
+    """The Base Color and the Subsurface Weight of `mat` per vertex of the exported scene `info`,
+    for a transport built by `method`: read by Cycles (`for_export`) where a link drives them
+    and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits); the
+    hierarchy and the splatting do not read them yet, and the line says so; nothing where no
+    link drives them."""
+    if mat.translucent.source != "PRINCIPLED" or not linked_any(mat):
         return Reading()
+    names = " and ".join(s for s in FOLLOWED if linked(mat, s))
     if method != "prt":
         who = "the splatting" if method == "splat" else "the hierarchy"
-        return Reading(message=f"Base Color from {base_color_source(mat)}: not followed by {who} yet, "
-                               "its socket's value shown (PRT follows it)")
+        return Reading(message=f"{names} from {base_color_source(mat, names.split(' and ')[0])}: not followed by "
+                               f"{who} yet, the socket's value shown (PRT follows it)")
     key = tree_key(mat)
+    out = Reading(key=key)
+    lines = []
     try:
-        colours, message = for_export(mat, info)
-        return Reading(colours, key, message, representatives(principled_inputs(mat), colours))
+        if linked(mat, "Base Color"):
+            out.colours, line = for_export(mat, info)
+            out.materials = representatives(principled_inputs(mat), out.colours)
+            lines.append(line)
+        if linked(mat, "Subsurface Weight"):
+            if mat.translucent.profile_name() != "cycles":
+                lines.append("Subsurface Weight: per vertex with Cycles' profile only, the socket's value shown")
+            else:
+                grey, line = for_export(mat, info, socket="Subsurface Weight")
+                out.weights = np.clip(grey[:, 0], 0.0, 1.0).astype(np.float32)
+                lines.append(line)
     except ValueError as e:
-        return Reading(message=f"Base Color not read per vertex ({e}): its socket's value shown")
+        return Reading(message=f"{names} not read per vertex ({e}): the socket's value shown")
+    out.message = "; ".join(lines)
+    return out
 
 
 def representatives(inputs, colours: np.ndarray) -> list:

@@ -146,3 +146,61 @@ def test_a_texture_edit_is_read_again_by_itself(addon, monkeypatch):
     mat.node_tree.nodes["Principled BSDF"].inputs["Subsurface Scale"].default_value = 0.006
     bpy.context.view_layer.update()
     assert len(bakes) == 2 and not np.array_equal(read_preview(objs[0]), now)
+
+
+def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
+    # The Subsurface Weight from a checker (1 on one square, 0.1 on the other) under a uniform
+    # Base Color: where it is low the diffuse lobe beside the walk takes over. Read by Cycles per
+    # vertex and split per vertex (`Prt.radiance(subsurface_weight=...)`), against Cycles'
+    # bake of the same material.
+    import bpy
+    import translucent
+    from addon import export, session
+    from blender_scripts.lib.cycles_reference import bake_diffuse_vertex_colors, use_cycles
+
+    mat, tex, objs = _scene(bpy, "checker")
+    p = mat.node_tree.nodes["Principled BSDF"]
+    mat.node_tree.links.remove(p.inputs["Base Color"].links[0])
+    p.inputs["Base Color"].default_value = (*COLOUR_A, 1.0)
+    p.inputs["Subsurface Weight"].default_value = 0.5
+    tex.inputs["Color1"].default_value = (1.0, 1.0, 1.0, 1.0)
+    tex.inputs["Color2"].default_value = (0.1, 0.1, 0.1, 1.0)
+    mat.node_tree.links.new(tex.outputs["Color"], p.inputs["Subsurface Weight"])
+    before = _user_data(bpy, mat, objs)
+    mat.translucent.enabled = True
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    s = session.SESSIONS[mat.name]
+    assert s.texture_message.startswith("Subsurface Weight from Checker Texture: read by Cycles at 964 vertices")
+    assert s.base_color is None and s.subsurface_weight is not None
+    assert _user_data(bpy, mat, objs) == before
+    # The checker's values at the vertices (those on a square's edge read between the two).
+    w = s.subsurface_weight
+    low, high = np.isclose(w, 0.1, atol=1e-3), np.isclose(w, 1.0, atol=1e-3)
+    assert low.sum() > 200 and high.sum() > 200 and (low | high).mean() > 0.7, "both squares on the spheres"
+    assert w.min() >= 0.1 - 1e-3 and w.max() <= 1.0
+    previews = [read_preview(o).copy() for o in objs]
+    estimate = max(s.last_eval["error_estimate"])
+
+    use_cycles(128, 0)
+    bakes = [bake_diffuse_vertex_colors(o, {"DIRECT", "INDIRECT", "COLOR"}) for o in objs]
+    use_cycles(128, 1)
+    noise = max(max(translucent.relative_error(bake_diffuse_vertex_colors(objs[0], {"DIRECT", "INDIRECT", "COLOR"}),
+                                               bakes[0], export.export_scene([objs[0]])[0].vertex_areas[:, 0])["rms"])
+                / np.sqrt(2), 0.0)
+    errors = []
+    for obj, preview, bake in zip(objs, previews, bakes):
+        w = export.export_scene([obj])[0].vertex_areas[:, 0]
+        errors.append(max(translucent.relative_error(preview, bake, w)["rms"]))
+    print(f"weight: textured preview vs Cycles {[f'{100 * e:.2f} %' for e in errors]}, Cycles' noise "
+          f"{100 * noise:.2f} %, estimate {100 * estimate:.2f} %")
+    for e in errors:
+        assert e <= 0.06 + 2 * noise + estimate, (errors, noise, estimate)
+
+    # The link removed: the socket's own weight, 0.5, everywhere again, farther from the bake.
+    mat.node_tree.links.remove(p.inputs["Subsurface Weight"].links[0])
+    bpy.context.view_layer.update()
+    assert s.subsurface_weight is None
+    uniform = [max(translucent.relative_error(read_preview(o), b, export.export_scene([o])[0].vertex_areas[:, 0])["rms"])
+               for o, b in zip(objs, bakes)]
+    print(f"the socket's value shown uniformly: {[f'{100 * e:.2f} %' for e in uniform]}")
+    assert min(uniform) > 1.5 * max(errors), (uniform, errors)
