@@ -70,12 +70,37 @@ def _user_data(bpy, mat, objs):
     return [mesh_hash(o.data) for o in objs], nodes, images, counts, len(mat.node_tree.links)
 
 
+def _against_cycles(bpy, s, objs, label: str):
+    """The previews of `objs` against Cycles' 128-spp vertex bakes of the same scene (seed 0, a
+    second seed for the bake's noise): within 6 % beyond the bake's noise and the preview's own
+    estimate (the same spheres with a uniform Base Color: 7.8 % at 128 spp). The bakes and the
+    errors per object."""
+    import translucent
+    from addon import export
+    from blender_scripts.lib.cycles_reference import bake_diffuse_vertex_colors, use_cycles
+
+    previews = [read_preview(o).copy() for o in objs]
+    estimate = max(s.last_eval["error_estimate"])
+    passes = {"DIRECT", "INDIRECT", "COLOR"}
+    use_cycles(128, 0)
+    bakes = [bake_diffuse_vertex_colors(o, passes) for o in objs]
+    use_cycles(128, 1)
+    areas = [export.export_scene([o])[0].vertex_areas[:, 0] for o in objs]
+    again = bake_diffuse_vertex_colors(objs[0], passes)
+    noise = max(translucent.relative_error(again, bakes[0], areas[0])["rms"]) / np.sqrt(2)
+    errors = [max(translucent.relative_error(p, b, w)["rms"]) for p, b, w in zip(previews, bakes, areas)]
+    print(f"{label}: textured preview vs Cycles {[f'{100 * e:.2f} %' for e in errors]}, Cycles' noise "
+          f"{100 * noise:.2f} %, estimate {100 * estimate:.2f} %")
+    for e in errors:
+        assert e <= 0.06 + 2 * noise + estimate, (errors, noise, estimate)
+    return bakes, errors
+
+
 @pytest.mark.parametrize("source", ["checker", "image"])
 def test_a_textured_base_colour_matches_a_cycles_bake_of_the_textured_material(addon, source):
     import bpy
     import translucent
     from addon import export, session
-    from blender_scripts.lib.cycles_reference import bake_diffuse_vertex_colors, use_cycles
 
     mat, tex, objs = _scene(bpy, source)
     before = _user_data(bpy, mat, objs)
@@ -86,25 +111,7 @@ def test_a_textured_base_colour_matches_a_cycles_bake_of_the_textured_material(a
     assert s.texture_message.startswith(f"Base Color from {label}: read by Cycles at 964 vertices")
     # The user's meshes, material, images and data-blocks as they were (the bake's copies gone).
     assert _user_data(bpy, mat, objs) == before
-    previews = [read_preview(o).copy() for o in objs]
-    estimate = max(s.last_eval["error_estimate"])
-
-    use_cycles(128, 0)
-    bakes = [bake_diffuse_vertex_colors(o, {"DIRECT", "INDIRECT", "COLOR"}) for o in objs]
-    use_cycles(128, 1)
-    noise = max(max(translucent.relative_error(bake_diffuse_vertex_colors(objs[0], {"DIRECT", "INDIRECT", "COLOR"}),
-                                               bakes[0], export.export_scene([objs[0]])[0].vertex_areas[:, 0])["rms"])
-                / np.sqrt(2), 0.0)
-    errors = []
-    for obj, preview, bake in zip(objs, previews, bakes):
-        w = export.export_scene([obj])[0].vertex_areas[:, 0]
-        errors.append(max(translucent.relative_error(preview, bake, w)["rms"]))
-    print(f"{source}: textured preview vs Cycles {[f'{100 * e:.2f} %' for e in errors]}, Cycles' noise "
-          f"{100 * noise:.2f} %, estimate {100 * estimate:.2f} %")
-    # Within 6 % beyond the bake's noise and the preview's own estimate (the same spheres with a
-    # uniform Base Color: 7.8 % at 128 spp).
-    for e in errors:
-        assert e <= 0.06 + 2 * noise + estimate, (errors, noise, estimate)
+    bakes, errors = _against_cycles(bpy, s, objs, source)
 
     # The link removed: the preview follows by itself to the socket's own value, uniformly (what
     # it showed before issue 30), which is far from the textured bake.
@@ -156,7 +163,6 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
     import bpy
     import translucent
     from addon import export, session
-    from blender_scripts.lib.cycles_reference import bake_diffuse_vertex_colors, use_cycles
 
     mat, tex, objs = _scene(bpy, "checker")
     p = mat.node_tree.nodes["Principled BSDF"]
@@ -178,23 +184,7 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
     low, high = np.isclose(w, 0.1, atol=1e-3), np.isclose(w, 1.0, atol=1e-3)
     assert low.sum() > 200 and high.sum() > 200 and (low | high).mean() > 0.7, "both squares on the spheres"
     assert w.min() >= 0.1 - 1e-3 and w.max() <= 1.0
-    previews = [read_preview(o).copy() for o in objs]
-    estimate = max(s.last_eval["error_estimate"])
-
-    use_cycles(128, 0)
-    bakes = [bake_diffuse_vertex_colors(o, {"DIRECT", "INDIRECT", "COLOR"}) for o in objs]
-    use_cycles(128, 1)
-    noise = max(max(translucent.relative_error(bake_diffuse_vertex_colors(objs[0], {"DIRECT", "INDIRECT", "COLOR"}),
-                                               bakes[0], export.export_scene([objs[0]])[0].vertex_areas[:, 0])["rms"])
-                / np.sqrt(2), 0.0)
-    errors = []
-    for obj, preview, bake in zip(objs, previews, bakes):
-        w = export.export_scene([obj])[0].vertex_areas[:, 0]
-        errors.append(max(translucent.relative_error(preview, bake, w)["rms"]))
-    print(f"weight: textured preview vs Cycles {[f'{100 * e:.2f} %' for e in errors]}, Cycles' noise "
-          f"{100 * noise:.2f} %, estimate {100 * estimate:.2f} %")
-    for e in errors:
-        assert e <= 0.06 + 2 * noise + estimate, (errors, noise, estimate)
+    bakes, errors = _against_cycles(bpy, s, objs, "weight")
 
     # The link removed: the socket's own weight, 0.5, everywhere again, farther from the bake.
     mat.node_tree.links.remove(p.inputs["Subsurface Weight"].links[0])
