@@ -212,3 +212,24 @@ def test_a_first_preview_is_the_half_space_answer_on_fewer_samples_and_says_what
     with pytest.raises(ValueError, match="first_preview"):
         translucent.Prt(sc, skin, first_preview=True, walks=8)
     assert translucent.Prt(sc, skin, first_preview=True, interreflection=True).report["first_preview"]
+    assert not c.report["world_unshadowed"], "no world here: nothing to say about its shadows"
+
+
+def test_a_first_preview_takes_the_world_unshadowed_and_says_so():
+    """Under a world a first preview reads it by its nine spherical-harmonic coefficients,
+    unshadowed (no world rays); on a convex sphere, which shadows nothing, that is the traced
+    world's answer (the full precompute's, which traces it) to the noise of its 64 rays a point."""
+    q, ts = sphere(16, 0.01)
+    s = translucent.Scene(q, ts)
+    s.set_world(color=(0.8, 0.9, 1.0), strength=1.0)
+    m = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    first = translucent.Prt(s, m, profile="dipole", first_preview=True)
+    full = translucent.Prt(s, m, profile="dipole")
+    assert first.report["world_unshadowed"] and not full.report["world_unshadowed"]
+    assert first.report["rays"] == 0 and full.report["rays"] > 0, (first.report["rays"], full.report["rays"])
+    b_first, b_full = first.radiosity(m), full.radiosity(m)
+    skipped = {k["what"]: k["why"] for k in first.last_eval["skipped"]}
+    assert "unshadowed" in skipped["the world's shadows"], skipped
+    assert "the world's shadows" not in {k["what"] for k in full.last_eval["skipped"]}
+    err = translucent.relative_error(b_first, b_full, s.vertex_areas)["rms"]
+    assert max(err) < 0.02, err

@@ -830,6 +830,7 @@ impl PyPrt {
         }
         d.set_item("first_preview", r.first_preview)?;
         d.set_item("carried_pose", r.carried_pose)?;
+        d.set_item("world_unshadowed", r.world_unshadowed)?;
         d.set_item("stored_channels", r.stored_channels)?;
         d.set_item("transport_bytes", r.transport_bytes)?;
         d.set_item("exact_samples", r.exact_samples)?;

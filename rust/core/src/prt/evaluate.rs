@@ -248,6 +248,13 @@ impl Prt {
         let mut out = Vec::new();
         // A first preview says so: its estimate covers the fit alone, not what it left out.
         let first = self.report.first_preview;
+        if self.report.world_unshadowed {
+            out.push(Skipped::new(
+                "the world's shadows",
+                "first preview: the world by its nine spherical-harmonic coefficients, \
+                 unshadowed (no rays); the full precompute traces them",
+            ));
+        }
         if self.report.carried_pose && (self.walks.is_some() || self.bounce.is_some()) {
             out.push(Skipped::new(
                 "the walks and the own light's rays on this pose",

@@ -447,6 +447,13 @@ impl Prt {
             let mut total = lighting.lock().unwrap_or_else(|e| e.into_inner());
             *total = total.merge(r);
         };
+        // A first preview takes the world by its nine spherical-harmonic coefficients,
+        // unshadowed (Mertens 2003 §5.3: no rays); the full precompute traces its shadows.
+        let unshadowed = IrradianceSettings {
+            world_unshadowed: irradiance_settings.world_unshadowed || settings.first_preview,
+            ..irradiance_settings.clone()
+        };
+        let irradiance_settings = &unshadowed;
         let irradiance = scene_irradiance(scene, tracer, irradiance_settings, &merge, &ask);
         let kept = std::sync::Arc::new(Mutex::new(KeptIrradiance::default()));
         let sampler = kept_sampler(
@@ -468,6 +475,7 @@ impl Prt {
             progress,
         )?;
         prt.kept_irradiance = kept.clone();
+        prt.report.world_unshadowed = unshadowed.world_unshadowed && !scene.world.is_black();
         let report = lighting.lock().unwrap_or_else(|e| e.into_inner()).clone();
         Ok((prt, report))
     }

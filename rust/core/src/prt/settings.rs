@@ -142,6 +142,9 @@ pub struct PrtReport {
     /// (`Prt::reposed_scene`: the walks' exits and the own light's hits on the same triangles
     /// of the posed mesh), not walked on this one: a precompute refines them.
     pub carried_pose: bool,
+    /// The world was taken by its nine spherical-harmonic coefficients, unshadowed (a first
+    /// preview under a world that is not black: `Prt::precompute_in_scene`).
+    pub world_unshadowed: bool,
     /// Triangles the walks read finer light in (a shadow's edge crosses them), the points
     /// evaluated there, and the time it took.
     pub shadow_edge_triangles: usize,

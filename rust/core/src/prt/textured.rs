@@ -783,10 +783,9 @@ mod tests {
             }
             checked += 1;
             let w = f64::from(weights[v]);
-            for c in 0..3 {
-                let expect = w * total[c] + (1.0 - w) * 0.75;
-                let rel = (f64::from(got.values[v][c]) - expect).abs() / expect;
-                worst = worst.max(rel);
+            for (t, b) in total.iter().zip(got.values[v]) {
+                let expect = w * t + (1.0 - w) * 0.75;
+                worst = worst.max((f64::from(b) - expect).abs() / expect);
             }
         }
         assert!(checked > 100, "{checked} vertices inside the rim");

@@ -366,7 +366,8 @@ class Prt:
         the walks through the mesh for the direct light and for the object's own light),
         shadow_edge_triangles and shadow_edge_points (where the walks read the light on a finer
         grid), carried_pose (the walks and own light carried from another pose by `update`,
-        not walked on this one), seconds per step."""
+        not walked on this one), world_unshadowed (a first preview's world by its nine
+        spherical-harmonic coefficients, no shadows), seconds per step."""
     @property
     def eta(self) -> float:
         """The IOR of the irradiance's Fresnel factor (1 for the Cycles profile)."""
