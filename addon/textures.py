@@ -198,8 +198,8 @@ def per_exported_vertex(baked: dict, info) -> np.ndarray:
     return np.concatenate(parts).astype(np.float32)
 
 
-def base_color_source(mat: bpy.types.Material, socket: str = "Base Color") -> str:
-    """The node that drives the Base Color (or `socket`), as the panel names it ("Image
+def input_source(mat: bpy.types.Material, socket: str = "Base Color") -> str:
+    """The node that drives the Principled input `socket`, as the panel names it ("Image
     Texture")."""
     node = principled_node(mat)
     return node.inputs[socket].links[0].from_node.bl_label if linked(mat, socket) else ""
@@ -218,7 +218,7 @@ def for_export(mat: bpy.types.Material, info, depsgraph=None, socket: str = "Bas
         if r.evaluated_count and len(baked[r.name]) != r.evaluated_count:
             raise ValueError(f"{r.name} has {len(baked[r.name])} vertices now, {r.evaluated_count} at the precompute")
     colours = per_exported_vertex(baked, info)
-    return colours, (f"{socket} from {base_color_source(mat, socket)}: read by Cycles at {len(colours):,} vertices "
+    return colours, (f"{socket} from {input_source(mat, socket)}: read by Cycles at {len(colours):,} vertices "
                      f"in {1000 * seconds:.0f} ms")
 
 
@@ -252,10 +252,11 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     link drives them."""
     if mat.translucent.source != "PRINCIPLED" or not linked_any(mat):
         return Reading()
-    names = " and ".join(s for s in FOLLOWED if linked(mat, s))
+    sockets = [s for s in FOLLOWED if linked(mat, s)]
+    names = " and ".join(sockets)
     if method != "prt":
         who = "the splatting" if method == "splat" else "the hierarchy"
-        return Reading(message=f"{names} from {base_color_source(mat, names.split(' and ')[0])}: not followed by "
+        return Reading(message=f"{names} from {input_source(mat, sockets[0])}: not followed by "
                                f"{who} yet, the socket's value shown (PRT follows it)")
     key = tree_key(mat)
     out = Reading(key=key)

@@ -675,13 +675,7 @@ mod tests {
         };
         let prt = Prt::precompute(&mesh, &reps, &settings, &light, None).unwrap();
         let support = prt.report().support_radius;
-        let mut seed = 7u64;
-        let mut next = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 40) as f32) / (1u64 << 24) as f32
-        };
+        let mut next = draws(7);
         let colors: Vec<[f32; 3]> = (0..mesh.vertex_count())
             .map(|_| [0.05 + 0.8 * next(), 0.85 * next(), 0.3 + 0.55 * next()])
             .collect();
@@ -731,6 +725,29 @@ mod tests {
         }
     }
 
+    /// Uniform draws in [0, 1) from a linear congruential sequence seeded with `seed`.
+    fn draws(mut seed: u64) -> impl FnMut() -> f32 {
+        move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 40) as f32) / (1u64 << 24) as f32
+        }
+    }
+
+    /// `got` within `rel` of `expect` at every vertex and channel (relative, floored at 1e-6).
+    fn assert_close(expect: &[[f32; 3]], got: &[[f32; 3]], rel: f32, what: &str) {
+        assert_eq!(expect.len(), got.len(), "{what}");
+        for (a, b) in expect.iter().zip(got) {
+            for c in 0..3 {
+                assert!(
+                    (a[c] - b[c]).abs() <= rel * a[c].abs().max(1e-6),
+                    "{what}: {a:?} {b:?}"
+                );
+            }
+        }
+    }
+
     /// A uniformly lit plane under Cycles' profile, `inputs` with Base Colour 0.75 (a node:
     /// no interpolation between media), precomputed for the whole medium (weight 1).
     fn cycles_plane() -> (Mesh, Prt, PrincipledInputs) {
@@ -760,15 +777,8 @@ mod tests {
         let whole = Material::from_principled(&at).unwrap();
         let total = Resolved::new(ProfileKind::Cycles, &whole).unwrap().totals();
         let n = mesh.vertex_count();
-        let mut seed = 11u64;
-        let weights: Vec<f32> = (0..n)
-            .map(|_| {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((seed >> 40) as f32) / (1u64 << 24) as f32
-            })
-            .collect();
+        let mut next = draws(11);
+        let weights: Vec<f32> = (0..n).map(|_| next()).collect();
         let colors = vec![[0.75f32; 3]; n];
         let got = prt
             .radiosity_textured(&at, &colors, Some(&weights), true, true)
@@ -819,14 +829,7 @@ mod tests {
                 .radiosity_textured(&at, &colors, Some(&vec![w as f32; n]), true, true)
                 .unwrap()
                 .values;
-            for (a, b) in expect.iter().zip(&got) {
-                for c in 0..3 {
-                    assert!(
-                        (a[c] - b[c]).abs() <= 2e-3 * a[c].abs().max(1e-6),
-                        "w {w}: {a:?} {b:?}"
-                    );
-                }
-            }
+            assert_close(&expect, &got, 2e-3, &format!("w {w}"));
         }
     }
 
@@ -880,14 +883,7 @@ mod tests {
         let textured = prt
             .radiosity_textured(&inputs(), &colors, None, true, true)
             .unwrap();
-        for (a, b) in uniform.iter().zip(&textured.values) {
-            for c in 0..3 {
-                assert!(
-                    (a[c] - b[c]).abs() <= 1e-5 * a[c].abs().max(1e-6),
-                    "{a:?} {b:?}"
-                );
-            }
-        }
+        assert_close(&uniform, &textured.values, 1e-5, "uniform");
     }
 
     #[test]
