@@ -233,6 +233,7 @@ impl PyHierarchy {
         d.set_item("oracle_tests", r.oracle_tests)?;
         d.set_item("dropped_beyond_support", r.dropped_beyond_support)?;
         d.set_item("split_faces", r.split_faces)?;
+        d.set_item("edge_faces", r.edge_faces)?;
         d.set_item("relinked", r.relinked)?;
         d.set_item("rays", r.rays)?;
         d.set_item("seconds_build", r.seconds_build)?;

@@ -20,6 +20,7 @@
 //! samples it.
 
 pub mod clusters;
+pub mod edges;
 pub mod far;
 pub mod links;
 pub mod ring;
@@ -80,6 +81,11 @@ pub struct Hierarchy {
     /// Each face's irradiance at its four midpoint sub-triangles' centroids (`SUB_POINTS`):
     /// the near links integrate each sub-triangle under its own.
     face_sub: Vec<[[f32; 3]; 4]>,
+    /// The faces around vertex receivers that a shadow's edge crosses, their light at finer
+    /// leaves (`edges`); None when stale (with `face_irradiance`).
+    edge_light: Option<edges::EdgeLight>,
+    /// Their leaves' form factors, kept until the material or the shape changes.
+    edge_forms: edges::EdgeForms,
     /// Faces wide against the profile's shortest decay length (`SPLIT_SHARE`), whose light is
     /// sampled at four points; the others at their centroid. Set by the material.
     split: Vec<bool>,
@@ -254,6 +260,8 @@ impl Hierarchy {
             far: FarEmitters::default(),
             face_irradiance: None,
             face_sub: Vec::new(),
+            edge_light: None,
+            edge_forms: Default::default(),
             split: Vec::new(),
             face_sources: PerSource::default(),
             vertex_sources: PerSource::default(),
@@ -399,7 +407,79 @@ impl Hierarchy {
             .map(|e| std::array::from_fn(|c| e.iter().map(|v| v[c]).sum::<f32>() / 4.0))
             .collect();
         self.face_irradiance = Some((mean, eta));
+        self.edge_light = None;
         Ok(r.rays)
+    }
+
+    /// The light at the leaves of each split face around a vertex receiver whose ring a
+    /// shadow's edge crosses (`edges::EdgeLight::refine`), each quarter's sample replaced by
+    /// its leaves' mean. Kept until the face irradiance is taken again. Returns rays cast.
+    fn sample_edges(&mut self, eta: f64, progress: Option<&ProgressFn>) -> Result<u64> {
+        if self.edge_light.is_some() || self.rim.is_empty() || !self.split.iter().any(|s| *s) {
+            return Ok(0);
+        }
+        let Some((corners, _)) = &self.vertex_irradiance else {
+            return Ok(0);
+        };
+        let which = edges::faces_to_resolve(
+            self.scene.mesh.triangles(),
+            &self.rim,
+            &self.split,
+            &self.face_sub,
+            corners,
+        );
+        let corner_light: Vec<[[f32; 3]; 3]> = (which.iter())
+            .map(|&f| self.scene.mesh.triangles()[f as usize].map(|v| corners[v as usize]))
+            .collect();
+        let s = self.irradiance_settings(eta, Density::Dense);
+        let ask = progress.map(|p| move |_: f32| p(f32::NAN));
+        let ask = ask.as_ref().map(|f| f as &ProgressFn);
+        let mesh = &self.scene.mesh;
+        let faces = &self.faces;
+        let rays = std::sync::atomic::AtomicU64::new(0);
+        // The leaves' centroids with the normals interpolated there.
+        let light_at = |asked: &[(u32, glam::DVec3)]| -> Result<Vec<[f32; 3]>> {
+            let (points, normals): (Vec<Vec3>, Vec<Vec3>) = (asked.par_iter())
+                .map(|&(f, at)| {
+                    let face = &faces[f as usize];
+                    let corners = mesh.triangles()[f as usize].map(|v| mesh.normals()[v as usize]);
+                    let b = edges::barycentric(face, at);
+                    let n = interpolated_normal(
+                        &corners,
+                        b[1] as f32,
+                        b[2] as f32,
+                        face.normal.as_vec3(),
+                    );
+                    (at.as_vec3(), n)
+                })
+                .unzip();
+            let (values, r) = crate::irradiance::irradiance_with_progress(
+                &self.scene,
+                &self.tracer,
+                &points,
+                &normals,
+                &s,
+                ask,
+            )?;
+            rays.fetch_add(r.rays, std::sync::atomic::Ordering::Relaxed);
+            Ok(values)
+        };
+        let light =
+            edges::EdgeLight::refine(&self.faces, which, &self.face_sub, &corner_light, &light_at)?;
+        // Each quarter's light becomes its leaves' mean and the face's the quarters' mean, so
+        // that the near links and the far clusters carry the power the leaves found; the
+        // corrections then only move it within each quarter (`edges::corrections`).
+        for (i, &f) in light.faces.iter().enumerate() {
+            let quarters = light.quarter_means(i);
+            self.face_sub[f as usize] = quarters;
+            if let Some((mean, _)) = &mut self.face_irradiance {
+                mean[f as usize] =
+                    std::array::from_fn(|c| quarters.iter().map(|e| e[c]).sum::<f32>() / 4.0);
+            }
+        }
+        let rays = rays.into_inner();
+        self.edge_light = Some(light);
+        Ok(rays)
     }
 
     fn sample_vertices(&mut self, eta: f64) -> Result<u64> {
@@ -657,9 +737,12 @@ impl Hierarchy {
             None => Vec::new(),
         };
         let ring_linear = short.iter().any(|s| *s != 0);
-        if point_mass || ring_linear {
+        // A split face's corners tell whether a shadow's edge crosses it (`edges`).
+        let edges_asked = !self.rim.is_empty() && self.split.iter().any(|s| *s);
+        if point_mass || ring_linear || edges_asked {
             report.rays += self.sample_vertices(eta)?;
         }
+        report.rays += self.sample_edges(eta, progress)?;
         report.seconds_irradiance = t.elapsed().as_secs_f64();
         tick(progress, 0.3)?;
         let t = Instant::now();
@@ -775,6 +858,28 @@ impl Hierarchy {
                 rgb,
                 &EdgeRule::FAST,
             );
+            for (v, d) in delta {
+                let o = &mut out[v as usize];
+                (0..3).for_each(|c| o[c] = (f64::from(o[c]) + d[c]).max(0.0) as f32);
+            }
+        }
+        // A shadow's edge across the faces around a vertex receiver (`edges`).
+        if material_changed || geometry_changed {
+            self.edge_forms.clear();
+        }
+        if let (Some(light), Some((_, _, rgb))) = (&self.edge_light, &self.profiles) {
+            report.edge_faces = light.faces.len();
+            self.edge_forms.fill(
+                &self.faces,
+                mesh.triangles(),
+                &self.rings,
+                mesh.positions(),
+                &self.rim,
+                light,
+                rgb,
+                &EdgeRule::FAST,
+            );
+            let delta = edges::corrections(light, &self.edge_forms, &self.face_sub);
             for (v, d) in delta {
                 let o = &mut out[v as usize];
                 (0..3).for_each(|c| o[c] = (f64::from(o[c]) + d[c]).max(0.0) as f32);

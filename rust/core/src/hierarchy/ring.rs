@@ -60,7 +60,7 @@ impl Rings {
         }
     }
 
-    fn of(&self, v: usize) -> &[(u32, u8)] {
+    pub(super) fn of(&self, v: usize) -> &[(u32, u8)] {
         &self.faces[self.first[v] as usize..self.first[v + 1] as usize]
     }
 

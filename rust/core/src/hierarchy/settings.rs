@@ -117,6 +117,9 @@ pub struct HierarchyReport {
     pub dropped_beyond_support: u64,
     /// Faces wide against the profile, their light sampled at four points.
     pub split_faces: usize,
+    /// Faces around vertex receivers resolved at sixteen points for a shadow's edge
+    /// (`edges`).
+    pub edge_faces: usize,
     /// Whether links were refined (on-the-fly, first build, incremental re-check).
     pub relinked: bool,
     pub rays: u64,

@@ -560,7 +560,8 @@ class Hierarchy:
         seconds, skipped (a list of {"what", "why"}); and refresh_advised (always False)."""
     @property
     def report(self) -> dict[str, object]:
-        """The last evaluation: links, far_links, near_links, links_per_face, split_faces, clusters, faces,
+        """The last evaluation: links, far_links, near_links, links_per_face, split_faces, edge_faces
+        (split faces resolved finer along a shadow's edge), clusters, faces,
         depth, oracle_tests, relinked, rays, seconds per phase (build, refit, irradiance, pull,
         links, push, estimate) and in all, error_estimate per channel (the walks' noise
         added), terms (None with walks off; else walks, walks_indirect, own_light_rays,
