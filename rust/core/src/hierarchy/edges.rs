@@ -52,8 +52,19 @@ pub const EXACT_WITHIN: f64 = 2.0;
 /// triangles under the benchmark's lights.
 pub const MAX_LEVEL: u8 = 3;
 
-/// The light at points of faces, (face, point) each.
-pub type LightAt<'a> = dyn Fn(&[(u32, DVec3)]) -> crate::error::Result<Vec<[f32; 3]>> + 'a;
+/// The light at points of faces, (face, point, the point's code within the face) each: the code
+/// names the point while the face stays where it is (`irradiance::keyed`).
+pub type LightAt<'a> = dyn Fn(&[(u32, DVec3, u32)]) -> crate::error::Result<Vec<[f32; 3]>> + 'a;
+
+/// A leaf's centroid's code within its face.
+fn centroid_code(leaf: Leaf) -> u32 {
+    (u32::from(leaf.level) << 24) | leaf.path
+}
+
+/// A lattice point's code within its face (`refine`'s corners).
+fn corner_code((i, j): (u32, u32)) -> u32 {
+    1 << 31 | i << 12 | j
+}
 
 /// A sub-triangle of a face by repeated midpoint splits: `path` holds the child taken at each
 /// level (`sub_triangles`' order, two bits a level, the quarter in the lowest two).
@@ -186,7 +197,7 @@ impl EdgeLight {
             }
             // Per node to split: its four children's centroids, and those of its three corners
             // not yet known (each once: its index among the points asked).
-            let mut asked: Vec<(u32, DVec3)> = Vec::new();
+            let mut asked: Vec<(u32, DVec3, u32)> = Vec::new();
             let mut new_corners: HashMap<(usize, (u32, u32)), usize> = HashMap::new();
             let mut starts: Vec<usize> = Vec::with_capacity(split.len());
             for &(i, n) in &split {
@@ -194,12 +205,14 @@ impl EdgeLight {
                 let face = &triangles[f as usize];
                 let t = n.triangle(face);
                 starts.push(asked.len());
-                asked.extend(sub_triangles(&t).map(|s| (f, s.centroid)));
+                let subs = sub_triangles(&t);
+                asked
+                    .extend((0..4).map(|k| (f, subs[k].centroid, centroid_code(n.child(k as u8)))));
                 for p in t.corners {
                     let k = key(face, p);
                     if !lattice[i].contains_key(&k) && !new_corners.contains_key(&(i, k)) {
                         new_corners.insert((i, k), asked.len());
-                        asked.push((f, p));
+                        asked.push((f, p, corner_code(k)));
                     }
                 }
             }
@@ -458,8 +471,9 @@ mod tests {
             let quarters: Vec<[[f32; 3]; 4]> = (faces.iter())
                 .map(|t| sub_triangles(t).map(|q| step(q.centroid, c)))
                 .collect();
-            let light =
-                |asked: &[(u32, DVec3)]| Ok(asked.iter().map(|(_, p)| step(*p, c)).collect());
+            let light = |asked: &[(u32, DVec3, u32)]| {
+                Ok(asked.iter().map(|(_, p, _)| step(*p, c)).collect())
+            };
             let corners: Vec<[[f32; 3]; 3]> = (faces.iter())
                 .map(|t| t.corners.map(|p| step(p, c)))
                 .collect();

@@ -32,6 +32,7 @@ pub use settings::{HierarchyReport, HierarchySettings, Mode, Receivers};
 
 use crate::error::{Error, Result};
 use crate::evaluation::{Quantity, Skipped};
+use crate::irradiance::keyed::KeyedPerSource;
 use crate::irradiance::{Density, IrradianceSettings, PerSource};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
@@ -86,6 +87,9 @@ pub struct Hierarchy {
     edge_light: Option<edges::EdgeLight>,
     /// Their leaves' form factors, kept until the material or the shape changes.
     edge_forms: edges::EdgeForms,
+    /// Their leaves' light kept light by light (`irradiance::keyed`): a moved light casts its
+    /// own rays, the others only at leaves they have not seen.
+    edge_sources: KeyedPerSource,
     /// Faces wide against the profile's shortest decay length (`SPLIT_SHARE`), whose light is
     /// sampled at four points; the others at their centroid. Set by the material.
     split: Vec<bool>,
@@ -262,6 +266,7 @@ impl Hierarchy {
             face_sub: Vec::new(),
             edge_light: None,
             edge_forms: Default::default(),
+            edge_sources: Default::default(),
             split: Vec::new(),
             face_sources: PerSource::default(),
             vertex_sources: PerSource::default(),
@@ -312,6 +317,7 @@ impl Hierarchy {
         self.face_irradiance = None;
         self.vertex_irradiance = None;
         self.face_sources.clear();
+        self.edge_sources.clear();
         self.vertex_sources.clear();
         if let Some(t) = &mut self.terms {
             t.stale(true);
@@ -337,6 +343,7 @@ impl Hierarchy {
         if let Some(o) = new_rest {
             self.scene.occluders = o;
             self.face_sources.clear();
+            self.edge_sources.clear();
             self.vertex_sources.clear();
         }
         if changed || !self.scene.occluders.is_empty() {
@@ -438,9 +445,10 @@ impl Hierarchy {
         let faces = &self.faces;
         let rays = std::sync::atomic::AtomicU64::new(0);
         // The leaves' centroids with the normals interpolated there.
-        let light_at = |asked: &[(u32, glam::DVec3)]| -> Result<Vec<[f32; 3]>> {
+        let kept = std::sync::Mutex::new(std::mem::take(&mut self.edge_sources));
+        let light_at = |asked: &[(u32, glam::DVec3, u32)]| -> Result<Vec<[f32; 3]>> {
             let (points, normals): (Vec<Vec3>, Vec<Vec3>) = (asked.par_iter())
-                .map(|&(f, at)| {
+                .map(|&(f, at, _)| {
                     let face = &faces[f as usize];
                     let corners = mesh.triangles()[f as usize].map(|v| mesh.normals()[v as usize]);
                     let b = edges::barycentric(face, at);
@@ -453,19 +461,17 @@ impl Hierarchy {
                     (at.as_vec3(), n)
                 })
                 .unzip();
-            let (values, r) = crate::irradiance::irradiance_with_progress(
-                &self.scene,
-                &self.tracer,
-                &points,
-                &normals,
-                &s,
-                ask,
-            )?;
+            let keys: Vec<(u32, u32)> = asked.iter().map(|&(f, _, code)| (f, code)).collect();
+            let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+            let (values, r) =
+                kept.evaluate(&self.scene, &self.tracer, &keys, &points, &normals, &s, ask)?;
             rays.fetch_add(r.rays, std::sync::atomic::Ordering::Relaxed);
             Ok(values)
         };
-        let light =
-            edges::EdgeLight::refine(&self.faces, which, &self.face_sub, &corner_light, &light_at)?;
+        let refined =
+            edges::EdgeLight::refine(&self.faces, which, &self.face_sub, &corner_light, &light_at);
+        self.edge_sources = kept.into_inner().unwrap_or_else(|e| e.into_inner());
+        let light = refined?;
         // Each quarter's light becomes its leaves' mean and the face's the quarters' mean, so
         // that the near links and the far clusters carry the power the leaves found; the
         // corrections then only move it within each quarter (`edges::corrections`).
@@ -720,6 +726,7 @@ impl Hierarchy {
                 self.split = split;
                 self.face_irradiance = None;
                 self.face_sources.clear();
+                self.edge_sources.clear();
             }
         }
         report.split_faces = self.split.iter().filter(|s| **s).count();

@@ -4,6 +4,7 @@
 //! Deterministic: every random number comes from a hash of (seed, point, sample).
 
 pub mod corners;
+pub mod keyed;
 
 pub use corners::OnMesh;
 
