@@ -439,8 +439,10 @@ impl Hierarchy {
             .map(|&f| self.scene.mesh.triangles()[f as usize].map(|v| corners[v as usize]))
             .collect();
         let s = self.irradiance_settings(eta, Density::Dense);
-        let ask = progress.map(|p| move |_: f32| p(f32::NAN));
-        let ask = ask.as_ref().map(|f| f as &ProgressFn);
+        // Before the irradiance stage's tick at 0.3: the bar held where it is, asking whether
+        // to go on.
+        let held = crate::progress::held_at(progress, 0.0);
+        let ask = Some(&held as &ProgressFn);
         let mesh = &self.scene.mesh;
         let faces = &self.faces;
         let rays = std::sync::atomic::AtomicU64::new(0);
