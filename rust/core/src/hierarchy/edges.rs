@@ -28,7 +28,7 @@
 //! move integrates only the faces whose leaves changed.
 
 use super::links::sub_triangles;
-use super::ring::Rings;
+use super::ring::{spread_exceeds, Rings};
 use crate::profiles::LookupRgb;
 use crate::surface_integral::{triangle_integral_rgb, EdgeRule, Triangle};
 use glam::DVec3;
@@ -103,12 +103,7 @@ impl Leaf {
 
 /// Whether values vary by more than `EDGE_CONTRAST` of their largest in some channel.
 pub fn varies<'a>(values: impl Iterator<Item = &'a [f32; 3]> + Clone) -> bool {
-    (0..3).any(|c| {
-        let (lo, hi) = (values.clone())
-            .map(|e| e[c])
-            .fold((f32::MAX, 0.0f32), |(lo, hi), x| (lo.min(x), hi.max(x)));
-        hi > 0.0 && hi - lo > EDGE_CONTRAST * hi
-    })
+    (0..3).any(|c| spread_exceeds(values.clone().map(|e| e[c]), EDGE_CONTRAST))
 }
 
 /// Barycentric weights (of corners 0, 1, 2) of a point of the triangle's plane.

@@ -117,6 +117,14 @@ fn decays(lookup: &[LookupProfile; 3]) -> [f64; 3] {
     })
 }
 
+/// B plus sparse corrections ΔB per vertex (`ring`, `edges`), kept non-negative.
+fn add_corrections(out: &mut [[f32; 3]], delta: Vec<(u32, [f64; 3])>) {
+    for (v, d) in delta {
+        let o = &mut out[v as usize];
+        (0..3).for_each(|c| o[c] = (f64::from(o[c]) + d[c]).max(0.0) as f32);
+    }
+}
+
 /// `progress` called at its fractions `from..to` for one stage of a longer call (a NaN, which
 /// only asks whether to go on, stays NaN).
 fn stage<'a>(
@@ -418,11 +426,18 @@ impl Hierarchy {
         Ok(r.rays)
     }
 
-    /// The light at the leaves of each split face around a vertex receiver whose ring a
-    /// shadow's edge crosses (`edges::EdgeLight::refine`), each quarter's sample replaced by
-    /// its leaves' mean. Kept until the face irradiance is taken again. Returns rays cast.
+    /// Whether split faces at vertex receivers are to be checked for a shadow's edge
+    /// (`edges`): their corners' irradiance is then sampled too.
+    fn edges_asked(&self) -> bool {
+        !self.rim.is_empty() && self.split.iter().any(|s| *s)
+    }
+
+    /// The light at the leaves of each split face at a vertex receiver that a shadow's edge
+    /// crosses (`edges::faces_to_resolve`, `edges::EdgeLight::refine`), each quarter's sample
+    /// replaced by its leaves' mean. Kept until the face irradiance is taken again. Returns
+    /// rays cast.
     fn sample_edges(&mut self, eta: f64, progress: Option<&ProgressFn>) -> Result<u64> {
-        if self.edge_light.is_some() || self.rim.is_empty() || !self.split.iter().any(|s| *s) {
+        if self.edge_light.is_some() || !self.edges_asked() {
             return Ok(0);
         }
         let Some((corners, _)) = &self.vertex_irradiance else {
@@ -445,9 +460,10 @@ impl Hierarchy {
         let ask = Some(&held as &ProgressFn);
         let mesh = &self.scene.mesh;
         let faces = &self.faces;
-        let rays = std::sync::atomic::AtomicU64::new(0);
-        // The leaves' centroids with the normals interpolated there.
-        let kept = std::sync::Mutex::new(std::mem::take(&mut self.edge_sources));
+        let rays = std::cell::Cell::new(0u64);
+        let kept = std::cell::RefCell::new(std::mem::take(&mut self.edge_sources));
+        // The light at the asked points with the normals interpolated there, each light's
+        // kept where it saw the point before.
         let light_at = |asked: &[(u32, glam::DVec3, u32)]| -> Result<Vec<[f32; 3]>> {
             let (points, normals): (Vec<Vec3>, Vec<Vec3>) = (asked.par_iter())
                 .map(|&(f, at, _)| {
@@ -464,15 +480,21 @@ impl Hierarchy {
                 })
                 .unzip();
             let keys: Vec<(u32, u32)> = asked.iter().map(|&(f, _, code)| (f, code)).collect();
-            let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
-            let (values, r) =
-                kept.evaluate(&self.scene, &self.tracer, &keys, &points, &normals, &s, ask)?;
-            rays.fetch_add(r.rays, std::sync::atomic::Ordering::Relaxed);
+            let (values, r) = kept.borrow_mut().evaluate(
+                &self.scene,
+                &self.tracer,
+                &keys,
+                &points,
+                &normals,
+                &s,
+                ask,
+            )?;
+            rays.set(rays.get() + r.rays);
             Ok(values)
         };
         let refined =
             edges::EdgeLight::refine(&self.faces, which, &self.face_sub, &corner_light, &light_at);
-        self.edge_sources = kept.into_inner().unwrap_or_else(|e| e.into_inner());
+        self.edge_sources = kept.into_inner();
         let light = refined?;
         // Each quarter's light becomes its leaves' mean and the face's the quarters' mean, so
         // that the near links and the far clusters carry the power the leaves found; the
@@ -485,9 +507,8 @@ impl Hierarchy {
                     std::array::from_fn(|c| quarters.iter().map(|e| e[c]).sum::<f32>() / 4.0);
             }
         }
-        let rays = rays.into_inner();
         self.edge_light = Some(light);
-        Ok(rays)
+        Ok(rays.get())
     }
 
     fn sample_vertices(&mut self, eta: f64) -> Result<u64> {
@@ -747,8 +768,7 @@ impl Hierarchy {
         };
         let ring_linear = short.iter().any(|s| *s != 0);
         // A split face's corners tell whether a shadow's edge crosses it (`edges`).
-        let edges_asked = !self.rim.is_empty() && self.split.iter().any(|s| *s);
-        if point_mass || ring_linear || edges_asked {
+        if point_mass || ring_linear || self.edges_asked() {
             report.rays += self.sample_vertices(eta)?;
         }
         report.rays += self.sample_edges(eta, progress)?;
@@ -867,10 +887,7 @@ impl Hierarchy {
                 rgb,
                 &EdgeRule::FAST,
             );
-            for (v, d) in delta {
-                let o = &mut out[v as usize];
-                (0..3).for_each(|c| o[c] = (f64::from(o[c]) + d[c]).max(0.0) as f32);
-            }
+            add_corrections(&mut out, delta);
         }
         // A shadow's edge across the faces around a vertex receiver (`edges`).
         if material_changed || geometry_changed {
@@ -888,11 +905,10 @@ impl Hierarchy {
                 rgb,
                 &EdgeRule::FAST,
             );
-            let delta = edges::corrections(light, &self.edge_forms, &self.face_sub);
-            for (v, d) in delta {
-                let o = &mut out[v as usize];
-                (0..3).for_each(|c| o[c] = (f64::from(o[c]) + d[c]).max(0.0) as f32);
-            }
+            add_corrections(
+                &mut out,
+                edges::corrections(light, &self.edge_forms, &self.face_sub),
+            );
         }
         report.seconds_push += t.elapsed().as_secs_f64();
         report.seconds = start.elapsed().as_secs_f64();

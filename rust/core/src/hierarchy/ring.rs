@@ -28,6 +28,13 @@ pub const RING_DECAY: f64 = 2.0;
 /// when it varies by more than this share of its largest value.
 pub const RING_CONTRAST: f32 = 0.1;
 
+/// Whether `values` (one channel) spread over more than `share` of their largest, which is
+/// positive.
+pub fn spread_exceeds(values: impl Iterator<Item = f32>, share: f32) -> bool {
+    let (lo, hi) = values.fold((f32::MAX, 0.0f32), |(lo, hi), x| (lo.min(x), hi.max(x)));
+    hi > 0.0 && hi - lo > share * hi
+}
+
 /// Each vertex's faces and its corner index in each (compressed rows).
 #[derive(Debug, Clone, Default)]
 pub struct Rings {
@@ -122,9 +129,7 @@ impl Rings {
                             .into_iter()
                             .chain(tri.iter().map(|&u| vertex_irradiance[u as usize][c]))
                     });
-                    let (lo, hi) =
-                        samples.fold((f32::MAX, 0.0f32), |(lo, hi), x| (lo.min(x), hi.max(x)));
-                    hi > 0.0 && hi - lo > RING_CONTRAST * hi
+                    spread_exceeds(samples, RING_CONTRAST)
                 };
                 let channels: Vec<usize> = (0..3)
                     .filter(|&c| short[v] & (1 << c) != 0 && contrast(c))

@@ -4,9 +4,8 @@
 //! the lights that stayed cast rays only for the points they have not seen; a light that moved
 //! casts for all of its points. Only the keys of the latest call are kept.
 
-use super::{irradiance_of_sources, lights_at_work, IrradianceReport, IrradianceSettings, Source};
+use super::{irradiance_of_sources, sources_at_work, IrradianceReport, IrradianceSettings};
 use crate::error::Result;
-use crate::lights::World;
 use crate::progress::ProgressFn;
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
@@ -20,7 +19,7 @@ pub type PointKey = (u32, u32);
 #[derive(Debug, Default)]
 pub struct KeyedPerSource {
     settings: Option<IrradianceSettings>,
-    parts: Vec<(Source, HashMap<PointKey, [f32; 3]>)>,
+    parts: Vec<(super::Source, HashMap<PointKey, [f32; 3]>)>,
 }
 
 impl KeyedPerSource {
@@ -49,13 +48,7 @@ impl KeyedPerSource {
             self.settings = Some(settings.clone());
         }
         let bounds = scene.mesh.bounds();
-        let (reaching, counts) = lights_at_work(&scene.lights, &scene.world, bounds);
-        let mut sources: Vec<Source> = (reaching.into_iter())
-            .map(|l| Source::Light(l.clone()))
-            .collect();
-        if !scene.world.is_black() {
-            sources.push(Source::World(scene.world.clone()));
-        }
+        let (sources, counts) = sources_at_work(scene);
         let mut old = std::mem::take(&mut self.parts);
         let mut rays = 0;
         let mut sum = vec![[0.0f32; 3]; points.len()];
@@ -69,10 +62,7 @@ impl KeyedPerSource {
             let cast = if missing.is_empty() {
                 Vec::new()
             } else {
-                let (lights, world) = match &src {
-                    Source::Light(l) => (std::slice::from_ref(l), &World::Black),
-                    Source::World(w) => (&[][..], w),
-                };
+                let (lights, world) = src.emitters();
                 let p: Vec<Vec3> = missing.iter().map(|&i| points[i]).collect();
                 let n: Vec<Vec3> = missing.iter().map(|&i| normals[i]).collect();
                 let (v, r) = irradiance_of_sources(

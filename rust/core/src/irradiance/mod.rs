@@ -342,7 +342,28 @@ enum Source {
     World(World),
 }
 
+/// Each light of `scene` that can reach its mesh's bounding box, then the world unless it is
+/// black: the sources a `PerSource` keeps apart; and the scene's light and world counts.
+fn sources_at_work(scene: &Scene) -> (Vec<Source>, IrradianceReport) {
+    let (reaching, counts) = lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds());
+    let mut sources: Vec<Source> = (reaching.into_iter())
+        .map(|l| Source::Light(l.clone()))
+        .collect();
+    if !scene.world.is_black() {
+        sources.push(Source::World(scene.world.clone()));
+    }
+    (sources, counts)
+}
+
 impl Source {
+    /// The source as `irradiance_of_sources` takes it: one light and no world, or the world.
+    fn emitters(&self) -> (&[Light], &World) {
+        match self {
+            Source::Light(l) => (std::slice::from_ref(l), &World::Black),
+            Source::World(w) => (&[][..], w),
+        }
+    }
+
     /// The factor per channel that takes this source's emission to `other`'s when the two are
     /// the same light (or world) but for it; None otherwise.
     fn scale_to(&self, other: &Source) -> Option<[f32; 3]> {
@@ -415,14 +436,7 @@ impl PerSource {
             self.settings = Some(settings.clone());
         }
         let bounds = scene.mesh.bounds();
-        let (reaching, counts) = lights_at_work(&scene.lights, &scene.world, bounds);
-        let mut sources: Vec<Source> = reaching
-            .into_iter()
-            .map(|l| Source::Light(l.clone()))
-            .collect();
-        if !scene.world.is_black() {
-            sources.push(Source::World(scene.world.clone()));
-        }
+        let (sources, counts) = sources_at_work(scene);
         let mut old = std::mem::take(&mut self.parts);
         let mut rays = 0;
         for src in sources {
@@ -464,10 +478,7 @@ impl PerSource {
                     v
                 }
                 (None, None, None) => {
-                    let (lights, world) = match &src {
-                        Source::Light(l) => (std::slice::from_ref(l), &World::Black),
-                        Source::World(w) => (&[][..], w),
-                    };
+                    let (lights, world) = src.emitters();
                     let (v, r) = irradiance_of_sources(
                         bounds, lights, world, tracer, points, normals, settings, progress,
                     )?;
