@@ -42,7 +42,8 @@ def nearest_original_vertices(objects: list[str], info: export.ExportInfo) -> di
 def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting, method_message: str = "") -> Session:
     """The finished job's transport becomes the material's session (the old one, still shown
     until now, is dropped) and the preview is written from it."""
-    session = Session(job.result, info, objects, lighting, material.translucent.eta, profile=job.profile)
+    session = Session(job.result, info, objects, lighting, getattr(job, "eta", material.translucent.eta),
+                      profile=job.profile)
     session.chosen_for = job.chosen_for
     session.method = getattr(job, "method", "prt")
     session.method_message = method_message
@@ -95,12 +96,12 @@ def _take_texture(session: Session, job: jobs.Job) -> None:
 
 
 def follow_texture(material: bpy.types.Material, s: Session, force: bool = False) -> None:
-    """Read the Base Color per vertex again when what drives it changed (its node tree's key,
+    """Read the Base Color per vertex again when what it depends on changed
+    (`textures.reading_key`: the node tree's key, the Base Color beside other materials' faces;
     or `force`: an image it reads was edited), when a link now drives it, or drop it when none
     does. PRT only (the hierarchy says it shows the socket's value)."""
-    followed = (s.method == "prt" and material.translucent.source == "PRINCIPLED"
-                and textures.linked_any(material))
-    if followed and not force and s.texture_key and textures.tree_key(material) == s.texture_key:
+    key = textures.reading_key(material, s.info, s.method)
+    if key and not force and key == s.texture_key:
         return
     texture = textures.read(material, s.info, s.method)
     s.base_color, s.texture_key, s.texture_message = texture.colours, texture.key, texture.message
@@ -116,7 +117,8 @@ def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, light
     when the job has none (yet)."""
     if job.first is None:
         return None
-    session = Session(job.first, info, objects, lighting, material.translucent.eta, profile=job.profile)
+    session = Session(job.first, info, objects, lighting, getattr(job, "eta", material.translucent.eta),
+                      profile=job.profile)
     session.chosen_for = job.chosen_for
     session.method = getattr(job, "method", "prt")
     session.method_message = getattr(job, "first_message", "") or FIRST_PREVIEW_MESSAGE.format(job.first_seconds)
@@ -320,9 +322,9 @@ def follow_principled(_scene=None, depsgraph=None) -> None:
 
 def _texture_changed(mat: bpy.types.Material, s: Session) -> bool:
     """A link now drives the Base Color or the Subsurface Weight, or no longer does, or what
-    drives them changed."""
-    linked = textures.linked_any(mat)
-    return linked != bool(s.texture_key) or (linked and textures.tree_key(mat) != s.texture_key)
+    drives them changed, or the Base Color beside other materials' faces did
+    (`textures.reading_key`)."""
+    return textures.reading_key(mat, s.info, s.method) != s.texture_key
 
 
 def refresh(material: bpy.types.Material) -> None:

@@ -35,6 +35,10 @@ class ObjectRange:
     vertices: np.ndarray | None = None
     # The evaluated mesh's vertex count.
     evaluated_count: int = 0
+    # Exported with `others_scatter`: per exported vertex, (count, 3), the diffuse albedo of the
+    # other material whose faces alone touch it (they scatter as that colour and are not
+    # previewed); NaN rows for the previewed vertices. None: every exported vertex is previewed.
+    others: np.ndarray | None = None
 
 
 @dataclass
@@ -306,16 +310,35 @@ def material_slots(obj: bpy.types.Object, material: bpy.types.Material) -> set[i
     return {i for i, slot in enumerate(obj.material_slots) if slot.material == material}
 
 
+def other_albedo(obj: bpy.types.Object, tris: np.ndarray, slots: np.ndarray, mine: np.ndarray,
+                 count: int) -> np.ndarray:
+    """Per vertex of `obj`'s evaluated mesh (`count`), the diffuse albedo
+    (`translucent.cycles.diffuse_albedo`) of the other material whose faces (`~mine`) alone touch
+    it, and NaN rows for the vertices of the previewed faces (`mine`)."""
+    rows = np.full((count, 3), np.nan, dtype=np.float32)
+    for k in np.unique(slots[~mine]):
+        mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+        rows[tris[(slots == k) & ~mine].ravel()] = cycles.diffuse_albedo(mat)
+    rows[tris[mine].ravel()] = np.nan
+    return rows
+
+
 def export_scene(
     objects: list[bpy.types.Object], depsgraph=None, bl_scene: bpy.types.Scene | None = None,
-    material: bpy.types.Material | None = None,
+    material: bpy.types.Material | None = None, others_scatter: bool = False,
 ) -> tuple[translucent.Scene, ExportInfo]:
     """One `translucent.Scene` from `objects` (their evaluated meshes merged) with the lights and
-    world of `bl_scene`. With `material`, only the faces of that material scatter and receive
-    (their vertices are exported, `ObjectRange.vertices`); each object's faces of other
-    materials cast shadows as an occluder ("NAME [other materials]"), and an object with none of
-    its faces in the material is left out (`info.without_faces`). `info.objects` says which
-    vertex range belongs to which object."""
+    world of `bl_scene`. With `material`, only the faces of that material are previewed, and an
+    object with none of its faces in the material is left out (`info.without_faces`). Each
+    object's faces of other materials:
+    - by default cast shadows as an occluder ("NAME [other materials]") and only the previewed
+      faces' vertices are exported (`ObjectRange.vertices`);
+    - with `others_scatter` (PRT reading the Base Color per vertex) stay in the mesh, as Cycles'
+      walk sees them: it can leave its object through a face of another material, where Cycles
+      shades the exit with a diffuse lobe in that face's place (`subsurface_shader_data_setup`),
+      so light entering there reaches the previewed faces. Their vertices scatter as their own
+      material's diffuse albedo (`ObjectRange.others`) and are not previewed.
+    `info.objects` says which vertex range belongs to which object."""
     bl_scene = bl_scene or bpy.context.scene
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     info = ExportInfo()
@@ -325,13 +348,15 @@ def export_scene(
         if obj.type != "MESH":
             raise ValueError(f"{obj.name} is a {obj.type}, not a mesh")
         p, t, n, key, slots = _evaluate(obj, depsgraph, triangles=True)
-        evaluated_count, vertices = len(p), None
+        evaluated_count, vertices, albedo = len(p), None, None
         if material is not None:
             mine = np.isin(slots, list(material_slots(obj, material)))
             if not mine.any():
                 info.without_faces.append(obj.name)
                 continue
-            if not mine.all():
+            if not mine.all() and others_scatter:
+                albedo = other_albedo(obj, t, slots, mine, len(p))
+            elif not mine.all():
                 others.append((obj, p, t[~mine], slots[~mine]))
                 vertices, t = np.unique(t[mine], return_inverse=True)
                 t = t.reshape(-1, 3)
@@ -339,7 +364,7 @@ def export_scene(
         parts_p.append(p)
         parts_t.append(t + offset)
         parts_n.append(n)
-        info.objects.append(ObjectRange(obj.name, offset, len(p), key, vertices, evaluated_count))
+        info.objects.append(ObjectRange(obj.name, offset, len(p), key, vertices, evaluated_count, albedo))
         offset += len(p)
     if not parts_p:
         what = f"the faces of material {material.name!r}" if material is not None else "objects"

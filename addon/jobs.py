@@ -320,9 +320,12 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
     objects = objects_with(material, bl_scene)
     if not objects:
         raise ValueError(f"no mesh object uses material {material.name!r}")
-    scene, info = export.export_scene(objects, bl_scene=bl_scene, material=material)
-    info.skipped_objects = [o.name for o in bl_scene.objects if o.type == "MESH" and o not in objects]
     s = material.translucent
+    # PRT with a Principled material keeps the faces of other materials in the mesh, scattering
+    # as their own colour (Cycles' walk leaves through them); the others make them occluders.
+    scene, info = export.export_scene(objects, bl_scene=bl_scene, material=material,
+                                      others_scatter=method == "prt" and s.source == "PRINCIPLED")
+    info.skipped_objects = [o.name for o in bl_scene.objects if o.type == "MESH" and o not in objects]
     # A Base Color driven by a link (a texture): read per vertex by Cycles (PRT only), and the
     # transport chosen for the media it spans.
     texture = textures.read(material, info, method)
@@ -360,6 +363,9 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
     job.subsurface_weight = texture.weights
     job.chosen_for = params(s)
     job.profile = s.profile_name()
+    # The IOR the transport was built with (the Principled BSDF's where it is followed, even
+    # before the panel's fields show it): an edit to another needs a new precompute.
+    job.eta = s.material().eta
     return job, [r.name for r in info.objects], info, export.lighting_keys(bl_scene)
 
 

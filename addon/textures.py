@@ -244,13 +244,38 @@ class Reading:
         return out
 
 
+def others_in(info) -> np.ndarray | None:
+    """Per exported vertex, the albedo of the other material it scatters as (`export.ObjectRange
+    .others`), NaN rows for the previewed vertices; None when every exported vertex is
+    previewed."""
+    if all(getattr(r, "others", None) is None for r in info.objects):
+        return None
+    return np.concatenate([r.others if r.others is not None else np.full((r.count, 3), np.nan, np.float32)
+                           for r in info.objects]).astype(np.float32)
+
+
+def reading_key(mat: bpy.types.Material, info, method: str) -> str:
+    """What `read` depends on, as a string ("" where it reads nothing): the node tree's key
+    where a link drives a followed input, and the Base Color where the faces of other materials
+    scatter beside the previewed ones (PRT and a Principled material only)."""
+    if method != "prt" or mat.translucent.source != "PRINCIPLED":
+        return ""
+    key = tree_key(mat) if linked_any(mat) else ""
+    if others_in(info) is not None:
+        inputs = principled_inputs(mat)
+        key += f"; other materials beside Base Color {None if inputs is None else inputs.base_color}"
+    return key
+
+
 def read(mat: bpy.types.Material, info, method: str) -> Reading:
     """The Base Color and the Subsurface Weight of `mat` per vertex of the exported scene `info`,
     for a transport built by `method`: read by Cycles (`for_export`) where a link drives them
     and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits); the
-    hierarchy and the splatting do not read them yet, and the line says so; nothing where no
-    link drives them."""
-    if mat.translucent.source != "PRINCIPLED" or not linked_any(mat):
+    hierarchy and the splatting do not read them yet, and the line says so. Where the faces of
+    other materials were exported to scatter (`export.export_scene(others_scatter=True)`), their
+    vertices take their own albedo and the previewed ones the Base Color. Nothing otherwise."""
+    others = others_in(info) if method == "prt" else None
+    if mat.translucent.source != "PRINCIPLED" or not (linked_any(mat) or others is not None):
         return Reading()
     sockets = [s for s in FOLLOWED if linked(mat, s)]
     names = " and ".join(sockets)
@@ -258,14 +283,22 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
         who = "the splatting" if method == "splat" else "the hierarchy"
         return Reading(message=f"{names} from {input_source(mat, sockets[0])}: not followed by "
                                f"{who} yet, the socket's value shown (PRT follows it)")
-    key = tree_key(mat)
-    out = Reading(key=key)
+    out = Reading(key=reading_key(mat, info, method))
     lines = []
     try:
         if linked(mat, "Base Color"):
             out.colours, line = for_export(mat, info)
-            out.materials = representatives(principled_inputs(mat), out.colours)
             lines.append(line)
+        elif others is not None:
+            out.colours = np.tile(np.asarray(principled_inputs(mat).base_color, np.float32), (len(others), 1))
+        if others is not None:
+            apart = ~np.isnan(others[:, 0])
+            out.colours = np.where(apart[:, None], others, out.colours).astype(np.float32)
+            lines.append(f"{int(apart.sum()):,} vertices of other materials scatter as their own colour, not "
+                         "previewed (Cycles' walk may leave through their faces)")
+        if out.colours is not None:
+            previewed = None if others is None else np.isnan(others[:, 0])
+            out.materials = representatives(principled_inputs(mat), out.colours, previewed)
         if linked(mat, "Subsurface Weight"):
             if mat.translucent.profile_name() != "cycles":
                 lines.append("Subsurface Weight: per vertex with Cycles' profile only, the socket's value shown")
@@ -279,15 +312,17 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     return out
 
 
-def representatives(inputs, colours: np.ndarray) -> list:
+def representatives(inputs, colours: np.ndarray, previewed: np.ndarray | None = None) -> list:
     """The materials the transport's basis and samples are chosen for when the Base Color
-    varies: the inputs at the vertices' mean Base Color (whose walks are traced), and at the
-    per-channel brightest and darkest (so the support and knots cover every medium between;
-    `translucent.Prt` reports the table's interpolation and range in its estimate)."""
+    varies: the inputs at the previewed vertices' mean Base Color (whose walks are traced;
+    `previewed` a mask, None: all), and at the per-channel brightest and darkest (so the support
+    and knots cover every medium between; `translucent.Prt` reports the table's interpolation
+    and range in its estimate)."""
     import dataclasses
 
     c = np.clip(colours, 0.0, 1.0)
-    picks = (c.mean(axis=0), c.max(axis=0), c.min(axis=0))
+    shown = c if previewed is None or not previewed.any() else c[previewed]
+    picks = (shown.mean(axis=0), c.max(axis=0), c.min(axis=0))
     return [dataclasses.replace(inputs, base_color=tuple(float(x) for x in p)).material() for p in picks]
 
 

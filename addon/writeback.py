@@ -41,11 +41,13 @@ def write_colors(mesh: bpy.types.Mesh, colors: np.ndarray, name: str = ATTRIBUTE
 
 def per_object(values: np.ndarray, info) -> dict[str, np.ndarray]:
     """Per-object values of an exported scene's per-vertex `values` (see export.ExportInfo), on
-    each object's evaluated vertices: NaN rows where the object's vertices were not exported
-    (faces of another material only)."""
+    each object's evaluated vertices: NaN rows where the object's vertices were not exported or
+    are not previewed (faces of another material only)."""
     out = {}
     for r in info.objects:
         part = values[r.start : r.start + r.count]
+        if getattr(r, "others", None) is not None:
+            part = np.where(np.isnan(r.others[:, :1]), part, np.nan).astype(np.float32)
         if r.vertices is not None:
             full = np.full((r.evaluated_count, part.shape[1]), np.nan, dtype=np.float32)
             full[r.vertices] = part

@@ -1,15 +1,20 @@
 """Several materials on one object (issue 30 point 3), in headless Blender: only the faces of the
-previewed material scatter and receive the preview; the object's faces of other materials cast
-shadows and are written nothing; an object holding the material on no face is left out, saying
-so. Expected values: the dipole's half-plane integral (helpers.half_plane, from its closed-form
-disc integral), independent of the code under test: light enters only through the previewed
-half of a sun-lit plane, so a vertex at a distance d from the other material's half gathers
-E_in (R_total - H(d))."""
+previewed material receive the preview and the object's faces of other materials are written
+nothing; an object holding the material on no face is left out, saying so. Expected values, from
+closed forms independent of the code under test:
+- a preset material (not read from the Principled BSDF): the other faces cast shadows only, so
+  light enters only through the previewed half of a sun-lit plane and a vertex at a distance d
+  from the other half gathers E_in (R_total - H(d)) (the dipole's half-plane integral,
+  helpers.half_plane, from its closed-form disc integral);
+- a material read from its Principled BSDF (PRT): the other faces stay in the mesh as Cycles'
+  walk sees them (it leaves its object through a face of any material, shaded there with a
+  diffuse lobe), so the light entering the other half reaches the previewed one and a vertex
+  gathers the whole plane's E_in R_total, up to the seam."""
 
 import numpy as np
 import pytest
 
-from helpers import assert_own_half_plane, entering, mesh_hash, rd_total, read_preview
+from helpers import assert_own_half_plane, entering, half_plane, mesh_hash, rd_total, read_preview
 
 pytestmark = pytest.mark.bpy
 
@@ -86,6 +91,64 @@ def test_only_the_previewed_faces_scatter_and_the_rest_keep_their_colours(addon)
     # Next to the paint, less comes back than far from it (the light lost under the paint).
     assert b[row[np.argmin(np.abs(co[row, 0] + 0.005))], 0] < 0.97 * e_in * rd_total(
         m.sigma_a[0], (1 - m.g) * m.sigma_s[0], m.eta)
+    assert mesh_hash(obj.data) == user_mesh
+    assert [s.material for s in obj.material_slots] == [wax, paint]
+
+
+def test_faces_of_another_material_let_light_in_as_cycles_walk_leaves_through_them(addon):
+    import bpy
+
+    from addon import session
+
+    wax, paint, obj = two_material_plane(bpy)
+    s = wax.translucent
+    s.source = "PRINCIPLED"
+    p = wax.node_tree.nodes["Principled BSDF"]
+    p.inputs["Subsurface Weight"].default_value = 1.0
+    p.inputs["Subsurface Scale"].default_value = 0.005
+    p.inputs["Base Color"].default_value = (0.8, 0.6, 0.5, 1.0)
+    paint.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+    before = np.tile(np.array([0.1, 0.2, 0.3], np.float32), (len(obj.data.vertices), 1))
+    from addon import writeback
+
+    writeback.write_colors(obj.data, before)
+    user_mesh = mesh_hash(obj.data)
+    assert bpy.ops.translucent.precompute(material_name=wax.name) == {"FINISHED"}
+    sess = session.SESSIONS[wax.name]
+    assert sess.transport.vertex_count == len(obj.data.vertices) and sess.info.occluders == []
+    co = np.array([v.co for v in obj.data.vertices])
+    covered = np.zeros(len(co), bool)
+    covered[[v for f in obj.data.polygons if f.material_index == 0 for v in f.vertices]] = True
+    r = sess.info.objects[0]
+    np.testing.assert_array_equal(np.isnan(r.others[:, 0]), covered)
+    np.testing.assert_allclose(r.others[~covered], 0.3, rtol=1e-6)  # the paint's own albedo
+    now = read_preview(obj)
+    np.testing.assert_array_equal(now[~covered], before[~covered])  # the paint's vertices untouched
+    assert "vertices of other materials scatter as their own colour" in sess.texture_message
+    assert not sess.edit_message, sess.edit_message
+    m = wax.translucent.material()
+    b = sess.transport.radiosity(m, base_color=sess.base_color)
+    np.testing.assert_allclose(now[covered], sess.transport.radiance(m, base_color=sess.base_color)[covered],
+                               rtol=1e-6)
+    e_in = entering(m.eta, 1.0, 3.0)
+    checked = 0
+    for c in range(3):
+        total = e_in * rd_total(m.sigma_a[c], (1 - m.g) * m.sigma_s[c], m.eta)
+        for v in np.flatnonzero((np.abs(co[:, 1]) < 1e-6) & (co[:, 0] < 1e-6) & (co[:, 0] > -0.12)):
+            # The whole plane's light, up to the seam itself (x = 0).
+            assert abs(b[v, c] / total - 1) < 0.02, (c, co[v, 0], b[v, c] / total)
+            checked += 1
+    assert checked > 60
+    # The half-plane answer (light through the wax alone) is about half of it at the seam.
+    assert half_plane(m, 0, 0.0) > 0.4 * rd_total(m.sigma_a[0], (1 - m.g) * m.sigma_s[0], m.eta)
+    # A Base Color edit of the previewed material reads the colours again: the paint's stay.
+    p.inputs["Base Color"].default_value = (0.7, 0.6, 0.5, 1.0)
+    bpy.context.view_layer.update()
+    from addon import edits
+
+    edits.follow_principled(bpy.context.scene, bpy.context.evaluated_depsgraph_get())
+    np.testing.assert_allclose(sess.base_color[covered], np.tile([0.7, 0.6, 0.5], (covered.sum(), 1)), rtol=1e-6)
+    np.testing.assert_allclose(sess.base_color[~covered], 0.3, rtol=1e-6)
     assert mesh_hash(obj.data) == user_mesh
     assert [s.material for s in obj.material_slots] == [wax, paint]
 
