@@ -15,6 +15,7 @@ object's pixels.
 
 Run: .venv/bin/python blender_scripts/report.py [--materials marble skin1 ketchup]
      [--receivers 100] [--model suzanne | stanford-bunny.obj ...] [--no-cycles] [--no-eevee]
+     [--scene-materials marble skin1 | --no-scene]
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ import bpy  # noqa: E402,F401
 import translucent  # noqa: E402
 from addon import export  # noqa: E402
 from blender_scripts.lib import cycles_reference as cr  # noqa: E402
-from blender_scripts.lib import scenes  # noqa: E402
+from blender_scripts.lib import scene_parts, scenes  # noqa: E402
 from blender_scripts.lib.ground_truth import digest, exit_weight, ground_truth  # noqa: E402
 from blender_scripts.lib.machine import cpu_and_cores  # noqa: E402
 from blender_scripts.lib.metrics import image_error, worst  # noqa: E402
@@ -260,6 +261,46 @@ def eevee_rows(obj, material, name, samples_list, reference_spp):
         return []
 
 
+SCENE_METHOD = "PRT in a scene (issue 30)"
+
+
+def scene_rows(materials: list[str], spp: int) -> list[Row]:
+    """Issue 30's scenes, each preview a row split by the part it adds (`scene_parts.measure`),
+    against a Cycles bake of the whole scene at `spp`, every sample taken. Builds a new Blender
+    file: run it last."""
+    rows = []
+    for p in scene_parts.measure(materials, spp, log=lambda line: print(line, file=sys.stderr, flush=True)):
+        rows.append(Row(SCENE_METHOD, f"{p.scene}, {p.obj}: {p.part}", p.material,
+                        f"Cycles {spp} spp, whole scene, every sample", p.rms, p.max, p.precompute_s, p.edit_s,
+                        p.estimate, notes=f"{p.vertices} vertices compared; bake {p.bake_s:.0f} s",
+                        extra=dict(scene=p.scene, part=p.part, obj=p.obj, chain=p.chain)))
+    return rows
+
+
+def scene_table(rows: list[Row]) -> list[str]:
+    """report.md's section for the scene rows: each part's distance and what it changed against
+    the row before it in the same scene, object and material."""
+    ours = [r for r in rows if r.method == SCENE_METHOD]
+    if not ours:
+        return []
+    lines = ["", "## In an artist's scene, split by part (issue 30)", "",
+             "Each row adds one part to the row before it in the same scene (textures: to the socket's "
+             "value shown uniformly; object IDs: to the two merged into one medium; material slots: to "
+             "every face previewed).", "",
+             "| scene | object | material | part | rel. RMS % | change, points | precompute s | edit ms | "
+             "own estimate % |", "|---|---|---|---|---|---|---|---|---|"]
+    before: dict[tuple, float] = {}
+    for r in ours:
+        key = (r.extra["scene"], r.extra["obj"], r.material, r.extra["chain"])
+        change = "" if key not in before or not r.extra["part"].startswith("+") else \
+            f"{100 * (r.rms - before[key]):+.2f}"
+        before[key] = r.rms
+        lines.append(f"| {r.extra['scene']} | {r.extra['obj']} | {r.material} | {r.extra['part']} | "
+                     f"{100 * r.rms:.2f} | {change} | {r.precompute_s:.1f} | {1e3 * r.edit_s:.2f} | "
+                     f"{100 * r.estimate:.2f} |")
+    return lines
+
+
 def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
     out.mkdir(parents=True, exist_ok=True)
     fields = ["method", "setting", "material", "against", "rms", "max", "precompute_s", "edit_s", "time_s",
@@ -276,10 +317,13 @@ def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
              "| method | setting | material | against | rel. RMS % | max rel. % | precompute s | edit ms | "
              "own estimate % | notes |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        if r.method == SCENE_METHOD:
+            continue  # their own table below
         est = "" if np.isnan(r.estimate) else f"{100 * r.estimate:.2f}"
         edit = f"{1e3 * r.edit_s:.2f}" if r.edit_s else ""
         lines.append(f"| {r.method} | {r.setting} | {r.material} | {r.against} | {100 * r.rms:.2f} | "
                      f"{100 * r.max:.1f} | {r.precompute_s:.2f} | {edit} | {est} | {r.notes} |")
+    lines += scene_table(rows)
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
     import matplotlib
@@ -287,7 +331,7 @@ def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig, ax = plt.subplots(figsize=(14, 6.5))
     materials = sorted({r.material for r in rows})
     colours = dict(zip(materials, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
     for mat in materials:
@@ -319,6 +363,16 @@ def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
         if cyc:
             ax.plot([r.time_s for r in cyc], [r.rms for r in cyc], color=c, marker="s", linestyle="--",
                     label=f"Cycles bake by spp, {mat}")
+        for scene_name, marker in ((scene_parts.FLOOR, "d"), (scene_parts.TEXTURE, "<"),
+                                   (scene_parts.TOUCHING, ">"), (scene_parts.SLOTS, "8")):
+            pts = [r for r in rows if r.method == SCENE_METHOD and r.material == mat
+                   and r.extra["scene"] == scene_name]
+            if pts:
+                # Each part's precompute and edit against its distance; a dotted line runs through
+                # the parts in the order they are added.
+                ax.plot([r.time_s for r in pts], [r.rms for r in pts], color=c, marker=marker, linestyle=":",
+                        markersize=7, label=f"PRT in a scene {scene_name.split(' ')[0]}, {mat}: part by part "
+                                            "(precompute)")
         eevee = [r for r in rows if r.method.startswith("EEVEE") and r.material == mat]
         if eevee:
             ax.scatter([r.time_s for r in eevee], [r.rms for r in eevee], color=c, marker="*", s=120,
@@ -329,7 +383,8 @@ def write_outputs(rows: list[Row], out: pathlib.Path, title: str) -> None:
     ax.set_ylabel("relative RMS error (worst channel)")
     ax.set_title(title, fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=6, loc="best")
+    # Outside the axes, on the right: the points stay visible.
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), ncol=2, frameon=False)
     fig.tight_layout()
     fig.savefig(out / "report.png", dpi=120)
     plt.close(fig)
@@ -348,6 +403,9 @@ def main(argv=None) -> int:
     ap.add_argument("--reference-spp", type=int, default=1024, help="the high-sample Cycles bake and image")
     ap.add_argument("--eevee-samples", type=int, nargs="+", default=[16, 64])
     ap.add_argument("--profiles", nargs="+", default=["cycles", "dipole"], choices=["cycles", "dipole"])
+    ap.add_argument("--scene-materials", nargs="+", default=["marble", "skin1"],
+                    help="issue 30's scenes in these materials (the touching ball in the second)")
+    ap.add_argument("--no-scene", action="store_true", help="leave issue 30's scenes out")
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
 
@@ -395,6 +453,9 @@ def main(argv=None) -> int:
         if not args.no_eevee:
             progress(i, steps, f"{name}: EEVEE")
             rows += eevee_rows(bake_obj, m, name, args.eevee_samples, args.reference_spp)
+    if not args.no_scene and not args.no_cycles:
+        progress(steps, steps, "issue 30's scenes, part by part")
+        rows += scene_rows(args.scene_materials, args.reference_spp)
     progress(steps, steps, "done")
     title = (f"{args.model}: {scene.vertex_count} vertices, {len(receivers)} receivers; "
              f"{cpu_and_cores()}; PRT edits on the CPU, median of 5")

@@ -182,6 +182,32 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
     return _cached(key, compute)
 
 
+def bake_whole_scene(copy: bpy.types.Object, materials: list, samples: int, label: str) -> tuple[np.ndarray, float]:
+    """Cycles' diffuse bake (direct, indirect, colour) of `copy` (a mesh with no modifiers) in the
+    whole scene as it stands, its slots holding the Blender `materials`, at `samples` with every
+    sample taken (seed 0), (N, 3), and its wall time [s]. Cached: the key hashes every mesh
+    object Cycles renders (their positions and transforms), the lights, the world, `samples` and
+    `label`, which must name what the key does not see (the materials' nodes and textures)."""
+    shown = sorted((o for o in bpy.context.scene.objects if o.type == "MESH" and not o.hide_render),
+                   key=lambda o: o.name)
+    key = hashlib.sha256(repr(("whole scene", _scene_digest(shown), [o.name for o in shown], samples,
+                               label)).encode()).hexdigest()[:24]
+
+    def compute():
+        copy.data.materials.clear()
+        for mat in materials:
+            copy.data.materials.append(mat)
+        scene = use_cycles(samples, 0)
+        was_adaptive = scene.cycles.use_adaptive_sampling
+        scene.cycles.use_adaptive_sampling = False
+        try:
+            return bake_diffuse_vertex_colors(copy, _diffuse_passes(False))
+        finally:
+            scene.cycles.use_adaptive_sampling = was_adaptive
+
+    return _cached(key, compute)
+
+
 def bake_receivers(obj: bpy.types.Object, material: translucent.Material, samples: int, receivers,
                    direct_only: bool = True, seed: int = 0) -> tuple[np.ndarray, float]:
     """Cycles' diffuse radiance at a few vertices of `obj` (a triangle mesh with no modifiers),
