@@ -315,7 +315,7 @@ fn span(points: &[Vec3], axis: Vec3) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::irradiance::{irradiance, IrradianceSettings};
+    use crate::irradiance::{irradiance, Density, IrradianceSettings};
     use crate::mesh::test_meshes::plane;
     use crate::raytrace::Tracer;
     use crate::scene::Scene;
@@ -482,5 +482,56 @@ mod tests {
             // 16 bounce rays per vertex, and a shadow ray toward the sun per floor hit.
             assert_eq!(r.rays > 0, albedo[0] > 0.0);
         }
+    }
+
+    #[test]
+    fn vertices_asked_for_more_bounce_rays_scatter_less_about_the_closed_form() {
+        // The wall above: E = rho E_sun / 2 at every vertex. Points used alone with
+        // `vertex_bounce_factor` 8 cast 8x the bounce rays, so their spread about the closed form
+        // shrinks as 1 / sqrt(8) (0.35); dense points keep their few rays whatever the factor.
+        let flat = plane(21, 2.0);
+        let p: Vec<Vec3> = (flat.positions().iter())
+            .map(|v| Vec3::new(v.z, v.x, v.y + 1.1))
+            .collect();
+        let wall = crate::mesh::Mesh::new(p, flat.triangles().to_vec(), None).unwrap();
+        let mut scene = Scene::new(wall);
+        scene.lights = vec![Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap()];
+        let (fp, ft) = square(Vec3::ZERO, 100.0);
+        scene.occluders.add("floor", &fp, &ft, [0.5; 3]).unwrap();
+        let tracer = scene.tracer();
+        let mesh = &scene.mesh;
+        let expect = 0.5f64;
+        // Relative RMS about the closed form over the wall's vertices away from its top and
+        // bottom rows (the floor's view factor changes there), and the estimate's rays.
+        let spread = |settings: &IrradianceSettings| {
+            let (e, r) =
+                irradiance(&scene, &tracer, mesh.positions(), mesh.normals(), settings).unwrap();
+            let inner: Vec<f64> = (e.iter().zip(mesh.positions()))
+                .filter(|(_, p)| p.z > 1.3 && p.z < 2.9)
+                .map(|(x, _)| f64::from(x[0]))
+                .collect();
+            let rms = (inner.iter().map(|x| (x - expect).powi(2)).sum::<f64>()
+                / inner.len() as f64)
+                .sqrt();
+            (rms / expect, r.rays)
+        };
+        let base = IrradianceSettings::default();
+        let boosted = IrradianceSettings {
+            vertex_bounce_factor: 8,
+            ..Default::default()
+        };
+        let (one, rays_one) = spread(&base.for_density(Density::Receivers));
+        let (eight, rays_eight) = spread(&boosted.for_density(Density::Receivers));
+        assert!(one > 0.02, "16 rays should scatter: {one}");
+        assert!(eight < 0.5 * one, "8x rays: {eight} against {one}");
+        assert!(
+            rays_eight > 7 * rays_one,
+            "{rays_eight} rays against {rays_one}"
+        );
+        // Dense points: the factor does not apply.
+        let (dense, rays_dense) = spread(&boosted.for_density(Density::Dense));
+        let (dense_base, rays_dense_base) = spread(&base.for_density(Density::Dense));
+        assert_eq!(rays_dense, rays_dense_base);
+        assert!((dense - dense_base).abs() < 1e-12 && dense > one);
     }
 }

@@ -373,6 +373,7 @@ impl Hierarchy {
             area_samples: self.settings.area_samples,
             seed: self.settings.seed,
             world_unshadowed: !self.settings.world_shadows,
+            ..Default::default()
         }
         .for_density(density)
     }

@@ -41,6 +41,10 @@ pub struct IrradianceSettings {
     /// after Ramamoorthi & Hanrahan 2001): no rays, exact for a world of order <= 2 seen from a
     /// convex surface; false traces `world_samples` shadowed rays per point.
     pub world_unshadowed: bool,
+    /// Bounce rays at a point used alone (`Density::Receivers`) are `world_samples /
+    /// BOUNCE_DIVISOR` times this (1: as many as the world's rays give; dense points always
+    /// take 1). PRT's vertices take more (`prt::VERTEX_BOUNCE_FACTOR`).
+    pub vertex_bounce_factor: u32,
 }
 
 impl Default for IrradianceSettings {
@@ -51,6 +55,7 @@ impl Default for IrradianceSettings {
             area_samples: 16,
             seed: 0,
             world_unshadowed: false,
+            vertex_bounce_factor: 1,
         }
     }
 }
@@ -80,8 +85,17 @@ impl IrradianceSettings {
         let mut s = self.clone();
         if density == Density::Dense {
             s.world_samples = (self.world_samples / DENSE_WORLD_DIVISOR).max(4);
+            s.vertex_bounce_factor = 1;
         }
         s
+    }
+
+    /// Bounce rays per point: `world_samples / BOUNCE_DIVISOR` (at least 1) times
+    /// `vertex_bounce_factor`.
+    pub fn bounce_rays(&self) -> u32 {
+        (self.world_samples / BOUNCE_DIVISOR)
+            .max(1)
+            .saturating_mul(self.vertex_bounce_factor.max(1))
     }
 }
 
@@ -272,7 +286,7 @@ fn estimate_point(
         // A stream of its own: the lights' and the world's draws stay as they were. With no
         // source there is nothing to send back: no ray.
         let mut rng = Rng::new(settings.seed ^ BOUNCE_STREAM, i as u64);
-        let rays = (settings.world_samples / BOUNCE_DIVISOR).max(1);
+        let rays = settings.bounce_rays();
         add(&mut sum, est.bounce(reaching, world, rays, &mut rng));
     }
     (sum, est.rays)

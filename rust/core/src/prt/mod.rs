@@ -50,7 +50,7 @@ pub use crate::own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
 pub use backend::Backend;
 pub use evaluate::{Coefficients, Evaluation, PrtDetails, REFRESH_FACTOR, REFRESH_FLOOR};
 pub use knots::BASIS_SIZES;
-pub use relight::RelightReport;
+pub use relight::{RelightReport, VERTEX_BOUNCE_FACTOR};
 pub use request::{
     irradiance_eta, path_settings, PrtRequest, FIRST_PREVIEW_FAR_FIELD,
     FIRST_PREVIEW_OWN_LIGHT_RAYS, FIRST_PREVIEW_SAMPLES,

@@ -72,6 +72,7 @@ impl Prt {
         settings: &IrradianceSettings,
         progress: Option<&ProgressFn>,
     ) -> Result<(Prt, RelightReport, IrradianceReport)> {
+        let settings = &super::relight::at_vertices(settings);
         self.check_pose(scene)?;
         let start = Instant::now();
         let mesh = &scene.mesh;
