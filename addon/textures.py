@@ -244,14 +244,28 @@ class Reading:
         return out
 
 
+def has_others(info) -> bool:
+    """Whether some exported vertex scatters as another material (`export.ObjectRange.others`)."""
+    return any(r.others is not None for r in info.objects)
+
+
 def others_in(info) -> np.ndarray | None:
     """Per exported vertex, the albedo of the other material it scatters as (`export.ObjectRange
     .others`), NaN rows for the previewed vertices; None when every exported vertex is
     previewed."""
-    if all(getattr(r, "others", None) is None for r in info.objects):
+    if not has_others(info):
         return None
     return np.concatenate([r.others if r.others is not None else np.full((r.count, 3), np.nan, np.float32)
                            for r in info.objects]).astype(np.float32)
+
+
+def beside_others(base_color: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Base Color per exported vertex where the faces of other materials scatter too: the
+    previewed vertices' `base_color` ((N, 3), or one colour), the others' own albedo (`others_in`),
+    and the mask of the previewed vertices."""
+    previewed = np.isnan(others[:, 0])
+    colours = np.where(previewed[:, None], np.asarray(base_color, np.float32), others).astype(np.float32)
+    return colours, previewed
 
 
 def reading_key(mat: bpy.types.Material, info, method: str) -> str:
@@ -261,7 +275,7 @@ def reading_key(mat: bpy.types.Material, info, method: str) -> str:
     if method != "prt" or mat.translucent.source != "PRINCIPLED":
         return ""
     key = tree_key(mat) if linked_any(mat) else ""
-    if others_in(info) is not None:
+    if has_others(info):
         inputs = principled_inputs(mat)
         key += f"; other materials beside Base Color {None if inputs is None else inputs.base_color}"
     return key
@@ -286,18 +300,16 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     out = Reading(key=reading_key(mat, info, method))
     lines = []
     try:
+        previewed = None
         if linked(mat, "Base Color"):
             out.colours, line = for_export(mat, info)
             lines.append(line)
-        elif others is not None:
-            out.colours = np.tile(np.asarray(principled_inputs(mat).base_color, np.float32), (len(others), 1))
         if others is not None:
-            apart = ~np.isnan(others[:, 0])
-            out.colours = np.where(apart[:, None], others, out.colours).astype(np.float32)
-            lines.append(f"{int(apart.sum()):,} vertices of other materials scatter as their own colour, not "
-                         "previewed (Cycles' walk may leave through their faces)")
+            base = out.colours if out.colours is not None else principled_inputs(mat).base_color
+            out.colours, previewed = beside_others(base, others)
+            lines.append(f"{int((~previewed).sum()):,} vertices of other materials scatter as their own colour, "
+                         "not previewed (Cycles' walk may leave through their faces)")
         if out.colours is not None:
-            previewed = None if others is None else np.isnan(others[:, 0])
             out.materials = representatives(principled_inputs(mat), out.colours, previewed)
         if linked(mat, "Subsurface Weight"):
             if mat.translucent.profile_name() != "cycles":

@@ -46,7 +46,7 @@ def per_object(values: np.ndarray, info) -> dict[str, np.ndarray]:
     out = {}
     for r in info.objects:
         part = values[r.start : r.start + r.count]
-        if getattr(r, "others", None) is not None:
+        if r.others is not None:
             part = np.where(np.isnan(r.others[:, :1]), part, np.nan).astype(np.float32)
         if r.vertices is not None:
             full = np.full((r.evaluated_count, part.shape[1]), np.nan, dtype=np.float32)

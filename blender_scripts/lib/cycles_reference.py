@@ -116,23 +116,33 @@ def use_cycles(samples: int, seed: int = 0, denoising: bool = False) -> bpy.type
 
 
 @contextlib.contextmanager
-def _simulated_in_cycles(obj: bpy.types.Object, material: translucent.Material, samples: int, seed: int,
-                         adaptive: bool):
-    """Cycles at `samples` and `seed`, adaptive sampling on or off, and `obj` in the Principled
-    simulation of `material` (`principled_material`, yielded) while the block runs; afterwards
-    the scene's adaptive sampling and the object's materials as they were, the mapped one removed."""
+def _cycles_sampling(samples: int, seed: int, adaptive: bool):
+    """Cycles at `samples` and `seed` (`use_cycles`), adaptive sampling on or off while the block
+    runs, the scene's adaptive sampling as it was afterwards."""
     scene = use_cycles(samples, seed)
     was_adaptive = scene.cycles.use_adaptive_sampling
     scene.cycles.use_adaptive_sampling = adaptive
-    mat = principled_material(material)
-    old = _with_material(obj, mat)
     try:
-        yield mat
+        yield scene
     finally:
         scene.cycles.use_adaptive_sampling = was_adaptive
-        for s, m in zip(obj.material_slots, old):
-            s.material = m
-        bpy.data.materials.remove(mat)
+
+
+@contextlib.contextmanager
+def _simulated_in_cycles(obj: bpy.types.Object, material: translucent.Material, samples: int, seed: int,
+                         adaptive: bool):
+    """Cycles at `samples` and `seed`, adaptive sampling on or off (`_cycles_sampling`), and `obj`
+    in the Principled simulation of `material` (`principled_material`, yielded) while the block
+    runs; afterwards the object's materials as they were, the mapped one removed."""
+    with _cycles_sampling(samples, seed, adaptive):
+        mat = principled_material(material)
+        old = _with_material(obj, mat)
+        try:
+            yield mat
+        finally:
+            for s, m in zip(obj.material_slots, old):
+                s.material = m
+            bpy.data.materials.remove(mat)
 
 
 def _diffuse_passes(direct_only: bool) -> set[str]:
@@ -197,13 +207,8 @@ def bake_whole_scene(copy: bpy.types.Object, materials: list, samples: int, labe
         copy.data.materials.clear()
         for mat in materials:
             copy.data.materials.append(mat)
-        scene = use_cycles(samples, 0)
-        was_adaptive = scene.cycles.use_adaptive_sampling
-        scene.cycles.use_adaptive_sampling = False
-        try:
+        with _cycles_sampling(samples, 0, adaptive=False):
             return bake_diffuse_vertex_colors(copy, _diffuse_passes(False))
-        finally:
-            scene.cycles.use_adaptive_sampling = was_adaptive
 
     return _cached(key, compute)
 

@@ -312,10 +312,8 @@ def _eyes(suzanne, name: str, spp: int) -> list[Part]:
     from translucent import cycles
 
     kept, kept_info = export.export_scene([suzanne], material=skin, others_scatter=True)
-    others = textures.others_in(kept_info)
-    previewed = np.isnan(others[:, 0])
     inputs = cycles.read_principled(skin.node_tree.nodes["Principled BSDF"])
-    colours = np.where(previewed[:, None], np.asarray(inputs.base_color, np.float32), others).astype(np.float32)
+    colours, previewed = textures.beside_others(inputs.base_color, textures.others_in(kept_info))
     rms, mx, est, pre, edit, n = _preview(kept, inputs.material(), reference=bake, w=kept.vertex_areas[:, 0],
                                           mask=~seam, base_color=colours,
                                           materials=textures.representatives(inputs, colours, previewed))

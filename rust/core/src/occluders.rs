@@ -445,23 +445,29 @@ mod tests {
         assert!(!tracer.occluded_by_rest(below, Vec3::Z, 0.2));
     }
 
-    #[test]
-    fn a_wall_on_a_lit_floor_receives_half_the_floors_radiosity() {
-        // A 2 x 2 wall standing at x = 0 (normal +x), 0.1 above a 200 x 200 floor of albedo
-        // (0.5, 0.25, 0.75) under a sun straight down that grazes the wall: the floor fills
-        // half of the wall's cosine-weighted hemisphere, so E = rho E_sun / 2 (the closed form
-        // of the view factor to an infinite plane); a black floor sends nothing.
+    /// A 2 x 2 wall standing at x = 0 (normal +x), 0.1 above a 200 x 200 floor of `albedo`,
+    /// under a sun of 2 W/m^2 straight down that grazes the wall: the floor fills half of the
+    /// wall's cosine-weighted hemisphere, so E = rho E_sun / 2 (the closed form of the view
+    /// factor to an infinite plane).
+    fn wall_over_floor(albedo: [f32; 3]) -> Scene {
         let flat = plane(21, 2.0);
         let p: Vec<Vec3> = (flat.positions().iter())
             .map(|v| Vec3::new(v.z, v.x, v.y + 1.1))
             .collect();
         let wall = crate::mesh::Mesh::new(p, flat.triangles().to_vec(), None).unwrap();
         assert!((wall.normals()[0] - Vec3::X).length() < 1e-6);
+        let mut scene = Scene::new(wall);
+        scene.lights = vec![Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap()];
+        let (fp, ft) = square(Vec3::ZERO, 100.0);
+        scene.occluders.add("floor", &fp, &ft, albedo).unwrap();
+        scene
+    }
+
+    #[test]
+    fn a_wall_on_a_lit_floor_receives_half_the_floors_radiosity() {
+        // `wall_over_floor`: E = rho E_sun / 2; a black floor sends nothing.
         for albedo in [[0.5, 0.25, 0.75], [0.0; 3]] {
-            let mut scene = Scene::new(wall.clone());
-            scene.lights = vec![Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap()];
-            let (fp, ft) = square(Vec3::ZERO, 100.0);
-            scene.occluders.add("floor", &fp, &ft, albedo).unwrap();
+            let scene = wall_over_floor(albedo);
             let mesh = &scene.mesh;
             let (e, r) = irradiance(
                 &scene,
@@ -486,18 +492,10 @@ mod tests {
 
     #[test]
     fn vertices_asked_for_more_bounce_rays_scatter_less_about_the_closed_form() {
-        // The wall above: E = rho E_sun / 2 at every vertex. Points used alone with
+        // `wall_over_floor`: E = rho E_sun / 2 at every vertex. Points used alone with
         // `vertex_bounce_factor` 8 cast 8x the bounce rays, so their spread about the closed form
         // shrinks as 1 / sqrt(8) (0.35); dense points keep their few rays whatever the factor.
-        let flat = plane(21, 2.0);
-        let p: Vec<Vec3> = (flat.positions().iter())
-            .map(|v| Vec3::new(v.z, v.x, v.y + 1.1))
-            .collect();
-        let wall = crate::mesh::Mesh::new(p, flat.triangles().to_vec(), None).unwrap();
-        let mut scene = Scene::new(wall);
-        scene.lights = vec![Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap()];
-        let (fp, ft) = square(Vec3::ZERO, 100.0);
-        scene.occluders.add("floor", &fp, &ft, [0.5; 3]).unwrap();
+        let scene = wall_over_floor([0.5; 3]);
         let tracer = scene.tracer();
         let mesh = &scene.mesh;
         let expect = 0.5f64;
