@@ -178,10 +178,17 @@ def bake_vertices(obj: bpy.types.Object, material: translucent.Material, samples
     no modifiers), (N, 3), and the bake's wall time [s]. `direct_only` leaves out indirect
     light (the object's own interreflection); `seed` is Cycles' sampling seed. `adaptive`:
     Blender's default adaptive sampling (noise threshold 0.01), where `samples` is the most a
-    point gets; without it every point gets them all."""
+    point gets; without it every point gets them all. Cached under a key that names every
+    other mesh Cycles renders beside `obj`."""
     extra = () if not direct_only and seed == 0 else (direct_only, seed)
     if not adaptive:
         extra += ("every sample",)
+    # Other meshes Cycles renders beside `obj` (a floor, a prop) change the bake, so they are in
+    # the key; a lone object's key is as it always was, so its stored bakes stay valid.
+    others = sorted((o for o in bpy.context.scene.objects if o.type == "MESH" and not o.hide_render and o != obj),
+                    key=lambda o: o.name)
+    if others:
+        extra += ("beside", [o.name for o in others], _scene_digest(others))
     key = hashlib.sha256(repr(("bake", _scene_digest([obj]), *_material_key(material)[:4], samples, *extra,
                                *_material_key(material)[4:])).encode()).hexdigest()[:24]
 
