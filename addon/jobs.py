@@ -348,6 +348,7 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
                            profile=s.profile_name())
     else:
         kwargs = dict(coefficients=s.coefficients, degree=int(s.degree), backend=s.backend, profile=s.profile_name())
+        kwargs.update(textures.walked(materials))  # other materials' faces: not walked for
         same = ((relight or pose) and carried("prt") and hasattr(previous.transport, "update")
                 and previous.chosen_for == params(s))
         if same and pose:

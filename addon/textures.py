@@ -324,17 +324,32 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     return out
 
 
+# The first three `representatives`: the previewed vertices' media, which the walks may be traced
+# for (`Prt(walk_media=...)`); any after them only cover other materials' faces.
+SHOWN_MEDIA = 3
+
+
+def walked(materials: list) -> dict:
+    """`Prt`'s argument that keeps the walks to the previewed vertices' media when
+    `representatives` added other materials' faces' after them."""
+    return {"walk_media": SHOWN_MEDIA} if len(materials) > SHOWN_MEDIA else {}
+
+
 def representatives(inputs, colours: np.ndarray, previewed: np.ndarray | None = None) -> list:
     """The materials the transport's basis and samples are chosen for when the Base Color
     varies: the inputs at the previewed vertices' mean Base Color (whose walks are traced;
-    `previewed` a mask, None: all), and at the per-channel brightest and darkest (so the support
-    and knots cover every medium between; `translucent.Prt` reports the table's interpolation
-    and range in its estimate)."""
+    `previewed` a mask, None: all), and at their per-channel brightest and darkest (walked too
+    where their diffusion lengths lie far from the mean's); then, where other materials' faces
+    are kept, at every vertex's brightest and darkest, so the support and knots cover every
+    medium between (`translucent.Prt` reports the table's interpolation and range in its
+    estimate)."""
     import dataclasses
 
     c = np.clip(colours, 0.0, 1.0)
     shown = c if previewed is None or not previewed.any() else c[previewed]
-    picks = (shown.mean(axis=0), c.max(axis=0), c.min(axis=0))
+    picks = [shown.mean(axis=0), shown.max(axis=0), shown.min(axis=0)]
+    if len(shown) < len(c):
+        picks += [c.max(axis=0), c.min(axis=0)]
     return [dataclasses.replace(inputs, base_color=tuple(float(x) for x in p)).material() for p in picks]
 
 

@@ -75,9 +75,9 @@ def progress(i: int, n: int, what: str) -> None:
         print(file=sys.stderr)
 
 
-# Ray budgets of the walks through the mesh in the report (0: the half-space table alone; 20 M is
+# Ray budgets of the walks through the mesh in the report (0: the half-space table alone; 30 M is
 # the default).
-WALK_RAYS = (0, 5_000_000, 20_000_000, 60_000_000)
+WALK_RAYS = (0, 5_000_000, 30_000_000, 60_000_000)
 
 
 def timed_edits(prt, edit, runs: int = 5):

@@ -43,17 +43,18 @@ def test_flat_neighbourhoods_are_not_walked():
     """The skip test of point 4: a large plane is flat within the walks' reach everywhere, so no
     vertex is walked and the preview is the half-space profile's to the bit, except on its open
     rim (where the walks go round the edge): its 160 vertices are sharp, walked one by one; a
-    small sphere is curved everywhere, so every candidate vertex is walked."""
+    small sphere is curved everywhere, so every candidate vertex is walked. (Both precomputes
+    take the same samples: by default the walks' run takes fewer.)"""
     p, s = sun_plane(n=41, size=1.0)
     m = translucent.Material.preset("skin1")
-    flat = translucent.Prt(s, m, backend="cpu")
+    flat = translucent.Prt(s, m, backend="cpu", samples=500_000)
     walks = flat.report["walks"]
     assert walks["walked_vertices"] == 0 and walks["skipped_flat"] > 0
     assert walks["sharp_vertices"] == 4 * 40 and walks["rays"] > 0
     lo, hi = p.min(0), p.max(0)
     rim = np.any(np.isclose(p[:, :2], lo[:2]) | np.isclose(p[:, :2], hi[:2]), axis=1)
     assert rim.sum() == 160
-    half = translucent.Prt(s, m, backend="cpu", walks=0).radiosity(m)
+    half = translucent.Prt(s, m, backend="cpu", walks=0, samples=500_000).radiosity(m)
     np.testing.assert_array_equal(flat.radiosity(m)[~rim], half[~rim])
 
     ps, ts = sphere(12, 0.005)
@@ -103,6 +104,49 @@ def test_an_edit_beyond_the_walked_lengths_asks_for_a_refresh():
     assert max(prt.last_eval["error_estimate"]) >= 1.0
 
 
+def test_media_beyond_the_walked_lengths_are_walked_beside_the_first():
+    """A thin lens (6 mm wide, 0.6 mm thick) under a sun: a bright medium's light crosses it,
+    a dark one's does not, so what the walks add differs far more than a diffusion length
+    can carry. Precomputed for both (as for a textured Base Color's range), the bright one is
+    walked too, the rays shared, and an edit to it is within 10 % of the walks at every vertex
+    (`reference_radiance`, an independent brute-force walk) with no refresh asked; walked for
+    the dark one alone (`walk_media=1`: the others only set the basis), the same edit is read
+    from the dark one's walks, flagged, and 2.5x as far off. A moved light relights both."""
+    p, t = sphere(16, 0.003)
+    p = p * np.array([1.0, 1.0, 0.1], np.float32)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.0, 0.0, -1.0), 1.0)
+    w = s.vertex_areas[:, 0]
+
+    def grey(b):
+        return translucent.Material.from_principled(base_color=(b, b, b), radius=(1.0, 1.0, 1.0), scale=0.001)
+
+    dark, bright = grey(0.3), grey(0.95)
+    truth = translucent.reference_radiance(s, bright, walks=1000)
+    k = translucent.layer_weight(bright.roughness, 1.0, bright.eta) / math.pi
+    both = translucent.Prt(s, [dark, bright], backend="cpu", interreflection=False, walk_rays=2_000_000)
+    err_both = max(translucent.relative_error(both.radiosity(bright) * k, truth, w)["rms"])
+    assert not both.refresh_advised
+    walks = both.report["walks"]
+    assert walks["media"] == 2 and 0 < walks["rays"] <= 1.1 * 2_000_000, walks
+    alone = translucent.Prt(s, [dark, bright], backend="cpu", interreflection=False, walk_rays=2_000_000,
+                            walk_media=1)
+    err_alone = max(translucent.relative_error(alone.radiosity(bright) * k, truth, w)["rms"])
+    assert alone.refresh_advised and alone.report["walks"]["media"] == 1
+    assert err_both < 0.10, err_both
+    assert err_alone > 2.5 * err_both, (err_alone, err_both)
+    # The estimate states the noise of the walks it read, and covers what was measured.
+    assert 0.5 * err_both <= max(both.last_eval["error_estimate"]) < 1.0
+    # A moved light relights both media from their records, no walk traced.
+    side = translucent.Scene(p, t)
+    side.add_sun((0.6, 0.0, -0.8), 1.0)
+    update = both.update(lights=side)
+    assert update["walks_traced"] == 0 and both.report["walks"]["media"] == 2, update
+    err_side = max(translucent.relative_error(both.radiosity(bright) * k,
+                                              translucent.reference_radiance(side, bright, walks=1000), w)["rms"])
+    assert err_side < 0.10 and not both.refresh_advised, err_side
+
+
 def test_bad_walk_input_is_a_clear_error():
     p, s = sun_plane(n=11, size=0.1)
     m = translucent.Material.preset("skin1")
@@ -118,6 +162,8 @@ def test_bad_walk_input_is_a_clear_error():
         translucent.Prt(s, m, profile="dipole", walks=16)
     with pytest.raises(ValueError):
         translucent.Prt(s, m, walks=-3)
+    with pytest.raises(ValueError, match="walk_media"):
+        translucent.Prt(s, m, walk_media=0)
 
 
 def test_the_walks_keep_to_their_ray_budget():

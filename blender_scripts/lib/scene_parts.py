@@ -54,8 +54,12 @@ def _preview(scene, m, *, reference, w, mask=None, base_color=None, materials=No
     """One precompute of `scene` (for `materials`, else `m`) and its radiance in `m`, against
     `reference` over the vertices where `mask` holds: (rms, max, estimate, precompute_s,
     edit_s, vertices compared)."""
+    from addon import textures
+
     t0 = time.perf_counter()
-    prt = translucent.Prt(scene, m if materials is None else materials, backend="cpu", single_scattering=False)
+    walked = {} if materials is None else textures.walked(materials)
+    prt = translucent.Prt(scene, m if materials is None else materials, backend="cpu", single_scattering=False,
+                          **walked)
     precompute = time.perf_counter() - t0
     preview = prt.radiance(m) if base_color is None else prt.radiance(m, base_color=base_color)
     edit = float(prt.last_eval["seconds"])

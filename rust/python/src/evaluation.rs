@@ -52,6 +52,7 @@ pub fn walks_dict<'py>(
     w.set_item("kernel_radius", g.kernel_radius)?;
     w.set_item("noise", g.noise.to_vec())?;
     w.set_item("share", g.share.to_vec())?;
+    w.set_item("media", g.media)?;
     w.set_item("seconds", g.seconds)?;
     w.set_item("relight_bytes", g.relight_bytes)?;
     w.set_item("seconds_relight", g.seconds_relight)?;

@@ -288,7 +288,7 @@ impl PyPrt {
         tolerance = 1e-5, far_field = 0.25, world_samples = 64, area_samples = 16, progress = None,
         backend = "auto", fit_tolerance = None, profile = "cycles", interreflection = None,
         interreflection_rays = 144, walks = None, walk_vertices = 1000, walk_rays = None,
-        single_scattering = None, single_coefficients = 16, single_steps = 32,
+        walk_media = None, single_scattering = None, single_coefficients = 16, single_steps = 32,
         first_preview = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -311,6 +311,7 @@ impl PyPrt {
         #[pyo3(from_py_with = crate::convert::opt_int)] walks: Option<i64>,
         #[pyo3(from_py_with = crate::convert::int)] walk_vertices: i64,
         #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
+        #[pyo3(from_py_with = crate::convert::opt_int)] walk_media: Option<i64>,
         single_scattering: Option<bool>,
         #[pyo3(from_py_with = crate::convert::int)] single_coefficients: i64,
         #[pyo3(from_py_with = crate::convert::int)] single_steps: i64,
@@ -339,6 +340,14 @@ impl PyPrt {
             walk_rays: walk_rays
                 .map(|r| non_negative("walk_rays", r))
                 .transpose()?,
+            walk_media: match walk_media {
+                Some(n) if n < 1 => {
+                    return Err(PyValueError::new_err(format!(
+                        "walk_media {n}: at least 1 (the first material is always walked)"
+                    )))
+                }
+                n => n.map(|n| non_negative("walk_media", n)).transpose()?,
+            },
             first_preview,
         };
         let world_samples: u32 = non_negative("world_samples", world_samples)?;

@@ -16,7 +16,7 @@ use crate::profiles::{Profile, Resolved};
 use crate::raytrace::Tracer;
 use crate::shadow_edges::ShadowEdges;
 use crate::walks::ExitLight;
-use crate::walks::{WalkTerm, WalkTermSettings};
+use crate::walks::{self, WalkTerm, WalkTermSettings};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -177,7 +177,7 @@ impl Prt {
             prt.add_walks(
                 mesh,
                 tracer,
-                rep,
+                &resolved,
                 &halfspace,
                 g,
                 irradiance,
@@ -205,14 +205,16 @@ impl Prt {
     }
 
     /// The walks through the mesh for the direct light (`WalkTerm`): what they add to the
-    /// half-space B of the first representative. Their exits read the light finer where a
-    /// shadow's edge crosses a triangle.
+    /// half-space B (`halfspace`) of the first of `media`, and beside it of those media whose
+    /// diffusion lengths reach beyond the walked ones (`walks::media_to_walk`: a textured Base
+    /// Color's brightest and darkest), the rays shared among them. Their exits read the light
+    /// finer where a shadow's edge crosses a triangle.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn add_walks(
         &mut self,
         mesh: &Mesh,
         tracer: &Tracer,
-        rep: &Resolved,
+        media: &[Resolved],
         halfspace: &[[f32; 3]],
         g: &WalkTermSettings,
         irradiance: &IrradianceFn,
@@ -229,7 +231,37 @@ impl Prt {
             vertices: &self.vertex_irradiance,
             edges: &edges,
         };
-        let term = WalkTerm::compute(mesh, tracer, rep, &lit, halfspace, g, progress)?;
+        let beside = walks::media_to_walk(&media[..g.media.clamp(1, media.len())]);
+        let mut shared = g.clone();
+        shared.rays = g.rays / (1 + beside.len() as u64);
+        let share = 1.0 / (1 + beside.len()) as f32;
+        let part = |k: usize| progress.map(move |p| move |f: f32| p(share * (k as f32 + f)));
+        let first = part(0);
+        let mut term = WalkTerm::compute(
+            mesh,
+            tracer,
+            &media[0],
+            &lit,
+            halfspace,
+            &shared,
+            first.as_ref().map(|f| f as _),
+        )?;
+        let mut walked = Vec::with_capacity(beside.len());
+        for (k, &i) in beside.iter().enumerate() {
+            let own = self.radiosity_of(&media[i], false, false)?.values;
+            let tick = part(k + 1);
+            let t = WalkTerm::compute(
+                mesh,
+                tracer,
+                &media[i],
+                &lit,
+                &own,
+                &shared,
+                tick.as_ref().map(|f| f as _),
+            )?;
+            walked.push((media[i].clone(), t));
+        }
+        term.set_beside(walked);
         self.report.walks = Some(term.report.clone());
         self.walks = Some(term);
         Ok(())
@@ -391,9 +423,13 @@ impl SampledLight {
             None => default_spacing(
                 mesh,
                 profiles,
-                settings
-                    .first_preview
-                    .then_some(super::request::FIRST_PREVIEW_SAMPLES),
+                if settings.first_preview {
+                    Some(super::request::FIRST_PREVIEW_SAMPLES)
+                } else if settings.walks.is_some() {
+                    Some(super::settings::DEFAULT_MAX_SAMPLES_WITH_WALKS)
+                } else {
+                    None
+                },
             ),
         };
         let samples = mesh.surface_samples(spacing)?;

@@ -315,20 +315,31 @@ impl Prt {
             };
             self.report.shadow_edge_triangles = edges.len();
             self.report.shadow_edge_points = edges.points();
-            if term.relightable() {
+            let beside = term.take_beside();
+            if term.relightable() && beside.iter().all(|(_, t)| t.relightable()) {
                 let light = ExitLight {
                     vertices: &self.vertex_irradiance,
                     edges: &edges,
                 };
                 term.relight(mesh, rep, &light, &halfspace)?;
+                let mut relit = Vec::with_capacity(beside.len());
+                for (medium, mut t) in beside {
+                    let own = self.radiosity_of(&medium, false, false)?.values;
+                    t.relight(mesh, &medium, &light, &own)?;
+                    relit.push((medium, t));
+                }
+                term.set_beside(relit);
                 self.report.walks = Some(term.report.clone());
                 self.walks = Some(term);
             } else if let Some(g) = &settings.walks {
                 let walk_progress = progress.map(|p| move |f: f32| p(0.7 + 0.1 * f));
+                let media: Vec<Resolved> = std::iter::once(rep.clone())
+                    .chain(beside.into_iter().map(|(m, _)| m))
+                    .collect();
                 self.add_walks(
                     mesh,
                     tracer,
-                    rep,
+                    &media,
                     &halfspace,
                     g,
                     irradiance,

@@ -35,6 +35,9 @@ pub struct PrtRequest {
     pub walk_vertices: usize,
     /// The walks' ray budget; None: `default_walk_rays` of the mesh's vertex count.
     pub walk_rays: Option<u64>,
+    /// How many of the materials, from the first, the walks may be traced for
+    /// (`walks::media_to_walk` picks among them); None: all.
+    pub walk_media: Option<usize>,
     /// A first preview, shown while the full precompute runs: the half-space profile and the
     /// object's own light (`FIRST_PREVIEW_OWN_LIGHT_RAYS` rays a vertex), no walks, on at most
     /// `FIRST_PREVIEW_SAMPLES` samples, far clusters accepted from `FIRST_PREVIEW_FAR_FIELD`
@@ -76,6 +79,7 @@ impl Default for PrtRequest {
             interreflection_rays: crate::own_light::DEFAULT_RAYS,
             walks: None,
             walk_vertices: 1000,
+            walk_media: None,
             walk_rays: None,
             first_preview: false,
         }
@@ -122,11 +126,13 @@ impl PrtRequest {
                 walks: w,
                 rays: 0,
                 vertices: self.walk_vertices,
+                media: self.walk_media.unwrap_or(usize::MAX),
                 ..WalkTermSettings::default()
             }),
             None if profile == ProfileKind::Cycles => Some(WalkTermSettings {
                 rays: walk_rays,
                 vertices: self.walk_vertices,
+                media: self.walk_media.unwrap_or(usize::MAX),
                 ..WalkTermSettings::default()
             }),
             None => None,
@@ -188,7 +194,7 @@ mod tests {
         );
         assert_eq!(cycles.eta, 1.0, "Cycles' walk leaves index-matched");
         let w = cycles.walks.expect("Cycles walks by default");
-        assert_eq!(w.rays, 20_000_000);
+        assert_eq!(w.rays, 30_000_000);
         let dipole = PrtRequest {
             profile: ProfileKind::Dipole,
             ..PrtRequest::default()

@@ -382,14 +382,15 @@ fn eta_mismatch_and_bad_settings_are_errors() {
 }
 
 #[test]
-fn the_default_walk_budget_is_twenty_million_rays_within_600_to_8000_per_vertex() {
-    // The bunny at 10 cm (34,834 vertices): 20 M rays, 574 per vertex -> raised to 600.
-    assert_eq!(default_walk_rays(34_834), 600 * 34_834);
-    // A mid-size mesh gets the flat budget.
-    assert_eq!(default_walk_rays(10_000), 20_000_000);
-    // A coarse 3,000-vertex character the flat budget too (it was capped at 7.5 M), a
-    // smaller mesh at most 8000 per vertex.
-    assert_eq!(default_walk_rays(3_000), 20_000_000);
+fn the_default_walk_budget_is_thirty_million_rays_within_600_to_8000_per_vertex() {
+    // The bunny at 10 cm (34,834 vertices) and a mid-size mesh get the flat budget; a mesh of
+    // 139k vertices 600 per vertex.
+    assert_eq!(default_walk_rays(34_834), 30_000_000);
+    assert_eq!(default_walk_rays(10_000), 30_000_000);
+    assert_eq!(default_walk_rays(139_000), 600 * 139_000);
+    // A coarse 3,000-vertex character at most 8000 per vertex (it was capped at 7.5 M), as a
+    // smaller mesh.
+    assert_eq!(default_walk_rays(3_000), 24_000_000);
     assert_eq!(default_walk_rays(2_000), 16_000_000);
     assert_eq!(default_walk_rays(42), 8000 * 42);
 }

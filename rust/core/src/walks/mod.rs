@@ -3,6 +3,7 @@
 
 mod allocation;
 mod grid;
+mod media;
 mod operator;
 mod passes;
 mod radiosity;
@@ -12,6 +13,7 @@ mod term;
 mod twin;
 mod walker;
 
+pub use media::media_to_walk;
 pub use operator::ReceiverRecord;
 pub use radiosity::{
     relit_radiosity, walk_radiosity, walk_radiosity_lit, ExitLight, MeshWalkResult,

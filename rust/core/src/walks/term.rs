@@ -36,6 +36,7 @@
 //! D = 0 without walks: there the half-space table is the walk.
 
 use super::grid::Grid;
+use super::media::Column;
 use super::passes::{Passes, KERNEL_SPACINGS};
 use super::radiosity::{ExitLight, MeshWalkSettings};
 use super::relight::{Kept, Layout};
@@ -55,14 +56,17 @@ pub const LENGTH_MARGIN: f64 = 1.5;
 /// diffusion lengths of the tangent plane.
 pub const FLAT_TOLERANCE: f64 = 0.02;
 
-/// The walks' default ray budget: 20 M rays (8-9 s on 2 cores for the 10 cm bunny), at least
-/// 600 per vertex (a larger mesh gets the bunny's walks per vertex, so the same noise per
-/// vertex, in proportionally more time: the horse's 48,485 vertices 29 M) and at most 8000 per
-/// vertex. On the bunny each vertex's D is a kernel average over about a dozen walked
+/// The walks' default ray budget: 30 M rays (12-15 s on 2 cores for the 10 cm bunny), at least
+/// 600 per vertex (a mesh of more than 50,000 vertices gets that many per vertex, so about the
+/// same noise per vertex in proportionally more time) and at most 8000 per vertex. It was
+/// 20 M; with the precompute's samples capped at 1 M instead of 2 M when the walks run
+/// (`prt::DEFAULT_MAX_SAMPLES_WITH_WALKS`, which cost nothing measurable against Cycles) the 10 M more rays cost about what the
+/// samples saved, and took the demo's Suzanne beside a ball from 5.10 to 4.73 % and the bunny
+/// in ketchup from 4.69 to 4.27 % from 1024-spp Cycles bakes (docs/walks.md "The ray budget"). On the bunny each vertex's D is a kernel average over about a dozen walked
 /// vertices; on a coarse mesh (faces as wide as the diffusion length) each vertex keeps its
 /// own walks (`walks::shrinkage`), so it needs about the rays the bunny's kernel pools for one
-/// vertex: 8000 (a 3,000-vertex character gets the whole 20 M, docs/walks.md "Coarse meshes").
-pub const DEFAULT_WALK_RAYS: u64 = 20_000_000;
+/// vertex: 8000 (a 3,000-vertex character gets 24 M, docs/walks.md "Coarse meshes").
+pub const DEFAULT_WALK_RAYS: u64 = 30_000_000;
 pub const MIN_WALK_RAYS_PER_VERTEX: u64 = 600;
 pub const MAX_WALK_RAYS_PER_VERTEX: u64 = 8000;
 
@@ -100,19 +104,24 @@ pub struct WalkTermSettings {
     /// Keep what the walks found as a function of the light, so a new light is read at the
     /// same exits (`WalkTerm::relight`) instead of walking again.
     pub record: bool,
+    /// At most this many of a precompute's materials, from the first, may be walked
+    /// (`media_to_walk` picks among them): the others set the basis alone (faces of another
+    /// material that are not shown).
+    pub media: usize,
 }
 
 impl Default for WalkTermSettings {
     fn default() -> Self {
         Self {
             walks: 16,
-            rays: 20_000_000,
+            rays: DEFAULT_WALK_RAYS,
             max_walks: 4096,
             vertices: 1000,
             seed: MeshWalkSettings::default().seed,
             refine: true,
             shrink: true,
             record: true,
+            media: usize::MAX,
         }
     }
 }
@@ -145,18 +154,26 @@ pub struct WalkTermReport {
     /// Area-weighted RMS of D relative to B, per channel: how much geometry changed.
     pub share: [f64; 3],
     pub seconds: f64,
+    /// Media walked: 1, or more where the representatives' diffusion lengths reach beyond
+    /// the first's (`media`); walks, rays, seconds and bytes are their sums, the noise the
+    /// largest.
+    pub media: usize,
     /// Bytes kept for a new light (`WalkTerm::relight`; 0 without `record`), and the seconds
     /// of the last relight (0 before any).
     pub relight_bytes: usize,
     pub seconds_relight: f64,
 }
 
-/// D / A per vertex and channel at the three walked diffusion lengths.
+/// D / A per vertex and channel at the three walked diffusion lengths (and at those of the
+/// media walked beside them, `media`).
 #[derive(Debug, Clone)]
 pub struct WalkTerm {
     pub(super) per_albedo: Vec<[f32; 3]>,
-    /// ln L of the walked channels, with the channel index, sorted.
-    lengths: Vec<(f64, usize)>,
+    /// ln L of the walked channels, sorted, each with its column: 3 m + c for channel c of
+    /// medium m (0 this one, m > 0 `beside[m - 1]`).
+    pub(super) lengths: Vec<(f64, usize)>,
+    /// Media walked beside this one, each with the material it was walked for (`media`).
+    pub(super) beside: Vec<(Resolved, WalkTerm)>,
     /// Relative noise per channel (added to the error estimate).
     pub(super) noise: [f64; 3],
     pub report: WalkTermReport,
@@ -254,6 +271,7 @@ impl WalkTerm {
         Ok(WalkTerm {
             per_albedo,
             lengths: sorted,
+            beside: Vec::new(),
             noise,
             report: WalkTermReport {
                 walked_vertices: main.walked.len(),
@@ -274,6 +292,7 @@ impl WalkTerm {
                 noise,
                 share,
                 seconds: start.elapsed().as_secs_f64(),
+                media: 1,
                 relight_bytes: layout.as_ref().map_or(0, |l| l.bytes()),
                 seconds_relight: 0.0,
             },
@@ -332,15 +351,14 @@ impl WalkTerm {
             pick
         });
         let scale: [f32; 3] = std::array::from_fn(|c| albedo[c] as f32 * factor[c]);
-        radiosity
-            .par_iter_mut()
-            .zip(self.per_albedo.par_iter())
-            .for_each(|(b, d)| {
-                for c in 0..3 {
-                    let ([i, j], [wi, wj]) = picks[c];
-                    b[c] = (b[c] + scale[c] * (wi * d[i] + wj * d[j])).max(floor);
-                }
-            });
+        let columns: [[Column; 2]; 3] = std::array::from_fn(|c| picks[c].0.map(|k| self.column(k)));
+        radiosity.par_iter_mut().enumerate().for_each(|(v, b)| {
+            for c in 0..3 {
+                let [(di, i), (dj, j)] = columns[c];
+                let [wi, wj] = picks[c].1;
+                b[c] = (b[c] + scale[c] * (wi * di[v][i] + wj * dj[v][j])).max(floor);
+            }
+        });
         error
     }
 }
@@ -388,14 +406,15 @@ impl WalkTerm {
         type Sums = ([f64; 3], [f64; 3]);
         let (beyond, total): Sums = radiosity
             .par_iter_mut()
-            .zip(self.per_albedo.par_iter())
+            .enumerate()
             .zip(ln_length.par_iter().zip(scale.par_iter()))
-            .map(|((b, d), (x, k))| {
+            .map(|((v, b), (x, k))| {
                 let mut out: Sums = ([0.0; 3], [0.0; 3]);
                 for c in 0..3 {
                     if k[c] != 0.0 {
                         let (([i, j], [wi, wj]), far) = self.pick(x[c]);
-                        let term = k[c] * (wi * d[i] + wj * d[j]);
+                        let ((di, ci), (dj, cj)) = (self.column(i), self.column(j));
+                        let term = k[c] * (wi * di[v][ci] + wj * dj[v][cj]);
                         b[c] = (b[c] + term).max(0.0);
                         if far {
                             out.0[c] = f64::from(term) * f64::from(term);

@@ -224,6 +224,7 @@ class Prt:
         walks: int | None = None,
         walk_vertices: int = 1000,
         walk_rays: int | None = None,
+        walk_media: int | None = None,
         single_scattering: bool | None = None,
         single_coefficients: int = 16,
         single_steps: int = 32,
@@ -242,10 +243,13 @@ class Prt:
         off for "dipole".
         `walks`: Cycles' walk traced through the mesh itself for the geometry a half-space
         profile cannot see (thin and curved parts); None: on for "cycles" with as many walks as
-        `walk_rays` rays allow (default 20 M, at least 600 and at most 8000 per vertex: about
+        `walk_rays` rays allow (default 30 M, at least 600 and at most 8000 per vertex: about
         32 walks each at as many vertices as that buys, up to all, then half the walks evenly
-        and half where they spread most; 8-10 s on 2 cores for the 10 cm bunny), off
-        for "dipole"; N: exactly N walks per walked vertex and channel; 0: off. Each walk
+        and half where they spread most; 12-15 s on 2 cores for the 10 cm bunny), off
+        for "dipole"; with several `materials`, those whose diffusion lengths lie more than
+        1.5x beyond the first's are walked too, the rays shared (`report["walks"]["media"]`:
+        a textured Base Color's brightest and darkest; `walk_media`: at most that many of
+        `materials`, from the first, are walked, the rest only set the basis); N: exactly N walks per walked vertex and channel; 0: off. Each walk
         carries a control variate (its twin in the tangent half-space), so few walks suffice. Flat
         neighbourhoods are not walked (`report["walks"]["skipped_flat"]`); where the term
         changes faster than the walked vertices' spacing, and at vertices sunk inside another
@@ -362,7 +366,8 @@ class Prt:
         quantization_error, on_gpu, rays, bounded_paths, seconds), walks and walks_indirect
         (None, or walked_vertices, skipped_flat, walks_per_vertex, refined_vertices,
         refined_walks_per_vertex, sharp_vertices, sharp_walks_per_vertex (open edges and apexes,
-        walked one by one), walks, rays, spacing, kernel_radius, noise, share, seconds:
+        walked one by one), walks, rays, spacing, kernel_radius, noise, share, media (media
+        walked: 1, or more beside the first), seconds:
         the walks through the mesh for the direct light and for the object's own light),
         shadow_edge_triangles and shadow_edge_points (where the walks read the light on a finer
         grid), carried_pose (the walks and own light carried from another pose by `update`,
