@@ -57,6 +57,7 @@ pub(super) type Column<'a> = (&'a [[f32; 3]], usize);
 
 impl WalkTerm {
     /// D / A per vertex of the medium holding column `k` (`lengths`), and its channel.
+    #[inline]
     pub(super) fn column(&self, k: usize) -> Column<'_> {
         let m = k / CHANNELS;
         let table = if m == 0 {
@@ -176,5 +177,10 @@ mod tests {
         // A second medium as bright as one already walked is not walked again.
         assert_eq!(media_to_walk(&[mean, bright.clone(), bright]), vec![1]);
         assert!(media_to_walk(&[]).is_empty());
+    }
+
+    #[test]
+    fn the_margins_log_is_ln_1_5() {
+        assert!((super::super::term::LN_LENGTH_MARGIN - LENGTH_MARGIN.ln()).abs() < 1e-15);
     }
 }

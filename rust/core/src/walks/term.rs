@@ -52,6 +52,8 @@ use std::time::Instant;
 /// How far (as a factor on the diffusion length) an edit may go beyond the walked channels
 /// before the walk term is called stale.
 pub const LENGTH_MARGIN: f64 = 1.5;
+/// ln LENGTH_MARGIN.
+pub(super) const LN_LENGTH_MARGIN: f64 = 0.405_465_108_108_164_4;
 /// Flat enough to skip the walks: every walked vertex within reach lies within this many
 /// diffusion lengths of the tangent plane.
 pub const FLAT_TOLERANCE: f64 = 0.02;
@@ -366,19 +368,21 @@ impl WalkTerm {
 impl WalkTerm {
     /// The two walked channels bracketing `ln_length` (a diffusion length's log) and their
     /// weights, and whether it lies beyond the walked ones by more than `LENGTH_MARGIN`.
+    /// (Read per vertex and channel on a textured edit: inlined, the margin's log a constant,
+    /// and the few walked lengths scanned in order.)
+    #[inline]
     fn pick(&self, x: f64) -> (([usize; 2], [f32; 2]), bool) {
         let (lo, hi) = (self.lengths[0], self.lengths[self.lengths.len() - 1]);
-        let beyond = x - hi.0 > LENGTH_MARGIN.ln() || lo.0 - x > LENGTH_MARGIN.ln();
+        let beyond = x - hi.0 > LN_LENGTH_MARGIN || lo.0 - x > LN_LENGTH_MARGIN;
         if x <= lo.0 {
             return (([lo.1, lo.1], [1.0, 0.0]), beyond);
         }
         if x >= hi.0 {
             return (([hi.1, hi.1], [1.0, 0.0]), beyond);
         }
-        let i = self
-            .lengths
-            .partition_point(|l| l.0 <= x)
-            .clamp(1, self.lengths.len() - 1);
+        let i = (1..self.lengths.len())
+            .find(|&i| self.lengths[i].0 > x)
+            .unwrap_or(self.lengths.len() - 1);
         let (a, b) = (self.lengths[i - 1], self.lengths[i]);
         let t = if b.0 > a.0 {
             (x - a.0) / (b.0 - a.0)
