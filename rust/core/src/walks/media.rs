@@ -11,7 +11,7 @@
 //! (`subsurface_random_walk` reads the closure there), so a vertex's term is its own medium's
 //! walk; reading it at that medium's own lengths leaves no interpolation at all.
 
-use super::term::{lengths_and_albedos, WalkTerm, LENGTH_MARGIN};
+use super::term::{lengths_and_albedos, WalkTerm, LN_LENGTH_MARGIN};
 use crate::optics::CHANNELS;
 use crate::profiles::Resolved;
 
@@ -39,11 +39,12 @@ pub fn media_to_walk(media: &[Resolved]) -> Vec<usize> {
             })
     };
     let (mut lo, mut hi) = span(&ln_lengths(first));
-    let margin = LENGTH_MARGIN.ln();
     let mut out = Vec::new();
     for (i, m) in media.iter().enumerate().skip(1) {
         let x = ln_lengths(m);
-        if x.iter().any(|&l| l > hi + margin || l < lo - margin) {
+        if x.iter()
+            .any(|&l| l > hi + LN_LENGTH_MARGIN || l < lo - LN_LENGTH_MARGIN)
+        {
             let (a, b) = span(&x);
             (lo, hi) = (lo.min(a), hi.max(b));
             out.push(i);
@@ -66,11 +67,6 @@ impl WalkTerm {
             &self.beside[m - 1].1.per_albedo
         };
         (table, k % CHANNELS)
-    }
-
-    /// The media walked beside this one, each with the material it was walked for.
-    pub fn beside(&self) -> &[(Resolved, WalkTerm)] {
-        &self.beside
     }
 
     /// Takes the media walked beside this one out (to relight them, `set_beside` puts them
@@ -165,7 +161,7 @@ mod tests {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
                 (a.min(x), b.max(x))
             });
-        let m = LENGTH_MARGIN.ln();
+        let m = LN_LENGTH_MARGIN;
         assert!(lengths(&near).iter().all(|&x| x <= hi + m && x >= lo - m));
         assert!(lengths(&bright).iter().any(|&x| x > hi + m));
         assert!(lengths(&dark).iter().any(|&x| x < lo - m));
@@ -181,6 +177,6 @@ mod tests {
 
     #[test]
     fn the_margins_log_is_ln_1_5() {
-        assert!((super::super::term::LN_LENGTH_MARGIN - LENGTH_MARGIN.ln()).abs() < 1e-15);
+        assert!((LN_LENGTH_MARGIN - crate::walks::LENGTH_MARGIN.ln()).abs() < 1e-15);
     }
 }
