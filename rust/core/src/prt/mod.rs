@@ -21,6 +21,7 @@
 
 mod backend;
 pub mod basis;
+mod color_picks;
 mod evaluate;
 pub mod gpu;
 mod knots;
@@ -36,6 +37,7 @@ pub mod single;
 mod tests;
 pub mod textured;
 mod tree;
+mod vertex_media;
 
 use crate::own_light::Bounce;
 use crate::profiles::ProfileKind;
@@ -105,6 +107,9 @@ pub struct Prt {
     /// light refills it instead of splitting the samples again. None after a pose until the
     /// next transport.
     tree_shape: Option<std::sync::Arc<tree::TreeShape>>,
+    /// The last textured edit's Base Color and its picks among the nodes (`color_picks`),
+    /// shared with the transports relit or posed from this one.
+    color_cache: color_picks::SharedColorCache,
 }
 
 impl Prt {

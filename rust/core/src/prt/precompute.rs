@@ -154,6 +154,7 @@ impl Prt {
             light_scale: [1.0; 3],
             kept_irradiance: Default::default(),
             tree_shape: Some(std::sync::Arc::new(shape)),
+            color_cache: Default::default(),
         };
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);

@@ -138,6 +138,7 @@ impl Prt {
             light_scale: [1.0; 3],
             kept_irradiance: self.kept_irradiance.clone(),
             tree_shape: self.tree_shape.clone(),
+            color_cache: self.color_cache.clone(),
         };
         if pose {
             next.tree_shape = None; // the samples move: the tree is split anew

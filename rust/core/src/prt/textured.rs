@@ -22,8 +22,9 @@
 //! vertex's node the same way. Subsurface Radius and Scale stay uniform (the transport's
 //! samples and knots are spaced for one radius).
 
+use super::color_picks::{self, Picks, FINE_BINS};
 use super::evaluate::{add_indirect_noise, Coefficients, Evaluation, PrtDetails};
-use super::layout::NodePick;
+use super::vertex_media::{add_layers, blend, OwnLight, PerNode, Vertex};
 use super::Prt;
 use crate::error::{Error, Result};
 use crate::evaluation::{radiance_from_radiosity_each, Quantity, Skipped};
@@ -33,6 +34,7 @@ use crate::profiles::{ProfileKind, Resolved};
 use crate::walks::lengths_and_albedos;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Intervals of the Base Color's table to start from: 1/16 apart.
@@ -40,7 +42,6 @@ pub const COLOR_INTERVALS: usize = 16;
 /// An interval whose midpoint the blend of its ends misses by more than this share of the
 /// fitted total is halved, down to 1/`FINE_BINS`.
 pub const INTERPOLATION_TOLERANCE: f64 = 0.005;
-const FINE_BINS: usize = 256;
 /// Below this share of the brightest node's total, the interpolation's miss is judged against
 /// that floor: an error of 40 % on a channel at a thousandth of the brightest is not seen.
 pub const DARK_SHARE: f64 = 0.05;
@@ -55,60 +56,6 @@ struct Node {
     sent: [f64; 3],
     /// The exit weight and view factor along the normal, per channel.
     along_normal: [f64; 3],
-}
-
-/// The fine bin of a Base Color channel (Cycles saturates the colour first:
-/// `subsurface_random_walk_coefficients`).
-fn fine_bin(x: f32) -> usize {
-    ((x.clamp(0.0, 1.0) * FINE_BINS as f32) as usize).min(FINE_BINS - 1)
-}
-
-/// Where a Base Color channel lies among the table's nodes: the node below and the weight of
-/// the one above. Every node lies on a fine bin's edge, so the node below a value is the node
-/// below its bin's lower edge: one lookup per bin, not a search per vertex.
-struct Locator {
-    xs: Vec<f32>,
-    /// 1 / (x_{k+1} - x_k), 0 at the last node.
-    inverse_widths: Vec<f32>,
-    below: [u32; FINE_BINS],
-}
-
-impl Locator {
-    /// `xs` sorted, every one a multiple of 1/`FINE_BINS`, at least one.
-    fn new(xs: Vec<f32>) -> Locator {
-        let last = xs.len().saturating_sub(2);
-        let below = std::array::from_fn(|b| {
-            let edge = b as f32 / FINE_BINS as f32;
-            (xs.partition_point(|&n| n <= edge).max(1) - 1).min(last) as u32
-        });
-        let inverse_widths = (0..xs.len())
-            .map(|k| xs.get(k + 1).map_or(0.0, |b| 1.0 / (b - xs[k])))
-            .collect();
-        Locator {
-            xs,
-            inverse_widths,
-            below,
-        }
-    }
-
-    fn locate(&self, x: f32) -> (u32, f32) {
-        let x = x.clamp(0.0, 1.0);
-        let k = self.below[fine_bin(x)];
-        let t = (x - self.xs[k as usize]) * self.inverse_widths[k as usize];
-        (k, t.clamp(0.0, 1.0))
-    }
-}
-
-/// A node quantity (`per_node[k][c]`) blended at a vertex's pick for channel `c`, as the
-/// coefficients are.
-fn blend(per_node: &[[f64; 3]], p: &NodePick, c: usize) -> f64 {
-    let (k, t) = p[c];
-    let below = per_node[k as usize][c];
-    if t > 0.0 {
-        below + f64::from(t) * (per_node[k as usize + 1][c] - below)
-    } else {
-        below
-    }
 }
 
 /// The Subsurface Weight per vertex checked: one value in [0, 1] per vertex.
@@ -148,7 +95,8 @@ fn check_colors(colors: &[[f32; 3]], vertices: usize) -> Result<()> {
 /// The nodes the vertices read, fitted, in increasing Base Color, and each vertex's pick.
 struct Table {
     nodes: Vec<Option<Node>>,
-    picks: Vec<NodePick>,
+    /// Each vertex's pick among the nodes, and the vertices' weights on each node summed.
+    picked: Arc<Picks>,
     /// Per channel: the largest error of a node read plus the largest interpolation error of
     /// an interval read.
     error: [f64; 3],
@@ -182,28 +130,7 @@ impl Prt {
 
     fn table(&self, inputs: &PrincipledInputs, colors: &[[f32; 3]]) -> Result<Table> {
         // Which fine bins of the Base Color each channel reads.
-        let bins = colors
-            .par_chunks(4096)
-            .map(|chunk| {
-                let mut read = [[false; 3]; FINE_BINS];
-                for c in chunk {
-                    for ch in 0..3 {
-                        read[fine_bin(c[ch])][ch] = true;
-                    }
-                }
-                read
-            })
-            .reduce(
-                || [[false; 3]; FINE_BINS],
-                |mut a, b| {
-                    for (x, y) in a.iter_mut().zip(b) {
-                        for ch in 0..3 {
-                            x[ch] |= y[ch];
-                        }
-                    }
-                    a
-                },
-            );
+        let bins = color_picks::bins(&self.color_cache, colors);
         let reads = |a: f64, b: f64, ch: usize| {
             let lo = ((a * FINE_BINS as f64) as usize).min(FINE_BINS - 1);
             let hi = ((b * FINE_BINS as f64).ceil() as usize).clamp(lo + 1, FINE_BINS);
@@ -303,16 +230,8 @@ impl Prt {
                 )));
             }
         }
-        let locator = Locator::new(nodes.iter().map(|n| n.0 as f32).collect());
-        let mut picks: Vec<NodePick> = vec![[(0, 0.0); 3]; colors.len()];
-        picks
-            .par_chunks_mut(4096)
-            .zip(colors.par_chunks(4096))
-            .for_each(|(picks, colors)| {
-                for (p, c) in picks.iter_mut().zip(colors) {
-                    *p = std::array::from_fn(|ch| locator.locate(c[ch]));
-                }
-            });
+        let xs = nodes.iter().map(|n| n.0 as f32).collect();
+        let picked = color_picks::picks(&self.color_cache, xs, colors);
         for (k, (_, node)) in nodes.iter().enumerate() {
             for (ch, e) in error.iter_mut().enumerate() {
                 let lo = if k > 0 { nodes[k - 1].0 } else { nodes[k].0 };
@@ -327,7 +246,7 @@ impl Prt {
         }
         Ok(Table {
             nodes: nodes.into_iter().map(|n| Some(n.1)).collect(),
-            picks,
+            picked,
             error,
         })
     }
@@ -395,18 +314,23 @@ impl Prt {
             .iter()
             .map(|n| n.as_ref().map(|n| n.coefficients.vectors.clone()))
             .collect();
-        let mut radiosity = self.transport.dot_interpolated(&vectors, &table.picks);
+        let mut radiosity = self
+            .transport
+            .dot_interpolated(&vectors, &table.picked.picks);
         // The lobes' split per vertex: the subsurface share w, and the diffuse lobe's albedo
         // (1 - w) x below x Base Color (saturated), below = (1 - Metallic)(1 - Transmission).
         let below = (1.0 - inputs.metallic) * (1.0 - inputs.transmission);
-        let share = |v: usize| weights.map_or(1.0, |w| f64::from(w[v]));
-        let diffuse =
-            |v: usize, c: usize| (1.0 - share(v)) * below * f64::from(colors[v][c]).clamp(0.0, 1.0);
+        let vertex = Vertex {
+            picks: &table.picked.picks,
+            weights,
+            colors,
+            below,
+        };
         if let Some(w) = weights {
             (radiosity.par_iter_mut().enumerate()).for_each(|(v, b)| {
                 let i = self.vertex_irradiance[v];
                 for c in 0..3 {
-                    let d = diffuse(v, c) * f64::from(i[c]);
+                    let d = vertex.diffuse(v, c) * f64::from(i[c]);
                     b[c] = (f64::from(w[v]) * f64::from(b[c]) + d) as f32;
                 }
             });
@@ -419,87 +343,68 @@ impl Prt {
                 .map(|n| n.as_ref().map_or([0.0; 3], f))
                 .collect()
         };
-        let point_mass = per_node(&|n| n.coefficients.point_mass);
-        if point_mass.iter().flatten().any(|&m| m > 0.0) {
-            radiosity
-                .par_iter_mut()
-                .zip(
-                    table
-                        .picks
-                        .par_iter()
-                        .zip(self.vertex_irradiance.par_iter()),
-                )
-                .for_each(|(b, (p, i))| {
-                    for c in 0..3 {
-                        b[c] += (blend(&point_mass, p, c) * f64::from(i[c])) as f32;
-                    }
-                });
-        }
-        let mut error_estimate = table.error;
-        let (ln_lengths, walk_albedos) = (per_node(&|n| n.ln_length), per_node(&|n| n.walk_albedo));
-        let walk_inputs = |factor: [f64; 3]| -> (Vec<[f64; 3]>, Vec<[f32; 3]>) {
-            table
-                .picks
-                .par_iter()
-                .enumerate()
-                .map(|(v, p)| {
-                    let x: [f64; 3] = std::array::from_fn(|c| blend(&ln_lengths, p, c));
-                    let k: [f32; 3] = std::array::from_fn(|c| {
-                        (share(v) * blend(&walk_albedos, p, c) * factor[c]) as f32
-                    });
-                    (x, k)
-                })
-                .unzip()
+        let nodes = PerNode {
+            fitted: table.nodes.iter().map(Option::is_some).collect(),
+            point_mass: per_node(&|n| n.coefficients.point_mass),
+            ln_length: per_node(&|n| n.ln_length),
+            walk_albedo: per_node(&|n| n.walk_albedo),
+            totals: per_node(&|n| n.totals),
         };
-        if let Some(g) = self.walks.as_ref().filter(|_| walks) {
-            let (x, k) = walk_inputs([1.0; 3]);
-            let added = g.add_per_vertex(&mut radiosity, &x, &k);
-            for (e, a) in error_estimate.iter_mut().zip(added) {
-                *e += a;
-            }
-        }
-        if let Some(own) = self.bounce.as_ref().filter(|_| bounce) {
+        let mut error_estimate = table.error;
+        let own = self.bounce.as_ref().filter(|_| bounce).map(|own| {
             // What the surface sends on, averaged over the vertices (each sender has its own
             // Base Color; the gathered E_ind holds no record of who sent it), against the
             // representative's: the indirect light's scale.
-            let n = table.picks.len().max(1) as f64;
-            let sent_per_node = per_node(&|n| n.sent);
-            let (totals, along) = (per_node(&|n| n.totals), per_node(&|n| n.along_normal));
+            let n = table.picked.picks.len().max(1) as f64;
+            let (sent_per_node, along) = (per_node(&|n| n.sent), per_node(&|n| n.along_normal));
             // A vertex of weight w sends w of its medium's and (1 - w) of its diffuse lobe's:
             // the same exit weight and specular layer, the lobe's albedo for the medium's total.
-            let sent: [f64; 3] = std::array::from_fn(|c| {
-                (table.picks.par_iter().enumerate())
-                    .map(|(v, p)| {
-                        let whole = blend(&sent_per_node, p, c);
-                        let lobe = (1.0 - share(v)) * blend(&totals, p, c) - diffuse(v, c);
-                        whole - blend(&along, p, c) * lobe
+            let mut sent: [f64; 3] = std::array::from_fn(|c| {
+                (sent_per_node.iter().zip(&table.picked.node_weights))
+                    .map(|(s, w)| s[c] * w[c])
+                    .sum()
+            });
+            if weights.is_some() {
+                let lobes: [f64; 3] = (table.picked.picks.par_iter().enumerate())
+                    .map(|(v, p)| -> [f64; 3] {
+                        std::array::from_fn(|c| {
+                            let lobe = (1.0 - vertex.share(v)) * blend(&nodes.totals, p, c)
+                                - vertex.diffuse(v, c);
+                            blend(&along, p, c) * lobe
+                        })
                     })
-                    .sum::<f64>()
-                    / n
-            });
-            let ratio: [f64; 3] = std::array::from_fn(|c| {
-                if own.source_albedo[c] > 0.0 {
-                    sent[c] / own.source_albedo[c]
-                } else {
-                    0.0
-                }
-            });
-            radiosity
-                .par_iter_mut()
-                .zip(table.picks.par_iter().zip(own.irradiance.par_iter()))
-                .enumerate()
-                .for_each(|(v, (b, (p, e)))| {
-                    for c in 0..3 {
-                        let receiving = share(v) * blend(&totals, p, c) + diffuse(v, c);
-                        b[c] += (receiving * ratio[c] * f64::from(e[c])) as f32;
-                    }
-                });
-            if let Some(g) = own.walked.as_ref().filter(|_| walks) {
-                let share = self.report.interreflection_share;
-                let (x, k) = walk_inputs(ratio);
-                let added = g.add_per_vertex(&mut radiosity, &x, &k);
-                add_indirect_noise(&mut error_estimate, added, share);
+                    .reduce(|| [0.0; 3], |a, b| std::array::from_fn(|c| a[c] + b[c]));
+                sent = std::array::from_fn(|c| sent[c] - lobes[c]);
             }
+            OwnLight {
+                irradiance: &own.irradiance,
+                ratio: std::array::from_fn(|c| {
+                    if own.source_albedo[c] > 0.0 {
+                        sent[c] / n / own.source_albedo[c]
+                    } else {
+                        0.0
+                    }
+                }),
+                walked: own.walked.as_ref().filter(|_| walks),
+            }
+        });
+        let (direct, indirect) = add_layers(
+            &mut radiosity,
+            &vertex,
+            &nodes,
+            &self.vertex_irradiance,
+            self.walks.as_ref().filter(|_| walks),
+            own.as_ref(),
+        );
+        for (e, a) in error_estimate.iter_mut().zip(direct) {
+            *e += a;
+        }
+        if own.as_ref().is_some_and(|o| o.walked.is_some()) {
+            add_indirect_noise(
+                &mut error_estimate,
+                indirect,
+                self.report.interreflection_share,
+            );
         }
         self.apply_light_scale(&mut radiosity);
         let dot_seconds = t1.elapsed().as_secs_f64();
@@ -555,7 +460,7 @@ impl Prt {
             .map(|n| n.as_ref().map_or([0.0; 3], |n| n.along_normal))
             .collect();
         let weights = |v: usize, cos_o: Option<f64>| -> [f64; 3] {
-            let p = &table.picks[v];
+            let p = &table.picked.picks[v];
             let Some(cos) = cos_o else {
                 return std::array::from_fn(|c| blend(&along, p, c));
             };
@@ -586,7 +491,7 @@ impl Prt {
             // Along the normals: no direction to find, each node's weights blended.
             e.values
                 .par_chunks_mut(4096)
-                .zip(table.picks.par_chunks(4096))
+                .zip(table.picked.picks.par_chunks(4096))
                 .for_each(|(values, picks)| {
                     for (b, p) in values.iter_mut().zip(picks) {
                         for (c, x) in b.iter_mut().enumerate() {
@@ -622,32 +527,6 @@ mod tests {
             subsurface_weight: 1.0,
             ..Default::default()
         }
-    }
-
-    #[test]
-    fn a_base_colour_is_located_between_the_nodes_around_it() {
-        // Nodes on fine-bin edges, uneven (a table after halvings); values at, between and
-        // beyond them, against a linear scan for the last node at or below the value.
-        let xs: Vec<f32> = [0, 16, 24, 26, 32, 96, 256]
-            .iter()
-            .map(|&k| k as f32 / FINE_BINS as f32)
-            .collect();
-        let locator = Locator::new(xs.clone());
-        for i in -8..=1032 {
-            let x = i as f32 / 1024.0;
-            let v = x.clamp(0.0, 1.0);
-            let mut k = 0;
-            while k + 2 < xs.len() && xs[k + 1] <= v {
-                k += 1;
-            }
-            let t = (v - xs[k]) / (xs[k + 1] - xs[k]);
-            let (got_k, got_t) = locator.locate(x);
-            assert_eq!(got_k as usize, k, "x = {x}");
-            assert!((got_t - t).abs() < 1e-6, "x = {x}: t {got_t} against {t}");
-            assert!((0.0..=1.0).contains(&got_t));
-        }
-        let single = Locator::new(vec![0.5]);
-        assert_eq!(single.locate(0.7), (0, 0.0));
     }
 
     #[test]

@@ -58,7 +58,7 @@ pub(super) type Column<'a> = (&'a [[f32; 3]], usize);
 
 impl WalkTerm {
     /// D / A per vertex of the medium holding column `k` (`lengths`), and its channel.
-    #[inline]
+    #[inline(always)]
     pub(super) fn column(&self, k: usize) -> Column<'_> {
         let m = k / CHANNELS;
         let table = if m == 0 {

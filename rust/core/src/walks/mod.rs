@@ -3,6 +3,7 @@
 
 mod allocation;
 mod grid;
+mod knots;
 mod media;
 mod operator;
 mod passes;
@@ -13,6 +14,7 @@ mod term;
 mod twin;
 mod walker;
 
+pub use knots::KnotReader;
 pub use media::media_to_walk;
 pub use operator::ReceiverRecord;
 pub use radiosity::{

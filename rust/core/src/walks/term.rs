@@ -370,8 +370,8 @@ impl WalkTerm {
     /// weights, and whether it lies beyond the walked ones by more than `LENGTH_MARGIN`.
     /// (Read per vertex and channel on a textured edit: inlined, the margin's log a constant,
     /// and the few walked lengths scanned in order.)
-    #[inline]
-    fn pick(&self, x: f64) -> (([usize; 2], [f32; 2]), bool) {
+    #[inline(always)]
+    pub(super) fn pick(&self, x: f64) -> (([usize; 2], [f32; 2]), bool) {
         let (lo, hi) = (self.lengths[0], self.lengths[self.lengths.len() - 1]);
         let beyond = x - hi.0 > LN_LENGTH_MARGIN || lo.0 - x > LN_LENGTH_MARGIN;
         if x <= lo.0 {
@@ -392,59 +392,25 @@ impl WalkTerm {
         (([a.1, b.1], [1.0 - t, t]), beyond)
     }
 
-    /// As `add_scaled_to` with a medium per vertex (a Base Color that varies over the surface,
-    /// `Prt::radiosity_textured`): at vertex v, D/A read at `ln_length[v][c]` and scaled by
-    /// `scale[v][c]` (the vertex's slab albedo times any factor). Returns per channel the
-    /// walks' noise plus, where a vertex's length lies beyond the walked ones by more than
-    /// `LENGTH_MARGIN`, its whole term counted as error: sqrt(sum of those terms^2 / sum B^2),
-    /// the relative RMS they could be off by.
-    pub fn add_per_vertex(
-        &self,
-        radiosity: &mut [[f32; 3]],
-        ln_length: &[[f64; 3]],
-        scale: &[[f32; 3]],
-    ) -> [f64; 3] {
-        if self.lengths.is_empty() {
-            return [0.0; 3];
-        }
-        type Sums = ([f64; 3], [f64; 3]);
-        let (beyond, total): Sums = radiosity
-            .par_iter_mut()
-            .enumerate()
-            .zip(ln_length.par_iter().zip(scale.par_iter()))
-            .map(|((v, b), (x, k))| {
-                let mut out: Sums = ([0.0; 3], [0.0; 3]);
-                for c in 0..3 {
-                    if k[c] != 0.0 {
-                        let (([i, j], [wi, wj]), far) = self.pick(x[c]);
-                        let ((di, ci), (dj, cj)) = (self.column(i), self.column(j));
-                        let term = k[c] * (wi * di[v][ci] + wj * dj[v][cj]);
-                        b[c] = (b[c] + term).max(0.0);
-                        if far {
-                            out.0[c] = f64::from(term) * f64::from(term);
-                        }
-                    }
-                    out.1[c] = f64::from(b[c]) * f64::from(b[c]);
-                }
-                out
-            })
-            .reduce(
-                || ([0.0; 3], [0.0; 3]),
-                |a, b| {
-                    (
-                        std::array::from_fn(|c| a.0[c] + b.0[c]),
-                        std::array::from_fn(|c| a.1[c] + b.1[c]),
-                    )
-                },
-            );
-        std::array::from_fn(|c| {
-            let off = if total[c] > 0.0 {
-                (beyond[c] / total[c]).sqrt()
-            } else {
-                0.0
-            };
-            self.noise[c] + off
-        })
+    /// D / A at vertex `v` read at `ln_length` (a diffusion length's log): the two walked
+    /// channels bracketing it blended in ln L, and whether it lies beyond the walked ones by
+    /// more than `LENGTH_MARGIN`. A medium per vertex (`Prt::radiosity_textured`) reads each
+    /// vertex's own length here, scaled by that vertex's slab albedo.
+    #[inline(always)]
+    pub fn per_albedo_at(&self, v: usize, ln_length: f64) -> (f32, bool) {
+        let (([i, j], [wi, wj]), far) = self.pick(ln_length);
+        let ((di, ci), (dj, cj)) = (self.column(i), self.column(j));
+        (wi * di[v][ci] + wj * dj[v][cj], far)
+    }
+
+    /// Whether nothing was walked (no channel carries light): the term adds nothing.
+    pub fn is_empty(&self) -> bool {
+        self.lengths.is_empty()
+    }
+
+    /// The term's own noise, relative to B per channel (area-weighted RMS).
+    pub fn noise(&self) -> [f64; 3] {
+        self.noise
     }
 }
 
