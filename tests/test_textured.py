@@ -3,11 +3,15 @@ checked, and a uniform Base Color given per vertex is the uniform material's pre
 per-vertex medium's accuracy against the dipole's closed form is checked in Rust
 (`prt::textured`), against Cycles in `test_bpy_texture.py`."""
 
+import math
+
 import numpy as np
 import pytest
 import translucent
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from helpers import sun_plane
+from helpers import sphere, sun_plane
 
 
 def _inputs(base_color=0.75):
@@ -78,3 +82,69 @@ def test_subsurface_weight_arguments_are_checked(prt):
     # Both at once: a Base Color and a weight per vertex.
     both = prt.radiance(_inputs(), base_color=np.full((n, 3), 0.5), subsurface_weight=np.full(n, 0.5))
     assert np.isfinite(both).all() and both.shape == (n, 3)
+
+
+@pytest.fixture(scope="module")
+def walked():
+    """A 10 mm sphere under a sun, Cycles' profile with the walks and the own light, its
+    transport for a dark and a bright Base Color (both walked: their lengths lie far apart)."""
+    pos, tri = sphere(10, 0.01)
+    scene = translucent.Scene(pos, tri)
+    scene.add_sun((0.3, 0.2, -1.0), irradiance=1.0)
+    reps = [_inputs(0.5), _inputs(0.95), _inputs(0.1)]
+    prt = translucent.Prt(scene, reps, samples=6000, backend="cpu", profile="cycles",
+                          walk_rays=600_000, interreflection_rays=16)
+    assert prt.report["walks"]["media"] >= 2
+    return prt
+
+
+def test_a_base_colour_changed_in_place_is_read_afresh(walked):
+    # An edit keeps the last colours' places among the table's nodes; a colour array changed in
+    # place must still give what a first edit with those colours gives (expected value: the
+    # same call made before any other colours were seen).
+    n = walked.vertex_count
+    rng = np.random.default_rng(7)
+    before = rng.uniform(0.05, 0.95, (n, 3)).astype(np.float32)
+    after = before.copy()
+    after[::3] = rng.uniform(0.05, 0.95, (len(after[::3]), 3))
+    first = walked.radiance(_inputs(), base_color=after)
+    first_estimate = walked.last_eval["error_estimate"]
+    colours = before.copy()
+    walked.radiance(_inputs(), base_color=colours)
+    walked.radiance(_inputs(), base_color=colours)  # the kept places read again
+    colours[:] = after
+    again = walked.radiance(_inputs(), base_color=colours)
+    np.testing.assert_array_equal(again, first)
+    np.testing.assert_allclose(walked.last_eval["error_estimate"], first_estimate, rtol=1e-9)
+    assert np.abs(first - walked.radiance(_inputs(), base_color=before)).max() > 0.0
+
+
+def test_one_base_colour_per_vertex_with_the_walks_is_the_uniform_material(walked):
+    # 0.5 lies on a node and is the first representative: the walks' term read along the
+    # nodes (a vertex's weight between two walked lengths blended from its nodes') and the own
+    # light scaled by the mean of what the vertices send on give the uniform edit's answer,
+    # which reads the walks at the material's own lengths.
+    n = walked.vertex_count
+    uniform = walked.radiance(_inputs(0.5))
+    per_vertex = walked.radiance(_inputs(0.3), base_color=np.full((n, 3), 0.5))
+    np.testing.assert_allclose(per_vertex, uniform, rtol=1e-3, atol=1e-7)
+
+
+@settings(max_examples=12, deadline=None, derandomize=True)
+@given(low=st.sampled_from([0.0, 1e-6, 0.02, 0.5]), high=st.sampled_from([0.5, 0.98, 1.0, 3.0]),
+       scale=st.sampled_from([1e-5, 0.002, 0.5]), weight=st.sampled_from([None, 0.0, 0.6]))
+def test_textured_edits_with_the_walks_stay_finite_non_negative_and_gain_no_energy(walked, low, high, scale, weight):
+    """Base Colours from black to beyond white (Cycles saturates them), radii far below and far
+    above the sphere's size, with and without a Subsurface Weight per vertex: B and the radiance
+    finite and >= 0, the estimate finite, and no energy gained: every vertex's medium returns at
+    most what enters, so B <= (1 + 10 %) E_sun (the 10 % for the walks' noise)."""
+    n = walked.vertex_count
+    colours = np.linspace(low, high, 3 * n).reshape(n, 3).astype(np.float32)
+    m = translucent.Material.from_principled(0.5, (1.0, 0.5, 0.25), scale)
+    w = None if weight is None else np.full(n, weight, np.float32)
+    b = walked.radiosity(m, base_color=colours, subsurface_weight=w)
+    assert np.all(np.isfinite(b)) and np.all(b >= 0), b
+    assert np.all(b <= 1.1), b.max()
+    assert all(math.isfinite(x) and x >= 0 for x in walked.last_eval["error_estimate"])
+    rad = walked.radiance(m, base_color=colours, subsurface_weight=w)
+    assert np.all(np.isfinite(rad)) and np.all(rad >= 0)
