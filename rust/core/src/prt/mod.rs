@@ -22,6 +22,7 @@
 mod backend;
 pub mod basis;
 mod color_picks;
+mod color_table;
 mod evaluate;
 pub mod gpu;
 mod knots;
