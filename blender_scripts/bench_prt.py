@@ -7,7 +7,9 @@ machine; timings live here, never in tests.
    relight (`update(lights=...)`) and a pose (`update(positions=...)`, PRT and the hierarchy
    with walks; budget 1 s).
 2. One edit (coefficient fit + dot product, 3 channels) on a >= 120k-vertex mesh (the bunny
-   subdivided once; budget: 5 ms on the CPU), Cycles' profile.
+   subdivided once; budget: 5 ms on the CPU), Cycles' profile; on the same mesh an edit with a
+   Base Color per vertex, without and with the walks and the own light (budget 10 ms), and a
+   uniform material beside another material's faces (budget 5 ms).
 3. Single scattering (Xu 2007 eqs. 12-15, the dipole): the MS + SS precompute of that mesh and
    one MS + SS edit (radiance toward an eye: L_d + L^(1), exact HG), beside MS alone.
 4. The bunny on a floor: the dipole's precompute with the floor a shadow only and sending light
@@ -326,17 +328,53 @@ def textured_edits(scene, positions, edits) -> None:
         f"{100 * estimate:.2f} % [budget 10 ms]"
     )
     # As the add-on has it with Cycles' profile: the walks' term read at each vertex's medium (the
-    # pattern's media walked beside the mean's, walks/media.rs).
-    prt = translucent.Prt(scene, reps, coefficients=32, samples=BIG_SAMPLES, backend="cpu",
-                          interreflection=False, single_scattering=False)
+    # pattern's media walked beside the mean's, walks/media.rs) and the object's own light.
+    prt = translucent.Prt(scene, reps, coefficients=32, samples=BIG_SAMPLES, backend="cpu", single_scattering=False)
     walked = []
     for k in range(edits):
         m = translucent.Material.from_principled(0.8, (1.0, 0.35, 0.2), 0.002 + 0.0002 * (k % 2))
         prt.radiance(m, base_color=colours)
         walked.append(prt.last_eval["seconds"])
     print(
-        f"the same with the walks' term ({prt.report['walks']['media']} media walked): median "
+        f"the same with the walks' term ({prt.report['walks']['media']} media walked) and the own light: median "
         f"{1e3 * statistics.median(walked):.2f} ms in the core over {edits} edits [budget 10 ms]"
+    )
+    other_materials_edits(scene, positions, edits)
+
+
+def other_materials_edits(scene, positions, edits) -> None:
+    """Issue 30: a uniform material whose object has faces of another material that scatter as
+    their own colour (the add-on passes it per vertex, `textures.beside_others`): a tenth of the
+    vertices here, the walks (for the previewed medium) and the own light on. Scale edits (the
+    colours' places among the table's nodes kept) and Base Color edits (placed again)."""
+    x = positions[:, 0] / np.ptp(positions[:, 0])
+    other = x > np.quantile(x, 0.9)
+    shown = np.array([0.8, 0.45, 0.35], np.float32)
+    reps = [translucent.Material.from_principled(tuple(shown), (1.0, 0.35, 0.2), 0.002),
+            translucent.Material.from_principled((0.9, 0.9, 0.9), (1.0, 0.35, 0.2), 0.002)]
+    prt = translucent.Prt(scene, reps, coefficients=32, samples=BIG_SAMPLES, backend="cpu",
+                          single_scattering=False, walk_media=1)
+    # Each slider dragged on its own, as an artist does: the kept places serve the Scale's edits.
+    times = {"scale": [], "colour": [], "uniform": []}
+    scale = [translucent.Material.from_principled(tuple(shown), (1.0, 0.35, 0.2), 0.002 + 0.0002 * (k % 2))
+             for k in range(edits)]
+    colours = np.where(other[:, None], np.float32(0.9), shown).astype(np.float32)
+    for m in scale:
+        prt.radiance(m, base_color=colours)
+        times["scale"].append(prt.last_eval["seconds"])
+    for k in range(edits):
+        colour = shown * (1.0 + 0.05 * (k % 2))
+        prt.radiance(translucent.Material.from_principled(tuple(colour), (1.0, 0.35, 0.2), 0.002),
+                     base_color=np.where(other[:, None], np.float32(0.9), colour).astype(np.float32))
+        times["colour"].append(prt.last_eval["seconds"])
+    for m in scale:
+        prt.radiance(m)
+        times["uniform"].append(prt.last_eval["seconds"])
+    med = {k: 1e3 * statistics.median(v) for k, v in times.items()}
+    print(
+        f"edit with another material's faces (a tenth of {len(positions)} vertices), walks and own light: median "
+        f"{med['scale']:.2f} ms a Scale edit, {med['colour']:.2f} ms a Base Color edit; every face the "
+        f"material {med['uniform']:.2f} ms, over {edits} edits [budget 5 ms]"
     )
 
 
