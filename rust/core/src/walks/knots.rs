@@ -10,8 +10,7 @@
 //! The two readings are one function: within one bracket the weight is (x - a) / (b - a),
 //! and its blend between the nodes' is that at the blended x.
 
-use super::media::Column;
-use super::term::WalkTerm;
+use super::term::{Column, WalkTerm};
 
 /// One interval between adjacent knots: the columns both ends read and the upper column's
 /// weight at each end, or `None` where the ends read different columns (or lie beyond the

@@ -11,7 +11,7 @@
 //! (`subsurface_random_walk` reads the closure there), so a vertex's term is its own medium's
 //! walk; reading it at that medium's own lengths leaves no interpolation at all.
 
-use super::term::{lengths_and_albedos, WalkTerm, LN_LENGTH_MARGIN};
+use super::term::{lengths_and_albedos, Column, WalkTerm, LN_LENGTH_MARGIN};
 use crate::optics::CHANNELS;
 use crate::profiles::Resolved;
 
@@ -52,9 +52,6 @@ pub fn media_to_walk(media: &[Resolved]) -> Vec<usize> {
     }
     out
 }
-
-/// One walked channel: D / A per vertex of its medium, and the channel in it.
-pub(super) type Column<'a> = (&'a [[f32; 3]], usize);
 
 impl WalkTerm {
     /// D / A per vertex of the medium holding column `k` (`lengths`), and its channel.

@@ -36,7 +36,6 @@
 //! D = 0 without walks: there the half-space table is the walk.
 
 use super::grid::Grid;
-use super::media::Column;
 use super::passes::{Passes, KERNEL_SPACINGS};
 use super::radiosity::{ExitLight, MeshWalkSettings};
 use super::relight::{Kept, Layout};
@@ -79,6 +78,9 @@ pub fn default_walk_rays(vertices: usize) -> u64 {
         .max(MIN_WALK_RAYS_PER_VERTEX * n)
         .min(MAX_WALK_RAYS_PER_VERTEX * n)
 }
+
+/// One walked channel: D / A per vertex of its medium, and the channel in it (`column`).
+pub(super) type Column<'a> = (&'a [[f32; 3]], usize);
 
 /// D per channel and its variance, at one walked vertex.
 pub(super) type Diff = ([f32; 3], [f32; 3]);
