@@ -302,7 +302,7 @@ def textured_edits(scene, positions, edits) -> None:
     slider moved between edits: the table of media fitted again and the interpolated dot
     product, on the CPU. The transport is chosen for the pattern's mean, brightest and darkest
     Base Colour (as the add-on does); no walks, no own light (`BIG_SAMPLES` samples); then the
-    same with the walks' term, as the add-on has it with Cycles' profile."""
+    same with the walks' term and the own light, as the add-on has it with Cycles' profile."""
     x = positions[:, 0] / np.ptp(positions[:, 0])
     colours = np.stack([0.5 + 0.45 * np.sin(40 * x), 0.5 + 0.45 * np.cos(31 * x), 0.5 + 0.45 * np.sin(23 * x + 1)], 1)
     reps = [translucent.Material.from_principled(tuple(c), (1.0, 0.35, 0.2), 0.002)

@@ -145,37 +145,51 @@ pub(super) struct ColorCache {
 /// A cache shared between a transport and those made from it.
 pub(super) type SharedColorCache = Arc<Mutex<ColorCache>>;
 
+/// The colours of an edit as the cache holds them, and the bins they read: `picks` knows them
+/// again by the pointer, so the colours are compared whole once per edit.
+pub(super) struct Reading {
+    colors: Arc<Vec<[f32; 3]>>,
+    pub bins: Arc<Bins>,
+}
+
 /// The bins `colors` reads, kept from the last edit when its colours were these.
-pub(super) fn bins(cache: &SharedColorCache, colors: &[[f32; 3]]) -> Arc<Bins> {
+pub(super) fn bins(cache: &SharedColorCache, colors: &[[f32; 3]]) -> Reading {
     {
         let kept = cache.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(b) = kept.bins.as_ref().filter(|_| kept.colors[..] == *colors) {
-            return b.clone();
+            return Reading {
+                colors: kept.colors.clone(),
+                bins: b.clone(),
+            };
         }
     }
-    let bins = Arc::new(bins_read(colors));
+    let reading = Reading {
+        colors: Arc::new(colors.to_vec()),
+        bins: Arc::new(bins_read(colors)),
+    };
     let mut kept = cache.lock().unwrap_or_else(|e| e.into_inner());
     *kept = ColorCache {
-        colors: Arc::new(colors.to_vec()),
-        bins: Some(bins.clone()),
+        colors: reading.colors.clone(),
+        bins: Some(reading.bins.clone()),
         picks: None,
     };
-    bins
+    reading
 }
 
-/// The picks of `colors` among nodes at `xs`, kept from the last edit when its colours and
-/// nodes were these (`bins` was called for these colours first).
-pub(super) fn picks(cache: &SharedColorCache, xs: Vec<f32>, colors: &[[f32; 3]]) -> Arc<Picks> {
+/// The picks of the colours `bins` read among nodes at `xs`, kept from the last edit when its
+/// colours and nodes were these.
+pub(super) fn picks(cache: &SharedColorCache, reading: &Reading, xs: Vec<f32>) -> Arc<Picks> {
+    // The cache still holds these colours unless another edit replaced them meanwhile.
+    let same = |kept: &ColorCache| Arc::ptr_eq(&kept.colors, &reading.colors);
     {
         let kept = cache.lock().unwrap_or_else(|e| e.into_inner());
-        let same = kept.colors[..] == *colors;
-        if let Some(p) = kept.picks.as_ref().filter(|p| same && p.xs == xs) {
+        if let Some(p) = kept.picks.as_ref().filter(|p| same(&kept) && p.xs == xs) {
             return p.clone();
         }
     }
-    let picks = Arc::new(picks_among(xs, colors));
+    let picks = Arc::new(picks_among(xs, &reading.colors));
     let mut kept = cache.lock().unwrap_or_else(|e| e.into_inner());
-    if kept.colors[..] == *colors {
+    if same(&kept) {
         kept.picks = Some(picks.clone());
     }
     picks
@@ -218,16 +232,19 @@ mod tests {
         let cache = SharedColorCache::default();
         let colors: Vec<[f32; 3]> = (0..9000).map(|i| [(i % 97) as f32 / 97.0; 3]).collect();
         let xs = vec![0.0, 0.5, 1.0];
-        let first = (bins(&cache, &colors), picks(&cache, xs.clone(), &colors));
-        let again = (bins(&cache, &colors), picks(&cache, xs.clone(), &colors));
+        let first = bins(&cache, &colors);
+        let first = (picks(&cache, &first, xs.clone()), first.bins);
+        let again = bins(&cache, &colors);
+        let again = (picks(&cache, &again, xs.clone()), again.bins);
         assert!(Arc::ptr_eq(&first.0, &again.0) && Arc::ptr_eq(&first.1, &again.1));
         let fresh = |xs: Vec<f32>, colors: &[[f32; 3]]| picks_among(xs, colors);
-        let finer = picks(&cache, vec![0.0, 0.25, 0.5, 1.0], &colors);
+        let finer = picks(&cache, &bins(&cache, &colors), vec![0.0, 0.25, 0.5, 1.0]);
         assert_eq!(finer.picks, fresh(vec![0.0, 0.25, 0.5, 1.0], &colors).picks);
         let mut changed = colors.clone();
         changed[4321] = [0.9, 0.1, 0.3];
-        assert_eq!(*bins(&cache, &changed), bins_read(&changed));
-        let p = picks(&cache, xs.clone(), &changed);
+        let reading = bins(&cache, &changed);
+        assert_eq!(*reading.bins, bins_read(&changed));
+        let p = picks(&cache, &reading, xs.clone());
         assert_eq!(p.picks, fresh(xs.clone(), &changed).picks);
         let (k, t) = p.picks[4321][0];
         assert!(k == 1 && (t - 0.8).abs() < 1e-6, "{k} {t}");

@@ -77,7 +77,8 @@ impl Prt {
 
     pub(super) fn table(&self, inputs: &PrincipledInputs, colors: &[[f32; 3]]) -> Result<Table> {
         // Which fine bins of the Base Color each channel reads.
-        let bins = color_picks::bins(&self.color_cache, colors);
+        let reading = color_picks::bins(&self.color_cache, colors);
+        let bins = &reading.bins;
         let reads = |a: f64, b: f64, ch: usize| {
             let lo = ((a * FINE_BINS as f64) as usize).min(FINE_BINS - 1);
             let hi = ((b * FINE_BINS as f64).ceil() as usize).clamp(lo + 1, FINE_BINS);
@@ -178,7 +179,7 @@ impl Prt {
             }
         }
         let xs = nodes.iter().map(|n| n.0 as f32).collect();
-        let picked = color_picks::picks(&self.color_cache, xs, colors);
+        let picked = color_picks::picks(&self.color_cache, &reading, xs);
         for (k, (_, node)) in nodes.iter().enumerate() {
             for (ch, e) in error.iter_mut().enumerate() {
                 let lo = if k > 0 { nodes[k - 1].0 } else { nodes[k].0 };

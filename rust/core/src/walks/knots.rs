@@ -41,11 +41,14 @@ impl WalkTerm {
                         return None;
                     }
                     let (lo, hi) = (knots[k][c], knots[next][c]);
-                    let ((pair, w0), far0) = self.pick(lo);
-                    let ((pair1, w1), far1) = self.pick(hi);
-                    // The same two columns at both ends, inside the walked range: linear.
-                    let same = pair == pair1;
-                    if far0 || far1 || !same || !within(self, lo) || !within(self, hi) {
+                    // Both ends inside the walked range (so neither beyond it) and between the
+                    // same two columns: linear.
+                    if !within(self, lo) || !within(self, hi) {
+                        return None;
+                    }
+                    let ((pair, w0), _) = self.pick(lo);
+                    let ((pair1, w1), _) = self.pick(hi);
+                    if pair != pair1 {
                         return None;
                     }
                     Some(Segment {
