@@ -1,25 +1,40 @@
 //! The walk term read along knots: a textured edit (`prt::textured`) gives each vertex a pick
 //! between two nodes of its Base Color's table, and its diffusion length's log ln L is the
-//! blend of theirs, x = (1 - t) x_k + t x_{k+1}. Where both nodes fall between the same two
-//! walked channels (and within the walked range), the weight of the upper channel is linear in
-//! x, so it is linear in t too: each vertex then reads its two columns with a weight blended
-//! from its nodes', no search among the walked lengths and no logarithm per vertex. An
-//! interval that straddles a walked length or reaches past the walked range is read exactly,
-//! at x, by `WalkTerm::per_albedo_at`.
-//!
-//! The two readings are one function: within one bracket the weight is (x - a) / (b - a),
-//! and its blend between the nodes' is that at the blended x.
+//! blend of theirs, x = (1 - t) x_k + t x_{k+1}. `WalkTerm::per_albedo_at` reads x between the
+//! two walked channels that bracket it, the upper one's weight (x - a) / (b - a), the end
+//! channel alone past the walked range, flagged beyond it past `LENGTH_MARGIN`. Along one
+//! interval that reading is piecewise linear in t, its breaks where x crosses a walked length
+//! or a margin: each interval is cut there once per edit into pieces, and each vertex reads its
+//! two columns with its piece's weight at its t, no search among the walked lengths and no
+//! logarithm per vertex. A base colour whose own medium was walked sits on a walked length in
+//! every channel, so without the cuts every vertex of a uniform material beside another
+//! material's faces was read the slow way.
 
-use super::term::{Column, WalkTerm};
+use super::term::{Column, WalkTerm, LN_LENGTH_MARGIN};
 
-/// One interval between adjacent knots: the columns both ends read and the upper column's
-/// weight at each end, or `None` where the ends read different columns (or lie beyond the
-/// walked range) and a vertex must be read at its own x.
+/// Where a knot interval's x stays between the same two walked channels (or past the same end)
+/// and on one side of each margin: the columns read, the upper one's weight a + b t, and
+/// whether the length lies beyond the walked ones.
 #[derive(Clone, Copy)]
-struct Segment<'a> {
+struct Piece<'a> {
+    /// The piece holds t up to this (the last piece of an interval: every t).
+    until: f32,
     below: Column<'a>,
     above: Column<'a>,
-    weights: [f32; 2],
+    weight: [f32; 2],
+    beyond: bool,
+}
+
+/// Most pieces an interval is cut into: past that (many media walked and a wide interval) it
+/// is read at each vertex's own x.
+const MOST_PIECES: usize = 4;
+
+/// One interval between adjacent knots cut into pieces, or `None` where its end knot is never
+/// read (a vertex is then read at its own x).
+#[derive(Clone, Copy)]
+struct Segment<'a> {
+    pieces: [Piece<'a>; MOST_PIECES],
+    count: u8,
 }
 
 /// The term of one walk term read along the knots of each channel.
@@ -40,22 +55,7 @@ impl WalkTerm {
                     if self.lengths.is_empty() || !usable[k] || !usable[next] {
                         return None;
                     }
-                    let (lo, hi) = (knots[k][c], knots[next][c]);
-                    // Both ends inside the walked range (so neither beyond it) and between the
-                    // same two columns: linear.
-                    if !within(self, lo) || !within(self, hi) {
-                        return None;
-                    }
-                    let ((pair, w0), _) = self.pick(lo);
-                    let ((pair1, w1), _) = self.pick(hi);
-                    if pair != pair1 {
-                        return None;
-                    }
-                    Some(Segment {
-                        below: self.column(pair[0]),
-                        above: self.column(pair[1]),
-                        weights: [w0[1], w1[1]],
-                    })
+                    self.segment(knots[k][c], knots[next][c])
                 })
                 .collect()
         });
@@ -64,18 +64,70 @@ impl WalkTerm {
             segments,
         }
     }
-}
 
-/// Whether `x` lies strictly inside the walked lengths' span (where `pick` is linear in x);
-/// at or past an end it reads the end column alone.
-fn within(term: &WalkTerm, x: f64) -> bool {
-    let (lo, hi) = (term.lengths[0].0, term.lengths[term.lengths.len() - 1].0);
-    x > lo && x < hi
+    /// The interval x = x0 + t (x1 - x0), t in [0, 1], cut where `per_albedo_at`'s reading
+    /// changes form.
+    fn segment(&self, x0: f64, x1: f64) -> Option<Segment<'_>> {
+        let (lo, hi) = (self.lengths[0].0, self.lengths[self.lengths.len() - 1].0);
+        let span = x1 - x0;
+        // The breaks strictly inside the interval, as t.
+        let mut cuts: Vec<f64> = (self.lengths.iter().map(|l| l.0))
+            .chain([lo - LN_LENGTH_MARGIN, hi + LN_LENGTH_MARGIN])
+            .filter(|&x| (x - x0) * (x - x1) < 0.0)
+            .map(|x| (x - x0) / span)
+            .collect();
+        cuts.sort_by(f64::total_cmp);
+        cuts.dedup();
+        if cuts.len() >= MOST_PIECES {
+            return None;
+        }
+        let mut pieces = [None; MOST_PIECES];
+        let mut start = 0.0;
+        for (i, &end) in cuts.iter().chain([1.0].iter()).enumerate() {
+            // The piece's form is that at its middle (at a break both sides agree in value).
+            let x_mid = x0 + 0.5 * (start + end) * span;
+            let ((pair, _), beyond) = self.pick(x_mid);
+            // The bracket's lengths: the upper weight (x - a) / (b - a) where two channels
+            // are read, none past an end (or between equal lengths, as `pick`).
+            let weight = match self.bracket(x_mid) {
+                Some((a, b)) if b > a => [((x0 - a) / (b - a)) as f32, (span / (b - a)) as f32],
+                _ => [0.0, 0.0],
+            };
+            pieces[i] = Some(Piece {
+                until: if i == cuts.len() {
+                    f32::INFINITY
+                } else {
+                    end as f32
+                },
+                below: self.column(pair[0]),
+                above: self.column(pair[1]),
+                weight,
+                beyond,
+            });
+            start = end;
+        }
+        let first = pieces[0]?;
+        Some(Segment {
+            pieces: pieces.map(|p| p.unwrap_or(first)),
+            count: (cuts.len() + 1) as u8,
+        })
+    }
+
+    /// The walked lengths (a, b) whose channels `pick` blends at `x` inside the walked range;
+    /// `None` at or past an end.
+    fn bracket(&self, x: f64) -> Option<(f64, f64)> {
+        let n = self.lengths.len();
+        if x <= self.lengths[0].0 || x >= self.lengths[n - 1].0 {
+            return None;
+        }
+        let i = (1..n).find(|&i| self.lengths[i].0 > x).unwrap_or(n - 1);
+        Some((self.lengths[i - 1].0, self.lengths[i].0))
+    }
 }
 
 impl KnotReader<'_> {
     /// D / A at vertex `v`, channel `c`, for the pick (k, t) between knots k and k + 1; `x`
-    /// gives ln L there when the interval is not linear (it is called only then). Whether the
+    /// gives ln L there when the interval is not cut (it is called only then). Whether the
     /// length lies beyond the walked ones by more than `LENGTH_MARGIN`, as `per_albedo_at`.
     #[inline(always)]
     pub fn read(
@@ -85,11 +137,18 @@ impl KnotReader<'_> {
         (k, t): (u32, f32),
         x: impl FnOnce() -> f64,
     ) -> (f32, bool) {
-        match self.segments[c][k as usize] {
+        match &self.segments[c][k as usize] {
             Some(s) => {
-                let w = s.weights[0] + t * (s.weights[1] - s.weights[0]);
-                let (lo, hi) = (s.below.0[v][s.below.1], s.above.0[v][s.above.1]);
-                (lo + w * (hi - lo), false)
+                let mut p = &s.pieces[0];
+                for q in &s.pieces[1..usize::from(s.count)] {
+                    if t <= p.until {
+                        break;
+                    }
+                    p = q;
+                }
+                let w = p.weight[0] + t * p.weight[1];
+                let (lo, hi) = (p.below.0[v][p.below.1], p.above.0[v][p.above.1]);
+                (lo + w * (hi - lo), p.beyond)
             }
             None => self.term.per_albedo_at(v, x()),
         }
@@ -128,18 +187,17 @@ mod tests {
             .collect();
         let usable = vec![true; knots.len()];
         let reader = g.knot_reader(&knots, &usable);
-        let mut linear = 0;
-        for (k, seg) in reader.segments[0].iter().enumerate() {
-            linear += usize::from(seg.is_some() && k + 1 < knots.len());
-        }
-        assert!(
-            linear >= 3,
-            "most intervals lie within one bracket: {linear}"
-        );
+        // Every interval is cut, none left to the per-vertex search: straddling a walked
+        // length, crossing a margin or lying past the walked range alike.
+        assert!(reader.segments.iter().flatten().all(Option::is_some));
+        let cut = (reader.segments[0].iter().flatten())
+            .filter(|s| s.count > 1)
+            .count();
+        assert!(cut >= 3, "intervals straddling a walked length: {cut}");
         for v in 0..7 {
             for c in 0..3 {
                 for k in 0..knots.len() - 1 {
-                    for t in [0.0f32, 0.25, 0.5, 0.9, 1.0] {
+                    for t in [0.0f32, 0.1, 0.25, 0.4, 0.5, 0.6, 0.75, 0.9, 1.0] {
                         let x = (1.0 - f64::from(t)) * knots[k][c] + f64::from(t) * knots[k + 1][c];
                         let (want, far) = g.per_albedo_at(v, x);
                         let (got, got_far) = reader.read(v, c, (k as u32, t), || x);
@@ -149,6 +207,37 @@ mod tests {
                         );
                         assert_eq!(got_far, far);
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn descending_and_wide_intervals_are_read_at_the_blended_length() {
+        // Knots in decreasing ln L, and one interval that crosses every walked length and both
+        // margins (more breaks than a segment holds: read at x).
+        let g = term(vec![[1.0, -2.0, 0.5], [3.0, 0.25, -1.0]], [0.0, 1.0, 2.5]);
+        let knots: Vec<[f64; 3]> = [3.4, 2.2, 1.1, 0.95, -0.1, -0.6, 3.6, -1.5]
+            .iter()
+            .map(|&x| [x; 3])
+            .collect();
+        let reader = g.knot_reader(&knots, &vec![true; knots.len()]);
+        assert!(
+            reader.segments[0][6].is_none(),
+            "3.6 -> -1.5 crosses 5 breaks"
+        );
+        for v in 0..2 {
+            for k in 0..knots.len() - 1 {
+                for i in 0..=20 {
+                    let t = i as f32 / 20.0;
+                    let x = (1.0 - f64::from(t)) * knots[k][0] + f64::from(t) * knots[k + 1][0];
+                    let (want, far) = g.per_albedo_at(v, x);
+                    let (got, got_far) = reader.read(v, 0, (k as u32, t), || x);
+                    assert!(
+                        (got - want).abs() <= 1e-5 * want.abs().max(1.0),
+                        "v {v} k {k} t {t}: {got} against {want}"
+                    );
+                    assert_eq!(got_far, far, "v {v} k {k} t {t}");
                 }
             }
         }
