@@ -39,6 +39,9 @@ class ObjectRange:
     # other material whose faces alone touch it (they scatter as that colour and are not
     # previewed); NaN rows for the previewed vertices. None: every exported vertex is previewed.
     others: np.ndarray | None = None
+    # With `others`: per exported vertex, the material slot whose material's albedo it takes (-1
+    # for the previewed vertices), so a change of that material is read again (`others_now`).
+    other_slots: np.ndarray | None = None
 
 
 @dataclass
@@ -310,16 +313,23 @@ def material_slots(obj: bpy.types.Object, material: bpy.types.Material) -> set[i
     return {i for i, slot in enumerate(obj.material_slots) if slot.material == material}
 
 
-def other_albedo(obj: bpy.types.Object, tris: np.ndarray, slots: np.ndarray, mine: np.ndarray,
-                 count: int) -> np.ndarray:
-    """Per vertex of `obj`'s evaluated mesh (`count`), the diffuse albedo
-    (`translucent.cycles.diffuse_albedo`) of the other material whose faces (`~mine`) alone touch
-    it, and NaN rows for the vertices of the previewed faces (`mine`)."""
-    rows = np.full((count, 3), np.nan, dtype=np.float32)
+def other_slots(tris: np.ndarray, slots: np.ndarray, mine: np.ndarray, count: int) -> np.ndarray:
+    """Per vertex of an evaluated mesh (`count`), the material slot of the other material whose
+    faces (`~mine`) alone touch it, -1 for the vertices of the previewed faces (`mine`)."""
+    out = np.full(count, -1, dtype=np.int32)
     for k in np.unique(slots[~mine]):
+        out[tris[(slots == k) & ~mine].ravel()] = k
+    out[tris[mine].ravel()] = -1
+    return out
+
+
+def others_now(obj: bpy.types.Object, slots: np.ndarray) -> np.ndarray:
+    """Per vertex, the diffuse albedo (`translucent.cycles.diffuse_albedo`) of the material now
+    in its slot (`other_slots`), NaN rows where the slot is -1 (the previewed vertices)."""
+    rows = np.full((len(slots), 3), np.nan, dtype=np.float32)
+    for k in np.unique(slots[slots >= 0]):
         mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
-        rows[tris[(slots == k) & ~mine].ravel()] = cycles.diffuse_albedo(mat)
-    rows[tris[mine].ravel()] = np.nan
+        rows[slots == k] = cycles.diffuse_albedo(mat)
     return rows
 
 
@@ -348,14 +358,15 @@ def export_scene(
         if obj.type != "MESH":
             raise ValueError(f"{obj.name} is a {obj.type}, not a mesh")
         p, t, n, key, slots = _evaluate(obj, depsgraph, triangles=True)
-        evaluated_count, vertices, albedo = len(p), None, None
+        evaluated_count, vertices, albedo, kept_slots = len(p), None, None, None
         if material is not None:
             mine = np.isin(slots, list(material_slots(obj, material)))
             if not mine.any():
                 info.without_faces.append(obj.name)
                 continue
             if not mine.all() and others_scatter:
-                albedo = other_albedo(obj, t, slots, mine, len(p))
+                kept_slots = other_slots(t, slots, mine, len(p))
+                albedo = others_now(obj, kept_slots)
             elif not mine.all():
                 others.append((obj, p, t[~mine], slots[~mine]))
                 vertices, t = np.unique(t[mine], return_inverse=True)
@@ -364,7 +375,7 @@ def export_scene(
         parts_p.append(p)
         parts_t.append(t + offset)
         parts_n.append(n)
-        info.objects.append(ObjectRange(obj.name, offset, len(p), key, vertices, evaluated_count, albedo))
+        info.objects.append(ObjectRange(obj.name, offset, len(p), key, vertices, evaluated_count, albedo, kept_slots))
         offset += len(p)
     if not parts_p:
         what = f"the faces of material {material.name!r}" if material is not None else "objects"

@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from translucent import cycles
+
 from . import export
 from .principled import principled_inputs, principled_node
 
@@ -249,6 +251,29 @@ def has_others(info) -> bool:
     return any(r.others is not None for r in info.objects)
 
 
+def read_others(info) -> None:
+    """Reads the other materials' albedo again into `info` (`export.others_now`): a colour
+    changed in another material, or another material put in its slot, is seen at the next edit
+    without a precompute (the transport takes a Base Color per vertex)."""
+    for r in info.objects:
+        obj = bpy.data.objects.get(r.name)
+        if r.others is not None and r.other_slots is not None and obj is not None:
+            r.others = export.others_now(obj, r.other_slots)
+
+
+def others_key(info) -> str:
+    """The other materials' albedo as `read_others` would read it now, as a string."""
+    parts = []
+    for r in info.objects:
+        obj = bpy.data.objects.get(r.name)
+        if r.other_slots is None or obj is None:
+            continue
+        for k in np.unique(r.other_slots[r.other_slots >= 0]):
+            mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+            parts.append(f"{r.name}[{k}] {getattr(mat, 'name', None)} {cycles.diffuse_albedo(mat)}")
+    return ", ".join(parts)
+
+
 def others_in(info) -> np.ndarray | None:
     """Per exported vertex, the albedo of the other material it scatters as (`export.ObjectRange
     .others`), NaN rows for the previewed vertices; None when every exported vertex is
@@ -277,7 +302,8 @@ def reading_key(mat: bpy.types.Material, info, method: str) -> str:
     key = tree_key(mat) if linked_any(mat) else ""
     if has_others(info):
         inputs = principled_inputs(mat)
-        key += f"; other materials beside Base Color {None if inputs is None else inputs.base_color}"
+        key += (f"; other materials beside Base Color {None if inputs is None else inputs.base_color}: "
+                f"{others_key(info)}")
     return key
 
 
@@ -288,6 +314,8 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     hierarchy and the splatting do not read them yet, and the line says so. Where the faces of
     other materials were exported to scatter (`export.export_scene(others_scatter=True)`), their
     vertices take their own albedo and the previewed ones the Base Color. Nothing otherwise."""
+    if method == "prt":
+        read_others(info)
     others = others_in(info) if method == "prt" else None
     if mat.translucent.source != "PRINCIPLED" or not (linked_any(mat) or others is not None):
         return Reading()

@@ -149,6 +149,25 @@ def test_faces_of_another_material_let_light_in_as_cycles_walk_leaves_through_th
     edits.follow_principled(bpy.context.scene, bpy.context.evaluated_depsgraph_get())
     np.testing.assert_allclose(sess.base_color[covered], np.tile([0.7, 0.6, 0.5], (covered.sum(), 1)), rtol=1e-6)
     np.testing.assert_allclose(sess.base_color[~covered], 0.3, rtol=1e-6)
+    # The paint's colour changed: read at once, on the same transport (no precompute), and the
+    # preview is that transport's answer for the new colours.
+    transport, shown = sess.transport, read_preview(obj)
+    paint.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.6, 0.5, 0.4, 1.0)
+    bpy.context.view_layer.update()
+    edits.follow_principled(bpy.context.scene, bpy.context.evaluated_depsgraph_get())
+    assert sess.transport is transport and not sess.edit_message, sess.edit_message
+    np.testing.assert_allclose(sess.base_color[~covered], np.tile([0.6, 0.5, 0.4], ((~covered).sum(), 1)),
+                               rtol=1e-6)
+    np.testing.assert_allclose(sess.base_color[covered], np.tile([0.7, 0.6, 0.5], (covered.sum(), 1)), rtol=1e-6)
+    m = wax.translucent.material()
+    colours = np.where(covered[:, None], np.float32([0.7, 0.6, 0.5]), np.float32([0.6, 0.5, 0.4]))
+    after = read_preview(obj)
+    np.testing.assert_allclose(after[covered], transport.radiance(m, base_color=colours.astype(np.float32))[covered],
+                               rtol=1e-5)
+    # A walk that starts in the wax takes the wax's albedo wherever it leaves, and a flat plane
+    # sends itself no light: the wax's preview stays as it was.
+    np.testing.assert_allclose(after[covered], shown[covered], rtol=1e-6)
+    np.testing.assert_array_equal(after[~covered], before[~covered])  # still untouched
     assert mesh_hash(obj.data) == user_mesh
     assert [s.material for s in obj.material_slots] == [wax, paint]
 
