@@ -33,6 +33,20 @@ def test_a_uniform_base_colour_per_vertex_is_the_uniform_material(prt):
     assert prt.last_eval["error_estimate"] is not None
 
 
+def test_a_rescaled_light_scales_the_textured_radiance_as_the_uniform_one():
+    # Only the sun's strength changes (a rescale, no ray): B is linear in the light, so the
+    # radiance along the normals doubles, per vertex as for the uniform material.
+    p, scene = sun_plane(n=21, size=0.1)
+    t = translucent.Prt(scene, _inputs(), coefficients=16, profile="cycles", walks=0, interreflection=False)
+    colours = np.full((len(p), 3), 0.75)
+    before = t.radiance(_inputs(0.3), base_color=colours)
+    _, brighter = sun_plane(n=21, size=0.1, strength=2.0)
+    t.update(lights=brighter)
+    after = t.radiance(_inputs(0.3), base_color=colours)
+    np.testing.assert_allclose(after, 2.0 * before, rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(after, t.radiance(_inputs(0.75)), rtol=1e-5, atol=1e-9)
+
+
 def test_base_colour_arguments_are_checked(prt):
     n = len(prt.radiance(_inputs()))
     with pytest.raises(ValueError, match="base_color has 3 rows"):

@@ -20,7 +20,7 @@
 
 use super::color_table::{Node, Table};
 use super::evaluate::{add_indirect_noise, Evaluation, PrtDetails};
-use super::vertex_media::{add_layers, blend, OwnLight, PerNode, Vertex};
+use super::vertex_media::{add_layers, blend, Finish, OwnLight, PerNode, Vertex};
 use super::Prt;
 use crate::error::{Error, Result};
 use crate::evaluation::{radiance_from_radiosity_each, Quantity, Skipped};
@@ -86,10 +86,12 @@ impl Prt {
         bounce: bool,
         walks: bool,
     ) -> Result<Evaluation> {
-        (self.textured(inputs, colors, weights, bounce, walks)).map(|(e, _)| e)
+        (self.textured(inputs, colors, weights, bounce, walks, false)).map(|(e, _)| e)
     }
 
-    /// `radiosity_textured` and the table it read.
+    /// `radiosity_textured` and the table it read; `along_normals`: radiance along each
+    /// normal instead (B times the vertex's exit weight and view factor blended between its
+    /// nodes, over pi), taken in the same pass as the layers.
     fn textured(
         &self,
         inputs: &PrincipledInputs,
@@ -97,6 +99,7 @@ impl Prt {
         weights: Option<&[f32]>,
         bounce: bool,
         walks: bool,
+        along_normals: bool,
     ) -> Result<(Evaluation, Table)> {
         let t0 = Instant::now();
         check_colors(colors, self.positions.len())?;
@@ -202,6 +205,15 @@ impl Prt {
                 walked: own.walked.as_ref().filter(|_| walks),
             }
         });
+        // Radiance along the normals: each vertex's B times its exit weight and view factor
+        // (blended as the coefficients are) over pi, with the lights' scale, once B is whole.
+        let along = along_normals.then(|| {
+            let scale = self.light_scale;
+            Finish {
+                along: per_node(&|n| n.along_normal),
+                scale: std::array::from_fn(|c| f64::from(scale[c]) / std::f64::consts::PI),
+            }
+        });
         let (direct, indirect) = add_layers(
             &mut radiosity,
             &vertex,
@@ -209,6 +221,7 @@ impl Prt {
             &self.vertex_irradiance,
             self.walks.as_ref().filter(|_| walks),
             own.as_ref(),
+            along.as_ref(),
         );
         for (e, a) in error_estimate.iter_mut().zip(direct) {
             *e += a;
@@ -220,7 +233,9 @@ impl Prt {
                 self.report.interreflection_share,
             );
         }
-        self.apply_light_scale(&mut radiosity);
+        if !along_normals {
+            self.apply_light_scale(&mut radiosity);
+        }
         let dot_seconds = t1.elapsed().as_secs_f64();
         let mut skipped = self.skipped(bounce, walks);
         if self.single.is_some() {
@@ -264,36 +279,36 @@ impl Prt {
         eye: Option<Vec3>,
     ) -> Result<Evaluation> {
         crate::evaluation::check_eye(eye)?;
-        let (mut e, table) = self.textured(inputs, colors, weights, true, true)?;
+        let (mut e, table) = self.textured(inputs, colors, weights, true, true, eye.is_none())?;
         let t = Instant::now();
-        // Along the normals (no eye) each node's weights once; toward an eye, per vertex the
+        // Along the normals (no eye) the layers' pass took it. Toward an eye, per vertex the
         // shared exit weight and each channel's view factor at its two nodes.
-        let along: Vec<[f64; 3]> = table
-            .nodes
-            .iter()
-            .map(|n| n.as_ref().map_or([0.0; 3], |n| n.along_normal))
-            .collect();
-        let weights = |v: usize, cos_o: Option<f64>| -> [f64; 3] {
-            let p = &table.picked.picks[v];
-            let Some(cos) = cos_o else {
-                return std::array::from_fn(|c| blend(&along, p, c));
-            };
-            std::array::from_fn(|c| {
-                let (k, t) = p[c];
-                let at = |k: u32| {
-                    table.nodes[k as usize].as_ref().map_or(0.0, |n| {
-                        n.resolved.exit_weight(cos) * n.resolved.profiles[c].view_factor(cos)
-                    })
-                };
-                let below = at(k);
-                if t > 0.0 {
-                    below + f64::from(t) * (at(k + 1) - below)
-                } else {
-                    below
-                }
-            })
-        };
         if eye.is_some() {
+            let along: Vec<[f64; 3]> = table
+                .nodes
+                .iter()
+                .map(|n| n.as_ref().map_or([0.0; 3], |n| n.along_normal))
+                .collect();
+            let weights = |v: usize, cos_o: Option<f64>| -> [f64; 3] {
+                let p = &table.picked.picks[v];
+                let Some(cos) = cos_o else {
+                    return std::array::from_fn(|c| blend(&along, p, c));
+                };
+                std::array::from_fn(|c| {
+                    let (k, t) = p[c];
+                    let at = |k: u32| {
+                        table.nodes[k as usize].as_ref().map_or(0.0, |n| {
+                            n.resolved.exit_weight(cos) * n.resolved.profiles[c].view_factor(cos)
+                        })
+                    };
+                    let below = at(k);
+                    if t > 0.0 {
+                        below + f64::from(t) * (at(k + 1) - below)
+                    } else {
+                        below
+                    }
+                })
+            };
             radiance_from_radiosity_each(
                 &mut e.values,
                 &self.positions,
@@ -301,18 +316,6 @@ impl Prt {
                 eye,
                 &weights,
             );
-        } else {
-            // Along the normals: no direction to find, each node's weights blended.
-            e.values
-                .par_chunks_mut(4096)
-                .zip(table.picked.picks.par_chunks(4096))
-                .for_each(|(values, picks)| {
-                    for (b, p) in values.iter_mut().zip(picks) {
-                        for (c, x) in b.iter_mut().enumerate() {
-                            *x *= (blend(&along, p, c) / std::f64::consts::PI) as f32;
-                        }
-                    }
-                });
         }
         e.quantity = Quantity::Radiance;
         e.details.dot_seconds += t.elapsed().as_secs_f64();

@@ -73,6 +73,14 @@ impl Vertex<'_> {
     }
 }
 
+/// What turns a vertex's B into radiance along its normal once its layers are added: its
+/// exit weight and view factor per node (blended as the coefficients are) times `scale` per
+/// channel (the lights' scale over pi).
+pub(super) struct Finish {
+    pub along: Vec<[f64; 3]>,
+    pub scale: [f64; 3],
+}
+
 /// Sums over the vertices for the walk terms' estimates, per channel: the squared term where a
 /// vertex's length left the walked range, and B^2 after the term was added.
 type Sums = [[f64; 3]; 4];
@@ -80,9 +88,10 @@ type Sums = [[f64; 3]; 4];
 /// Vertices per chunk of the pass.
 const CHUNK: usize = 2048;
 
-/// Adds the layers to `radiosity` (B of the transport, per vertex) and returns the estimates'
-/// parts: per channel, for the direct walks' term and for the own light's, its noise plus,
-/// where a vertex's length lies beyond the walked ones by more than `LENGTH_MARGIN`, its whole
+/// Adds the layers to `radiosity` (B of the transport, per vertex), with `finish` turns each
+/// vertex's whole B into radiance along its normal (the estimates are B's), and returns the
+/// estimates' parts: per channel, for the direct walks' term and for the own light's, its
+/// noise plus, where a vertex's length lies beyond the walked ones by more than `LENGTH_MARGIN`, its whole
 /// term counted as error: sqrt(sum of those terms^2 / sum B^2), the relative RMS they could be
 /// off by (0 where the term is absent).
 pub(super) fn add_layers(
@@ -92,6 +101,7 @@ pub(super) fn add_layers(
     irradiance: &[[f32; 3]],
     walks: Option<&WalkTerm>,
     own: Option<&OwnLight>,
+    finish: Option<&Finish>,
 ) -> ([f64; 3], [f64; 3]) {
     let walks = walks.filter(|g| !g.is_empty());
     let own_walked = own.and_then(|o| o.walked).filter(|g| !g.is_empty());
@@ -140,6 +150,9 @@ pub(super) fn add_layers(
                             add_term(b, r, &at, x, k * ratio as f32, &mut far_own);
                             total_own += f64::from(*b) * f64::from(*b);
                         }
+                    }
+                    if let Some(f) = finish {
+                        *b *= (blend(&f.along, p, c) * f.scale[c]) as f32;
                     }
                 }
                 (s[0][c], s[1][c], s[2][c], s[3][c]) = (far, total, far_own, total_own);
