@@ -323,12 +323,18 @@ def other_slots(tris: np.ndarray, slots: np.ndarray, mine: np.ndarray, count: in
     return out
 
 
+def other_materials(obj: bpy.types.Object, slots: np.ndarray) -> dict[int, bpy.types.Material | None]:
+    """The material now in each slot that `slots` (`other_slots`) names, by slot (None: an empty
+    slot, or one the object no longer has)."""
+    return {int(k): obj.material_slots[k].material if k < len(obj.material_slots) else None
+            for k in np.unique(slots[slots >= 0])}
+
+
 def others_now(obj: bpy.types.Object, slots: np.ndarray) -> np.ndarray:
     """Per vertex, the diffuse albedo (`translucent.cycles.diffuse_albedo`) of the material now
     in its slot (`other_slots`), NaN rows where the slot is -1 (the previewed vertices)."""
     rows = np.full((len(slots), 3), np.nan, dtype=np.float32)
-    for k in np.unique(slots[slots >= 0]):
-        mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+    for k, mat in other_materials(obj, slots).items():
         rows[slots == k] = cycles.diffuse_albedo(mat)
     return rows
 

@@ -268,8 +268,7 @@ def others_key(info) -> str:
         obj = bpy.data.objects.get(r.name)
         if r.other_slots is None or obj is None:
             continue
-        for k in np.unique(r.other_slots[r.other_slots >= 0]):
-            mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+        for k, mat in export.other_materials(obj, r.other_slots).items():
             parts.append(f"{r.name}[{k}] {getattr(mat, 'name', None)} {cycles.diffuse_albedo(mat)}")
     return ", ".join(parts)
 

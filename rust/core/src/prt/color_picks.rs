@@ -190,7 +190,7 @@ pub(super) fn bins(cache: &SharedColorCache, colors: &[[f32; 3]]) -> Reading {
         }
         std::mem::take(&mut *kept)
     };
-    let mut copy = reuse(Some(old.colors)).unwrap_or_default();
+    let mut copy = Arc::try_unwrap(old.colors).unwrap_or_default();
     copy.clear();
     copy.extend_from_slice(colors);
     let reading = Reading {
@@ -287,6 +287,7 @@ mod tests {
         let total: f64 = p.node_weights.iter().map(|w| w[1]).sum();
         assert!((total / changed.len() as f64 - 1.0).abs() < 1e-6, "{total}");
     }
+
     #[test]
     fn picks_written_into_spent_memory_are_each_vertex_located() {
         // Edits by turns between colour sets with runs of one colour (a uniform material beside

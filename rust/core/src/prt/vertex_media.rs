@@ -91,9 +91,9 @@ const CHUNK: usize = 2048;
 /// Adds the layers to `radiosity` (B of the transport, per vertex), with `finish` turns each
 /// vertex's whole B into radiance along its normal (the estimates are B's), and returns the
 /// estimates' parts: per channel, for the direct walks' term and for the own light's, its
-/// noise plus, where a vertex's length lies beyond the walked ones by more than `LENGTH_MARGIN`, its whole
-/// term counted as error: sqrt(sum of those terms^2 / sum B^2), the relative RMS they could be
-/// off by (0 where the term is absent).
+/// noise plus, where a vertex's length lies beyond the walked ones by more than
+/// `LENGTH_MARGIN`, its whole term counted as error: sqrt(sum of those terms^2 / sum B^2), the
+/// relative RMS they could be off by (0 where the term is absent).
 pub(super) fn add_layers(
     radiosity: &mut [[f32; 3]],
     vertex: &Vertex,

@@ -89,7 +89,10 @@ impl WalkTerm {
             let ((pair, _), beyond) = self.pick(x_mid);
             // The bracket's lengths: the upper weight (x - a) / (b - a) where two channels
             // are read, none past an end (or between equal lengths, as `pick`).
-            let weight = match self.bracket(x_mid) {
+            let weight = match self
+                .bracket(x_mid)
+                .map(|i| (self.lengths[i - 1].0, self.lengths[i].0))
+            {
                 Some((a, b)) if b > a => [((x0 - a) / (b - a)) as f32, (span / (b - a)) as f32],
                 _ => [0.0, 0.0],
             };
@@ -111,17 +114,6 @@ impl WalkTerm {
             pieces: pieces.map(|p| p.unwrap_or(first)),
             count: (cuts.len() + 1) as u8,
         })
-    }
-
-    /// The walked lengths (a, b) whose channels `pick` blends at `x` inside the walked range;
-    /// `None` at or past an end.
-    fn bracket(&self, x: f64) -> Option<(f64, f64)> {
-        let n = self.lengths.len();
-        if x <= self.lengths[0].0 || x >= self.lengths[n - 1].0 {
-            return None;
-        }
-        let i = (1..n).find(|&i| self.lengths[i].0 > x).unwrap_or(n - 1);
-        Some((self.lengths[i - 1].0, self.lengths[i].0))
     }
 }
 

@@ -376,15 +376,10 @@ impl WalkTerm {
     pub(super) fn pick(&self, x: f64) -> (([usize; 2], [f32; 2]), bool) {
         let (lo, hi) = (self.lengths[0], self.lengths[self.lengths.len() - 1]);
         let beyond = x - hi.0 > LN_LENGTH_MARGIN || lo.0 - x > LN_LENGTH_MARGIN;
-        if x <= lo.0 {
-            return (([lo.1, lo.1], [1.0, 0.0]), beyond);
-        }
-        if x >= hi.0 {
-            return (([hi.1, hi.1], [1.0, 0.0]), beyond);
-        }
-        let i = (1..self.lengths.len())
-            .find(|&i| self.lengths[i].0 > x)
-            .unwrap_or(self.lengths.len() - 1);
+        let Some(i) = self.bracket(x) else {
+            let end = if x <= lo.0 { lo } else { hi };
+            return (([end.1, end.1], [1.0, 0.0]), beyond);
+        };
         let (a, b) = (self.lengths[i - 1], self.lengths[i]);
         let t = if b.0 > a.0 {
             (x - a.0) / (b.0 - a.0)
@@ -392,6 +387,18 @@ impl WalkTerm {
             0.0
         } as f32;
         (([a.1, b.1], [1.0 - t, t]), beyond)
+    }
+
+    /// The index i of the walked length above `x` (lengths[i - 1] <= x < lengths[i]) where `x`
+    /// lies strictly inside the walked range; `None` at or past an end (`pick` reads the end
+    /// channel alone there).
+    #[inline(always)]
+    pub(super) fn bracket(&self, x: f64) -> Option<usize> {
+        let n = self.lengths.len();
+        if x <= self.lengths[0].0 || x >= self.lengths[n - 1].0 {
+            return None;
+        }
+        Some((1..n).find(|&i| self.lengths[i].0 > x).unwrap_or(n - 1))
     }
 
     /// D / A at vertex `v` read at `ln_length` (a diffusion length's log): the two walked
