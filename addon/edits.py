@@ -91,6 +91,7 @@ def _take_texture(session: Session, job: jobs.Job) -> None:
     the session."""
     session.base_color = getattr(job, "base_color", None)
     session.subsurface_weight = getattr(job, "subsurface_weight", None)
+    session.others = getattr(job, "others", None)
     session.texture_key = getattr(job, "texture_key", "")
     session.texture_message = getattr(job, "texture_message", "")
 
@@ -105,7 +106,7 @@ def follow_texture(material: bpy.types.Material, s: Session, force: bool = False
         return
     texture = textures.read(material, s.info, s.method)
     s.base_color, s.texture_key, s.texture_message = texture.colours, texture.key, texture.message
-    s.subsurface_weight = texture.weights
+    s.subsurface_weight, s.others = texture.weights, texture.others
 
 
 FIRST_PREVIEW_MESSAGE = "first preview after {:.2f} s (no walks yet): refining with the walks"
@@ -197,7 +198,7 @@ def edit(material: bpy.types.Material) -> None:
     # A Base Color read per vertex (`follow_texture`): each vertex scatters as its own medium.
     textured = {}
     if s.method == "prt":
-        textured = textures.Reading(colours=s.base_color, weights=s.subsurface_weight).kwargs()
+        textured = textures.Reading(colours=s.base_color, weights=s.subsurface_weight, others=s.others).kwargs()
     if s.method == "splat":
         colors = _splatted(material, s)
         if colors is None:

@@ -265,8 +265,8 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
         # The hierarchy carried its walks to the pose: now it walks the pose, in the background.
         if getattr(job, "retrace", False) and mat.name not in JOBS:
             again = jobs.RetraceJob(job.result, mat.translucent.material())
-            for key in ("method", "base_color", "subsurface_weight", "texture_key", "texture_message", "chosen_for",
-                        "profile"):
+            for key in ("method", "base_color", "subsurface_weight", "others", "texture_key", "texture_message",
+                        "chosen_for", "profile"):
                 setattr(again, key, getattr(job, key, None))
             edits.in_background(mat.name, again, objects, info, lighting, failed, message)
 

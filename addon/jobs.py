@@ -361,7 +361,7 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
             job = Job(scene, materials, first_preview=first_preview and s.profile_name() == "cycles", **kwargs)
     job.method = method
     job.base_color, job.texture_key, job.texture_message = texture.colours, texture.key, texture.message
-    job.subsurface_weight = texture.weights
+    job.subsurface_weight, job.others = texture.weights, texture.others
     job.chosen_for = params(s)
     job.profile = s.profile_name()
     # The IOR the transport was built with (the Principled BSDF's where it is followed, even

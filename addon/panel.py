@@ -139,7 +139,7 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
                 connected = principled.connected_inputs(mat)
                 sess = SESSIONS.get(mat.name)
                 if sess is not None and sess.texture_message:
-                    followed = sess.base_color is not None or sess.subsurface_weight is not None
+                    followed = any(x is not None for x in (sess.base_color, sess.subsurface_weight, sess.others))
                     col.label(text=sess.texture_message, icon="TEXTURE" if followed else "ERROR")
                     if sess.base_color is not None:
                         connected = [c for c in connected if not c.startswith("Base Color (")]

@@ -62,6 +62,9 @@ class Session:
     base_color: object = None
     # The Subsurface Weight per exported vertex where a link drives it (Cycles' profile), else None.
     subsurface_weight: object = None
+    # A uniform material beside other materials' faces: their albedo per exported vertex, NaN
+    # rows for the previewed vertices (`textures.Reading.others`), else None.
+    others: object = None
     texture_key: str = ""
     texture_message: str = ""
     # Method = Splatting (nothing precomputed: each evaluation splats again, on a worker

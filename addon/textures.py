@@ -227,22 +227,28 @@ def for_export(mat: bpy.types.Material, info, depsgraph=None, socket: str = "Bas
 @dataclass
 class Reading:
     """What `read` found: the Base Color per exported vertex and the Subsurface Weight (each
-    None where it is not read), the node tree's key it was read for, the panel's line, and the
-    materials a precompute chooses its transport for (empty where the Base Color is uniform)."""
+    None where it is not read), the node tree's key it was read for, the panel's line, the
+    materials a precompute chooses its transport for (empty where the Base Color is uniform),
+    and the other materials' albedo per vertex beside a uniform material (`others_in`; None
+    where there are none or they sit in `colours`' rows)."""
 
     colours: np.ndarray | None = None
     key: str = ""
     message: str = ""
     materials: list = field(default_factory=list)
     weights: np.ndarray | None = None
+    others: np.ndarray | None = None
 
     def kwargs(self) -> dict:
-        """The per-vertex arguments of `Prt.radiance` (`base_color`, `subsurface_weight`)."""
+        """The per-vertex arguments of `Prt.radiance` (`base_color`, `subsurface_weight`,
+        `others`)."""
         out = {}
         if self.colours is not None:
             out["base_color"] = self.colours
         if self.weights is not None:
             out["subsurface_weight"] = self.weights
+        if self.others is not None:
+            out["others"] = self.others
         return out
 
 
@@ -347,6 +353,10 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
                 lines.append(line)
     except ValueError as e:
         return Reading(message=f"{names} not read per vertex ({e}): the socket's value shown")
+    if others is not None and out.weights is None and not linked(mat, "Base Color"):
+        # A uniform material beside other materials' faces: the previewed vertices cost a
+        # uniform edit, the others' albedo passed apart (`Prt.radiance(others=...)`).
+        out.colours, out.others = None, others
     out.message = "; ".join(lines)
     return out
 

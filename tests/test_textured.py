@@ -162,3 +162,60 @@ def test_textured_edits_with_the_walks_stay_finite_non_negative_and_gain_no_ener
     assert all(math.isfinite(x) and x >= 0 for x in walked.last_eval["error_estimate"])
     rad = walked.radiance(m, base_color=colours, subsurface_weight=w)
     assert np.all(np.isfinite(rad)) and np.all(rad >= 0)
+
+
+@pytest.fixture(scope="module")
+def facing():
+    """Two 10 mm spheres 2 mm apart under a sun, one object's mesh (each lights the other: the own
+    light is not nil), Cycles' profile with the own light, no walks; the second sphere's vertices
+    (x > 0) are the other material's."""
+    pos, tri = sphere(8, 0.01)
+    both = np.concatenate([pos - (0.011, 0.0, 0.0), pos + (0.011, 0.0, 0.0)]).astype(np.float32)
+    scene = translucent.Scene(both, np.concatenate([tri, tri + len(pos)]))
+    scene.add_sun((0.3, 0.2, -1.0), irradiance=1.0)
+    prt = translucent.Prt(scene, _inputs(0.5), samples=6000, backend="cpu", profile="cycles", walks=0,
+                          interreflection_rays=64)
+    return prt, both[:, 0] > 0.0
+
+
+def test_other_materials_rows_beside_a_uniform_material(facing):
+    # `others=` (another material's faces on the object, NaN rows for the previewed vertices):
+    # the previewed vertices get what the per-vertex edit gives them with the others' colours in
+    # its rows (each vertex its own medium; the others reach the previewed ones through the own
+    # light alone), the others' rows NaN and counted in `skipped`. Base Colour 0.5 lies on a
+    # node, so the per-vertex edit interpolates only the others' slab albedos (within 0.5 %).
+    prt, other = facing
+    got = {}
+    for shade in (0.05, 0.95):
+        others = np.where(other[:, None], np.float32(shade), np.float32(np.nan)) * np.ones((1, 3), np.float32)
+        got[shade] = prt.radiance(_inputs(0.5), others=others)
+        skipped = [s for s in prt.last_eval["skipped"] if "other materials" in s["what"]]
+        assert skipped and f"{int(other.sum())} vertices" in skipped[0]["why"]
+        merged = np.where(other[:, None], others, np.float32(0.5)).astype(np.float32)
+        per_vertex = prt.radiance(_inputs(0.5), base_color=merged)
+        assert np.isnan(got[shade][other]).all() and np.isfinite(got[shade][~other]).all()
+        np.testing.assert_allclose(got[shade][~other], per_vertex[~other], rtol=2e-3, atol=1e-7)
+    # The others' colour is seen: a bright neighbour lights the previewed sphere more than a
+    # dark one, by far more than the tolerance above.
+    gain = got[0.95][~other].sum(axis=0) / got[0.05][~other].sum(axis=0) - 1.0
+    assert (gain > 0.01).all(), gain
+    # Others of the previewed colour are the uniform edit.
+    same = np.where(other[:, None], np.float32(0.5), np.float32(np.nan)) * np.ones((1, 3), np.float32)
+    np.testing.assert_allclose(prt.radiance(_inputs(0.5), others=same)[~other],
+                               prt.radiance(_inputs(0.5))[~other], rtol=1e-5, atol=1e-9)
+
+
+def test_others_arguments_are_checked(walked):
+    n = walked.vertex_count
+    with pytest.raises(ValueError, match="others has 3 rows"):
+        walked.radiance(_inputs(), others=np.full((3, 3), np.nan))
+    bad = np.full((n, 3), np.nan)
+    bad[5, 0] = 0.5
+    with pytest.raises(ValueError, match="others row 5"):
+        walked.radiosity(_inputs(), others=bad)
+    with pytest.raises(ValueError, match="others must have shape"):
+        walked.radiance(_inputs(), others=np.full((n, 2), np.nan))
+    with pytest.raises(ValueError, match="others is for a uniform material"):
+        walked.radiance(_inputs(), others=np.full((n, 3), np.nan), base_color=np.full((n, 3), 0.5))
+    with pytest.raises(ValueError, match="others needs a material made by Material.from_principled"):
+        walked.radiance(translucent.Material.preset("marble"), others=np.full((n, 3), np.nan))

@@ -472,7 +472,12 @@ impl PyPrt {
     /// `subsurface_weight`: an (N,) array of the Principled Subsurface Weight per vertex in
     /// [0, 1] (Cycles' profile only): w of the subsurface lobe and 1 - w of the diffuse one,
     /// both of the vertex's Base Color (the material's own where `base_color` is not given).
-    #[pyo3(signature = (material, interreflection = true, walks = true, base_color = None, subsurface_weight = None))]
+    /// `others`: an (N, 3) array, for a uniform material made by `Material.from_principled`
+    /// whose object has faces of other materials: their vertices' Base Color, NaN rows for
+    /// the previewed vertices. The others scatter as their own colour into the object's own
+    /// light and come back NaN (not previewed); the previewed vertices cost a uniform edit.
+    #[pyo3(signature = (material, interreflection = true, walks = true, base_color = None, subsurface_weight = None, others = None))]
+    #[allow(clippy::too_many_arguments)]
     fn radiosity<'py>(
         &self,
         py: Python<'py>,
@@ -481,21 +486,26 @@ impl PyPrt {
         walks: bool,
         base_color: Option<&Bound<'_, PyAny>>,
         subsurface_weight: Option<&Bound<'_, PyAny>>,
+        others: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let n = self.vertex_count()?;
         let varying = per_vertex_inputs(&material, base_color, subsurface_weight, n)?;
+        let beside = others_of(&material, others, varying.is_some())?;
         let e = run(py, None, |_| {
             let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
-            match &varying {
-                Some((inputs, colours, weights)) => inner.radiosity_textured(
+            match (&varying, &beside) {
+                (Some((inputs, colours, weights)), _) => inner.radiosity_textured(
                     inputs,
                     colours,
                     weights.as_deref(),
                     interreflection,
                     walks,
                 ),
-                None => inner.radiosity_parts(&m, interreflection, walks),
+                (None, Some((inputs, others))) => {
+                    inner.radiosity_beside(inputs, others, interreflection, walks)
+                }
+                (None, None) => inner.radiosity_parts(&m, interreflection, walks),
             }
         })?;
         let out = rgb_array(py, &e.values);
@@ -510,8 +520,10 @@ impl PyPrt {
     /// With single scattering (report["single_scattering"]), L_d + L^(1) (Xu 2007 eq. 1):
     /// `phase` "hg" (exact Henyey–Greenstein per light group) or "eddington" (Xu eq. 11).
     /// `base_color` as `radiosity` (multiple scattering then: single scattering is not
-    /// added with a Base Color per vertex yet, and `skipped` says so).
-    #[pyo3(signature = (material, eye = None, phase = "hg", base_color = None, subsurface_weight = None))]
+    /// added with a Base Color per vertex yet, and `skipped` says so). `others` as
+    /// `radiosity` (multiple scattering too).
+    #[pyo3(signature = (material, eye = None, phase = "hg", base_color = None, subsurface_weight = None, others = None))]
+    #[allow(clippy::too_many_arguments)]
     fn radiance<'py>(
         &self,
         py: Python<'py>,
@@ -520,19 +532,24 @@ impl PyPrt {
         phase: &str,
         base_color: Option<&Bound<'_, PyAny>>,
         subsurface_weight: Option<&Bound<'_, PyAny>>,
+        others: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
         let phase = Phase::parse(phase).map_err(to_py)?;
         let n = self.vertex_count()?;
         let varying = per_vertex_inputs(&material, base_color, subsurface_weight, n)?;
+        let beside = others_of(&material, others, varying.is_some())?;
         let (e, l1) = run(py, None, |_| {
             let inner = self.inner.read().unwrap_or_else(|e| e.into_inner());
-            match &varying {
-                Some((inputs, colours, weights)) => inner
+            match (&varying, &beside) {
+                (Some((inputs, colours, weights)), _) => inner
                     .radiance_textured(inputs, colours, weights.as_deref(), eye)
                     .map(|e| (e, None)),
-                None => inner.radiance_with(&m, eye, phase),
+                (None, Some((inputs, others))) => {
+                    (inner.radiance_beside(inputs, others, eye)).map(|e| (e, None))
+                }
+                (None, None) => inner.radiance_with(&m, eye, phase),
             }
         })?;
         let out = rgb_array(py, &e.values);
@@ -935,6 +952,35 @@ fn per_vertex_inputs(
         .map(|w| crate::convert::float_values("subsurface_weight", w))
         .transpose()?;
     Ok(Some((inputs, colours, weights)))
+}
+
+/// The Principled inputs and the other materials' rows (`others=`, NaN for the previewed
+/// vertices), or None without it. With a Base Color or Subsurface Weight per vertex
+/// (`per_vertex`) the others' colours belong in `base_color`'s rows.
+fn others_of(
+    material: &PyMaterial,
+    others: Option<&Bound<'_, PyAny>>,
+    per_vertex: bool,
+) -> PyResult<Option<(PrincipledInputs, Vec<[f32; 3]>)>> {
+    let Some(others) = others else {
+        return Ok(None);
+    };
+    if per_vertex {
+        return Err(PyValueError::new_err(
+            "others is for a uniform material: with base_color or subsurface_weight per \
+             vertex, give the other materials' colours in base_color's rows",
+        ));
+    }
+    let inputs = material.principled.ok_or_else(|| {
+        PyValueError::new_err(
+            "others needs a material made by Material.from_principled (the other materials' \
+             vertices take its inputs with their own Base Color)",
+        )
+    })?;
+    Ok(Some((
+        inputs,
+        crate::convert::float_rows("others", others)?,
+    )))
 }
 
 /// What `update` returns: its seconds per stage, rays and walks traced.

@@ -56,16 +56,39 @@ impl Bounce {
         error: &mut [f64; 3],
         signed: bool,
     ) {
-        use rayon::prelude::*;
-        let receiving = material.totals();
-        let albedo = material.sent_on(1.0);
-        let ratio: [f64; 3] = std::array::from_fn(|ch| {
+        let ratio = self.ratio(material.sent_on(1.0));
+        self.add_scaled(radiosity, material, ratio, walks, share, error, signed);
+    }
+
+    /// Per channel, how much more or less light a surface sending `sent` on (its slab albedo
+    /// seen along the normal, `Resolved::sent_on`, averaged over the vertices where they
+    /// differ) sends out than the source did: what E_ind is scaled by.
+    pub fn ratio(&self, sent: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|ch| {
             if self.source_albedo[ch] > 0.0 {
-                albedo[ch] / self.source_albedo[ch]
+                sent[ch] / self.source_albedo[ch]
             } else {
                 0.0
             }
-        });
+        })
+    }
+
+    /// `add_to` with the indirect light scaled by `ratio` (`ratio`) rather than by what
+    /// `material` alone sends on: a surface whose vertices send on different media (another
+    /// material's faces beside the previewed ones) lights the receiver by their mean.
+    #[allow(clippy::too_many_arguments)]
+    pub fn add_scaled(
+        &self,
+        radiosity: &mut [[f32; 3]],
+        material: &Resolved,
+        ratio: [f64; 3],
+        walks: bool,
+        share: f64,
+        error: &mut [f64; 3],
+        signed: bool,
+    ) {
+        use rayon::prelude::*;
+        let receiving = material.totals();
         let k: [f32; 3] = std::array::from_fn(|ch| (receiving[ch] * ratio[ch]) as f32);
         radiosity
             .par_iter_mut()

@@ -158,18 +158,21 @@ impl Prt {
         bounce: bool,
         walks: bool,
     ) -> Result<Evaluation> {
-        self.radiosity_inner(material, bounce, walks, None)
+        self.radiosity_inner(material, bounce, walks, None, None)
             .map(|(e, _)| e)
     }
 
     /// As `radiosity_parts`; with `single` (on the GPU only) single scattering's kernel runs
-    /// in the same submission and its L^(1) comes back beside B.
-    fn radiosity_inner(
+    /// in the same submission and its L^(1) comes back beside B. `sent`: what the surface
+    /// sends on, averaged over its vertices (`Resolved::sent_on`), where some vertices are of
+    /// other media than `material` (`beside`); None: the material's own.
+    pub(super) fn radiosity_inner(
         &self,
         material: &Resolved,
         bounce: bool,
         walks: bool,
         single: Option<&crate::prt::gpu::SingleEdit>,
+        sent: Option<[f64; 3]>,
     ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         let t0 = Instant::now();
         self.check_eta(&material.material)?;
@@ -203,9 +206,11 @@ impl Prt {
         }
         if let Some(bounce) = self.bounce.as_ref().filter(|_| bounce) {
             let share = self.report.interreflection_share;
-            bounce.add_to(
+            let ratio = bounce.ratio(sent.unwrap_or_else(|| material.sent_on(1.0)));
+            bounce.add_scaled(
                 &mut radiosity,
                 material,
+                ratio,
                 walks,
                 share,
                 &mut error_estimate,
@@ -313,7 +318,8 @@ impl Prt {
         if self.gpu.as_ref().is_some_and(|g| g.has_single()) {
             // Both kernels in one GPU submission; L^(1)'s dot time is inside `dot_seconds`.
             let (edit, error_estimate, fit_seconds) = s.gpu_edit(material, eye, phase)?;
-            let (mut e, l1) = self.radiance_inner(material, eye, Some(&edit))?;
+            let r = self.resolve(material)?;
+            let (mut e, l1) = self.radiance_inner(&r, eye, Some(&edit), None)?;
             let l1 = l1.ok_or_else(|| {
                 Error::GpuUnavailable("the GPU returned no single scattering".into())
             })?;
@@ -337,7 +343,7 @@ impl Prt {
         }
         // CPU: B, then one pass that turns it into F_t B / pi (the dipole's exit weight, as
         // `radiance`) and adds L^(1).
-        let (mut e, _) = self.radiosity_inner(&self.resolve(material)?, true, true, None)?;
+        let (mut e, _) = self.radiosity_inner(&self.resolve(material)?, true, true, None, None)?;
         let l1 = s.radiance_joined(material, eye, phase, &mut e.values)?;
         e.quantity = Quantity::Radiance;
         e.details.fit_seconds += l1.fit_seconds;
@@ -351,19 +357,22 @@ impl Prt {
     /// Cycles' specular layer lets through for its walk). Vertices facing away from the eye get
     /// 0. Without an eye, the radiance leaving along each vertex normal (what a bake sees).
     pub fn radiance(&self, material: &Material, eye: Option<Vec3>) -> Result<Evaluation> {
-        self.radiance_inner(material, eye, None).map(|(e, _)| e)
-    }
-
-    /// As `radiance`, with `single` as `radiosity_inner`.
-    fn radiance_inner(
-        &self,
-        material: &Material,
-        eye: Option<Vec3>,
-        single: Option<&crate::prt::gpu::SingleEdit>,
-    ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
         crate::evaluation::check_eye(eye)?;
         let r = self.resolve(material)?;
-        let (mut e, l1) = self.radiosity_inner(&r, true, true, single)?;
+        self.radiance_inner(&r, eye, None, None).map(|(e, _)| e)
+    }
+
+    /// As `radiance` for a material already resolved, with `single` and `sent` as
+    /// `radiosity_inner`.
+    pub(super) fn radiance_inner(
+        &self,
+        r: &Resolved,
+        eye: Option<Vec3>,
+        single: Option<&crate::prt::gpu::SingleEdit>,
+        sent: Option<[f64; 3]>,
+    ) -> Result<(Evaluation, Option<Vec<[f32; 3]>>)> {
+        crate::evaluation::check_eye(eye)?;
+        let (mut e, l1) = self.radiosity_inner(r, true, true, single, sent)?;
         let t = Instant::now();
         radiance_from_radiosity(
             &mut e.values,

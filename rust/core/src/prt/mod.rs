@@ -21,6 +21,7 @@
 
 mod backend;
 pub mod basis;
+mod beside;
 mod color_picks;
 mod color_table;
 mod evaluate;

@@ -195,13 +195,7 @@ impl Prt {
             }
             OwnLight {
                 irradiance: &own.irradiance,
-                ratio: std::array::from_fn(|c| {
-                    if own.source_albedo[c] > 0.0 {
-                        sent[c] / n / own.source_albedo[c]
-                    } else {
-                        0.0
-                    }
-                }),
+                ratio: own.ratio(sent.map(|s| s / n)),
                 walked: own.walked.as_ref().filter(|_| walks),
             }
         });

@@ -282,6 +282,7 @@ class Prt:
         walks: bool = True,
         base_color: npt.ArrayLike | None = None,
         subsurface_weight: npt.ArrayLike | None = None,
+        others: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiosity B per vertex: the profile summed over the lit surface (with the
         object's own light where it was precomputed, unless `interreflection` is False, and
@@ -292,7 +293,13 @@ class Prt:
         own Base Color's medium; the estimate adds the table's interpolation error.
         `subsurface_weight`: (N,) Principled Subsurface Weight per vertex in [0, 1] (Cycles'
         profile only; the material's own Base Color where `base_color` is not given): w of the
-        subsurface lobe and 1 - w of the diffuse lobe beside it, as Cycles splits them."""
+        subsurface lobe and 1 - w of the diffuse lobe beside it, as Cycles splits them.
+        `others`: (N, 3), for a uniform `Material.from_principled` material whose object has faces
+        of other materials: their vertices' Base Color, NaN rows for the previewed vertices. The
+        others scatter as their own colour into the object's own light and come back NaN (not
+        previewed; `last_eval["skipped"]` counts them); the previewed vertices cost a uniform
+        edit. Not with `base_color` or `subsurface_weight` (put the others' colours in
+        `base_color`'s rows then)."""
     def radiance(
         self,
         material: Material,
@@ -300,14 +307,15 @@ class Prt:
         phase: Literal["hg", "eddington"] = "hg",
         base_color: npt.ArrayLike | None = None,
         subsurface_weight: npt.ArrayLike | None = None,
+        others: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiance toward the point `eye`, W(w_o) V(w_o) B / pi (W: F_t for the dipole, what
         the specular layer leaves for Cycles; V: Cycles' view factor, see `Material.slab_reflectance`,
         1 for the dipole); without an eye, along each vertex normal (a bake).
         With single scattering (report["single_scattering"]) plus L^(1) toward the eye, with
         the Henyey-Greenstein ("hg") or Eddington (Xu eq. 11) phase function.
-        `base_color` and `subsurface_weight` as `radiosity` (multiple scattering alone then;
-        `last_eval["skipped"]` says so)."""
+        `base_color`, `subsurface_weight` and `others` as `radiosity` (multiple scattering alone
+        then; `last_eval["skipped"]` says so)."""
     def single_radiance(
         self,
         material: Material,
