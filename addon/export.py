@@ -18,6 +18,8 @@ import numpy as np
 import translucent
 from translucent import cycles
 
+from . import linking
+
 
 @dataclass
 class ObjectRange:
@@ -49,6 +51,10 @@ class ExportInfo:
     objects: list[ObjectRange] = field(default_factory=list)
     lights: list[str] = field(default_factory=list)
     skipped_lights: list[str] = field(default_factory=list)
+    # Lights whose light linking lights none of the previewed objects (`linking.follow`), and
+    # the lines saying what of the lights' linking is not followed.
+    unlinked_lights: list[str] = field(default_factory=list)
+    linking: list[str] = field(default_factory=list)
     # Mesh objects left out because they do not carry the previewed material.
     skipped_objects: list[str] = field(default_factory=list)
     # Other objects exported as occluders (they shadow the previewed ones; issue 30), and the
@@ -149,7 +155,7 @@ def lighting_keys(bl_scene: bpy.types.Scene) -> dict[str, str]:
         keys[f"light {o.name}"] = repr((
             tuple(round(x, 9) for row in o.matrix_world for x in row), d.type, d.energy, tuple(d.color),
             getattr(d, "spot_size", 0), getattr(d, "spot_blend", 0), getattr(d, "size", 0),
-            getattr(d, "size_y", 0), getattr(d, "shape", ""), o.hide_render))
+            getattr(d, "size_y", 0), getattr(d, "shape", ""), o.hide_render, linking.key(o)))
     w = bl_scene.world
     if w is not None:
         parts = [tuple(w.color)]
@@ -181,13 +187,22 @@ def _axis(obj: bpy.types.Object, k: int) -> tuple[float, float, float]:
 
 
 def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: ExportInfo) -> None:
-    """Every visible light of `bl_scene`, in Blender's units; black or hidden lights skipped."""
+    """Every visible light of `bl_scene`, in Blender's units; black or hidden lights skipped, and
+    lights whose light linking lights none of the exported objects left out (`linking.follow`:
+    `info.linking` says so, and what of their linking is not followed)."""
+    previewed = [r.name for r in info.objects]
+    occluders = sorted(k.removeprefix("occluder ") for k in info.occluder_keys)
     for obj in bl_scene.objects:
         if obj.type != "LIGHT":
             continue
         light = obj.data
         if obj.hide_render or light.energy <= 0.0 or max(light.color) <= 0.0:
             info.skipped_lights.append(obj.name)
+            continue
+        kept, lines = linking.follow(obj, previewed, occluders)
+        info.linking.extend(lines)
+        if not kept:
+            info.unlinked_lights.append(obj.name)
             continue
         color = tuple(light.color)
         pos = tuple(obj.matrix_world.translation)

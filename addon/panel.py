@@ -22,6 +22,8 @@ def summary(sess: Session) -> str:
         scene += f", {', '.join(info.without_faces)} holding it on no face left out"
     if info.occluders:
         scene += f", {len(info.occluders)} occluder(s)"
+    if getattr(info, "unlinked_lights", None):
+        scene += f", light(s) lighting none of them left out (light linking): {', '.join(info.unlinked_lights)}"
     if sess.method == "splat":
         peel = r.get("peel")
         peeled = f", {peel['samples']:,} peeled samples (world, area lights)" if peel else ""
@@ -89,6 +91,10 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     if sess.edit_message:
         lines.append((sess.edit_message, "TIME" if mat.name in PREPARING else "ERROR"))
     lines += [(part, "NONE") for part in summary(sess).split("; ")]
+    # Light and shadow linking: what is followed (a light lighting none of the objects left out)
+    # and what is not.
+    lines += [(line, "INFO" if line.endswith("left out, its bounce off the other objects with it") else "ERROR")
+              for line in getattr(sess.info, "linking", [])]
     if sess.last_eval is not None:
         lines.append((estimate_line(sess), "NONE"))
         # What the method's evaluation left out, and why (its own words).
