@@ -50,10 +50,10 @@ TOUCHING = "(c) two characters touching"
 SLOTS = "(d) a second, opaque material"
 
 
-def _preview(scene, m, *, reference, w, mask=None, base_color=None, materials=None):
-    """One precompute of `scene` (for `materials`, else `m`) and its radiance in `m`, against
-    `reference` over the vertices where `mask` holds: (rms, max, estimate, precompute_s,
-    edit_s, vertices compared)."""
+def _preview(scene, m, *, reference, w, mask=None, base_color=None, materials=None, others=None):
+    """One precompute of `scene` (for `materials`, else `m`) and its radiance in `m` (with
+    `base_color` or `others` per vertex where given), against `reference` over the vertices where
+    `mask` holds: (rms, max, estimate, precompute_s, edit_s, vertices compared)."""
     from addon import textures
 
     t0 = time.perf_counter()
@@ -61,7 +61,8 @@ def _preview(scene, m, *, reference, w, mask=None, base_color=None, materials=No
     prt = translucent.Prt(scene, m if materials is None else materials, backend="cpu", single_scattering=False,
                           **walked)
     precompute = time.perf_counter() - t0
-    preview = prt.radiance(m) if base_color is None else prt.radiance(m, base_color=base_color)
+    per_vertex = {k: v for k, v in (("base_color", base_color), ("others", others)) if v is not None}
+    preview = prt.radiance(m, **per_vertex)
     edit = float(prt.last_eval["seconds"])
     keep = np.ones(len(preview), bool) if mask is None else mask
     rms, mx = worst(translucent.relative_error(preview[keep], reference[keep], w[keep]))
@@ -310,8 +311,8 @@ def _eyes(suzanne, name: str, spp: int) -> list[Part]:
                          "+ material slots: the eyes opaque occluders, not scattering (the hierarchy and "
                          "the splatting)", name, "Suzanne", mask=mask))
     # PRT with the material read from its Principled BSDF: the eyes' faces stay in the mesh as
-    # Cycles' walk sees them, their vertices scattering as their own albedo (the add-on's
-    # `textures.read` beside other materials).
+    # Cycles' walk sees them, their vertices scattering as their own albedo, passed apart from
+    # the uniform material (the add-on's `textures.read` beside other materials: `others=`).
     from addon import textures
     from translucent import cycles
 
@@ -319,7 +320,7 @@ def _eyes(suzanne, name: str, spp: int) -> list[Part]:
     inputs = cycles.read_principled(skin.node_tree.nodes["Principled BSDF"])
     colours, previewed = textures.beside_others(inputs.base_color, textures.others_in(kept_info))
     rms, mx, est, pre, edit, n = _preview(kept, inputs.material(), reference=bake, w=kept.vertex_areas[:, 0],
-                                          mask=~seam, base_color=colours,
+                                          mask=~seam, others=textures.others_in(kept_info),
                                           materials=textures.representatives(inputs, colours, previewed))
     rows.append(Part(SLOTS, "+ the eyes' faces kept in the mesh as Cycles' walk sees them, scattering as their "
                             "own colour (PRT)", name, "Suzanne", rms, mx, est, pre, edit, seconds, n))
