@@ -116,6 +116,13 @@ fn count_chunk(rows: &[[f32; 3]]) -> Option<Others> {
     Some(out)
 }
 
+/// The Base Color per vertex: `base` at the previewed vertices, the others' own elsewhere.
+fn merged(base: [f32; 3], others: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    (others.iter())
+        .map(|o| if o[0].is_nan() { base } else { *o })
+        .collect()
+}
+
 impl Prt {
     /// Multiple-scattering radiosity of the uniform material `inputs` at the vertices whose
     /// `others` row is NaN, beside vertices of other materials (`others`' finite rows: each
@@ -174,16 +181,7 @@ impl Prt {
             }
             // Another material that is itself textured: every vertex read as its own colour.
             None => {
-                let colors: Vec<[f32; 3]> = others
-                    .iter()
-                    .map(|o| {
-                        if o[0].is_nan() {
-                            inputs.base_color.map(|x| x as f32)
-                        } else {
-                            *o
-                        }
-                    })
-                    .collect();
+                let colors = merged(inputs.base_color.map(|x| x as f32), others);
                 let mut e = match radiance {
                     Some(eye) => self.radiance_textured(inputs, &colors, None, eye)?,
                     None => self.radiosity_textured(inputs, &colors, None, bounce, walks)?,
@@ -285,6 +283,13 @@ mod tests {
             .collect()
     }
 
+    /// The per-vertex edit with the others' colours in its rows (the previewed ones 0.75).
+    fn per_vertex(prt: &Prt, others: &[[f32; 3]]) -> Vec<[f32; 3]> {
+        (prt.radiosity_textured(&inputs(), &merged([0.75; 3], others), None, true, true))
+            .unwrap()
+            .values
+    }
+
     /// At every previewed vertex `got` within `rel` of `expect`; the others' rows NaN.
     fn check(expect: &[[f32; 3]], got: &[[f32; 3]], others: &[[f32; 3]], rel: f32) {
         for ((a, b), o) in expect.iter().zip(got).zip(others) {
@@ -336,13 +341,7 @@ mod tests {
             let got = prt
                 .radiosity_beside(&inputs(), &others, true, true)
                 .unwrap();
-            let merged: Vec<[f32; 3]> = (others.iter())
-                .map(|o| if o[0].is_nan() { [0.75; 3] } else { *o })
-                .collect();
-            let textured = (prt.radiosity_textured(&inputs(), &merged, None, true, true))
-                .unwrap()
-                .values;
-            check(&textured, &got.values, &others, 2e-3);
+            check(&per_vertex(&prt, &others), &got.values, &others, 2e-3);
             let previewed = got.values.iter().filter(|b| !b[0].is_nan());
             sums.push(previewed.map(|b| f64::from(b[0])).sum::<f64>());
         }
@@ -363,13 +362,7 @@ mod tests {
         let got = prt
             .radiosity_beside(&inputs(), &others, true, true)
             .unwrap();
-        let merged: Vec<[f32; 3]> = (others.iter())
-            .map(|o| if o[0].is_nan() { [0.75; 3] } else { *o })
-            .collect();
-        let textured = (prt.radiosity_textured(&inputs(), &merged, None, true, true))
-            .unwrap()
-            .values;
-        check(&textured, &got.values, &others, 1e-6);
+        check(&per_vertex(&prt, &others), &got.values, &others, 1e-6);
     }
 
     #[test]
