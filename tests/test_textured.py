@@ -219,3 +219,15 @@ def test_others_arguments_are_checked(walked):
         walked.radiance(_inputs(), others=np.full((n, 3), np.nan), base_color=np.full((n, 3), 0.5))
     with pytest.raises(ValueError, match="others needs a material made by Material.from_principled"):
         walked.radiance(translucent.Material.preset("marble"), others=np.full((n, 3), np.nan))
+
+
+def test_float32_float64_and_strided_colours_read_alike(prt):
+    # A C-contiguous float32 array is read as it is, any other through float64: the same values.
+    n = len(prt.radiance(_inputs()))
+    rng = np.random.default_rng(3)
+    wide = rng.uniform(0.05, 0.95, (n, 6))
+    strided = wide.astype(np.float32)[:, ::2]  # float32, not contiguous
+    assert not strided.flags["C_CONTIGUOUS"]
+    a = prt.radiance(_inputs(), base_color=np.ascontiguousarray(strided))
+    np.testing.assert_array_equal(prt.radiance(_inputs(), base_color=strided), a)
+    np.testing.assert_array_equal(prt.radiance(_inputs(), base_color=strided.astype(np.float64)), a)

@@ -71,6 +71,15 @@ fn as_contiguous<'py>(value: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<
 /// beyond f32's range (1e39 in a float64 array) is refused here, saying so, instead of reaching
 /// the core as an infinity; NaN and infinities given as such are the core's to report.
 pub fn float_rows(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]>> {
+    // A C-contiguous (N, 3) float32 array (what the add-on passes at every edit) is read as it
+    // is: one copy, none of the float64 round trip (0.6 ms of an edit at 139k rows).
+    if let Ok(arr) = value.extract::<PyReadonlyArray2<f32>>() {
+        if arr.shape()[1] == 3 {
+            if let Ok(s) = arr.as_slice() {
+                return Ok(s.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect());
+            }
+        }
+    }
     let arr = as_contiguous(value, "float64")
         .map_err(|e| PyValueError::new_err(format!("{name} must be an (N, 3) float array: {e}")))?;
     let arr: PyReadonlyArray2<f64> = arr
