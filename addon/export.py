@@ -51,6 +51,9 @@ class ExportInfo:
     objects: list[ObjectRange] = field(default_factory=list)
     lights: list[str] = field(default_factory=list)
     skipped_lights: list[str] = field(default_factory=list)
+    # Objects of the scene whose material emits light (`translucent.cycles.emits`): they light
+    # it in Cycles, and are not lights here (shadows and bounce only).
+    emitters: list[str] = field(default_factory=list)
     # Lights whose light linking lights none of the previewed objects (`linking.follow`), and
     # the lines saying what of the lights' linking is not followed.
     unlinked_lights: list[str] = field(default_factory=list)
@@ -274,6 +277,8 @@ def _add_parts(scene: translucent.Scene, obj, name: str, co, tris, slots, info: 
     used = np.unique(slots)
     for k in used:
         mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+        if cycles.emits(mat) and obj.name not in info.emitters:
+            info.emitters.append(obj.name)
         label = name if len(used) == 1 else f"{obj.name} [{mat.name if mat is not None else 'no material'}]"
         scene.add_occluder(co, tris[slots == k], name=label, albedo=cycles.diffuse_albedo(mat))
         info.occluders.append(label)
@@ -387,6 +392,8 @@ def export_scene(
                 continue
             if not mine.all() and others_scatter:
                 kept_slots = other_slots(t, slots, mine, len(p))
+                if any(cycles.emits(m) for m in other_materials(obj, kept_slots).values()):
+                    info.emitters.append(obj.name)
                 albedo = others_now(obj, kept_slots)
             elif not mine.all():
                 others.append((obj, p, t[~mine], slots[~mine]))

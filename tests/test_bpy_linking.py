@@ -1,4 +1,4 @@
-"""Light and shadow linking (issue 30 point 1), in headless Blender: a light whose receiver
+"""Light and shadow linking, and emissive meshes (issue 30 point 1), in headless Blender: a light whose receiver
 collection leaves out the previewed object lights nothing of it in Cycles, so the preview must be
 the one of the scene without that light (Blender's rule: only included objects -> those alone;
 only excluded -> all but those; none -> every object); what the export cannot follow (a light
@@ -98,3 +98,40 @@ def test_shadow_linking_is_named_where_it_is_not_followed(addon):
     sess = session.SESSIONS[mat.name]
     assert [line for line in sess.info.linking if "shadow linking" in line] == [
         "Rim's shadows are not cast by Floor in Cycles (shadow linking): they are here, not followed"]
+
+
+def test_an_emissive_prop_is_named_as_light_not_followed(addon):
+    # A plane with an Emission shader lights the scene in Cycles; the export makes it a shadow
+    # (and a bounce), not a light, and the panel says so. A Principled BSDF with an Emission
+    # Strength above 0 counts; one at 0 (Blender's default), or a black emission, does not.
+    import bpy
+
+    from addon import panel, session
+
+    mat, obj, rim = _scene(bpy)
+    panel_mat = bpy.data.materials.new("Panel")
+    tree = panel_mat.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    emit = tree.nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 5.0
+    tree.links.new(emit.outputs["Emission"], tree.nodes["Material Output"].inputs["Surface"])
+    bpy.ops.mesh.primitive_plane_add(size=0.1, location=(0.0, -0.2, 0.1))
+    lamp = bpy.context.active_object
+    lamp.name = "Softbox"
+    lamp.data.materials.append(panel_mat)
+    glow = bpy.data.materials.new("Glow")
+    bsdf = glow.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Emission Color"].default_value = (1.0, 0.5, 0.2, 1.0)
+    floor = bpy.data.objects["Floor"]
+    floor.data.materials.append(glow)
+    _preview(bpy, mat, obj)
+    sess = session.SESSIONS[mat.name]
+    assert sess.info.emitters == ["Softbox"]  # the floor's Emission Strength is 0
+    lines = [text for text, _ in panel.status_lines(mat)]
+    assert any(t.startswith("Softbox: emissive, lighting the scene in Cycles; not a light here") for t in lines), lines
+    bsdf.inputs["Emission Strength"].default_value = 2.0
+    _preview(bpy, mat, obj)
+    assert sorted(session.SESSIONS[mat.name].info.emitters) == ["Floor", "Softbox"]
+    bsdf.inputs["Emission Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    _preview(bpy, mat, obj)
+    assert session.SESSIONS[mat.name].info.emitters == ["Softbox"]

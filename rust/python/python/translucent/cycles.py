@@ -165,6 +165,33 @@ def diffuse_albedo(material) -> tuple[float, float, float]:
     return tuple(min(max(x, 0.0), 1.0) for x in colour)
 
 
+def emits(material) -> bool:
+    """Whether Cycles sees light leave a surface of `material` (a bpy Material, or None): an
+    Emission node, or a Principled BSDF with an Emission Strength above 0 (or either input
+    connected) and a colour that is not black, anywhere upstream of the active Material
+    Output's Surface."""
+    tree = None if material is None else material.node_tree
+    out = None if tree is None else next((n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output),
+                                         None)
+    if out is None:
+        return False
+    seen, todo = set(), [out]
+    while todo:
+        node = todo.pop()
+        if node.name in seen:
+            continue
+        seen.add(node.name)
+        sockets = {"EMISSION": ("Color", "Strength"), "BSDF_PRINCIPLED": ("Emission Color", "Emission Strength")}
+        if node.type in sockets:
+            colour, strength = (node.inputs[k] for k in sockets[node.type])
+            bright = colour.is_linked or max(colour.default_value[:3]) > 0.0
+            if bright and (strength.is_linked or strength.default_value > 0.0):
+                return True
+        inputs = [out.inputs["Surface"]] if node is out else node.inputs
+        todo.extend(link.from_node for i in inputs for link in i.links)
+    return False
+
+
 def read_principled(node) -> Principled:
     """Every input of a Principled BSDF node that changes Cycles' subsurface answer
     (unconnected values)."""
