@@ -1,9 +1,9 @@
-"""Light and shadow linking, and emissive meshes (issue 30 point 1), in headless Blender: a light whose receiver
-collection leaves out the previewed object lights nothing of it in Cycles, so the preview must be
-the one of the scene without that light (Blender's rule: only included objects -> those alone;
-only excluded -> all but those; none -> every object); what the export cannot follow (a light
-lighting some previewed objects and not others, a floor it does not light, shadow linking) is
-named in the panel, never silently dropped."""
+"""Light and shadow linking, and emissive meshes (issue 30 point 1), in headless Blender. A light
+whose receiver collection leaves out the previewed object lights nothing of it in Cycles, so the
+preview must be the one of the scene without that light (Blender's rule: only included objects ->
+those alone; only excluded -> all but those; none -> every object). What the export cannot follow
+(a light lighting some previewed objects and not others, a floor it does not light, shadow
+linking, an emissive mesh's light) is named in the panel, never silently dropped."""
 
 import numpy as np
 import pytest
