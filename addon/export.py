@@ -54,6 +54,9 @@ class ExportInfo:
     # Objects of the scene whose material emits light (`translucent.cycles.emits`): they light
     # it in Cycles, and are not lights here (shadows and bounce only).
     emitters: list[str] = field(default_factory=list)
+    # Emissive rectangles found among the occluders (`_emissive_rectangle`), made area lights
+    # by `add_lights`: (object, (centre, normal, axis_u, size_u, size_v, radiance)).
+    emissive_rectangles: list = field(default_factory=list)
     # Lights whose light linking lights none of the previewed objects (`linking.follow`), and
     # the lines saying what of the lights' linking is not followed.
     unlinked_lights: list[str] = field(default_factory=list)
@@ -228,6 +231,24 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
             info.skipped_lights.append(obj.name)
             continue
         info.lights.append(obj.name)
+    # Emissive rectangles: a Lambertian rectangle of radiance L on each side is an area light of
+    # power pi A L (the core's area light has radiance P / (pi A), as Cycles' has), each side's
+    # lifted off the rectangle by a thousandth of its size, or the rectangle (an occluder too)
+    # would shadow its own light: 0.4 of it reached a ball 15 cm below.
+    for obj, (centre, normal, axis_u, size_u, size_v, radiance) in info.emissive_rectangles:
+        kept, lines = linking.follow(obj, previewed, occluders)
+        info.linking.extend(lines)
+        if obj.name in info.emitters:
+            info.emitters.remove(obj.name)
+        if not kept:
+            info.unlinked_lights.append(obj.name)
+            continue
+        k = max(radiance)
+        lift = 1e-3 * max(size_u, size_v)
+        for side in (normal, -normal):
+            scene.add_area_light(tuple(centre + lift * side), tuple(side), tuple(axis_u), size_u, size_v,
+                                 math.pi * size_u * size_v * k, color=tuple(c / k for c in radiance))
+        info.lights.append(f"{obj.name} (emissive rectangle)")
 
 
 # Object types Cycles renders as surfaces: their evaluated mesh casts the shadow.
@@ -253,7 +274,8 @@ def _add_key(keys: dict, obj, key: str) -> None:
     # The geometry and what the object sends back (its slots' albedo: a colour edit relights);
     # an object instanced several times: its instances' keys in the depsgraph's order.
     albedo = [cycles.diffuse_albedo(s.material) for s in obj.material_slots] or [cycles.DEFAULT_SURFACE]
-    keys[f"occluder {obj.name}"] = keys.get(f"occluder {obj.name}", "") + f"{key}:{albedo!r};"
+    emission = [cycles.emission(s.material) for s in obj.material_slots]
+    keys[f"occluder {obj.name}"] = keys.get(f"occluder {obj.name}", "") + f"{key}:{albedo!r}:{emission!r};"
 
 
 def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
@@ -297,6 +319,32 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
         if len(co) == 0 or len(tris) == 0:
             continue
         _add_parts(scene, original, original.name, co, tris, slots, info)
+        rectangle = _emissive_rectangle(original, co, tris, slots)
+        if rectangle is not None:
+            info.emissive_rectangles.append((original, rectangle))
+
+
+def _emissive_rectangle(obj, co, tris, slots):
+    """An emissive rectangle (a softbox, a light panel): `obj`'s faces one material of constant
+    emission (`translucent.cycles.emission`) on four corners that make a rectangle; as
+    (centre, unit normal, unit axis_u, size_u, size_v, radiance), else None."""
+    used = np.unique(slots)
+    if len(used) != 1 or used[0] >= len(obj.material_slots):
+        return None
+    radiance = cycles.emission(obj.material_slots[int(used[0])].material)
+    corners = np.unique(tris)
+    if radiance is None or len(corners) != 4:
+        return None
+    p = co[corners].astype(np.float64)
+    far = int(np.argmax(np.linalg.norm(p - p[0], axis=1)))  # the corner across from p[0]
+    side = [k for k in (1, 2, 3) if k != far]
+    e1, e2 = p[side[0]] - p[0], p[side[1]] - p[0]
+    l1, l2 = np.linalg.norm(e1), np.linalg.norm(e2)
+    diagonal = np.linalg.norm(p[far] - p[0])
+    if min(l1, l2) <= 0.0 or abs(e1 @ e2) > 1e-4 * l1 * l2 or np.linalg.norm(p[0] + e1 + e2 - p[far]) > 1e-5 * diagonal:
+        return None
+    normal = np.cross(e1, e2)
+    return (p.mean(axis=0), normal / np.linalg.norm(normal), e1 / l1, float(l1), float(l2), radiance)
 
 
 def set_world(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: ExportInfo) -> None:

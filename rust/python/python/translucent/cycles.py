@@ -142,7 +142,7 @@ def diffuse_albedo(material) -> tuple[float, float, float]:
     """The albedo one diffuse bounce off a surface of `material` (a bpy Material, or None)
     takes: of the node the Material Output's Surface takes, a Principled BSDF's Base Color x
     (1 - Metallic) x (1 - Transmission Weight) (what its diffuse and subsurface lobes reflect
-    in all; unconnected values), a Diffuse BSDF's Color; no material: Cycles' default surface
+    in all; unconnected values), a Diffuse BSDF's Color, an Emission's 0; no material: Cycles' default surface
     (grey 0.8); any other shader, or a connected colour: the material's viewport colour
     (Viewport Display), an approximation. Specular, sheen and coat layers are left out.
     Clamped to [0, 1]."""
@@ -162,6 +162,8 @@ def diffuse_albedo(material) -> tuple[float, float, float]:
         colour = tuple(float(x) * k for x in node.inputs["Base Color"].default_value[:3])
     elif node is not None and node.type == "BSDF_DIFFUSE" and not node.inputs["Color"].is_linked:
         colour = tuple(float(x) for x in node.inputs["Color"].default_value[:3])
+    elif node is not None and node.type == "EMISSION":
+        colour = (0.0, 0.0, 0.0)  # it emits and reflects nothing
     return tuple(min(max(x, 0.0), 1.0) for x in colour)
 
 
@@ -190,6 +192,28 @@ def emits(material) -> bool:
         inputs = [out.inputs["Surface"]] if node is out else node.inputs
         todo.extend(link.from_node for i in inputs for link in i.links)
     return False
+
+
+def emission(material) -> tuple[float, float, float] | None:
+    """The radiance a surface of `material` emits, per channel, where it is one constant: the
+    node the active Material Output's Surface takes is an Emission node or a Principled BSDF
+    with its colour and strength unconnected (Color x Strength, Emission Color x Emission
+    Strength: Blender's manual, a Strength of 1 shows the Color itself, so it is the radiance).
+    None where it emits nothing or not a constant (a mix, a texture: `emits` still says)."""
+    tree = None if material is None else material.node_tree
+    out = None if tree is None else next((n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output),
+                                         None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return None
+    node = out.inputs["Surface"].links[0].from_node
+    names = {"EMISSION": ("Color", "Strength"), "BSDF_PRINCIPLED": ("Emission Color", "Emission Strength")}
+    if node.type not in names:
+        return None
+    colour, strength = (node.inputs[k] for k in names[node.type])
+    if colour.is_linked or strength.is_linked:
+        return None
+    radiance = tuple(max(float(c), 0.0) * float(strength.default_value) for c in colour.default_value[:3])
+    return radiance if max(radiance) > 0.0 else None
 
 
 def read_principled(node) -> Principled:
