@@ -65,10 +65,13 @@ def key(light: bpy.types.Object) -> tuple:
 
 
 def follow(light: bpy.types.Object, previewed: list[str], occluders: list[str]) -> tuple[bool, list[str]]:
-    """Whether to export `light` for the previewed objects (names), and the lines saying what of
-    its linking is not followed, `occluders` the other objects exported (names). A light that lights none of them is left out (its bounce off the
-    other objects with it); one that lights some of them lights all; a receiver or blocker
-    collection that leaves out another exported object is named."""
+    """Whether to export `light` (a light, or an emissive rectangle) for the previewed objects
+    (names), and the lines saying what of its linking is not followed, `occluders` the other
+    objects exported (names; the light's own object aside). A light that lights none of the
+    previewed objects is left out (its bounce off the other objects with it); one that lights
+    some of them lights all; a receiver or blocker collection that leaves out another exported
+    object is named."""
+    occluders = [n for n in occluders if n != light.name]
     lit = [n for n in previewed if receives(light, n)]
     if not lit:
         return False, [f"{light.name} lights none of the previewed objects (light linking): left out, "
