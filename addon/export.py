@@ -467,6 +467,12 @@ def export_scene(
         # shadow rays see them, and send light back; they neither scatter nor receive the preview.
         _add_parts(scene, obj, f"{obj.name} [other materials]", p, t, slots, info)
     add_occluders(scene, depsgraph, {o.name for o in objects}, info)
+    # An emissive object that casts no shadow (hidden from shadow rays) still lights the scene
+    # in Cycles: named as well.
+    for obj in bl_scene.objects:
+        if (obj.type in _SURFACES and not obj.hide_render and f"occluder {obj.name}" not in info.occluder_keys
+                and obj not in objects and any(cycles.emits(sl.material) for sl in obj.material_slots)):
+            info.emitters.append(obj.name)
     add_lights(scene, bl_scene, info)
     set_world(scene, bl_scene, info)
     return scene, info

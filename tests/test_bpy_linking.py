@@ -135,11 +135,18 @@ def test_emissive_meshes_light_as_area_lights_or_are_named(addon):
     bsdf.inputs["Emission Color"].default_value = (1.0, 0.5, 0.2, 1.0)
     floor = bpy.data.objects["Floor"]
     floor.data.materials.append(glow)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.01, location=(-0.15, 0.0, 0.0))
+    ghost = bpy.context.active_object
+    ghost.name = "Ghost"
+    ghost.visible_shadow = False  # no shadow, still a light in Cycles
+    ghost.data.materials.append(bpy.data.materials["Glow"])
     _preview(bpy, mat, obj)
     info = session.SESSIONS[mat.name].info
-    assert info.emitters == ["Orb"] and "Softbox (emissive rectangle)" in info.lights, (info.emitters, info.lights)
+    assert sorted(info.emitters) == ["Ghost", "Orb"], info.emitters
+    assert "Softbox (emissive rectangle)" in info.lights, info.lights
     lines = [text for text, _ in panel.status_lines(mat)]
-    assert any(t.startswith("Orb: emissive, lighting the scene in Cycles; not a light here") for t in lines), lines
+    named = [t for t in lines if "emissive, lighting the scene in Cycles; not a light here" in t]
+    assert named and "Orb" in named[0] and "Ghost" in named[0], lines
     bsdf.inputs["Emission Strength"].default_value = 2.0
     _preview(bpy, mat, obj)
     assert "Floor (emissive rectangle)" in session.SESSIONS[mat.name].info.lights
