@@ -61,6 +61,8 @@ class ExportInfo:
     # the lines saying what of the lights' linking is not followed.
     unlinked_lights: list[str] = field(default_factory=list)
     linking: list[str] = field(default_factory=list)
+    # Each occluder's label ("Box", "Box [Paint]", "Head [other materials]") -> its object's name.
+    occluder_objects: dict[str, str] = field(default_factory=dict)
     # Mesh objects left out because they do not carry the previewed material.
     skipped_objects: list[str] = field(default_factory=list)
     # Other objects exported as occluders (they shadow the previewed ones; issue 30), and the
@@ -198,6 +200,14 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
     `info.linking` says so, and what of their linking is not followed)."""
     previewed = [r.name for r in info.objects]
     occluders = sorted(k.removeprefix("occluder ") for k in info.occluder_keys)
+    added = 0  # the lights added so far: the next one's place, for `link_shadows`
+
+    def link(obj, count: int) -> None:
+        # Shadow linking: the props that cast this light's shadows (`count` lights just added).
+        names = linking.blockers(obj, info.occluder_objects)
+        for k in range(added - count, added) if names is not None else ():
+            scene.link_shadows(k, names)
+
     for obj in bl_scene.objects:
         if obj.type != "LIGHT":
             continue
@@ -230,6 +240,8 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
         else:
             info.skipped_lights.append(obj.name)
             continue
+        added += 1
+        link(obj, 1)
         info.lights.append(obj.name)
     # Emissive rectangles: a Lambertian rectangle of radiance L on each side is an area light of
     # power pi A L (the core's area light has radiance P / (pi A), as Cycles' has), each side's
@@ -248,6 +260,8 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
         for side in (normal, -normal):
             scene.add_area_light(tuple(centre + lift * side), tuple(side), tuple(axis_u), size_u, size_v,
                                  math.pi * size_u * size_v * k, color=tuple(c / k for c in radiance))
+        added += 2
+        link(obj, 2)
         info.lights.append(f"{obj.name} (emissive rectangle)")
 
 
@@ -304,6 +318,7 @@ def _add_parts(scene: translucent.Scene, obj, name: str, co, tris, slots, info: 
         label = name if len(used) == 1 else f"{obj.name} [{mat.name if mat is not None else 'no material'}]"
         scene.add_occluder(co, tris[slots == k], name=label, albedo=cycles.diffuse_albedo(mat))
         info.occluders.append(label)
+        info.occluder_objects[label] = obj.name
 
 
 def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: ExportInfo) -> None:

@@ -7,9 +7,10 @@ every object but those; with both, the included minus the excluded. No collectio
 one: every object. Each entry of the collection (an object, or a child collection standing for
 every object in it) carries its state, `CollectionLightLinking.link_state`.
 
-What the export can follow exactly is a light that lights every previewed object or none of
-them (the irradiance is computed per scene, not per object). The rest is stated, not hidden:
-`export.add_lights` puts a line in `ExportInfo.linking` for each part left unfollowed."""
+What the export follows: a light that lights every previewed object or none of them (the
+irradiance is computed per scene, not per object), and which props cast each light's shadows
+(`blockers`, `translucent.Scene.link_shadows`). The rest is stated, not hidden: `export.add_lights`
+puts a line in `ExportInfo.linking` for each part left unfollowed."""
 
 from __future__ import annotations
 
@@ -85,8 +86,22 @@ def follow(light: bpy.types.Object, previewed: list[str], occluders: list[str]) 
     if dark:
         lines.append(f"{light.name} does not light {', '.join(dark)} in Cycles (light linking): their bounce of it "
                      "still counted here")
-    free = sorted(n for n in previewed + occluders if not blocks(light, n))
-    if free:
-        lines.append(f"{light.name}'s shadows are not cast by {', '.join(free)} in Cycles (shadow linking): they "
-                     "are here, not followed")
+    linked = getattr(getattr(light, "light_linking", None), "blocker_collection", None) is not None
+    free = sorted(n for n in occluders if not blocks(light, n))
+    if linked and free:
+        lines.append(f"{light.name}'s shadows are not cast by {', '.join(free)} (shadow linking; not followed by the "
+                     "splatting)")
+    own = sorted(n for n in previewed if not blocks(light, n))
+    if own:
+        lines.append(f"{light.name}'s shadows are not cast by {', '.join(own)} in Cycles (shadow linking): a "
+                     "previewed object always casts them here, not followed")
     return True, lines
+
+
+def blockers(light: bpy.types.Object, occluders: dict[str, str]) -> list[str] | None:
+    """The exported occluders (labels, `occluders` mapping each to its object's name) that cast
+    `light`'s shadows under its blocker collection; None where it has none (every one does)."""
+    linking = getattr(light, "light_linking", None)
+    if getattr(linking, "blocker_collection", None) is None:
+        return None
+    return sorted(label for label, name in occluders.items() if blocks(light, name))

@@ -93,8 +93,9 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     lines += [(part, "NONE") for part in summary(sess).split("; ")]
     # Light and shadow linking: what is followed (a light lighting none of the objects left out)
     # and what is not.
-    lines += [(line, "INFO" if line.endswith("left out, its bounce off the other objects with it") else "ERROR")
-              for line in getattr(sess.info, "linking", [])]
+    followed = ("left out, its bounce off the other objects with it", "(shadow linking; not followed by the splatting)")
+    lines += [(line, "INFO" if line.endswith(followed) and not (sess.method == "splat" and "splatting" in line)
+               else "ERROR") for line in getattr(sess.info, "linking", [])]
     if getattr(sess.info, "emitters", None):
         lines.append((f"{', '.join(sess.info.emitters)}: emissive, lighting the scene in Cycles; not a light here "
                       "(emissive meshes not followed: shadows and bounce only)", "ERROR"))

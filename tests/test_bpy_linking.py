@@ -80,24 +80,47 @@ def test_a_light_linked_away_from_the_previewed_object_is_the_scene_without_it(a
     assert sorted(bpy.data.collections.keys()) == ["Rim on the ball", "Rim receivers", "Rim receivers.001"]
 
 
-def test_shadow_linking_is_named_where_it_is_not_followed(addon):
+def test_shadow_linking_lets_only_a_lights_blockers_cast_its_shadows(addon):
+    # A black box between Rim and the ball (no bounce), Rim's blocker collection leaving it out:
+    # Rim lights the ball unshadowed while the box still shadows Key. The preview is linear in
+    # the lights (the dipole: no walks chosen by the light), so it must be Key's alone with the
+    # box plus Rim's alone with no box at all.
     import bpy
 
-    from addon import panel, session
+    from addon import session
 
     mat, obj, rim = _scene(bpy)
-    floor = bpy.data.objects["Floor"]
-    rim.light_linking.blocker_collection = _linking(bpy, "Rim blockers", [(floor, "EXCLUDE")])
-    _preview(bpy, mat, obj)
+    mat.translucent.profile = "DIPOLE"
+    key = bpy.data.objects["Key"]
+    black = bpy.data.materials.new("Black")
+    black.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bpy.ops.mesh.primitive_cube_add(size=0.06, location=(0.0, 0.08, 0.03))
+    box = bpy.context.active_object
+    box.name = "Box"
+    box.data.materials.append(black)
+    for o in (key, rim, box, bpy.data.objects["Floor"]):
+        o.data.materials.append(black) if o.type == "MESH" and not o.data.materials else None
+    rim.hide_render = True
+    key_alone = _preview(bpy, mat, obj)
+    rim.hide_render, key.hide_render, box.visible_shadow = False, True, False
+    rim_unshadowed = _preview(bpy, mat, obj)
+    box.visible_shadow, key.hide_render = True, False
+    rim_shadowed = _preview(bpy, mat, obj)
+    key.hide_render = True
+    rim_alone_shadowed = _preview(bpy, mat, obj)
+    key.hide_render = False
+    assert np.abs(rim_alone_shadowed - rim_unshadowed).max() > 1e-3  # the box does shadow Rim
+    rim.light_linking.blocker_collection = _linking(bpy, "Rim blockers", [(box, "EXCLUDE")])
+    linked = _preview(bpy, mat, obj)
+    np.testing.assert_allclose(linked, key_alone + rim_unshadowed, rtol=1e-3, atol=1e-7)  # float sums
+    assert np.abs(linked - rim_shadowed).max() > 1e-3
     sess = session.SESSIONS[mat.name]
-    lines = [text for text, _ in panel.status_lines(mat)]
-    assert any("Rim's shadows are not cast by Floor in Cycles (shadow linking)" in t for t in lines), lines
-    # Only the ball may block Rim: the floor's shadow not followed, the ball's own is.
-    rim.light_linking.blocker_collection = _linking(bpy, "Rim blockers 2", [(obj, "INCLUDE")])
+    assert "Rim's shadows are not cast by Box (shadow linking; not followed by the splatting)" in sess.info.linking
+    # Excluding the ball itself is not followed: said so.
+    rim.light_linking.blocker_collection = _linking(bpy, "Rim blockers 2", [(obj, "EXCLUDE")])
     _preview(bpy, mat, obj)
-    sess = session.SESSIONS[mat.name]
-    assert [line for line in sess.info.linking if "shadow linking" in line] == [
-        "Rim's shadows are not cast by Floor in Cycles (shadow linking): they are here, not followed"]
+    assert any("Ball in Cycles (shadow linking): a previewed object always casts them here" in line
+               for line in session.SESSIONS[mat.name].info.linking)
 
 
 def _emission(bpy, name, strength, colour=(1.0, 1.0, 1.0)):

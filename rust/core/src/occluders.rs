@@ -45,6 +45,8 @@ pub struct Occluders {
 pub struct Bouncing {
     pub triangles: Vec<[Vec3; 3]>,
     pub albedo: Vec<[f32; 3]>,
+    /// Each triangle's object (its place among the objects added).
+    pub objects: Vec<u32>,
 }
 
 /// What `Occluders::relevant` kept and left out.
@@ -163,9 +165,13 @@ impl Occluders {
             .iter()
             .flat_map(|o| std::iter::repeat_n(o.albedo, o.end - o.start))
             .collect();
+        let objects = (self.objects.iter().enumerate())
+            .flat_map(|(k, o)| std::iter::repeat_n(k as u32, o.end - o.start))
+            .collect();
         Some(Bouncing {
             triangles: self.triangles.clone(),
             albedo,
+            objects,
         })
     }
 
@@ -178,6 +184,18 @@ impl Occluders {
         lights: &[Light],
         world: &World,
     ) -> (Vec<[Vec3; 3]>, OccluderReport) {
+        let (kept, _, report) = self.relevant_of(bounds, lights, world);
+        (kept, report)
+    }
+
+    /// `relevant`, with each kept triangle's object (its place among the objects added): what
+    /// shadow linking tells apart (`Tracer::blocking`).
+    pub fn relevant_of(
+        &self,
+        bounds: (Vec3, Vec3),
+        lights: &[Light],
+        world: &World,
+    ) -> (Vec<[Vec3; 3]>, Vec<u32>, OccluderReport) {
         let (lo, hi) = bounds;
         let volumes: Vec<Volume> = lights
             .iter()
@@ -186,14 +204,16 @@ impl Occluders {
             .collect();
         let everything = !world.is_black();
         let mut kept = Vec::new();
+        let mut of = Vec::new();
         let mut skipped = Vec::new();
-        for o in &self.objects {
+        for (k, o) in self.objects.iter().enumerate() {
             let before = kept.len();
             kept.extend(
                 self.triangles[o.start..o.end]
                     .iter()
                     .filter(|t| everything || volumes.iter().any(|v| v.may_hold(t))),
             );
+            of.resize(kept.len(), k as u32);
             if kept.len() == before {
                 skipped.push(o.name.clone());
             }
@@ -209,7 +229,17 @@ impl Occluders {
                 .map(|o| o.name.clone())
                 .collect(),
         };
-        (kept, report)
+        (kept, of, report)
+    }
+
+    /// The objects' names, in the order they were added.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.objects.iter().map(|o| o.name.as_str())
+    }
+
+    /// The place among the objects added of the object named `name`, if any.
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.objects.iter().position(|o| o.name == name)
     }
 }
 

@@ -74,10 +74,12 @@ impl Bvh {
     }
 }
 
-/// Every occluder with its diffuse albedo (in BVH order): what the irradiance's bounce meets.
+/// Every occluder with its diffuse albedo and object (in BVH order): what the irradiance's
+/// bounce meets.
 struct Bounce {
     bvh: Bvh,
     albedo: Vec<[f32; 3]>,
+    objects: Vec<u32>,
 }
 
 /// Where a bounce ray from the mesh first meets the rest of the scene, on a surface that sends
@@ -100,6 +102,12 @@ pub struct Tracer {
     /// The rest of the scene: seen by `occluded` (shadow rays) and `occluded_by_rest`, never
     /// by `intersect` and the walks' casts.
     rest: Option<Arc<Bvh>>,
+    /// Per triangle of `rest`, in BVH order, its occluder object, where given
+    /// (`with_occluder_objects`).
+    rest_objects: Option<Arc<Vec<u32>>>,
+    /// Shadow linking (`blocking`): per occluder object, whether it casts the shadows of the
+    /// light this tracer is cast for (an object past its end does); None: every one does.
+    blockers: Option<Arc<Vec<bool>>>,
     /// Every occluder with its albedo, where some sends light back (`with_bounce`).
     bounce: Option<Arc<Bounce>>,
     /// How far ray origins are pushed off the surface: relative to the mesh size, so that
@@ -149,6 +157,8 @@ impl Tracer {
             own: Arc::new(own),
             objects,
             rest: None,
+            rest_objects: None,
+            blockers: None,
             bounce: None,
             epsilon: EPSILON * scale,
             centre,
@@ -165,6 +175,8 @@ impl Tracer {
             own: self.own.clone(),
             objects: self.objects.clone(),
             rest: (!tris.is_empty()).then(|| Arc::new(Bvh::build(tris))),
+            rest_objects: None,
+            blockers: self.blockers.clone(),
             bounce: self.bounce.clone(),
             epsilon: self.epsilon,
             centre: self.centre,
@@ -172,16 +184,74 @@ impl Tracer {
         }
     }
 
+    /// `with_occluders`, each triangle's occluder object given (`Occluders::relevant_of`), so
+    /// that a light's shadow linking can leave some objects out (`blocking`).
+    pub fn with_occluder_objects(&self, occluders: &[[Vec3; 3]], objects: &[u32]) -> Tracer {
+        let mut t = self.with_occluders(occluders);
+        t.rest_objects = t.rest.as_ref().map(|r| {
+            let of = r.bvh.primitive_indices.iter().map(|&i| objects[i as usize]);
+            Arc::new(of.collect())
+        });
+        t
+    }
+
+    /// This tracer (its BVHs shared) for one light's shadow rays under shadow linking: only the
+    /// occluder objects `blockers` holds true for cast them (Cycles' blocker collection); the
+    /// mesh always does. None: every object.
+    pub fn blocking(&self, blockers: Option<Arc<Vec<bool>>>) -> Tracer {
+        Tracer {
+            own: self.own.clone(),
+            objects: self.objects.clone(),
+            rest: self.rest.clone(),
+            rest_objects: self.rest_objects.clone(),
+            blockers,
+            bounce: self.bounce.clone(),
+            epsilon: self.epsilon,
+            centre: self.centre,
+            scale: self.scale,
+        }
+    }
+
+    /// Whether a triangle of occluder object `object` casts this tracer's shadows.
+    fn blocks(&self, object: u32) -> bool {
+        (self.blockers.as_ref()).is_none_or(|b| b.get(object as usize).copied().unwrap_or(true))
+    }
+
+    /// Whether `bvh` (the rest, or the bounce's, with `objects` per triangle in BVH order)
+    /// holds a triangle that casts this tracer's shadows along `ray`.
+    fn rest_occludes(&self, bvh: &Bvh, objects: Option<&[u32]>, ray: Ray) -> bool {
+        match (self.blockers.as_ref(), objects) {
+            (Some(_), Some(objects)) => !bvh.bvh.ray_traverse_miss(ray, |ray, id| {
+                if self.blocks(objects[id]) {
+                    intersect(&bvh.triangles[id], ray)
+                } else {
+                    f32::INFINITY
+                }
+            }),
+            _ => bvh.occluded(ray),
+        }
+    }
+
     /// This tracer with every occluder and its albedo per triangle (`Occluders::bouncing`) for
     /// the bounce; None: no bounce.
     pub fn with_bounce(mut self, bouncing: Option<Bouncing>) -> Tracer {
-        self.bounce = bouncing.map(|Bouncing { triangles, albedo }| {
-            let bvh = Bvh::build(self.in_frame(&triangles));
-            let albedo = (bvh.bvh.primitive_indices.iter())
-                .map(|&i| albedo[i as usize])
-                .collect();
-            Arc::new(Bounce { bvh, albedo })
-        });
+        self.bounce = bouncing.map(
+            |Bouncing {
+                 triangles,
+                 albedo,
+                 objects,
+             }| {
+                let bvh = Bvh::build(self.in_frame(&triangles));
+                let order = &bvh.bvh.primitive_indices;
+                let albedo = order.iter().map(|&i| albedo[i as usize]).collect();
+                let objects = order.iter().map(|&i| objects[i as usize]).collect();
+                Arc::new(Bounce {
+                    bvh,
+                    albedo,
+                    objects,
+                })
+            },
+        );
         self
     }
 
@@ -233,7 +303,7 @@ impl Tracer {
             return false;
         }
         let ray = self.ray(origin, direction, t_max);
-        self.own.occluded(ray) || bounce.bvh.occluded(ray)
+        self.own.occluded(ray) || self.rest_occludes(&bounce.bvh, Some(&bounce.objects), ray)
     }
 
     /// The offset used for ray origins and t_min.
@@ -266,14 +336,20 @@ impl Tracer {
             return false;
         }
         let ray = self.ray(origin, direction, t_max);
-        self.own.occluded(ray) || self.rest.as_ref().is_some_and(|r| r.occluded(ray))
+        self.own.occluded(ray)
+            || (self.rest.as_ref()).is_some_and(|r| {
+                self.rest_occludes(r, self.rest_objects.as_deref().map(|v| &v[..]), ray)
+            })
     }
 
     /// Whether the rest of the scene (not the mesh) lies along `direction` (unit) from
     /// `origin` within (epsilon, t_max). False without occluders.
     pub fn occluded_by_rest(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
         match &self.rest {
-            Some(r) if t_max > self.epsilon => r.occluded(self.ray(origin, direction, t_max)),
+            Some(r) if t_max > self.epsilon => {
+                let objects = self.rest_objects.as_deref().map(|v| &v[..]);
+                self.rest_occludes(r, objects, self.ray(origin, direction, t_max))
+            }
             _ => false,
         }
     }

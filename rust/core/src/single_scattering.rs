@@ -102,6 +102,9 @@ pub struct SinglePaths<'a> {
     mesh: &'a Mesh,
     tracer: &'a Tracer,
     sources: Vec<Source<'a>>,
+    /// Per group, the tracer its shadow rays take under shadow linking (`Scene::blockers_of`):
+    /// None, the scene's.
+    linked: Vec<Option<Tracer>>,
     colours: Vec<[f32; 3]>,
     settings: PathSettings,
 }
@@ -122,10 +125,12 @@ impl<'a> SinglePaths<'a> {
         let (lo, hi) = scene.mesh.bounds();
         let mut sources = Vec::new();
         let mut colours = Vec::new();
-        for l in &scene.lights {
+        let mut linked = Vec::new();
+        for (k, l) in scene.lights.iter().enumerate() {
             if l.is_black() || !l.can_reach(lo, hi) {
                 continue;
             }
+            linked.push(scene.blockers_of(k).map(|b| tracer.blocking(Some(b))));
             let c = match l {
                 Light::Sun { irradiance, .. } => *irradiance,
                 Light::Point { power, .. }
@@ -152,10 +157,12 @@ impl<'a> SinglePaths<'a> {
                 }
             }
         }
+        linked.resize_with(sources.len(), || None);
         Ok(Self {
             mesh: &scene.mesh,
             tracer,
             sources,
+            linked,
             colours,
             settings: settings.clone(),
         })
@@ -295,7 +302,8 @@ impl<'a> SinglePaths<'a> {
         } else {
             f32::INFINITY
         };
-        if self.tracer.occluded(o, dir, rest) {
+        let shadows = self.linked[group].as_ref().unwrap_or(self.tracer);
+        if shadows.occluded(o, dir, rest) {
             return;
         }
         let eta = self.settings.eta;

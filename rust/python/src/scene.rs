@@ -13,7 +13,10 @@ use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
 use translucent_core::occluders::{OccluderReport, Occluders};
 use translucent_core::raytrace::Tracer;
-use translucent_core::scene::Scene;
+use translucent_core::scene::{Blockers, Scene};
+
+/// A scene's lights, world, occluders and shadow linking (`PyScene::lighting`).
+pub type Lighting = (Vec<Light>, World, Occluders, Vec<Option<Blockers>>);
 
 /// A triangle mesh with lights and a world. Lengths in scene units; light units as Blender's.
 #[pyclass(name = "Scene", module = "translucent")]
@@ -35,10 +38,16 @@ impl PyScene {
         self.lighting.clone()
     }
 
-    /// Its lights, world and occluders: what an `update(lights=scene)` takes from it.
-    pub fn lighting(&self) -> (Vec<Light>, World, Occluders) {
+    /// Its lights, world and occluders, and the lights' shadow linking (`link_shadows`):
+    /// what an `update(lights=scene)` takes from it.
+    pub fn lighting(&self) -> Lighting {
         let s = &self.scene;
-        (s.lights.clone(), s.world.clone(), s.occluders.clone())
+        (
+            s.lights.clone(),
+            s.world.clone(),
+            s.occluders.clone(),
+            s.shadow_blockers.clone(),
+        )
     }
 
     fn lighting_changed(&mut self) {
@@ -298,6 +307,16 @@ impl PyScene {
             .occluders
             .add(name, &positions, &triangles, albedo.map(|a| a as f32))
             .map_err(to_py)?;
+        self.lighting_changed();
+        Ok(())
+    }
+
+    /// Shadow linking (Cycles' blocker collection) for light `light`, its place among the
+    /// lights added (0 the first): only the occluders named in `blockers` cast its shadows
+    /// (every occluder added under such a name); the mesh always does. ValueError names an
+    /// unknown light or occluder. The other lights keep every occluder.
+    fn link_shadows(&mut self, light: usize, blockers: Vec<String>) -> PyResult<()> {
+        self.scene.link_shadows(light, &blockers).map_err(to_py)?;
         self.lighting_changed();
         Ok(())
     }

@@ -381,7 +381,9 @@ impl PySplat {
             if let Some((p, n)) = pose {
                 inner.set_positions(p, n)?;
             }
-            if let Some((l, w, o)) = lights {
+            // Shadow linking is not followed by the splatting (its light views see every
+            // occluder): the add-on says so.
+            if let Some((l, w, o, _)) = lights {
                 inner.set_lighting(l, w, Some(o));
             }
             Ok(())

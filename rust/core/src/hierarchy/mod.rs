@@ -343,6 +343,19 @@ impl Hierarchy {
     /// (a prop moved, added or hidden): then every light's shadows change, so the irradiance
     /// kept light by light is dropped and the next evaluation casts every source's rays again.
     /// The shadow tracer is rebuilt once, for both.
+    /// Shadow linking per light (`Scene::shadow_blockers`, by the lights' places): a light
+    /// whose blockers changed is lit again at the next evaluation.
+    pub fn link_shadows(&mut self, blockers: Vec<Option<crate::scene::Blockers>>) {
+        if blockers != self.scene.shadow_blockers {
+            self.scene.shadow_blockers = blockers;
+            self.face_irradiance = None;
+            self.vertex_irradiance = None;
+            if let Some(t) = &mut self.terms {
+                t.stale(false);
+            }
+        }
+    }
+
     pub fn set_lighting(&mut self, lights: Vec<Light>, world: World, occluders: Option<Occluders>) {
         self.scene.lights = lights;
         self.scene.world = world;

@@ -14,7 +14,7 @@ use crate::limits;
 use crate::optics::fresnel_transmittance;
 use crate::progress::Ticker;
 use crate::raytrace::Tracer;
-use crate::scene::Scene;
+use crate::scene::{Blockers, Scene};
 use crate::spherical_harmonics as sh;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -148,9 +148,34 @@ pub fn irradiance_with_progress(
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
     let (lights, world) = (&scene.lights, &scene.world);
     let bounds = scene.mesh.bounds();
-    irradiance_of_sources(
-        bounds, lights, world, tracer, points, normals, settings, progress,
-    )
+    if !scene.links_shadows() {
+        return irradiance_of_sources(
+            bounds, lights, world, tracer, points, normals, settings, progress,
+        );
+    }
+    // Shadow linking: the lights that share their blockers together, each group through a
+    // tracer whose shadow rays see only those (the world with the unlinked lights).
+    let mut groups: Vec<(Option<Blockers>, Vec<Light>)> = vec![(None, Vec::new())];
+    for (k, l) in lights.iter().enumerate() {
+        let blockers = scene.blockers_of(k);
+        match groups.iter_mut().find(|g| g.0 == blockers) {
+            Some(g) => g.1.push(l.clone()),
+            None => groups.push((blockers, vec![l.clone()])),
+        }
+    }
+    let mut sum = vec![[0.0f32; 3]; points.len()];
+    let mut rays = 0;
+    for (k, (blockers, group)) in groups.into_iter().enumerate() {
+        let world = if k == 0 { world } else { &World::Black };
+        let linked = tracer.blocking(blockers);
+        let (v, r) = irradiance_of_sources(
+            bounds, &group, world, &linked, points, normals, settings, progress,
+        )?;
+        rays += r.rays;
+        sum.par_iter_mut().zip(&v).for_each(|(s, x)| add(s, *x));
+    }
+    let (_, counts) = lights_at_work(lights, world, bounds);
+    Ok((sum, IrradianceReport { rays, ..counts }))
 }
 
 /// `irradiance` from `lights` and `world` (not the scene's own list: a caller that lights
@@ -350,9 +375,11 @@ pub struct PerSource {
     parts: Vec<(Source, Vec<[f32; 3]>)>,
 }
 
+/// A light with the occluder objects that cast its shadows (`Scene::blockers_of`; None: all),
+/// or the world.
 #[derive(Debug, Clone, PartialEq)]
 enum Source {
-    Light(Light),
+    Light(Light, Option<Blockers>),
     World(World),
 }
 
@@ -361,7 +388,10 @@ enum Source {
 fn sources_at_work(scene: &Scene) -> (Vec<Source>, IrradianceReport) {
     let (reaching, counts) = lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds());
     let mut sources: Vec<Source> = (reaching.into_iter())
-        .map(|l| Source::Light(l.clone()))
+        .map(|l| {
+            let k = scene.lights.iter().position(|x| std::ptr::eq(x, l));
+            Source::Light(l.clone(), k.and_then(|k| scene.blockers_of(k)))
+        })
         .collect();
     if !scene.world.is_black() {
         sources.push(Source::World(scene.world.clone()));
@@ -373,7 +403,7 @@ impl Source {
     /// The source as `irradiance_of_sources` takes it: one light and no world, or the world.
     fn emitters(&self) -> (&[Light], &World) {
         match self {
-            Source::Light(l) => (std::slice::from_ref(l), &World::Black),
+            Source::Light(l, _) => (std::slice::from_ref(l), &World::Black),
             Source::World(w) => (&[][..], w),
         }
     }
@@ -383,7 +413,7 @@ impl Source {
     fn scale_to(&self, other: &Source) -> Option<[f32; 3]> {
         use crate::light_scale::common_scale;
         match (self, other) {
-            (Source::Light(a), Source::Light(b)) => common_scale(
+            (Source::Light(a, x), Source::Light(b, y)) if x == y => common_scale(
                 std::slice::from_ref(a),
                 &World::Black,
                 std::slice::from_ref(b),
@@ -467,9 +497,15 @@ impl PerSource {
                         .map(|k| (i, k))
                 })
             };
+            // Shadow linking: this light's shadows cast by its blockers alone.
+            let linked = match &src {
+                Source::Light(_, Some(b)) => Some(tracer.blocking(Some(b.clone()))),
+                _ => None,
+            };
+            let tracer = linked.as_ref().unwrap_or(tracer);
             // A sun, point or spot light at points on the mesh: its shadow from the corners.
             let on_mesh = match (&src, triangles) {
-                (Source::Light(l), Some(t)) if corners::applies(l, tracer) => Some((l, t)),
+                (Source::Light(l, _), Some(t)) if corners::applies(l, tracer) => Some((l, t)),
                 _ => None,
             };
             let values = match (kept, kept.is_none().then(rescaled).flatten(), on_mesh) {

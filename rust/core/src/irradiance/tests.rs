@@ -435,3 +435,57 @@ fn corners_give_each_samples_own_shadow_ray_answer_with_a_ray_per_vertex() {
     // Shadow edges and terminators do cross triangles: some samples cast their own ray.
     assert!(r_read.rays > 2 * mesh.vertex_count() as u64);
 }
+
+#[test]
+fn shadow_linking_lets_only_a_lights_blockers_cast_its_shadows() {
+    // A 10-unit plane under two suns straight down (1 and 2 W/m^2) and two occluder squares
+    // above it, "roof" over x < 0 and "shade" over x > 0. The first sun is blocked by "roof"
+    // alone (Cycles' blocker collection), the second by both: below "roof" neither sun arrives,
+    // below "shade" only the first (1), in the open both (3): the suns' closed form, E cos.
+    let mut s = scene(10.0, false);
+    let square = |x0: f32| {
+        [(x0, -1.0), (x0 + 2.0, -1.0), (x0 + 2.0, 1.0), (x0, 1.0)]
+            .map(|(x, y)| Vec3::new(x, y, 1.0))
+    };
+    let tris = [[0, 1, 2], [0, 2, 3]];
+    s.occluders
+        .add("roof", &square(-3.0), &tris, [0.0; 3])
+        .unwrap();
+    s.occluders
+        .add("shade", &square(1.0), &tris, [0.0; 3])
+        .unwrap();
+    s.lights = vec![
+        Light::sun(Vec3::new(0.0, 0.0, -1.0), [1.0; 3]).unwrap(),
+        Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap(),
+    ];
+    s.link_shadows(0, &["roof".to_string()]).unwrap();
+    let pts = [
+        Vec3::new(-2.0, 0.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(4.0, 3.0, 0.0),
+    ];
+    let normals = vec![Vec3::Z; pts.len()];
+    let settings = IrradianceSettings::default();
+    let (tracer, _) = s.shadow_tracer(&Tracer::new(&s.mesh));
+    let expect = [[0.0f32; 3], [1.0; 3], [3.0; 3]];
+    let (plain, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+    assert_close(&plain, &expect);
+    // Kept light by light (a precompute's and a relight's path) the same.
+    let mut kept = PerSource::default();
+    let (by_source, _) = kept
+        .evaluate(&s, &tracer, &pts, &normals, &settings)
+        .unwrap();
+    assert_close(&by_source, &expect);
+    // Unlinked, both suns are blocked by either square.
+    s.shadow_blockers.clear();
+    let (unlinked, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+    assert_close(&unlinked, &[[0.0; 3], [0.0; 3], [3.0; 3]]);
+    // An unknown light or occluder is named.
+    let e = s.link_shadows(2, &[]).unwrap_err().to_string();
+    assert!(e.contains("light 2"), "{e}");
+    let e = s
+        .link_shadows(0, &["lid".to_string()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("\"lid\""), "{e}");
+}

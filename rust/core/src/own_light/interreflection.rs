@@ -476,6 +476,7 @@ mod tests {
             .with_bounce(Some(crate::occluders::Bouncing {
                 triangles: floor(0.0),
                 albedo: vec![rho; 2],
+                objects: vec![0; 2],
             }));
         let b = vec![[1.0f32; 3]; mesh.vertex_count()];
         let one = |_: f64| [1.0; 3];

@@ -151,11 +151,20 @@ class Scene:
         self, color: RGB | None = None, strength: float = 1.0, image: npt.ArrayLike | None = None
     ) -> None:
         """Uniform radiance `color` x `strength`, or an (H, W, 3) equirectangular radiance image."""
-    def add_occluder(self, positions: npt.ArrayLike, triangles: npt.ArrayLike, name: str = "occluder") -> None:
+    def add_occluder(
+        self, positions: npt.ArrayLike, triangles: npt.ArrayLike, name: str = "occluder", albedo: RGB | None = None
+    ) -> None:
         """Another object that casts shadows on the mesh and does not scatter (a floor, a wall,
         a prop): world-space (N, 3) positions and (M, 3) triangles, either winding. Shadow rays
-        stop at it; the walks and the object's own light never enter it. ValueError names
-        what is wrong (NaN, an index out of range, an empty object)."""
+        stop at it; the walks and the object's own light never enter it. `albedo` (a float or
+        RGB in [0, 1]) above 0 sends light back by one diffuse bounce. ValueError names what is
+        wrong (NaN, an index out of range, an empty object)."""
+    def link_shadows(self, light: int, blockers: Sequence[str]) -> None:
+        """Shadow linking (Cycles' blocker collection) for light `light`, its place among the
+        lights added (0 the first): only the occluders named in `blockers` cast its shadows; the
+        mesh always does; the other lights keep every occluder. Followed by the irradiance of
+        PRT (single scattering too), the hierarchy and the references; not by the splatting.
+        ValueError names an unknown light or occluder."""
     @property
     def occluders(self) -> dict[str, object]:
         """What the shadow rays keep of the occluders under the current lights and world:
