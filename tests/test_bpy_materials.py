@@ -293,6 +293,7 @@ def test_eyes_of_another_material_in_a_scene_with_a_floor_and_a_box(addon):
     import bpy
 
     from addon import edits, session
+    from blender_scripts.lib import scenes
 
     from helpers import key_light
 
@@ -307,22 +308,9 @@ def test_eyes_of_another_material_in_a_scene_with_a_floor_and_a_box(addon):
     head = bpy.context.active_object
     head.data.materials.append(skin)
     head.data.materials.append(eye)
-    # The eyes: the two smallest connected parts of Suzanne's mesh.
+    # The eyes: the two smallest loose parts of Suzanne's mesh.
     mesh = head.data
-    parent = list(range(len(mesh.vertices)))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for e in mesh.edges:
-        a, b = find(e.vertices[0]), find(e.vertices[1])
-        parent[a] = b
-    root = np.array([find(poly.vertices[0]) for poly in mesh.polygons])
-    parts, counts = np.unique(root, return_counts=True)
-    eyes = np.isin(root, parts[np.argsort(counts)[:2]])
+    eyes = scenes.smallest_parts(mesh)
     mesh.polygons.foreach_set("material_index", eyes.astype(np.int32))
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, -0.12))
     floor = bpy.context.active_object

@@ -264,24 +264,7 @@ def _eyes(suzanne, name: str, spp: int) -> list[Part]:
     Compared over the vertices no eye face touches (a vertex on the seam is baked as the mean
     of both materials)."""
     mesh = suzanne.data
-    parent = np.arange(len(mesh.vertices))  # loose parts of the base mesh by union-find
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for poly in mesh.polygons:
-        vs = list(poly.vertices)
-        for v in vs[1:]:
-            a, b = find(vs[0]), find(v)
-            if a != b:
-                parent[b] = a
-    roots = np.array([find(i) for i in range(len(parent))])
-    face_root = np.array([roots[poly.vertices[0]] for poly in mesh.polygons])
-    parts, counts = np.unique(face_root, return_counts=True)
-    eyes = parts[np.argsort(counts)[:2]]
+    eyes = scenes.smallest_parts(mesh)
     m = scenes.material(name)
     skin = cr.principled_material(m, f"{name} (Suzanne, eyes apart)")
     eye = bpy.data.materials.new("Eyes")
@@ -291,7 +274,7 @@ def _eyes(suzanne, name: str, spp: int) -> list[Part]:
     mesh.materials.clear()
     mesh.materials.append(skin)
     mesh.materials.append(eye)
-    mesh.polygons.foreach_set("material_index", np.isin(face_root, eyes).astype(np.int32))
+    mesh.polygons.foreach_set("material_index", eyes.astype(np.int32))
     suzanne.hide_render = False
     bpy.context.view_layer.update()
     scene, info = export.export_scene([suzanne], material=skin)

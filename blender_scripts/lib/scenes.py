@@ -190,3 +190,26 @@ def texture_base_color(mat: bpy.types.Material, source: str) -> bpy.types.Node:
         raise ValueError(f"source must be 'procedural' or 'image', not {source!r}")
     mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     return tex
+
+
+def smallest_parts(mesh: bpy.types.Mesh, count: int = 2) -> np.ndarray:
+    """Per face of `mesh`, whether it lies in one of its `count` smallest loose parts (by faces;
+    Suzanne's two eyes for the monkey primitive), the parts found by union-find over the faces'
+    vertices."""
+    parent = np.arange(len(mesh.vertices))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for poly in mesh.polygons:
+        vs = list(poly.vertices)
+        for v in vs[1:]:
+            a, b = find(vs[0]), find(v)
+            if a != b:
+                parent[b] = a
+    face_root = np.array([find(poly.vertices[0]) for poly in mesh.polygons])
+    parts, counts = np.unique(face_root, return_counts=True)
+    return np.isin(face_root, parts[np.argsort(counts)[:count]])
