@@ -103,3 +103,34 @@ def test_a_hierarchy_update_under_a_new_occluder_shadows_as_the_half_plane_integ
     # Taken back out: the hierarchy is lit as before the prop came.
     h.update(lights=scene(False))
     assert np.all(h.radiosity(m)[row, 0] > 0.9 * e_in * rd_total(m.sigma_a[0], (1 - m.g) * m.sigma_s[0], m.eta))
+
+
+def test_shadow_linking_through_the_api_relight_and_pose():
+    # Shadow linking (Cycles' blocker collection): the sun's blockers leave the square out, so
+    # the irradiance is the sun's 3 W/m^2 everywhere, as with no square (closed form). A
+    # transport relit by a Scene that only links the shadows recasts them (not a rescale) and
+    # meets a fresh precompute; a pose on the same lights keeps the linking.
+    p, t = plane(31, 2.0)
+    shadowed = sunlit(p, t, square(0.5, 0.5, 0.3, 0.5))
+    linked = sunlit(p, t, square(0.5, 0.5, 0.3, 0.5))
+    linked.link_shadows(0, [])
+    np.testing.assert_allclose(linked.irradiance(), 3.0, rtol=1e-5)
+    assert np.min(shadowed.irradiance()) == 0.0
+    with pytest.raises(ValueError, match="no occluder named 'lid'|no occluder named \"lid\""):
+        linked.link_shadows(0, ["lid"])
+    with pytest.raises(ValueError, match="light 1"):
+        linked.link_shadows(1, [])
+    m = translucent.Material.preset("marble")
+    prt = translucent.Prt(shadowed, m, coefficients=8, profile="dipole", single_scattering=False)
+    fresh = translucent.Prt(linked, m, coefficients=8, profile="dipole", single_scattering=False).radiosity(m)
+    before = prt.radiosity(m)
+    report = prt.update(lights=linked)
+    assert report["rays"] > 0 and report["rescaled"] is None
+    np.testing.assert_allclose(prt.radiosity(m), fresh, rtol=1e-5, atol=1e-9)
+    assert np.abs(before - fresh).max() > 1e-3 * fresh.max()
+    # The pose's transport is a first preview's (fewer samples: within 2 %), and still unshadowed
+    # where the square's shadow would fall.
+    prt.update(positions=p)
+    rel = np.abs(prt.radiosity(m) - fresh) / fresh.max()
+    assert rel.max() < 0.02, rel.max()
+    assert np.abs(before - fresh).max() > 10 * np.abs(prt.radiosity(m) - fresh).max()

@@ -44,11 +44,7 @@ pub struct PyPrt {
     lighting_version: std::sync::atomic::AtomicU64,
     /// The lights, world and occluders the transport holds (a power or colour change of all
     /// the lights together is a rescale: `light_scale::common_scale`; other occluders are not).
-    lit_with: Mutex<(
-        Vec<translucent_core::lights::Light>,
-        translucent_core::lights::World,
-        translucent_core::occluders::Occluders,
-    )>,
+    lit_with: Mutex<crate::scene::Lighting>,
     /// What the tracer kept of the occluders at the precompute or the last update.
     occluders: Mutex<translucent_core::occluders::OccluderReport>,
     /// The mesh the transport holds (the last pose's): what `update(positions=...)` poses.
@@ -89,12 +85,8 @@ impl PyPrt {
         )> = match given {
             Some((p, n)) => {
                 let mesh = held(&self.mesh).clone();
-                let (lit, world, occluders) = match lights {
-                    Some(l) => (
-                        l.scene.lights.clone(),
-                        l.scene.world.clone(),
-                        l.scene.occluders.clone(),
-                    ),
+                let (lit, world, occluders, blockers) = match lights {
+                    Some(l) => crate::scene::lighting_of(&l.scene),
                     None => held(&self.lit_with).clone(),
                 };
                 let (scene, tracer, report) = run(py, None, |_| {
@@ -102,6 +94,7 @@ impl PyPrt {
                     scene.lights = lit;
                     scene.world = world;
                     scene.occluders = occluders;
+                    scene.shadow_blockers = blockers;
                     let own = Tracer::new(&scene.mesh);
                     let (tracer, report) = if scene.occluders.is_empty() {
                         (own, Default::default())
@@ -183,11 +176,7 @@ impl PyPrt {
         })?;
         *self.inner.write().unwrap_or_else(|e| e.into_inner()) = next;
         *held(&self.mesh) = scene.mesh.clone();
-        *held(&self.lit_with) = (
-            scene.lights.clone(),
-            scene.world.clone(),
-            scene.occluders.clone(),
-        );
+        *held(&self.lit_with) = crate::scene::lighting_of(scene);
         *held(&self.occluders) = occluder_report;
         *held(&self.lighting) = lighting.into_inner().unwrap_or_else(|e| e.into_inner());
         if let Some((counter, version)) = lit_by {
@@ -420,11 +409,7 @@ impl PyPrt {
             last_single: Mutex::new(None),
             scene_lighting: Mutex::new(scene_lighting),
             lighting_version: std::sync::atomic::AtomicU64::new(lighting_version),
-            lit_with: Mutex::new((
-                core_scene.lights.clone(),
-                core_scene.world.clone(),
-                core_scene.occluders.clone(),
-            )),
+            lit_with: Mutex::new(crate::scene::lighting_of(core_scene)),
             occluders: Mutex::new(scene.occluder_report()),
             mesh: Mutex::new(core_scene.mesh.clone()),
         };
@@ -727,8 +712,9 @@ impl PyPrt {
         let version = counter.load(std::sync::atomic::Ordering::Relaxed);
         let scene = &lights.scene;
         let (scale, same_occluders) = {
-            let (old_lights, old_world, old_occluders) = &*held(&self.lit_with);
-            let same = *old_occluders == scene.occluders;
+            let (old_lights, old_world, old_occluders, old_blockers) = &*held(&self.lit_with);
+            // Other occluders, or another shadow linking: not a rescale.
+            let same = *old_occluders == scene.occluders && *old_blockers == scene.shadow_blockers;
             let scale = translucent_core::light_scale::common_scale(
                 old_lights,
                 old_world,
@@ -759,11 +745,7 @@ impl PyPrt {
                 }
                 inner.rescale_light(k)
             })?;
-            *held(&self.lit_with) = (
-                scene.lights.clone(),
-                scene.world.clone(),
-                scene.occluders.clone(),
-            );
+            *held(&self.lit_with) = crate::scene::lighting_of(scene);
             *held(&self.scene_lighting) = counter;
             self.lighting_version
                 .store(version, std::sync::atomic::Ordering::Relaxed);

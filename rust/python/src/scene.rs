@@ -18,6 +18,16 @@ use translucent_core::scene::{Blockers, Scene};
 /// A scene's lights, world, occluders and shadow linking (`PyScene::lighting`).
 pub type Lighting = (Vec<Light>, World, Occluders, Vec<Option<Blockers>>);
 
+/// A core scene's lights, world, occluders and shadow linking, cloned.
+pub fn lighting_of(s: &Scene) -> Lighting {
+    (
+        s.lights.clone(),
+        s.world.clone(),
+        s.occluders.clone(),
+        s.shadow_blockers.clone(),
+    )
+}
+
 /// A triangle mesh with lights and a world. Lengths in scene units; light units as Blender's.
 #[pyclass(name = "Scene", module = "translucent")]
 pub struct PyScene {
@@ -41,13 +51,7 @@ impl PyScene {
     /// Its lights, world and occluders, and the lights' shadow linking (`link_shadows`):
     /// what an `update(lights=scene)` takes from it.
     pub fn lighting(&self) -> Lighting {
-        let s = &self.scene;
-        (
-            s.lights.clone(),
-            s.world.clone(),
-            s.occluders.clone(),
-            s.shadow_blockers.clone(),
-        )
+        lighting_of(&self.scene)
     }
 
     fn lighting_changed(&mut self) {
