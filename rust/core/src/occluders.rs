@@ -236,11 +236,6 @@ impl Occluders {
     pub fn names(&self) -> impl Iterator<Item = &str> {
         self.objects.iter().map(|o| o.name.as_str())
     }
-
-    /// The place among the objects added of the object named `name`, if any.
-    pub fn index_of(&self, name: &str) -> Option<usize> {
-        self.objects.iter().position(|o| o.name == name)
-    }
 }
 
 /// A conservative bound of the region shadow rays from the mesh's box to one light cross.

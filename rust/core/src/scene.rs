@@ -48,10 +48,7 @@ impl Scene {
                 self.lights.len()
             )));
         }
-        if let Some(b) = blockers
-            .iter()
-            .find(|b| self.occluders.index_of(b).is_none())
-        {
+        if let Some(b) = (blockers.iter()).find(|b| !self.occluders.names().any(|n| n == *b)) {
             return Err(Error::InvalidArgument(format!(
                 "blockers: no occluder named {b:?}"
             )));

@@ -339,10 +339,6 @@ impl Hierarchy {
         self.set_lighting(lights, world, None);
     }
 
-    /// New lights and world, and a new rest of the scene where `occluders` is given and differs
-    /// (a prop moved, added or hidden): then every light's shadows change, so the irradiance
-    /// kept light by light is dropped and the next evaluation casts every source's rays again.
-    /// The shadow tracer is rebuilt once, for both.
     /// Shadow linking per light (`Scene::shadow_blockers`, by the lights' places): a light
     /// whose blockers changed is lit again at the next evaluation.
     pub fn link_shadows(&mut self, blockers: Vec<Option<crate::scene::Blockers>>) {
@@ -356,6 +352,10 @@ impl Hierarchy {
         }
     }
 
+    /// New lights and world, and a new rest of the scene where `occluders` is given and differs
+    /// (a prop moved, added or hidden): then every light's shadows change, so the irradiance
+    /// kept light by light is dropped and the next evaluation casts every source's rays again.
+    /// The shadow tracer is rebuilt once, for both.
     pub fn set_lighting(&mut self, lights: Vec<Light>, world: World, occluders: Option<Occluders>) {
         self.scene.lights = lights;
         self.scene.world = world;

@@ -73,7 +73,7 @@ impl Bounce {
         })
     }
 
-    /// `add_to` with the indirect light scaled by `ratio` (`ratio`) rather than by what
+    /// `add_to` with the indirect light scaled by `ratio` (`Bounce::ratio`) rather than by what
     /// `material` alone sends on: a surface whose vertices send on different media (another
     /// material's faces beside the previewed ones) lights the receiver by their mean.
     #[allow(clippy::too_many_arguments)]

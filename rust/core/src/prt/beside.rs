@@ -49,16 +49,24 @@ fn count(others: &[[f32; 3]], vertices: usize) -> Result<Option<Others>> {
         )));
     }
     const CHUNK: usize = 16_384;
-    let chunks: Vec<Option<Others>> = (others.par_chunks(CHUNK)).map(count_chunk).collect();
+    let parts: Option<Vec<Others>> = (others.par_chunks(CHUNK)).map(count_chunk).collect();
+    let Some(parts) = parts else {
+        // A chunk stopped early: at a bad row, or past the colours taken one by one.
+        return match others.iter().position(bad_row) {
+            Some(v) => Err(Error::InvalidArgument(format!(
+                "others row {v} is {:?}: a finite colour (another material's vertex) or NaN in \
+                 all three channels (a previewed vertex)",
+                others[v]
+            ))),
+            None => Ok(None),
+        };
+    };
+    // Every row checked: the chunks' colours merged, in order.
     let mut out = Others {
         colors: Vec::new(),
         previewed: 0,
     };
-    for chunk in chunks {
-        let Some(part) = chunk else {
-            out.colors.clear();
-            break;
-        };
+    for part in parts {
         out.previewed += part.previewed;
         for (color, n) in part.colors {
             match out.colors.iter().position(|c| c.0 == color) {
@@ -67,19 +75,7 @@ fn count(others: &[[f32; 3]], vertices: usize) -> Result<Option<Others>> {
             }
         }
     }
-    let counted = out.colors.iter().map(|c| c.1).sum::<usize>() + out.previewed;
-    if counted == vertices && out.colors.len() <= OTHER_COLORS_MOST {
-        return Ok(Some(out));
-    }
-    // A chunk stopped early: at a bad row, or past the colours taken one by one.
-    match others.iter().position(bad_row) {
-        Some(v) => Err(Error::InvalidArgument(format!(
-            "others row {v} is {:?}: a finite colour (another material's vertex) or NaN in all \
-             three channels (a previewed vertex)",
-            others[v]
-        ))),
-        None => Ok(None),
-    }
+    Ok((out.colors.len() <= OTHER_COLORS_MOST).then_some(out))
 }
 
 /// `count` over some rows; None at a bad row or past `OTHER_COLORS_MOST` colours.
