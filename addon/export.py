@@ -57,7 +57,7 @@ class ExportInfo:
     # Emissive rectangles found among the occluders (`_emissive_rectangle`), made area lights
     # by `add_lights`: (object, (centre, normal, axis_u, size_u, size_v, radiance)).
     emissive_rectangles: list = field(default_factory=list)
-    # Lights whose light linking lights none of the previewed objects (`linking.follow`), and
+    # Lights whose light linking lights none of the exported objects (`linking.follow`), and
     # the lines saying what of the lights' linking is not followed.
     unlinked_lights: list[str] = field(default_factory=list)
     linking: list[str] = field(default_factory=list)
@@ -195,18 +195,17 @@ def _axis(obj: bpy.types.Object, k: int) -> tuple[float, float, float]:
 
 
 def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: ExportInfo) -> None:
-    """Every visible light of `bl_scene`, in Blender's units; black or hidden lights skipped, and
-    lights whose light linking lights none of the exported objects left out (`linking.follow`:
-    `info.linking` says so, and what of their linking is not followed)."""
+    """Every visible light of `bl_scene`, in Blender's units, with its light and shadow linking
+    (`linking.link`); black or hidden lights skipped, and lights whose light linking lights none
+    of the exported objects left out (`linking.follow`: `info.linking` says so, and what of their
+    linking is not followed)."""
     previewed = [r.name for r in info.objects]
     occluders = sorted(k.removeprefix("occluder ") for k in info.occluder_keys)
-    added = 0  # the lights added so far: the next one's place, for `link_shadows`
+    added = 0  # the lights added so far: the next one's place, for the linking
 
     def link(obj, count: int) -> None:
-        # Shadow linking: the props that cast this light's shadows (`count` lights just added).
-        names = linking.blockers(obj, info.occluder_objects)
-        for k in range(added - count, added) if names is not None else ():
-            scene.link_shadows(k, names)
+        # The `count` lights just added for `obj`.
+        linking.link(scene, range(added - count, added), obj, previewed, info.occluder_objects)
 
     for obj in bl_scene.objects:
         if obj.type != "LIGHT":

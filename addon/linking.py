@@ -7,10 +7,11 @@ every object but those; with both, the included minus the excluded. No collectio
 one: every object. Each entry of the collection (an object, or a child collection standing for
 every object in it) carries its state, `CollectionLightLinking.link_state`.
 
-What the export follows: a light that lights every previewed object or none of them (the
-irradiance is computed per scene, not per object), and which props cast each light's shadows
-(`blockers`, `translucent.Scene.link_shadows`). The rest is stated, not hidden: `export.add_lights`
-puts a line in `ExportInfo.linking` for each part left unfollowed."""
+What the export follows (`link`): which props and which previewed objects each light lights (a
+prop left out sends none of it back; a previewed object left out still receives it from the props
+it lights: `translucent.Scene.link_light`), and which of them cast its shadows (`link_shadows`).
+A light lighting nothing exported is left out. The splatting follows none of it: `export.add_lights`
+puts a line in `ExportInfo.linking` saying so."""
 
 from __future__ import annotations
 
@@ -67,41 +68,38 @@ def key(light: bpy.types.Object) -> tuple:
 
 def follow(light: bpy.types.Object, previewed: list[str], occluders: list[str]) -> tuple[bool, list[str]]:
     """Whether to export `light` (a light, or an emissive rectangle) for the previewed objects
-    (names), and the lines saying what of its linking is not followed, `occluders` the other
-    objects exported (names; the light's own object aside). A light that lights none of the
-    previewed objects is left out (its bounce off the other objects with it); one that lights
-    some of them lights all; a receiver or blocker collection that leaves out another exported
-    object is named."""
+    (names), `occluders` the other objects exported (names; the light's own object aside), and
+    the lines saying what of its linking is not followed: a light that lights none of the
+    exported objects is left out; the splatting follows no linking."""
     occluders = [n for n in occluders if n != light.name]
-    lit = [n for n in previewed if receives(light, n)]
-    if not lit:
-        return False, [f"{light.name} lights none of the previewed objects (light linking): left out, "
-                       "its bounce off the other objects with it"]
-    lines = []
-    if len(lit) < len(previewed):
-        unlit = ", ".join(n for n in previewed if n not in lit)
-        lines.append(f"{light.name} does not light {unlit} in Cycles (light linking): lit here, not followed per "
-                     "object")
-    dark = sorted(n for n in occluders if not receives(light, n))
-    if dark:
-        lines.append(f"{light.name} does not light {', '.join(dark)} in Cycles (light linking): their bounce of it "
-                     "still counted here")
-    linked = getattr(getattr(light, "light_linking", None), "blocker_collection", None) is not None
-    free = sorted(n for n in occluders if not blocks(light, n))
-    if linked and free:
-        lines.append(f"{light.name}'s shadows are not cast by {', '.join(free)} (shadow linking; not followed by the "
-                     "splatting)")
-    own = sorted(n for n in previewed if not blocks(light, n))
-    if own:
-        lines.append(f"{light.name}'s shadows are not cast by {', '.join(own)} in Cycles (shadow linking): a "
-                     "previewed object always casts them here, not followed")
-    return True, lines
+    if not any(receives(light, n) for n in previewed + occluders):
+        return False, [f"{light.name} lights none of the exported objects (light linking): left out"]
+    linked = getattr(light, "light_linking", None)
+    if any(getattr(linked, a, None) is not None for a in ("receiver_collection", "blocker_collection")):
+        return True, [f"{light.name}'s light and shadow linking: not followed by the splatting"]
+    return True, []
 
 
-def blockers(light: bpy.types.Object, occluders: dict[str, str]) -> list[str] | None:
-    """The exported occluders (labels, `occluders` mapping each to its object's name) that cast
-    `light`'s shadows under its blocker collection; None where it has none (every one does)."""
+def _objects(previewed: list[str], member) -> bool | list[int]:
+    """The previewed objects (their places, as the exported mesh's objects) for which `member`
+    holds: True for all of them, False for none, else their places."""
+    places = [k for k, name in enumerate(previewed) if member(name)]
+    return True if len(places) == len(previewed) else bool(places) and places
+
+
+def link(scene, lights: range, light: bpy.types.Object, previewed: list[str], occluders: dict[str, str]) -> None:
+    """Light and shadow linking of `light` onto the core scene's `lights` (the places of the
+    lights it was exported as): the props it lights and those casting its shadows (`occluders`
+    maps each exported occluder's label to its object's name), and the previewed objects it
+    lights and those casting its shadows (`previewed`, by their places in the exported mesh)."""
     linking = getattr(light, "light_linking", None)
-    if getattr(linking, "blocker_collection", None) is None:
-        return None
-    return sorted(label for label, name in occluders.items() if blocks(light, name))
+    if getattr(linking, "receiver_collection", None) is not None:
+        names = sorted(label for label, name in occluders.items() if receives(light, name))
+        mesh = _objects(previewed, lambda n: receives(light, n))
+        for k in lights:
+            scene.link_light(k, names, mesh=mesh)
+    if getattr(linking, "blocker_collection", None) is not None:
+        names = sorted(label for label, name in occluders.items() if blocks(light, name))
+        mesh = _objects(previewed, lambda n: blocks(light, n))
+        for k in lights:
+            scene.link_shadows(k, names, mesh=mesh)

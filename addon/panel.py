@@ -13,6 +13,13 @@ from .session import JOBS, PREPARING, SESSIONS, Session, state
 HIERARCHY_SHOWN = (("faces", "faces"), ("clusters", "clusters"), ("links", "links"), ("rays", "rays"))
 
 
+def _bounce_only(r: dict) -> str:
+    """The lights that reach only the other objects, where there are some (they light the
+    previewed ones by the bounce alone)."""
+    k = r.get("lights_bounce_only", 0)
+    return f", {k} lighting them by the other objects' bounce alone" if k else ""
+
+
 def summary(sess: Session) -> str:
     """What the precompute did and left out, in one line for the status bar and the panel: the
     export's part, then the method's own report as it gives it."""
@@ -23,7 +30,7 @@ def summary(sess: Session) -> str:
     if info.occluders:
         scene += f", {len(info.occluders)} occluder(s)"
     if getattr(info, "unlinked_lights", None):
-        scene += f", light(s) lighting none of them left out (light linking): {', '.join(info.unlinked_lights)}"
+        scene += f", light(s) lighting none of the exported objects left out (light linking): {', '.join(info.unlinked_lights)}"
     if sess.method == "splat":
         peel = r.get("peel")
         peeled = f", {peel['samples']:,} peeled samples (world, area lights)" if peel else ""
@@ -40,7 +47,7 @@ def summary(sess: Session) -> str:
              f"({w['skipped_flat']} flat skipped)" if w else "")
     return (
         f"{scene}, {r['lights_used']} light(s) used, {r['lights_skipped_black'] + len(info.skipped_lights)} dark "
-        f"and {r['lights_unreached']} out of reach skipped, {world}; {r['samples']} samples, "
+        f"and {r['lights_unreached']} out of reach skipped{_bounce_only(r)}, {world}; {r['samples']} samples, "
         f"{r['coefficients']} coefficients, support radius {r['support_radius']:.4g} units, "
         f"{r['rays']} rays{walks}, {r['seconds']:.2f} s"
     )

@@ -134,3 +134,32 @@ def test_shadow_linking_through_the_api_relight_and_pose():
     rel = np.abs(prt.radiosity(m) - fresh) / fresh.max()
     assert rel.max() < 0.02, rel.max()
     assert np.abs(before - fresh).max() > 10 * np.abs(prt.radiosity(m) - fresh).max()
+
+
+def test_light_linking_through_the_api_prt_single_scattering_and_a_relight():
+    # Light linking (Cycles' receiver collection): the sun linked to neither the mesh nor the
+    # square lights nothing, so the irradiance is 0, and so is PRT's radiosity with single
+    # scattering (whose entry rays are the light's own). A transport relit by a Scene that only
+    # links the light is not a rescale and goes dark; linked back to the mesh, it meets the
+    # unlinked scene's (the square does not light the plane from its sunlit top either way).
+    p, t = plane(31, 2.0)
+    plain = sunlit(p, t, square(0.5, 0.5, 0.3, 0.5))
+    dark = sunlit(p, t, square(0.5, 0.5, 0.3, 0.5))
+    dark.link_light(0, [], mesh=False)
+    assert np.max(dark.irradiance()) == 0.0 and np.max(plain.irradiance()) == pytest.approx(3.0, rel=1e-5)
+    relit = sunlit(p, t, square(0.5, 0.5, 0.3, 0.5))
+    relit.link_light(0, ["blocker"], mesh=True)
+    np.testing.assert_allclose(relit.irradiance(), plain.irradiance(), rtol=1e-6, atol=1e-9)
+    with pytest.raises(ValueError, match="receivers: no occluder named"):
+        dark.link_light(0, ["lid"])
+    with pytest.raises(ValueError, match="light 1"):
+        dark.link_light(1, [])
+    m = translucent.Material.preset("marble")
+    prt = translucent.Prt(plain, m, coefficients=8, profile="dipole", single_scattering=True)
+    lit = prt.radiosity(m)
+    assert lit.max() > 0.1
+    report = prt.update(lights=dark)
+    assert report["rescaled"] is None
+    assert np.max(np.abs(prt.radiosity(m))) == 0.0
+    prt.update(lights=relit)
+    np.testing.assert_allclose(prt.radiosity(m), lit, rtol=1e-5, atol=1e-9)

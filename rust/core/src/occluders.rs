@@ -516,6 +516,136 @@ mod tests {
     }
 
     #[test]
+    fn light_linking_leaves_the_direct_light_and_the_bounce_to_what_it_lights() {
+        // `wall_over_floor` under a sun of 2 W/m^2 at 45 degrees, from above and +x: the wall
+        // receives 2 cos 45 = sqrt 2 directly, the floor sqrt 2 too, of which the wall receives
+        // rho sqrt 2 / 2 back. Cycles' light linking: the sun lighting the floor alone, the
+        // wall keeps only the bounce; lighting the wall alone, only its direct light.
+        let albedo = [0.5f32, 0.25, 0.75];
+        let mut scene = wall_over_floor(albedo);
+        scene.lights = vec![Light::sun(Vec3::new(-1.0, 0.0, -1.0), [2.0; 3]).unwrap()];
+        let direct = 2f64.sqrt();
+        let check = |scene: &Scene, direct: f64, bounce: f64, what: &str| {
+            let mesh = &scene.mesh;
+            let (e, _) = irradiance(
+                scene,
+                &scene.tracer(),
+                mesh.positions(),
+                mesh.normals(),
+                &IrradianceSettings::default(),
+            )
+            .unwrap();
+            for c in 0..3 {
+                let mean = e.iter().map(|x| f64::from(x[c])).sum::<f64>() / e.len() as f64;
+                let expect = direct + bounce * f64::from(albedo[c]) * 2f64.sqrt() / 2.0;
+                assert!(
+                    (mean - expect).abs() <= 0.02 * expect,
+                    "{what}, channel {c}: {mean} vs {expect}"
+                );
+            }
+        };
+        check(&scene, direct, 1.0, "unlinked");
+        scene
+            .link_light(0, &["floor".to_string()], Some(&[]))
+            .unwrap();
+        check(&scene, 0.0, 1.0, "the floor alone");
+        scene.link_light(0, &[], None).unwrap();
+        check(&scene, direct, 0.0, "the wall alone");
+        let e = scene
+            .link_light(0, &["roof".to_string()], None)
+            .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("receivers: no occluder named \"roof\""),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_spot_on_the_floor_beside_the_wall_lights_it_by_the_bounce_alone() {
+        // `wall_over_floor` under a spot 4 above the floor at x = 3, straight down, 40 degrees
+        // wide (blend 0): its cone reaches the floor (a disc of radius 4 tan 20 degrees about
+        // (3, 0, 0)) and not the wall's box, so no direct ray is cast, and the wall receives
+        // only what the lit disc sends back. Expected: the disc's radiosity rho E_f / pi with
+        // E_f = (P / 4 pi) cos / d^2 (Blender's spot), integrated over the disc against the
+        // wall point's view of it, cos_p cos_q / r^2 dA (midpoint rule, 200 x 256 cells).
+        let albedo = [0.5f32, 0.25, 0.75];
+        let mut scene = wall_over_floor(albedo);
+        let (h, half) = (4.0f64, 20f64.to_radians());
+        let power = 1000.0f32;
+        scene.lights = vec![Light::spot(
+            Vec3::new(3.0, 0.0, h as f32),
+            Vec3::new(0.0, 0.0, -1.0),
+            [power; 3],
+            (2.0 * half) as f32,
+            0.0,
+        )
+        .unwrap()];
+        let settings = IrradianceSettings {
+            world_samples: 2048, // 512 bounce rays a point
+            ..Default::default()
+        };
+        let mesh = &scene.mesh;
+        let (e, r) = irradiance(
+            &scene,
+            &scene.tracer(),
+            mesh.positions(),
+            mesh.normals(),
+            &settings,
+        )
+        .unwrap();
+        assert_eq!(
+            (r.lights_used, r.lights_bounce_only, r.lights_unreached),
+            (1, 1, 0)
+        );
+        let radius = h * half.tan();
+        let (nr, nf) = (200, 256);
+        let intensity = f64::from(power) / (4.0 * std::f64::consts::PI);
+        let expect_at = |p: Vec3| -> f64 {
+            let (px, py, pz) = (f64::from(p.x), f64::from(p.y), f64::from(p.z));
+            let mut sum = 0.0;
+            for i in 0..nr {
+                let rho = (i as f64 + 0.5) / nr as f64 * radius;
+                for j in 0..nf {
+                    let phi = (j as f64 + 0.5) / nf as f64 * std::f64::consts::TAU;
+                    let (qx, qy) = (3.0 + rho * phi.cos(), rho * phi.sin());
+                    let d2 = h * h + rho * rho;
+                    let e_floor = intensity * (h / d2.sqrt()) / d2;
+                    let v = [qx - px, qy - py, -pz];
+                    let r2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                    let (cos_p, cos_q) = (v[0] / r2.sqrt(), pz / r2.sqrt());
+                    let area = rho * (radius / nr as f64) * (std::f64::consts::TAU / nf as f64);
+                    sum += e_floor / std::f64::consts::PI * cos_p * cos_q / r2 * area;
+                }
+            }
+            sum
+        };
+        let expect: f64 = mesh.positions().iter().map(|p| expect_at(*p)).sum::<f64>()
+            / mesh.vertex_count() as f64;
+        for c in 0..3 {
+            let mean = e.iter().map(|x| f64::from(x[c])).sum::<f64>() / e.len() as f64;
+            let want = f64::from(albedo[c]) * expect;
+            assert!(
+                (mean - want).abs() <= 0.03 * want,
+                "channel {c}: {mean} vs {want}"
+            );
+        }
+        // A black floor sends nothing back: the spot reaches nothing that matters, no ray.
+        let mut dark = wall_over_floor([0.0; 3]);
+        dark.lights = scene.lights.clone();
+        let (e, r) = irradiance(
+            &dark,
+            &dark.tracer(),
+            dark.mesh.positions(),
+            dark.mesh.normals(),
+            &settings,
+        )
+        .unwrap();
+        assert_eq!((r.lights_used, r.lights_unreached, r.rays), (0, 1, 0));
+        assert!(e.iter().all(|x| *x == [0.0; 3]));
+    }
+
+    #[test]
     fn vertices_asked_for_more_bounce_rays_scatter_less_about_the_closed_form() {
         // `wall_over_floor`: E = rho E_sun / 2 at every vertex. Points used alone with
         // `vertex_bounce_factor` 8 cast 8x the bounce rays, so their spread about the closed form

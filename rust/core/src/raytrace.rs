@@ -7,6 +7,7 @@
 
 use crate::mesh::Mesh;
 use crate::occluders::Bouncing;
+use crate::scene::Linking;
 use glam::{Vec3, Vec3A};
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::CwBvh;
@@ -80,6 +81,8 @@ struct Bounce {
     bvh: Bvh,
     albedo: Vec<[f32; 3]>,
     objects: Vec<u32>,
+    /// The bounding box of the triangles that send light back (albedo > 0), world space.
+    bounds: (Vec3, Vec3),
 }
 
 /// Where a bounce ray from the mesh first meets the rest of the scene, on a surface that sends
@@ -105,9 +108,9 @@ pub struct Tracer {
     /// Per triangle of `rest`, in BVH order, its occluder object, where given
     /// (`with_occluder_objects`).
     rest_objects: Option<Arc<Vec<u32>>>,
-    /// Shadow linking (`blocking`): per occluder object, whether it casts the shadows of the
-    /// light this tracer is cast for (an object past its end does); None: every one does.
-    blockers: Option<Arc<Vec<bool>>>,
+    /// Light and shadow linking of the lights this tracer is cast for (`linked`): which
+    /// objects cast their shadows and which send them back; None: unlinked.
+    linking: Option<Linking>,
     /// Every occluder with its albedo, where some sends light back (`with_bounce`).
     bounce: Option<Arc<Bounce>>,
     /// How far ray origins are pushed off the surface: relative to the mesh size, so that
@@ -158,7 +161,7 @@ impl Tracer {
             objects,
             rest: None,
             rest_objects: None,
-            blockers: None,
+            linking: None,
             bounce: None,
             epsilon: EPSILON * scale,
             centre,
@@ -176,7 +179,7 @@ impl Tracer {
             objects: self.objects.clone(),
             rest: (!tris.is_empty()).then(|| Arc::new(Bvh::build(tris))),
             rest_objects: None,
-            blockers: self.blockers.clone(),
+            linking: self.linking.clone(),
             bounce: self.bounce.clone(),
             epsilon: self.epsilon,
             centre: self.centre,
@@ -195,16 +198,17 @@ impl Tracer {
         t
     }
 
-    /// This tracer (its BVHs shared) for one light's shadow rays under shadow linking: only the
-    /// occluder objects `blockers` holds true for cast them (Cycles' blocker collection); the
-    /// mesh always does. None: every object.
-    pub fn blocking(&self, blockers: Option<Arc<Vec<bool>>>) -> Tracer {
+    /// This tracer (its BVHs shared) for the rays of lights linked by `linking` (Cycles' light
+    /// and shadow linking, `Scene::link_light` / `link_shadows`): only the objects of its
+    /// blocker collection cast their shadows, and only those of its receiver collection send
+    /// them back as the bounce. None: unlinked.
+    pub fn linked(&self, linking: Option<Linking>) -> Tracer {
         Tracer {
             own: self.own.clone(),
             objects: self.objects.clone(),
             rest: self.rest.clone(),
             rest_objects: self.rest_objects.clone(),
-            blockers,
+            linking,
             bounce: self.bounce.clone(),
             epsilon: self.epsilon,
             centre: self.centre,
@@ -212,16 +216,81 @@ impl Tracer {
         }
     }
 
+    /// Whether the lights this tracer is cast for light every object of the mesh (`linked`).
+    pub fn lights_whole_mesh(&self) -> bool {
+        let mask = self
+            .linking
+            .as_ref()
+            .and_then(|l| l.mesh_receivers.as_ref());
+        mask.is_none_or(|m| m.iter().all(|&x| x))
+    }
+
+    /// Whether the lights this tracer is cast for light the mesh's object `object`.
+    pub fn lights_object(&self, object: u32) -> bool {
+        (self.linking.as_ref()).is_none_or(|l| l.lights_object(object))
+    }
+
+    /// Whether the lights this tracer is cast for light the mesh at `p` (normal `n`), where
+    /// their direct light is gathered only then (light linking). Where only some of the mesh's
+    /// objects are lit, the point's object is found by a ray a few epsilons long from just
+    /// above it, back through the surface.
+    pub fn lights_point(&self, p: Vec3, n: Vec3) -> bool {
+        let Some(mask) = self
+            .linking
+            .as_ref()
+            .and_then(|l| l.mesh_receivers.as_ref())
+        else {
+            return true;
+        };
+        if mask.iter().all(|&x| x) || mask.iter().all(|&x| !x) {
+            return mask.first().copied().unwrap_or(true);
+        }
+        let lift = 8.0 * self.epsilon;
+        let hit = self.own.closest(self.ray(p + n * lift, -n, 2.0 * lift));
+        let object = match (hit, &self.objects) {
+            (Some((_, i)), Some(objects)) => objects[i],
+            _ => 0,
+        };
+        mask.get(object as usize).copied().unwrap_or(true)
+    }
+
+    /// Whether the mesh's BVH holds a triangle that casts this tracer's shadows along `ray`
+    /// (shadow linking leaves some of its objects out).
+    fn own_occludes(&self, ray: Ray) -> bool {
+        let Some(mask) = self.linking.as_ref().and_then(|l| l.mesh_blockers.as_ref()) else {
+            return self.own.occluded(ray);
+        };
+        match &self.objects {
+            _ if mask.iter().all(|&x| !x) => false,
+            Some(objects) => !self.own.bvh.ray_traverse_miss(ray, |ray, id| {
+                if mask.get(objects[id] as usize).copied().unwrap_or(true) {
+                    intersect(&self.own.triangles[id], ray)
+                } else {
+                    f32::INFINITY
+                }
+            }),
+            None => self.own.occluded(ray),
+        }
+    }
+
     /// Whether a triangle of occluder object `object` casts this tracer's shadows.
     fn blocks(&self, object: u32) -> bool {
-        (self.blockers.as_ref()).is_none_or(|b| b.get(object as usize).copied().unwrap_or(true))
+        let blockers = self.linking.as_ref().and_then(|l| l.blockers.as_ref());
+        blockers.is_none_or(|b| b.get(object as usize).copied().unwrap_or(true))
+    }
+
+    /// Whether occluder object `object` is lit by this tracer's lights (and so sends them back).
+    fn receives(&self, object: u32) -> bool {
+        let receivers = self.linking.as_ref().and_then(|l| l.receivers.as_ref());
+        receivers.is_none_or(|r| r.get(object as usize).copied().unwrap_or(true))
     }
 
     /// Whether `bvh` (the rest, or the bounce's, with `objects` per triangle in BVH order)
     /// holds a triangle that casts this tracer's shadows along `ray`.
     fn rest_occludes(&self, bvh: &Bvh, objects: Option<&[u32]>, ray: Ray) -> bool {
-        match (self.blockers.as_ref(), objects) {
-            (Some(_), Some(objects)) => !bvh.bvh.ray_traverse_miss(ray, |ray, id| {
+        let linked = self.linking.as_ref().is_some_and(|l| l.blockers.is_some());
+        match (linked, objects) {
+            (true, Some(objects)) => !bvh.bvh.ray_traverse_miss(ray, |ray, id| {
                 if self.blocks(objects[id]) {
                     intersect(&bvh.triangles[id], ray)
                 } else {
@@ -241,6 +310,11 @@ impl Tracer {
                  albedo,
                  objects,
              }| {
+                let sending = (triangles.iter().zip(&albedo)).filter(|(_, a)| **a != [0.0; 3]);
+                let bounds = sending.flat_map(|(t, _)| t.iter()).fold(
+                    (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                    |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+                );
                 let bvh = Bvh::build(self.in_frame(&triangles));
                 let order = &bvh.bvh.primitive_indices;
                 let albedo = order.iter().map(|&i| albedo[i as usize]).collect();
@@ -249,6 +323,7 @@ impl Tracer {
                     bvh,
                     albedo,
                     objects,
+                    bounds,
                 })
             },
         );
@@ -271,8 +346,15 @@ impl Tracer {
         self.bounce.is_some()
     }
 
+    /// The bounding box of the rest of the scene's triangles that send light back (world
+    /// space), where some do (`with_bounce`): a light reaching it lights the mesh by the bounce.
+    pub fn bounce_bounds(&self) -> Option<(Vec3, Vec3)> {
+        self.bounce.as_ref().map(|b| b.bounds)
+    }
+
     /// Where the ray from `origin` along `direction` (unit) first meets the rest of the scene,
-    /// when that is nearer than the mesh and sends light back (albedo > 0); None otherwise.
+    /// when that is nearer than the mesh and sends light back (albedo > 0, and lit by this
+    /// tracer's lights: `linked`); None otherwise.
     pub fn bounce_hit(&self, origin: Vec3, direction: Vec3) -> Option<BounceHit> {
         let bounce = self.bounce.as_ref()?;
         let ray = self.ray(origin, direction, f32::INFINITY);
@@ -281,7 +363,7 @@ impl Tracer {
             return None; // the mesh itself lies in front
         }
         let albedo = bounce.albedo[i];
-        if albedo == [0.0; 3] {
+        if albedo == [0.0; 3] || !self.receives(bounce.objects[i]) {
             return None;
         }
         let tri = &bounce.bvh.triangles[i];
@@ -303,7 +385,7 @@ impl Tracer {
             return false;
         }
         let ray = self.ray(origin, direction, t_max);
-        self.own.occluded(ray) || self.rest_occludes(&bounce.bvh, Some(&bounce.objects), ray)
+        self.own_occludes(ray) || self.rest_occludes(&bounce.bvh, Some(&bounce.objects), ray)
     }
 
     /// The offset used for ray origins and t_min.
@@ -336,7 +418,7 @@ impl Tracer {
             return false;
         }
         let ray = self.ray(origin, direction, t_max);
-        self.own.occluded(ray)
+        self.own_occludes(ray)
             || (self.rest.as_ref()).is_some_and(|r| {
                 self.rest_occludes(r, self.rest_objects.as_deref().map(|v| &v[..]), ray)
             })

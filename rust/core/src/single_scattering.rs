@@ -102,7 +102,7 @@ pub struct SinglePaths<'a> {
     mesh: &'a Mesh,
     tracer: &'a Tracer,
     sources: Vec<Source<'a>>,
-    /// Per group, the tracer its shadow rays take under shadow linking (`Scene::blockers_of`):
+    /// Per group, the tracer its shadow rays take under shadow linking (`Scene::linking_of`):
     /// None, the scene's.
     linked: Vec<Option<Tracer>>,
     colours: Vec<[f32; 3]>,
@@ -127,10 +127,14 @@ impl<'a> SinglePaths<'a> {
         let mut colours = Vec::new();
         let mut linked = Vec::new();
         for (k, l) in scene.lights.iter().enumerate() {
-            if l.is_black() || !l.can_reach(lo, hi) {
+            let linking = scene.linking_of(k);
+            // Light linking: a light that lights none of the mesh sends nothing into it.
+            let count = scene.mesh_object_count() as u32;
+            let unlit = (linking.as_ref()).is_some_and(|l| (0..count).all(|o| !l.lights_object(o)));
+            if l.is_black() || !l.can_reach(lo, hi) || unlit {
                 continue;
             }
-            linked.push(scene.blockers_of(k).map(|b| tracer.blocking(Some(b))));
+            linked.push(linking.map(|l| tracer.linked(Some(l))));
             let c = match l {
                 Light::Sun { irradiance, .. } => *irradiance,
                 Light::Point { power, .. }
@@ -272,6 +276,12 @@ impl<'a> SinglePaths<'a> {
             return; // x is not inside the mesh toward the light (an open mesh's edge)
         };
         hit.t = (hit.t - back).max(0.0);
+        // Light linking: light entering an object the group's lights do not light.
+        if let Some(Some(linked)) = self.linked.get(group) {
+            if !linked.lights_object(self.mesh.object_of_triangle(hit.triangle as usize)) {
+                return;
+            }
+        }
         let tri = self.mesh.triangles()[hit.triangle as usize];
         let corners = tri.map(|i| self.mesh.positions()[i as usize]);
         let x_i = x + dir * hit.t;

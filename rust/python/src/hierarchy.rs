@@ -163,9 +163,9 @@ impl PyHierarchy {
             if let Some((p, n)) = pose {
                 inner.set_positions(p, n)?;
             }
-            if let Some((l, w, o, blockers)) = lights {
+            if let Some((l, w, o, linking)) = lights {
                 inner.set_lighting(l, w, Some(o));
-                inner.link_shadows(blockers);
+                inner.link(linking);
             }
             Ok(())
         })

@@ -85,7 +85,7 @@ impl PyPrt {
         )> = match given {
             Some((p, n)) => {
                 let mesh = held(&self.mesh).clone();
-                let (lit, world, occluders, blockers) = match lights {
+                let (lit, world, occluders, linking) = match lights {
                     Some(l) => crate::scene::lighting_of(&l.scene),
                     None => held(&self.lit_with).clone(),
                 };
@@ -94,7 +94,7 @@ impl PyPrt {
                     scene.lights = lit;
                     scene.world = world;
                     scene.occluders = occluders;
-                    scene.shadow_blockers = blockers;
+                    scene.linking = linking;
                     let own = Tracer::new(&scene.mesh);
                     let (tracer, report) = if scene.occluders.is_empty() {
                         (own, Default::default())
@@ -712,9 +712,9 @@ impl PyPrt {
         let version = counter.load(std::sync::atomic::Ordering::Relaxed);
         let scene = &lights.scene;
         let (scale, same_occluders) = {
-            let (old_lights, old_world, old_occluders, old_blockers) = &*held(&self.lit_with);
-            // Other occluders, or another shadow linking: not a rescale.
-            let same = *old_occluders == scene.occluders && *old_blockers == scene.shadow_blockers;
+            let (old_lights, old_world, old_occluders, old_linking) = &*held(&self.lit_with);
+            // Other occluders, or another light or shadow linking: not a rescale.
+            let same = *old_occluders == scene.occluders && *old_linking == scene.linking;
             let scale = translucent_core::light_scale::common_scale(
                 old_lights,
                 old_world,
@@ -803,6 +803,10 @@ impl PyPrt {
         d.set_item("lights_used", held(&self.lighting).lights_used)?;
         d.set_item("lights_skipped_black", held(&self.lighting).lights_skipped)?;
         d.set_item("lights_unreached", held(&self.lighting).lights_unreached)?;
+        d.set_item(
+            "lights_bounce_only",
+            held(&self.lighting).lights_bounce_only,
+        )?;
         d.set_item("world_skipped", held(&self.lighting).world_skipped)?;
         // The rest of the scene: what of it could shadow the mesh and was kept.
         d.set_item(

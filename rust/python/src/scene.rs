@@ -13,18 +13,18 @@ use translucent_core::lights::{Light, World};
 use translucent_core::mesh::Mesh;
 use translucent_core::occluders::{OccluderReport, Occluders};
 use translucent_core::raytrace::Tracer;
-use translucent_core::scene::{Blockers, Scene};
+use translucent_core::scene::{Linking, Scene};
 
-/// A scene's lights, world, occluders and shadow linking (`PyScene::lighting`).
-pub type Lighting = (Vec<Light>, World, Occluders, Vec<Option<Blockers>>);
+/// A scene's lights, world, occluders and light and shadow linking (`PyScene::lighting`).
+pub type Lighting = (Vec<Light>, World, Occluders, Vec<Option<Linking>>);
 
-/// A core scene's lights, world, occluders and shadow linking, cloned.
+/// A core scene's lights, world, occluders and light and shadow linking, cloned.
 pub fn lighting_of(s: &Scene) -> Lighting {
     (
         s.lights.clone(),
         s.world.clone(),
         s.occluders.clone(),
-        s.shadow_blockers.clone(),
+        s.linking.clone(),
     )
 }
 
@@ -48,7 +48,7 @@ impl PyScene {
         self.lighting.clone()
     }
 
-    /// Its lights, world and occluders, and the lights' shadow linking (`link_shadows`):
+    /// Its lights, world and occluders, and the lights' linking (`link_light`, `link_shadows`):
     /// what an `update(lights=scene)` takes from it.
     pub fn lighting(&self) -> Lighting {
         lighting_of(&self.scene)
@@ -317,10 +317,41 @@ impl PyScene {
 
     /// Shadow linking (Cycles' blocker collection) for light `light`, its place among the
     /// lights added (0 the first): only the occluders named in `blockers` cast its shadows
-    /// (every occluder added under such a name); the mesh always does. ValueError names an
-    /// unknown light or occluder. The other lights keep every occluder.
-    fn link_shadows(&mut self, light: usize, blockers: Vec<String>) -> PyResult<()> {
-        self.scene.link_shadows(light, &blockers).map_err(to_py)?;
+    /// (every occluder added under such a name), and of the mesh the objects `mesh` names
+    /// (`mesh_objects`). ValueError names an unknown light, occluder or object. The other
+    /// lights keep every occluder.
+    #[pyo3(signature = (light, blockers, mesh = None))]
+    fn link_shadows(
+        &mut self,
+        light: usize,
+        blockers: Vec<String>,
+        mesh: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let mesh = mesh_objects(mesh)?;
+        self.scene
+            .link_shadows(light, &blockers, mesh.as_deref())
+            .map_err(to_py)?;
+        self.lighting_changed();
+        Ok(())
+    }
+
+    /// Light linking (Cycles' receiver collection) for light `light`, its place among the
+    /// lights added (0 the first): it lights only the occluders named in `receivers` (only
+    /// they send it back as the bounce) and of the mesh the objects `mesh` names
+    /// (`mesh_objects`; one left out still receives it from the occluders it lights).
+    /// ValueError names an unknown light, occluder or object. The other lights light
+    /// everything.
+    #[pyo3(signature = (light, receivers, mesh = None))]
+    fn link_light(
+        &mut self,
+        light: usize,
+        receivers: Vec<String>,
+        mesh: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let mesh = mesh_objects(mesh)?;
+        self.scene
+            .link_light(light, &receivers, mesh.as_deref())
+            .map_err(to_py)?;
         self.lighting_changed();
         Ok(())
     }
@@ -496,4 +527,19 @@ fn colour_or_white(name: &str, power: f64, color: Option<&Bound<'_, PyAny>>) -> 
         Some(c) => colour(power, c),
         None => Ok([power as f32; 3]),
     }
+}
+
+/// The mesh's objects a linking names: None or True, all of them (no mask); False, none; else
+/// a sequence of the objects' indices (the `objects` the Scene was built with; 0 for a mesh of
+/// one). TypeError otherwise.
+fn mesh_objects(mesh: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Vec<u32>>> {
+    let Some(mesh) = mesh else { return Ok(None) };
+    if let Ok(b) = mesh.cast::<pyo3::types::PyBool>() {
+        return Ok((!b.is_true()).then(Vec::new));
+    }
+    mesh.extract::<Vec<u32>>().map(Some).map_err(|_| {
+        pyo3::exceptions::PyTypeError::new_err(
+            "mesh: True, False or a sequence of the mesh's object indices (non-negative integers)",
+        )
+    })
 }

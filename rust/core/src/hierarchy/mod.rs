@@ -339,11 +339,11 @@ impl Hierarchy {
         self.set_lighting(lights, world, None);
     }
 
-    /// Shadow linking per light (`Scene::shadow_blockers`, by the lights' places): a light
-    /// whose blockers changed is lit again at the next evaluation.
-    pub fn link_shadows(&mut self, blockers: Vec<Option<crate::scene::Blockers>>) {
-        if blockers != self.scene.shadow_blockers {
-            self.scene.shadow_blockers = blockers;
+    /// Light and shadow linking per light (`Scene::linking`, by the lights' places): a light
+    /// whose linking changed is lit again at the next evaluation.
+    pub fn link(&mut self, linking: Vec<Option<crate::scene::Linking>>) {
+        if linking != self.scene.linking {
+            self.scene.linking = linking;
             self.face_irradiance = None;
             self.vertex_irradiance = None;
             if let Some(t) = &mut self.terms {

@@ -48,7 +48,7 @@ impl KeyedPerSource {
             self.settings = Some(settings.clone());
         }
         let bounds = scene.mesh.bounds();
-        let (sources, counts) = sources_at_work(scene);
+        let (sources, counts) = sources_at_work(scene, tracer);
         let mut old = std::mem::take(&mut self.parts);
         let mut rays = 0;
         let mut sum = vec![[0.0f32; 3]; points.len()];
@@ -63,6 +63,8 @@ impl KeyedPerSource {
                 Vec::new()
             } else {
                 let (lights, world) = src.emitters();
+                let linked = src.tracer(tracer);
+                let tracer = linked.as_ref().unwrap_or(tracer);
                 let p: Vec<Vec3> = missing.iter().map(|&i| points[i]).collect();
                 let n: Vec<Vec3> = missing.iter().map(|&i| normals[i]).collect();
                 let (v, r) = irradiance_of_sources(

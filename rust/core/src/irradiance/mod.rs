@@ -14,7 +14,7 @@ use crate::limits;
 use crate::optics::fresnel_transmittance;
 use crate::progress::Ticker;
 use crate::raytrace::Tracer;
-use crate::scene::{Blockers, Scene};
+use crate::scene::{Linking, Scene};
 use crate::spherical_harmonics as sh;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -107,9 +107,14 @@ pub struct IrradianceReport {
     pub lights_used: usize,
     /// Lights that emit nothing: no rays at all.
     pub lights_skipped: usize,
-    /// Lights that cannot reach the translucent mesh (a spot aimed away, an area light facing
-    /// away): no rays and no per-point work.
+    /// Lights that can reach neither the translucent mesh nor an object of the rest of the
+    /// scene that sends light back (a spot aimed away, an area light facing away): no rays and
+    /// no per-point work.
     pub lights_unreached: usize,
+    /// Lights that cannot reach the translucent mesh but reach an object that sends light
+    /// back (a spot aimed at the floor beside it, a light facing a bounce card): counted among
+    /// `lights_used`, they cast no direct ray and are gathered by the bounce alone.
+    pub lights_bounce_only: usize,
     /// A black world: no environment rays.
     pub world_skipped: bool,
 }
@@ -148,33 +153,33 @@ pub fn irradiance_with_progress(
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
     let (lights, world) = (&scene.lights, &scene.world);
     let bounds = scene.mesh.bounds();
-    if !scene.links_shadows() {
+    if !scene.links() {
         return irradiance_of_sources(
             bounds, lights, world, tracer, points, normals, settings, progress,
         );
     }
-    // Shadow linking: the lights that share their blockers together, each group through a
-    // tracer whose shadow rays see only those (the world with the unlinked lights).
-    let mut groups: Vec<(Option<Blockers>, Vec<Light>)> = vec![(None, Vec::new())];
+    // Light and shadow linking: the lights linked alike together, each group through a
+    // tracer that follows their linking (the world with the unlinked lights).
+    let mut groups: Vec<(Option<Linking>, Vec<Light>)> = vec![(None, Vec::new())];
     for (k, l) in lights.iter().enumerate() {
-        let blockers = scene.blockers_of(k);
-        match groups.iter_mut().find(|g| g.0 == blockers) {
+        let linking = scene.linking_of(k);
+        match groups.iter_mut().find(|g| g.0 == linking) {
             Some(g) => g.1.push(l.clone()),
-            None => groups.push((blockers, vec![l.clone()])),
+            None => groups.push((linking, vec![l.clone()])),
         }
     }
     let mut sum = vec![[0.0f32; 3]; points.len()];
     let mut rays = 0;
-    for (k, (blockers, group)) in groups.into_iter().enumerate() {
+    for (k, (linking, group)) in groups.into_iter().enumerate() {
         let world = if k == 0 { world } else { &World::Black };
-        let linked = tracer.blocking(blockers);
+        let linked = tracer.linked(linking);
         let (v, r) = irradiance_of_sources(
             bounds, &group, world, &linked, points, normals, settings, progress,
         )?;
         rays += r.rays;
         sum.par_iter_mut().zip(&v).for_each(|(s, x)| add(s, *x));
     }
-    let (_, counts) = lights_at_work(lights, world, bounds);
+    let (_, counts) = lights_at_work(lights, world, bounds, tracer.bounce_bounds());
     Ok((sum, IrradianceReport { rays, ..counts }))
 }
 
@@ -205,9 +210,9 @@ pub fn irradiance_of_sources(
             settings.eta
         )));
     }
-    let (reaching, counts) = lights_at_work(lights, world, bounds);
+    let (reaching, counts) = lights_at_work(lights, world, bounds, tracer.bounce_bounds());
     let world = (!world.is_black()).then_some(world);
-    let rays = asked_rays(reaching.len(), world.is_some(), points.len(), settings)?;
+    let rays = asked_rays(reaching.direct, world.is_some(), points.len(), settings)?;
     let ticker = Ticker::new(progress, rays as u64);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
     let world_sh = world.filter(|_| settings.world_unshadowed).map(|w| {
@@ -222,7 +227,7 @@ pub fn irradiance_of_sources(
     // Points in chunks, one tick per chunk for the lights (a tick per point read the clock
     // for every point: 0.2 s of the bunny's 2 M samples); the world ticks per row of its grid.
     const CHUNK: usize = 256;
-    let light_ticks = reaching.len() as u64 * u64::from(settings.area_samples.max(1));
+    let light_ticks = reaching.direct as u64 * u64::from(settings.area_samples.max(1));
     let results: Vec<([f32; 3], u64)> = points
         .par_chunks(CHUNK)
         .zip(normals.par_chunks(CHUNK))
@@ -262,13 +267,14 @@ pub fn irradiance_of_sources(
     Ok((results.into_iter().map(|r| r.0).collect(), report))
 }
 
-/// One point's irradiance: every reaching light, then the world (by its nine coefficients
-/// when unshadowed, else sampled). Zero at a point with no usable normal.
+/// One point's irradiance: every light reaching the mesh, then the world (by its nine
+/// coefficients when unshadowed, else sampled), then the bounce of these and of the lights
+/// reaching the rest of the scene alone. Zero at a point with no usable normal.
 #[allow(clippy::too_many_arguments)]
 fn estimate_point(
     tracer: &Tracer,
     settings: &IrradianceSettings,
-    reaching: &[&Light],
+    reaching: &Reaching<'_>,
     world: Option<&World>,
     world_sh: Option<&[[f64; 3]]>,
     ticker: &Ticker,
@@ -289,7 +295,9 @@ fn estimate_point(
         ticker,
     };
     let mut sum = [0.0f32; 3];
-    for l in reaching {
+    // Light linking: lights that do not light the mesh here reach it by the bounce alone.
+    let lit = reaching.direct == 0 || tracer.lights_point(p, n);
+    for l in reaching.lights[..reaching.direct].iter().filter(|_| lit) {
         add(&mut sum, est.light(l, settings.area_samples.max(1)));
     }
     if let Some(coefficients) = world_sh {
@@ -307,12 +315,15 @@ fn estimate_point(
     } else if let Some(w) = world {
         add(&mut sum, est.world(w, settings.world_samples.max(1)));
     }
-    if tracer.bounces() && (!reaching.is_empty() || world.is_some()) {
+    if tracer.bounces() && (!reaching.lights.is_empty() || world.is_some()) {
         // A stream of its own: the lights' and the world's draws stay as they were. With no
         // source there is nothing to send back: no ray.
         let mut rng = Rng::new(settings.seed ^ BOUNCE_STREAM, i as u64);
         let rays = settings.bounce_rays();
-        add(&mut sum, est.bounce(reaching, world, rays, &mut rng));
+        add(
+            &mut sum,
+            est.bounce(&reaching.lights, world, rays, &mut rng),
+        );
     }
     (sum, est.rays)
 }
@@ -339,30 +350,55 @@ fn asked_rays(lights: usize, world: bool, points: usize, s: &IrradianceSettings)
 /// Whether an estimate at `points` points of `scene` keeps to the limits: what a caller checks
 /// before building a ray tracer for it.
 pub fn check_request(scene: &Scene, points: usize, settings: &IrradianceSettings) -> Result<()> {
-    let (reaching, _) = lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds());
-    asked_rays(reaching.len(), !scene.world.is_black(), points, settings).map(|_| ())
+    let (reaching, _) = lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds(), None);
+    asked_rays(reaching.direct, !scene.world.is_black(), points, settings).map(|_| ())
 }
 
-/// The lights that emit and can reach the mesh's box `bounds`, and the report's counts of
-/// lights used, skipped and unreached and of the world (no rays yet).
+/// The lights at work for a mesh whose box is `bounds`: those that emit and can reach it, then
+/// those that cannot but reach `bounce` (the box of the rest of the scene's triangles that send
+/// light back: lit by the bounce alone); and the report's counts of lights used, skipped,
+/// unreached and bounce-only and of the world (no rays yet).
 fn lights_at_work<'a>(
     lights: &'a [Light],
     world: &World,
     (lo, hi): (Vec3, Vec3),
-) -> (Vec<&'a Light>, IrradianceReport) {
+    bounce: Option<(Vec3, Vec3)>,
+) -> (Reaching<'a>, IrradianceReport) {
     let emitting = lights.iter().filter(|l| !l.is_black()).count();
-    let reaching: Vec<&Light> = lights
-        .iter()
-        .filter(|l| !l.is_black() && l.can_reach(lo, hi))
+    let mut places: Vec<usize> = (0..lights.len())
+        .filter(|&k| !lights[k].is_black() && lights[k].can_reach(lo, hi))
         .collect();
+    let direct = places.len();
+    if let Some((blo, bhi)) = bounce.filter(|(l, h)| l.cmple(*h).all()) {
+        let bounced = |&k: &usize| {
+            let l = &lights[k];
+            !l.is_black() && !l.can_reach(lo, hi) && l.can_reach(blo, bhi)
+        };
+        places.extend((0..lights.len()).filter(bounced));
+    }
+    let lights_of: Vec<&Light> = places.iter().map(|&k| &lights[k]).collect();
     let counts = IrradianceReport {
         rays: 0,
-        lights_used: reaching.len(),
+        lights_used: lights_of.len(),
         lights_skipped: lights.len() - emitting,
-        lights_unreached: emitting - reaching.len(),
+        lights_unreached: emitting - lights_of.len(),
+        lights_bounce_only: lights_of.len() - direct,
         world_skipped: world.is_black(),
     };
+    let reaching = Reaching {
+        lights: lights_of,
+        places,
+        direct,
+    };
     (reaching, counts)
+}
+
+/// The lights at work (`lights_at_work`), with their places in the list given: the first
+/// `direct` reach the mesh, the rest light it by the bounce alone.
+struct Reaching<'a> {
+    lights: Vec<&'a Light>,
+    places: Vec<usize>,
+    direct: usize,
 }
 
 /// Irradiance at fixed points kept light by light (and the world), so that a changed scene
@@ -375,23 +411,23 @@ pub struct PerSource {
     parts: Vec<(Source, Vec<[f32; 3]>)>,
 }
 
-/// A light with the occluder objects that cast its shadows (`Scene::blockers_of`; None: all),
-/// or the world.
+/// A light with its light and shadow linking (`Scene::linking_of`; None: unlinked), or the
+/// world.
 #[derive(Debug, Clone, PartialEq)]
 enum Source {
-    Light(Light, Option<Blockers>),
+    Light(Light, Option<Linking>),
     World(World),
 }
 
-/// Each light of `scene` that can reach its mesh's bounding box, then the world unless it is
-/// black: the sources a `PerSource` keeps apart; and the scene's light and world counts.
-fn sources_at_work(scene: &Scene) -> (Vec<Source>, IrradianceReport) {
-    let (reaching, counts) = lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds());
-    let mut sources: Vec<Source> = (reaching.into_iter())
-        .map(|l| {
-            let k = scene.lights.iter().position(|x| std::ptr::eq(x, l));
-            Source::Light(l.clone(), k.and_then(|k| scene.blockers_of(k)))
-        })
+/// Each light of `scene` at work (reaching its mesh's bounding box, or only the objects that
+/// send light back to it through `tracer`), then the world unless it is black: the sources a
+/// `PerSource` keeps apart; and the scene's light and world counts.
+fn sources_at_work(scene: &Scene, tracer: &Tracer) -> (Vec<Source>, IrradianceReport) {
+    let bounce = tracer.bounce_bounds();
+    let (reaching, counts) =
+        lights_at_work(&scene.lights, &scene.world, scene.mesh.bounds(), bounce);
+    let mut sources: Vec<Source> = (reaching.places.iter())
+        .map(|&k| Source::Light(scene.lights[k].clone(), scene.linking_of(k)))
         .collect();
     if !scene.world.is_black() {
         sources.push(Source::World(scene.world.clone()));
@@ -400,6 +436,15 @@ fn sources_at_work(scene: &Scene) -> (Vec<Source>, IrradianceReport) {
 }
 
 impl Source {
+    /// Light and shadow linking: the tracer this source's rays take, where it is linked (None:
+    /// `tracer` itself).
+    fn tracer(&self, tracer: &Tracer) -> Option<Tracer> {
+        match self {
+            Source::Light(_, Some(l)) => Some(tracer.linked(Some(l.clone()))),
+            _ => None,
+        }
+    }
+
     /// The source as `irradiance_of_sources` takes it: one light and no world, or the world.
     fn emitters(&self) -> (&[Light], &World) {
         match self {
@@ -480,7 +525,7 @@ impl PerSource {
             self.settings = Some(settings.clone());
         }
         let bounds = scene.mesh.bounds();
-        let (sources, counts) = sources_at_work(scene);
+        let (sources, counts) = sources_at_work(scene, tracer);
         let mut old = std::mem::take(&mut self.parts);
         let mut rays = 0;
         for src in sources {
@@ -497,11 +542,7 @@ impl PerSource {
                         .map(|k| (i, k))
                 })
             };
-            // Shadow linking: this light's shadows cast by its blockers alone.
-            let linked = match &src {
-                Source::Light(_, Some(b)) => Some(tracer.blocking(Some(b.clone()))),
-                _ => None,
-            };
+            let linked = src.tracer(tracer);
             let tracer = linked.as_ref().unwrap_or(tracer);
             // A sun, point or spot light at points on the mesh: its shadow from the corners.
             let on_mesh = match (&src, triangles) {

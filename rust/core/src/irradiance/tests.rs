@@ -458,7 +458,7 @@ fn shadow_linking_lets_only_a_lights_blockers_cast_its_shadows() {
         Light::sun(Vec3::new(0.0, 0.0, -1.0), [1.0; 3]).unwrap(),
         Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap(),
     ];
-    s.link_shadows(0, &["roof".to_string()]).unwrap();
+    s.link_shadows(0, &["roof".to_string()], None).unwrap();
     let pts = [
         Vec3::new(-2.0, 0.0, 0.0),
         Vec3::new(2.0, 0.0, 0.0),
@@ -477,15 +477,91 @@ fn shadow_linking_lets_only_a_lights_blockers_cast_its_shadows() {
         .unwrap();
     assert_close(&by_source, &expect);
     // Unlinked, both suns are blocked by either square.
-    s.shadow_blockers.clear();
+    s.linking.clear();
     let (unlinked, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
     assert_close(&unlinked, &[[0.0; 3], [0.0; 3], [3.0; 3]]);
     // An unknown light or occluder is named.
-    let e = s.link_shadows(2, &[]).unwrap_err().to_string();
+    let e = s.link_shadows(2, &[], None).unwrap_err().to_string();
     assert!(e.contains("light 2"), "{e}");
     let e = s
-        .link_shadows(0, &["lid".to_string()])
+        .link_shadows(0, &["lid".to_string()], None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("\"lid\""), "{e}");
+}
+
+#[test]
+fn a_mesh_left_out_of_a_lights_blockers_casts_none_of_its_shadows() {
+    // `scene(10, true)`: the mesh's own small square at height 1 over the origin shadows the
+    // plane below it from the suns straight down. Left out of the first sun's (2 W/m^2)
+    // blocker collection, it casts none of that sun's shadow; the second (1 W/m^2),
+    // unlinked, is still shadowed there. Closed form E cos: 2 below the square, 3 beside it.
+    let mut s = scene(10.0, true);
+    s.lights = vec![
+        Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap(),
+        Light::sun(Vec3::new(0.0, 0.0, -1.0), [1.0; 3]).unwrap(),
+    ];
+    let pts = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(3.0, 3.0, 0.0)];
+    let normals = vec![Vec3::Z; pts.len()];
+    let settings = IrradianceSettings::default();
+    let tracer = s.tracer();
+    let (plain, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+    assert_close(&plain, &[[0.0; 3], [3.0; 3]]);
+    s.link_shadows(0, &[], Some(&[])).unwrap();
+    let expect = [[2.0f32; 3], [3.0; 3]];
+    let (linked, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+    assert_close(&linked, &expect);
+    let mut kept = PerSource::default();
+    let (by_source, _) = kept
+        .evaluate(&s, &tracer, &pts, &normals, &settings)
+        .unwrap();
+    assert_close(&by_source, &expect);
+    // Light linking kept beside it: the sun not lighting the mesh leaves only the other's 1.
+    s.link_light(0, &[], Some(&[])).unwrap();
+    let (unlit, _) = irradiance(&s, &tracer, &pts, &normals, &settings).unwrap();
+    assert_close(&unlit, &[[0.0; 3], [1.0; 3]]);
+}
+
+#[test]
+fn linking_follows_each_object_of_the_mesh() {
+    // `scene(10, true)` as two objects: the plane (0) and the small square at height 1 over the
+    // origin (1), under two suns straight down, 2 and 1 W/m^2. Closed form E cos at a point
+    // under the square, one in the open and one on the square's top:
+    let mut s = scene(10.0, true);
+    s.mesh = s
+        .mesh
+        .clone()
+        .with_objects(vec![0, 0, 0, 0, 1, 1, 1, 1])
+        .unwrap();
+    s.lights = vec![
+        Light::sun(Vec3::new(0.0, 0.0, -1.0), [2.0; 3]).unwrap(),
+        Light::sun(Vec3::new(0.0, 0.0, -1.0), [1.0; 3]).unwrap(),
+    ];
+    let pts = [
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(3.0, 3.0, 0.0),
+        Vec3::new(0.1, 0.05, 1.0),
+    ];
+    let normals = vec![Vec3::Z; pts.len()];
+    let settings = IrradianceSettings::default();
+    let tracer = Tracer::new(&s.mesh);
+    let check = |s: &Scene, expect: [f32; 3]| {
+        let expect = expect.map(|e| [e; 3]);
+        let (plain, _) = irradiance(s, &tracer, &pts, &normals, &settings).unwrap();
+        assert_close(&plain, &expect);
+        let (kept, _) = PerSource::default()
+            .evaluate(s, &tracer, &pts, &normals, &settings)
+            .unwrap();
+        assert_close(&kept, &expect);
+    };
+    // Unlinked: the square shadows both suns below it.
+    check(&s, [0.0, 3.0, 3.0]);
+    // The square left out of the first sun's blockers: that sun reaches the plane below it.
+    s.link_shadows(0, &[], Some(&[0])).unwrap();
+    check(&s, [2.0, 3.0, 3.0]);
+    // ... and the first sun lighting the square alone: the plane keeps the second sun's 1.
+    s.link_light(0, &[], Some(&[1])).unwrap();
+    check(&s, [0.0, 1.0, 3.0]);
+    let e = s.link_light(0, &[], Some(&[2])).unwrap_err().to_string();
+    assert!(e.contains("object 2, but the mesh holds 2"), "{e}");
 }

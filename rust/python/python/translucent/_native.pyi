@@ -159,12 +159,20 @@ class Scene:
         stop at it; the walks and the object's own light never enter it. `albedo` (a float or
         RGB in [0, 1]) above 0 sends light back by one diffuse bounce. ValueError names what is
         wrong (NaN, an index out of range, an empty object)."""
-    def link_shadows(self, light: int, blockers: Sequence[str]) -> None:
+    def link_shadows(self, light: int, blockers: Sequence[str], mesh: bool | Sequence[int] = True) -> None:
         """Shadow linking (Cycles' blocker collection) for light `light`, its place among the
-        lights added (0 the first): only the occluders named in `blockers` cast its shadows; the
-        mesh always does; the other lights keep every occluder. Followed by the irradiance of
-        PRT (single scattering too), the hierarchy and the references; not by the splatting.
-        ValueError names an unknown light or occluder."""
+        lights added (0 the first): only the occluders named in `blockers` cast its shadows, and
+        of the mesh the objects `mesh` names (True: all, False: none, or their indices as in
+        `objects`; 0 for a mesh of one); the other lights keep every object. Followed by the
+        irradiance of PRT (single scattering too), the hierarchy and the references; not by the
+        splatting. ValueError names an unknown light, occluder or object; TypeError a `mesh`
+        that is none of those."""
+    def link_light(self, light: int, receivers: Sequence[str], mesh: bool | Sequence[int] = True) -> None:
+        """Light linking (Cycles' receiver collection) for light `light`, its place among the
+        lights added: it lights only the occluders named in `receivers` (only they send it back
+        as the bounce) and of the mesh the objects `mesh` names (as `link_shadows`); a mesh
+        object left out still receives it from the occluders it lights, as in Cycles. Followed
+        where `link_shadows` is. ValueError names an unknown light, occluder or object."""
     @property
     def occluders(self) -> dict[str, object]:
         """What the shadow rays keep of the occluders under the current lights and world:
@@ -376,7 +384,8 @@ class Prt:
     def report(self) -> dict[str, float | int | bool | list[float]]:
         """What the precompute did and left out: samples, support_radius [unit], knots,
         coefficients, basis_size_by_tolerance, representative_error, stored_channels, rays,
-        lights_used, lights_skipped_black, lights_unreached, world_skipped, skipped_beyond_support,
+        lights_used, lights_skipped_black, lights_unreached, lights_bounce_only (lights reaching
+        only the rest of the scene, gathered by its bounce), world_skipped, skipped_beyond_support,
         skipped_dark, skipped_other_object, single_scattering (bool), single_scattering_share,
         single_scattering_tolerance, single_scattering_reason, single (None, or coefficients,
         steps, knots, step_length, groups, spread_groups, legendre_order, transport_bytes,
