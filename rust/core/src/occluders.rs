@@ -646,6 +646,45 @@ mod tests {
     }
 
     #[test]
+    fn a_noisy_bounce_casts_more_batches_and_a_quiet_one_stops_after_the_first() {
+        // Points asked for more bounce rays (`vertex_bounce_factor` 2: batches of 32) go on
+        // while the bounce's standard error exceeds BOUNCE_TARGET of their irradiance. Under
+        // the grazing sun the wall's light is the bright floor's bounce alone (noisy: more
+        // batches, and the mean stays on the closed form rho E / 2); under a sun at 45 degrees
+        // over a floor of albedo 0.02 the bounce is a sliver of the direct light (one batch).
+        let settings = IrradianceSettings {
+            vertex_bounce_factor: 2,
+            ..Default::default()
+        }
+        .for_density(Density::Receivers);
+        let batch = f64::from(settings.bounce_rays());
+        // Rays per point and the wall's mean irradiance.
+        let run = |scene: &Scene| {
+            let m = &scene.mesh;
+            let (e, r) = irradiance(
+                scene,
+                &scene.tracer(),
+                m.positions(),
+                m.normals(),
+                &settings,
+            )
+            .unwrap();
+            let mean = e.iter().map(|x| f64::from(x[0])).sum::<f64>() / e.len() as f64;
+            (r.rays as f64 / e.len() as f64, mean)
+        };
+        let (noisy, mean) = run(&wall_over_floor([0.8; 3]));
+        // One batch: `batch` bounce rays and a shadow ray for each of the half that meet the
+        // floor; the noisy wall casts well over two.
+        assert!(noisy > 2.0 * 1.5 * batch, "{noisy} rays a point");
+        assert!((mean - 0.8).abs() < 0.02 * 0.8, "{mean} vs 0.8");
+        let mut quiet = wall_over_floor([0.02; 3]);
+        quiet.lights = vec![Light::sun(Vec3::new(-1.0, 0.0, -1.0), [2.0; 3]).unwrap()];
+        let (rays, _) = run(&quiet);
+        // The direct ray, one batch, and a shadow ray for each floor hit: at most 1 + 2 batch.
+        assert!(rays <= 1.0 + 2.0 * batch, "{rays} rays a point");
+    }
+
+    #[test]
     fn vertices_asked_for_more_bounce_rays_scatter_less_about_the_closed_form() {
         // `wall_over_floor`: E = rho E_sun / 2 at every vertex. Points used alone with
         // `vertex_bounce_factor` 8 cast 8x the bounce rays, so their spread about the closed form

@@ -278,7 +278,7 @@ impl PyPrt {
         backend = "auto", fit_tolerance = None, profile = "cycles", interreflection = None,
         interreflection_rays = 144, walks = None, walk_vertices = 1000, walk_rays = None,
         walk_media = None, single_scattering = None, single_coefficients = 16, single_steps = 32,
-        first_preview = false))]
+        first_preview = false, seed = 0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -305,6 +305,7 @@ impl PyPrt {
         #[pyo3(from_py_with = crate::convert::int)] single_coefficients: i64,
         #[pyo3(from_py_with = crate::convert::int)] single_steps: i64,
         first_preview: bool,
+        #[pyo3(from_py_with = crate::convert::int)] seed: i64,
     ) -> PyResult<Self> {
         let model = crate::material::profile_kind(profile)?;
         let single_coefficients: usize = non_negative("single_coefficients", single_coefficients)?;
@@ -338,6 +339,7 @@ impl PyPrt {
                 n => n.map(|n| non_negative("walk_media", n)).transpose()?,
             },
             first_preview,
+            seed: non_negative("seed", seed)?,
         };
         let world_samples: u32 = non_negative("world_samples", world_samples)?;
         let area_samples: u32 = non_negative("area_samples", area_samples)?;
@@ -363,7 +365,7 @@ impl PyPrt {
             eta,
             world_samples,
             area_samples,
-            seed: 0,
+            seed: request.seed,
             ..Default::default()
         };
         let tracer = scene.tracer();

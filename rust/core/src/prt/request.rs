@@ -46,6 +46,10 @@ pub struct PrtRequest {
     /// pay: at 70,000 the spacing nears the profile's length, the far field gives way and the
     /// transport took 5 s.
     pub first_preview: bool,
+    /// The random streams' seed: the walks' and (through the caller's irradiance settings) the
+    /// irradiance's. Two seeds give two independent previews: their difference measures the
+    /// noise the estimate states.
+    pub seed: u64,
 }
 
 /// The most samples a first preview takes (`PrtRequest::first_preview`).
@@ -82,8 +86,14 @@ impl Default for PrtRequest {
             walk_media: None,
             walk_rays: None,
             first_preview: false,
+            seed: 0,
         }
     }
+}
+
+/// The walks' seed for the request's `seed` (0: the walks' default stream).
+fn walk_seed(seed: u64) -> u64 {
+    WalkTermSettings::default().seed ^ seed.wrapping_mul(0x9e37_79b9_7f4a_7c15)
 }
 
 impl PrtRequest {
@@ -127,12 +137,14 @@ impl PrtRequest {
                 rays: 0,
                 vertices: self.walk_vertices,
                 media: self.walk_media.unwrap_or(usize::MAX),
+                seed: walk_seed(self.seed),
                 ..WalkTermSettings::default()
             }),
             None if profile == ProfileKind::Cycles => Some(WalkTermSettings {
                 rays: walk_rays,
                 vertices: self.walk_vertices,
                 media: self.walk_media.unwrap_or(usize::MAX),
+                seed: walk_seed(self.seed),
                 ..WalkTermSettings::default()
             }),
             None => None,
