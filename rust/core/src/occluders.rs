@@ -340,7 +340,7 @@ fn span(points: &[Vec3], axis: Vec3) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::irradiance::{irradiance, Density, IrradianceSettings};
+    use crate::irradiance::{irradiance, Density, IrradianceReport, IrradianceSettings};
     use crate::mesh::test_meshes::plane;
     use crate::raytrace::Tracer;
     use crate::scene::Scene;
@@ -488,22 +488,28 @@ mod tests {
         scene
     }
 
+    /// The mesh's irradiance averaged over its vertices, per channel, and the report.
+    fn mean_irradiance(
+        scene: &Scene,
+        settings: &IrradianceSettings,
+    ) -> ([f64; 3], IrradianceReport) {
+        let mesh = &scene.mesh;
+        let tracer = scene.tracer();
+        let (e, r) =
+            irradiance(scene, &tracer, mesh.positions(), mesh.normals(), settings).unwrap();
+        let mean = std::array::from_fn(|c| {
+            e.iter().map(|x| f64::from(x[c])).sum::<f64>() / e.len() as f64
+        });
+        (mean, r)
+    }
+
     #[test]
     fn a_wall_on_a_lit_floor_receives_half_the_floors_radiosity() {
         // `wall_over_floor`: E = rho E_sun / 2; a black floor sends nothing.
         for albedo in [[0.5, 0.25, 0.75], [0.0; 3]] {
             let scene = wall_over_floor(albedo);
-            let mesh = &scene.mesh;
-            let (e, r) = irradiance(
-                &scene,
-                &scene.tracer(),
-                mesh.positions(),
-                mesh.normals(),
-                &IrradianceSettings::default(),
-            )
-            .unwrap();
-            for c in 0..3 {
-                let mean = e.iter().map(|x| f64::from(x[c])).sum::<f64>() / e.len() as f64;
+            let (means, r) = mean_irradiance(&scene, &IrradianceSettings::default());
+            for (c, &mean) in means.iter().enumerate() {
                 let expect = f64::from(albedo[c]) * 2.0 / 2.0;
                 assert!(
                     (mean - expect).abs() <= 0.02 * expect,
@@ -526,17 +532,8 @@ mod tests {
         scene.lights = vec![Light::sun(Vec3::new(-1.0, 0.0, -1.0), [2.0; 3]).unwrap()];
         let direct = 2f64.sqrt();
         let check = |scene: &Scene, direct: f64, bounce: f64, what: &str| {
-            let mesh = &scene.mesh;
-            let (e, _) = irradiance(
-                scene,
-                &scene.tracer(),
-                mesh.positions(),
-                mesh.normals(),
-                &IrradianceSettings::default(),
-            )
-            .unwrap();
-            for c in 0..3 {
-                let mean = e.iter().map(|x| f64::from(x[c])).sum::<f64>() / e.len() as f64;
+            let (means, _) = mean_irradiance(scene, &IrradianceSettings::default());
+            for (c, &mean) in means.iter().enumerate() {
                 let expect = direct + bounce * f64::from(albedo[c]) * 2f64.sqrt() / 2.0;
                 assert!(
                     (mean - expect).abs() <= 0.02 * expect,
@@ -585,15 +582,7 @@ mod tests {
             world_samples: 2048, // 512 bounce rays a point
             ..Default::default()
         };
-        let mesh = &scene.mesh;
-        let (e, r) = irradiance(
-            &scene,
-            &scene.tracer(),
-            mesh.positions(),
-            mesh.normals(),
-            &settings,
-        )
-        .unwrap();
+        let (means, r) = mean_irradiance(&scene, &settings);
         assert_eq!(
             (r.lights_used, r.lights_bounce_only, r.lights_unreached),
             (1, 1, 0)
@@ -620,10 +609,10 @@ mod tests {
             }
             sum
         };
+        let mesh = &scene.mesh;
         let expect: f64 = mesh.positions().iter().map(|p| expect_at(*p)).sum::<f64>()
             / mesh.vertex_count() as f64;
-        for c in 0..3 {
-            let mean = e.iter().map(|x| f64::from(x[c])).sum::<f64>() / e.len() as f64;
+        for (c, &mean) in means.iter().enumerate() {
             let want = f64::from(albedo[c]) * expect;
             assert!(
                 (mean - want).abs() <= 0.03 * want,
@@ -633,16 +622,9 @@ mod tests {
         // A black floor sends nothing back: the spot reaches nothing that matters, no ray.
         let mut dark = wall_over_floor([0.0; 3]);
         dark.lights = scene.lights.clone();
-        let (e, r) = irradiance(
-            &dark,
-            &dark.tracer(),
-            dark.mesh.positions(),
-            dark.mesh.normals(),
-            &settings,
-        )
-        .unwrap();
+        let (means, r) = mean_irradiance(&dark, &settings);
         assert_eq!((r.lights_used, r.lights_unreached, r.rays), (0, 1, 0));
-        assert!(e.iter().all(|x| *x == [0.0; 3]));
+        assert_eq!(means, [0.0; 3]);
     }
 
     #[test]
@@ -658,19 +640,10 @@ mod tests {
         }
         .for_density(Density::Receivers);
         let batch = f64::from(settings.bounce_rays());
-        // Rays per point and the wall's mean irradiance.
+        // Rays per point and the wall's mean irradiance (red).
         let run = |scene: &Scene| {
-            let m = &scene.mesh;
-            let (e, r) = irradiance(
-                scene,
-                &scene.tracer(),
-                m.positions(),
-                m.normals(),
-                &settings,
-            )
-            .unwrap();
-            let mean = e.iter().map(|x| f64::from(x[0])).sum::<f64>() / e.len() as f64;
-            (r.rays as f64 / e.len() as f64, mean)
+            let (means, r) = mean_irradiance(scene, &settings);
+            (r.rays as f64 / scene.mesh.vertex_count() as f64, means[0])
         };
         let (noisy, mean) = run(&wall_over_floor([0.8; 3]));
         // One batch: `batch` bounce rays and a shadow ray for each of the half that meet the

@@ -251,19 +251,20 @@ impl Tracer {
             (Some((_, i)), Some(objects)) => objects[i],
             _ => 0,
         };
-        mask.get(object as usize).copied().unwrap_or(true)
+        self.lights_object(object)
     }
 
     /// Whether the mesh's BVH holds a triangle that casts this tracer's shadows along `ray`
     /// (shadow linking leaves some of its objects out).
     fn own_occludes(&self, ray: Ray) -> bool {
-        let Some(mask) = self.linking.as_ref().and_then(|l| l.mesh_blockers.as_ref()) else {
+        let Some(linking) = self.linking.as_ref().filter(|l| l.mesh_blockers.is_some()) else {
             return self.own.occluded(ray);
         };
+        let none = (linking.mesh_blockers.as_ref()).is_some_and(|m| m.iter().all(|&x| !x));
         match &self.objects {
-            _ if mask.iter().all(|&x| !x) => false,
+            _ if none => false,
             Some(objects) => !self.own.bvh.ray_traverse_miss(ray, |ray, id| {
-                if mask.get(objects[id] as usize).copied().unwrap_or(true) {
+                if linking.mesh_object_blocks(objects[id]) {
                     intersect(&self.own.triangles[id], ray)
                 } else {
                     f32::INFINITY
@@ -275,14 +276,12 @@ impl Tracer {
 
     /// Whether a triangle of occluder object `object` casts this tracer's shadows.
     fn blocks(&self, object: u32) -> bool {
-        let blockers = self.linking.as_ref().and_then(|l| l.blockers.as_ref());
-        blockers.is_none_or(|b| b.get(object as usize).copied().unwrap_or(true))
+        (self.linking.as_ref()).is_none_or(|l| l.occluder_blocks(object))
     }
 
     /// Whether occluder object `object` is lit by this tracer's lights (and so sends them back).
     fn receives(&self, object: u32) -> bool {
-        let receivers = self.linking.as_ref().and_then(|l| l.receivers.as_ref());
-        receivers.is_none_or(|r| r.get(object as usize).copied().unwrap_or(true))
+        (self.linking.as_ref()).is_none_or(|l| l.lights_occluder(object))
     }
 
     /// Whether `bvh` (the rest, or the bounce's, with `objects` per triangle in BVH order)

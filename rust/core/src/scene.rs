@@ -30,19 +30,28 @@ pub struct LightLinking {
 impl LightLinking {
     /// Whether the mesh's object `object` is lit.
     pub fn lights_object(&self, object: u32) -> bool {
-        in_mask(&self.mesh_receivers, object)
+        in_mask(self.mesh_receivers.as_deref(), object)
     }
 
     /// Whether the mesh's object `object` casts the shadows.
-    pub fn blocked_by_object(&self, object: u32) -> bool {
-        in_mask(&self.mesh_blockers, object)
+    pub fn mesh_object_blocks(&self, object: u32) -> bool {
+        in_mask(self.mesh_blockers.as_deref(), object)
+    }
+
+    /// Whether occluder object `object` is lit (and so sends the light back).
+    pub fn lights_occluder(&self, object: u32) -> bool {
+        in_mask(self.receivers.as_deref(), object)
+    }
+
+    /// Whether occluder object `object` casts the shadows.
+    pub fn occluder_blocks(&self, object: u32) -> bool {
+        in_mask(self.blockers.as_deref(), object)
     }
 }
 
 /// Whether a mask (None: everything) holds `k` (past its end: it does).
-pub fn in_mask(mask: &Option<Vec<bool>>, k: u32) -> bool {
-    mask.as_ref()
-        .is_none_or(|m| m.get(k as usize).copied().unwrap_or(true))
+fn in_mask(mask: Option<&[bool]>, k: u32) -> bool {
+    mask.is_none_or(|m| m.get(k as usize).copied().unwrap_or(true))
 }
 
 /// One light's linking, shared between the scene and the tracers cast for it.
