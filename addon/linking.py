@@ -93,13 +93,11 @@ def link(scene, lights: range, light: bpy.types.Object, previewed: list[str], oc
     maps each exported occluder's label to its object's name), and the previewed objects it
     lights and those casting its shadows (`previewed`, by their places in the exported mesh)."""
     linking = getattr(light, "light_linking", None)
-    if getattr(linking, "receiver_collection", None) is not None:
-        names = sorted(label for label, name in occluders.items() if receives(light, name))
-        mesh = _objects(previewed, lambda n: receives(light, n))
+    for collection, member, apply in (("receiver_collection", receives, scene.link_light),
+                                      ("blocker_collection", blocks, scene.link_shadows)):
+        if getattr(linking, collection, None) is None:
+            continue
+        names = sorted(label for label, name in occluders.items() if member(light, name))
+        mesh = _objects(previewed, lambda n, member=member: member(light, n))
         for k in lights:
-            scene.link_light(k, names, mesh=mesh)
-    if getattr(linking, "blocker_collection", None) is not None:
-        names = sorted(label for label, name in occluders.items() if blocks(light, name))
-        mesh = _objects(previewed, lambda n: blocks(light, n))
-        for k in lights:
-            scene.link_shadows(k, names, mesh=mesh)
+            apply(k, names, mesh=mesh)

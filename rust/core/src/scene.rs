@@ -33,6 +33,11 @@ impl LightLinking {
         in_mask(self.mesh_receivers.as_deref(), object)
     }
 
+    /// Whether it lights none of the mesh's objects (`Scene::link_light` with no object).
+    pub fn lights_no_mesh_object(&self) -> bool {
+        (self.mesh_receivers.as_ref()).is_some_and(|m| m.iter().all(|&x| !x))
+    }
+
     /// Whether the mesh's object `object` casts the shadows.
     pub fn mesh_object_blocks(&self, object: u32) -> bool {
         in_mask(self.mesh_blockers.as_deref(), object)

@@ -129,8 +129,7 @@ impl<'a> SinglePaths<'a> {
         for (k, l) in scene.lights.iter().enumerate() {
             let linking = scene.linking_of(k);
             // Light linking: a light that lights none of the mesh sends nothing into it.
-            let count = scene.mesh_object_count() as u32;
-            let unlit = (linking.as_ref()).is_some_and(|l| (0..count).all(|o| !l.lights_object(o)));
+            let unlit = (linking.as_ref()).is_some_and(|l| l.lights_no_mesh_object());
             if l.is_black() || !l.can_reach(lo, hi) || unlit {
                 continue;
             }

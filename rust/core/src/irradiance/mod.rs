@@ -383,17 +383,18 @@ fn lights_at_work<'a>(
     bounce: Option<(Vec3, Vec3)>,
 ) -> (Reaching<'a>, IrradianceReport) {
     let emitting = lights.iter().filter(|l| !l.is_black()).count();
-    let mut places: Vec<usize> = (0..lights.len())
-        .filter(|&k| !lights[k].is_black() && lights[k].can_reach(lo, hi))
-        .collect();
-    let direct = places.len();
-    if let Some((blo, bhi)) = bounce.filter(|(l, h)| l.cmple(*h).all()) {
-        let bounced = |&k: &usize| {
-            let l = &lights[k];
-            !l.is_black() && !l.can_reach(lo, hi) && l.can_reach(blo, bhi)
-        };
-        places.extend((0..lights.len()).filter(bounced));
+    let bounce = bounce.filter(|(l, h)| l.cmple(*h).all());
+    // Each emitting light once: reaching the mesh, else reaching what sends light back.
+    let (mut places, mut bounced) = (Vec::new(), Vec::new());
+    for (k, l) in lights.iter().enumerate().filter(|(_, l)| !l.is_black()) {
+        if l.can_reach(lo, hi) {
+            places.push(k);
+        } else if bounce.is_some_and(|(blo, bhi)| l.can_reach(blo, bhi)) {
+            bounced.push(k);
+        }
     }
+    let direct = places.len();
+    places.extend(bounced);
     let lights_of: Vec<&Light> = places.iter().map(|&k| &lights[k]).collect();
     let counts = IrradianceReport {
         rays: 0,
@@ -708,9 +709,10 @@ impl Estimator<'_> {
     /// equation's first indirect term for a Lambertian rest of the scene (Kajiya 1986), what
     /// Cycles' diffuse bounce off another object gives. Each light is sampled once per hit
     /// (an area light at a random point), the world by one cosine-weighted ray.
-    /// The bounce's mean over `rays.0` cosine-weighted rays, and more batches of as many, up to
-    /// `rays.1` in all, while its standard error exceeds `BOUNCE_TARGET` of the point's
-    /// irradiance (`direct` plus the bounce) in some channel.
+    ///
+    /// N: `batch` rays, then more batches of as many, up to `most` in all, while the mean's
+    /// standard error exceeds `BOUNCE_TARGET` of the point's irradiance (`direct` plus the
+    /// bounce) in some channel.
     fn bounce(
         &mut self,
         lights: &[&Light],
