@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import translucent
-from helpers import fresnel_t, plane, rd_total
+from helpers import fresnel_t, plane, rd_total, sphere
 
 FLOOR_ALBEDO = (0.5, 0.25, 0.8)
 
@@ -101,3 +101,48 @@ def test_the_floor_sends_the_objects_own_light_back_to_it():
     # Per channel the floor's albedo: blue (0.8) reflects more of it than green (0.25).
     assert gain[low, 2].mean() > gain[low, 1].mean()
     assert np.all(added[0.0] == 0.0)
+
+
+def ball_over_a_floor(albedo, n=24):
+    """A 3 mm marble ball resting over a 10 cm floor, a sun lighting the floor alone (light
+    linking): all the ball's light is the floor's bounce."""
+    p, t = sphere(n, 3.0)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.3, 0.0, -1.0), 1.0)
+    fp, ft = floor(50.0)
+    fp[:, 2] = -3.0
+    s.add_occluder(fp, ft, name="floor", albedo=albedo)
+    s.link_light(0, ["floor"], mesh=False)
+    return s, s.vertex_areas[:, 0].astype(np.float64)
+
+
+@pytest.mark.parametrize("walks", [0, None])
+def test_two_seeds_differ_by_the_irradiance_noise_the_estimate_states(walks):
+    """The bounce at the vertices and the samples is a Monte Carlo estimate: its noise reaches
+    the preview through the receiver's disc and point mass, the samples' sum and the walks, and
+    `last_eval["irradiance_noise"]` states it (inside `error_estimate`). Measured, not taken
+    from the code: the RMS of two seeds' difference over sqrt(2) (one preview's noise) within
+    [0.75, 1.33] of the stated noise (the irradiance's alone without the walks; in quadrature
+    with the walks' own when they run). Over a black floor nothing is random in the light:
+    nothing is stated."""
+    s, w = ball_over_a_floor(0.8)
+    m = translucent.Material.preset("marble", mm_per_unit=1.0)
+    kw = dict(walks=0) if walks == 0 else dict(walk_rays=2_000_000)
+
+    def run(seed):
+        prt = translucent.Prt(s, m, backend="cpu", interreflection=False, seed=seed, **kw)
+        b = prt.radiosity(m).astype(np.float64)
+        noise = np.array(prt.last_eval["irradiance_noise"])
+        assert np.all(np.array(prt.last_eval["error_estimate"]) >= noise)
+        if prt.report["walks"] is not None:
+            noise = np.hypot(noise, prt.report["walks"]["noise"])
+        return b, noise
+
+    (a, stated), (b, _) = run(0), run(1)
+    measured = np.sqrt((w[:, None] * (a - b) ** 2).sum(0) / (w[:, None] * a**2).sum(0)) / np.sqrt(2)
+    assert np.all(measured > 0.75 * stated) and np.all(measured < 1.33 * stated), (measured, stated)
+    black, _ = ball_over_a_floor(0.0, n=8)
+    black.link_light(0, ["floor"], mesh=True)  # the ball lit directly too: B is not 0
+    prt = translucent.Prt(black, m, backend="cpu", interreflection=False, walks=0)
+    assert np.all(prt.radiosity(m).max(axis=0) > 0.0)
+    assert prt.last_eval["irradiance_noise"] == [0.0, 0.0, 0.0]

@@ -522,6 +522,40 @@ mod tests {
     }
 
     #[test]
+    fn the_stated_bounce_error_is_the_spread_between_two_seeds() {
+        // `wall_over_floor`: the wall's light is the bounce alone. Two seeds give two
+        // independent estimates per vertex; half their squared difference, averaged over the
+        // 441 vertices, is the variance the stated errors must give (their squares averaged).
+        let scene = wall_over_floor([0.5, 0.25, 0.75]);
+        let tracer = scene.tracer();
+        let mesh = &scene.mesh;
+        let run = |seed| {
+            let settings = IrradianceSettings {
+                seed,
+                ..Default::default()
+            };
+            let mut kept = crate::irradiance::PerSource::default();
+            let (e, _) = kept
+                .evaluate(&scene, &tracer, mesh.positions(), mesh.normals(), &settings)
+                .unwrap();
+            (e, kept.bounce_error())
+        };
+        let ((a, stated), (b, _)) = (run(0), run(1));
+        for c in 0..3 {
+            let n = a.len() as f64;
+            let spread = (a.iter().zip(&b))
+                .map(|(x, y)| f64::from(x[c] - y[c]).powi(2) / 2.0)
+                .sum::<f64>()
+                / n;
+            let said = stated.iter().map(|s| f64::from(s[c]).powi(2)).sum::<f64>() / n;
+            assert!(
+                said > 0.8 * spread && said < 1.25 * spread,
+                "channel {c}: stated variance {said}, between seeds {spread}"
+            );
+        }
+    }
+
+    #[test]
     fn light_linking_leaves_the_direct_light_and_the_bounce_to_what_it_lights() {
         // `wall_over_floor` under a sun of 2 W/m^2 at 45 degrees, from above and +x: the wall
         // receives 2 cos 45 = sqrt 2 directly, the floor sqrt 2 too, of which the wall receives

@@ -580,8 +580,8 @@ impl PyPrt {
 
     /// The last evaluation, None before the first: the keys every method shares ("method",
     /// "quantity", "error_estimate" per channel, "seconds", "skipped" as {"what", "why"}) and
-    /// PRT's own: fit_seconds, dot_seconds, fit_error per channel, backend, the GPU's timings,
-    /// single scattering's estimate and seconds, refresh_advised.
+    /// PRT's own: fit_seconds, dot_seconds, fit_error and irradiance_noise per channel,
+    /// backend, the GPU's timings, single scattering's estimate and seconds, refresh_advised.
     #[getter]
     fn last_eval<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let inner = self.read()?;
@@ -601,6 +601,7 @@ impl PyPrt {
             d.set_item("readback_seconds", g.readback)?;
         }
         d.set_item("fit_error", details.fit_error.to_vec())?;
+        d.set_item("irradiance_noise", details.irradiance_noise.to_vec())?;
         if let Some(l1) = &*held(&self.last_single) {
             // On the GPU, L^(1)'s dot products run inside the MS dispatch (dispatch_seconds).
             d.set_item("single_error_estimate", l1.error_estimate.to_vec())?;
@@ -859,6 +860,7 @@ impl PyPrt {
         d.set_item("interreflection_relay_rays", r.interreflection_relay_rays)?;
         d.set_item("interreflection_share", r.interreflection_share)?;
         d.set_item("seconds_interreflection", r.seconds_interreflection)?;
+        d.set_item("seconds_irradiance_noise", r.seconds_irradiance_noise)?;
         d.set_item("shadow_edge_triangles", r.shadow_edge_triangles)?;
         d.set_item("shadow_edge_points", r.shadow_edge_points)?;
         d.set_item("seconds_shadow_edges", r.seconds_shadow_edges)?;

@@ -197,6 +197,34 @@ pub fn irradiance_of_sources(
     settings: &IrradianceSettings,
     progress: Option<&ProgressFn>,
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+    let (estimated, report) = estimate_sources(
+        bounds, lights, world, tracer, points, normals, settings, progress,
+    )?;
+    Ok((estimated.values, report))
+}
+
+/// Irradiance at points with the standard error of its bounce part per point.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Estimated {
+    pub values: Vec<[f32; 3]>,
+    /// The standard error of each point's bounce off the rest of the scene (its rays' sample
+    /// variance over their count; 0 where none was cast). The lights' and the world's own
+    /// sampling is not in it.
+    pub bounce_error: Vec<[f32; 3]>,
+}
+
+/// `irradiance_of_sources` with each point's bounce error (`Estimated`).
+#[allow(clippy::too_many_arguments)]
+fn estimate_sources(
+    bounds: (Vec3, Vec3),
+    lights: &[Light],
+    world: &World,
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+    progress: Option<&ProgressFn>,
+) -> Result<(Estimated, IrradianceReport)> {
     if points.len() != normals.len() {
         return Err(Error::InvalidArgument(format!(
             "{} points but {} normals",
@@ -228,13 +256,13 @@ pub fn irradiance_of_sources(
     // for every point: 0.2 s of the bunny's 2 M samples); the world ticks per row of its grid.
     const CHUNK: usize = 256;
     let light_ticks = reaching.direct as u64 * u64::from(settings.area_samples.max(1));
-    let results: Vec<([f32; 3], u64)> = points
+    let results: Vec<Point> = points
         .par_chunks(CHUNK)
         .zip(normals.par_chunks(CHUNK))
         .enumerate()
         .flat_map_iter(|(chunk, (ps, ns))| {
-            let out: Vec<([f32; 3], u64)> = if ticker.stopped() {
-                vec![([0.0; 3], 0); ps.len()]
+            let out: Vec<Point> = if ticker.stopped() {
+                vec![Point::default(); ps.len()]
             } else {
                 ps.iter()
                     .zip(ns)
@@ -261,10 +289,14 @@ pub fn irradiance_of_sources(
         .collect();
     ticker.check()?;
     let report = IrradianceReport {
-        rays: results.iter().map(|r| r.1).sum(),
+        rays: results.iter().map(|r| r.rays).sum(),
         ..counts
     };
-    Ok((results.into_iter().map(|r| r.0).collect(), report))
+    let estimated = Estimated {
+        values: results.iter().map(|r| r.value).collect(),
+        bounce_error: results.iter().map(|r| r.bounce_error).collect(),
+    };
+    Ok((estimated, report))
 }
 
 /// One point's irradiance: every light reaching the mesh, then the world (by its nine
@@ -281,9 +313,9 @@ fn estimate_point(
     i: usize,
     p: Vec3,
     n: Vec3,
-) -> ([f32; 3], u64) {
+) -> Point {
     if !(n.is_finite() && n.length_squared() > 0.0) {
-        return ([0.0; 3], 0);
+        return Point::default();
     }
     let mut est = Estimator {
         tracer,
@@ -295,6 +327,7 @@ fn estimate_point(
         ticker,
     };
     let mut sum = [0.0f32; 3];
+    let mut bounce_error = [0.0f32; 3];
     // Light linking: lights that do not light the mesh here reach it by the bounce alone.
     let lit = reaching.direct == 0 || tracer.lights_point(p, n);
     for l in reaching.lights[..reaching.direct].iter().filter(|_| lit) {
@@ -328,12 +361,24 @@ fn estimate_point(
             rays
         };
         let direct = sum;
-        add(
-            &mut sum,
-            est.bounce(&reaching.lights, world, (rays, most), direct, &mut rng),
-        );
+        let (mean, error) = est.bounce(&reaching.lights, world, (rays, most), direct, &mut rng);
+        add(&mut sum, mean);
+        bounce_error = error;
     }
-    (sum, est.rays)
+    Point {
+        value: sum,
+        bounce_error,
+        rays: est.rays,
+    }
+}
+
+/// One point's estimate: its irradiance, the standard error of its bounce part (0 where no
+/// bounce ray was cast) and the rays it cast.
+#[derive(Debug, Clone, Copy, Default)]
+struct Point {
+    value: [f32; 3],
+    bounce_error: [f32; 3],
+    rays: u64,
 }
 
 /// A point asked for more bounce rays (`vertex_bounce_factor` > 1) casts them in batches of
@@ -427,7 +472,10 @@ struct Reaching<'a> {
 #[derive(Debug, Default)]
 pub struct PerSource {
     settings: Option<IrradianceSettings>,
-    parts: Vec<(Source, Vec<[f32; 3]>)>,
+    /// Each source's values and bounce errors (`Estimated`).
+    parts: Vec<(Source, Estimated)>,
+    /// How many points the last `evaluate` estimated.
+    points: usize,
 }
 
 /// A light with its light and shadow linking (`Scene::linking_of`; None: unlinked), or the
@@ -494,6 +542,7 @@ impl PerSource {
     pub fn clear(&mut self) {
         self.parts.clear();
         self.settings = None;
+        self.points = 0;
     }
 
     /// `irradiance(scene, ...)` with the values of lights seen before reused; the report's
@@ -550,12 +599,12 @@ impl PerSource {
         for src in sources {
             let kept = old
                 .iter()
-                .position(|(s, v)| *s == src && v.len() == points.len());
+                .position(|(s, v)| *s == src && v.values.len() == points.len());
             // The same light (or world) but for its power or colour: its values scaled, no
             // ray (the irradiance is linear in the emission: `light_scale::common_scale`).
             let rescaled = || {
                 old.iter().enumerate().find_map(|(i, (s, v))| {
-                    (v.len() == points.len())
+                    (v.values.len() == points.len())
                         .then(|| s.scale_to(&src))
                         .flatten()
                         .map(|k| (i, k))
@@ -572,8 +621,9 @@ impl PerSource {
                 (Some(i), _, _) => old.swap_remove(i).1,
                 (None, Some((i, k)), _) => {
                     let mut v = old.swap_remove(i).1;
-                    v.par_iter_mut()
-                        .for_each(|x| *x = std::array::from_fn(|c| x[c] * k[c]));
+                    let scale = |x: &mut [f32; 3]| *x = std::array::from_fn(|c| x[c] * k[c]);
+                    v.values.par_iter_mut().for_each(scale);
+                    v.bounce_error.par_iter_mut().for_each(scale);
                     v
                 }
                 (None, None, Some((light, triangles))) => {
@@ -585,11 +635,15 @@ impl PerSource {
                         light, tracer, settings, points, normals, on, progress,
                     )?;
                     rays += r;
-                    v
+                    // No bounce on this path (`corners::applies`): nothing random.
+                    Estimated {
+                        bounce_error: vec![[0.0; 3]; v.len()],
+                        values: v,
+                    }
                 }
                 (None, None, None) => {
                     let (lights, world) = src.emitters();
-                    let (v, r) = irradiance_of_sources(
+                    let (v, r) = estimate_sources(
                         bounds, lights, world, tracer, points, normals, settings, progress,
                     )?;
                     rays += r.rays;
@@ -598,11 +652,28 @@ impl PerSource {
             };
             self.parts.push((src, values));
         }
-        let mut sum = vec![[0.0f32; 3]; points.len()];
-        for (_, v) in &self.parts {
-            sum.par_iter_mut().zip(v).for_each(|(s, x)| add(s, *x));
+        self.points = points.len();
+        Ok((
+            self.summed(|e| &e.values),
+            IrradianceReport { rays, ..counts },
+        ))
+    }
+
+    /// The standard error of the bounce in the last `evaluate`'s irradiance, per point: the
+    /// sources' errors added. Each source casts its bounce rays along the same directions from
+    /// a point (one stream per point), so their errors are correlated; the sum of standard
+    /// errors bounds the error of the sum.
+    pub fn bounce_error(&self) -> Vec<[f32; 3]> {
+        self.summed(|e| &e.bounce_error)
+    }
+
+    /// `of` of every source, added point by point.
+    fn summed(&self, of: impl Fn(&Estimated) -> &Vec<[f32; 3]>) -> Vec<[f32; 3]> {
+        let mut sum = vec![[0.0f32; 3]; self.points];
+        for (_, e) in &self.parts {
+            sum.par_iter_mut().zip(of(e)).for_each(|(s, x)| add(s, *x));
         }
-        Ok((sum, IrradianceReport { rays, ..counts }))
+        sum
     }
 }
 
@@ -712,7 +783,7 @@ impl Estimator<'_> {
     ///
     /// N: `batch` rays, then more batches of as many, up to `most` in all, while the mean's
     /// standard error exceeds `BOUNCE_TARGET` of the point's irradiance (`direct` plus the
-    /// bounce) in some channel.
+    /// bounce) in some channel. Returns the mean and its standard error, per channel.
     fn bounce(
         &mut self,
         lights: &[&Light],
@@ -720,7 +791,7 @@ impl Estimator<'_> {
         (batch, most): (u32, u32),
         direct: [f32; 3],
         rng: &mut Rng,
-    ) -> [f32; 3] {
+    ) -> ([f32; 3], [f32; 3]) {
         let (t, b) = self.n.any_orthonormal_pair();
         let origin = self.tracer.offset_origin(self.p, self.n);
         let mut sum = [0.0f64; 3];
@@ -731,17 +802,17 @@ impl Estimator<'_> {
             let frame = (t, b, origin);
             self.bounce_batch(lights, world, batch, frame, rng, &mut sum, &mut squares);
             cast += batch;
-            let n = f64::from(cast);
             let noisy = (0..3).any(|c| {
-                let mean = sum[c] / n;
-                let var = (squares[c] / n - mean * mean).max(0.0);
-                (var / n).sqrt() > f64::from(BOUNCE_TARGET) * (f64::from(direct[c]) + mean)
+                let (mean, error) = mean_and_error(sum[c], squares[c], cast);
+                error > f64::from(BOUNCE_TARGET) * (f64::from(direct[c]) + mean)
             });
             if !noisy {
                 break;
             }
         }
-        std::array::from_fn(|c| (sum[c] / f64::from(cast)) as f32)
+        let both: [(f64, f64); 3] =
+            std::array::from_fn(|c| mean_and_error(sum[c], squares[c], cast));
+        (both.map(|b| b.0 as f32), both.map(|b| b.1 as f32))
     }
 
     /// `rays` bounce rays from `origin` about the normal (with `t`, `b` its frame), each one's
@@ -794,6 +865,21 @@ impl Estimator<'_> {
             }
         }
     }
+}
+
+/// The mean of `n` values from their `sum` and the `sum` of their `squares`, and its standard
+/// error from their unbiased sample variance (the 1/n variance understates it by n/(n - 1):
+/// half at a dense point's two bounce rays). One value gives no variance: its square stands
+/// for it (E[x^2] = var + mean^2 bounds the variance from above).
+fn mean_and_error(sum: f64, squares: f64, n: u32) -> (f64, f64) {
+    let k = f64::from(n.max(1));
+    let mean = sum / k;
+    let var = if n > 1 {
+        ((squares - k * mean * mean) / (k - 1.0)).max(0.0)
+    } else {
+        squares
+    };
+    (mean, (var / k).sqrt())
 }
 
 /// A cosine-weighted direction about `n` (with `t`, `b` completing its frame) from two uniform

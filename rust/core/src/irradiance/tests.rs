@@ -565,3 +565,18 @@ fn linking_follows_each_object_of_the_mesh() {
     let e = s.link_light(0, &[], Some(&[2])).unwrap_err().to_string();
     assert!(e.contains("object 2, but the mesh holds 2"), "{e}");
 }
+
+#[test]
+fn the_bounce_error_is_the_unbiased_standard_error_of_the_mean() {
+    // Two values 1 and 3: mean 2, unbiased variance ((1 - 2)^2 + (3 - 2)^2) / 1 = 2, standard
+    // error sqrt(2 / 2) = 1 (the 1/n variance would give 1/sqrt(2)).
+    let (mean, error) = mean_and_error(4.0, 10.0, 2);
+    assert!(
+        (mean - 2.0).abs() < 1e-12 && (error - 1.0).abs() < 1e-12,
+        "{mean} {error}"
+    );
+    // Equal values: no spread, no error.
+    assert_eq!(mean_and_error(15.0, 45.0, 5), (3.0, 0.0));
+    // One value: its square bounds the variance (it is all we know).
+    assert_eq!(mean_and_error(3.0, 9.0, 1), (3.0, 3.0));
+}

@@ -41,6 +41,9 @@ pub struct PrtDetails {
     pub dot_seconds: f64,
     /// Upload, dispatch and readback when the GPU ran it.
     pub gpu: Option<crate::prt::gpu::GpuTimings>,
+    /// The relative noise, per channel, that the vertices' bounce off the rest of the scene
+    /// brings to B (`irradiance_noise`), inside `error_estimate`; 0 where nothing sends light back.
+    pub irradiance_noise: [f64; 3],
 }
 
 /// One material evaluated by PRT (`evaluation::Evaluation`): B or L per vertex; the error
@@ -217,6 +220,19 @@ impl Prt {
                 false,
             );
         }
+        // The vertices' bounce noise (`irradiance_noise`): through the receiver's own disc and the
+        // point mass, and through the walk term as it scales it (D / A).
+        let irradiance_noise = self.irradiance_noise.as_ref().map_or([0.0; 3], |n| {
+            let gain: [f64; 3] =
+                std::array::from_fn(|ch| f64::from(c.vectors[ch][0]) + c.point_mass[ch]);
+            let totals = material.totals();
+            let scale = |_: usize, ch: usize| totals[ch] / n.totals[ch];
+            let walked = self.walks.is_some() && walks;
+            n.relative(&radiosity, &|_, ch| gain[ch], &scale, walked)
+        });
+        for (e, x) in error_estimate.iter_mut().zip(irradiance_noise) {
+            *e += x;
+        }
         self.apply_light_scale(&mut radiosity);
         let dot_seconds = t1.elapsed().as_secs_f64();
         Ok((
@@ -231,6 +247,7 @@ impl Prt {
                     fit_seconds,
                     dot_seconds,
                     gpu,
+                    irradiance_noise,
                 },
             },
             l1,

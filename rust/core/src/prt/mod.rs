@@ -26,6 +26,7 @@ mod color_picks;
 mod color_table;
 mod evaluate;
 pub mod gpu;
+mod irradiance_noise;
 mod knots;
 mod layout;
 mod pose;
@@ -78,6 +79,9 @@ pub struct Prt {
     /// I(x_o) per vertex, for the profiles' point mass (not scaled by the rim coverage: a
     /// diffuse lobe returns the light where it arrives, whatever surface lies around).
     vertex_irradiance: Vec<[f32; 3]>,
+    /// The standard error of `vertex_irradiance`'s bounce off the rest of the scene, where
+    /// it was measured (`irradiance_noise`): the estimate states the noise it brings.
+    irradiance_noise: Option<irradiance_noise::IrradianceNoise>,
     near_radius: f64,
     /// The support radius spans the whole mesh: nothing lies beyond it.
     whole_mesh: bool,

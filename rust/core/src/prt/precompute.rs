@@ -2,6 +2,7 @@
 //! receiver's disc, the knots, the transport rows, then the walks and the object's own light.
 
 use super::basis::Basis;
+use super::irradiance_noise::IrradianceNoise;
 use super::knots::{default_spacing, Knots};
 use super::layout::Transport;
 use super::rows::{transport_rows, within, FarField};
@@ -102,7 +103,7 @@ impl Prt {
             .flat_map(|r| r.profiles.iter().cloned())
             .collect();
 
-        let lit = SampledLight::new(mesh, &profiles, settings, irradiance, sampler)?;
+        let mut lit = SampledLight::new(mesh, &profiles, settings, irradiance, sampler)?;
         report.samples = lit.samples.len();
         report.first_preview = settings.first_preview;
         report.sample_spacing = f64::from(lit.spacing);
@@ -138,7 +139,8 @@ impl Prt {
             positions: mesh.positions().to_vec(),
             normals: mesh.normals().to_vec(),
             triangles: std::sync::Arc::new(mesh.triangles().to_vec()),
-            vertex_irradiance: lit.vertex_irradiance,
+            irradiance_noise: lit.irradiance_noise(mesh, &resolved[0]),
+            vertex_irradiance: lit.vertex_irradiance.clone(),
             near_radius,
             whole_mesh: knots.whole_mesh,
             eta: settings.eta,
@@ -147,7 +149,7 @@ impl Prt {
             walks: None,
             single: None,
             report,
-            samples: lit.samples,
+            samples: Vec::new(),
             spacing: lit.spacing,
             settings: settings.clone(),
             representatives: representatives.to_vec(),
@@ -156,6 +158,8 @@ impl Prt {
             tree_shape: Some(std::sync::Arc::new(shape)),
             color_cache: Default::default(),
         };
+        prt.add_samples_noise(mesh, &mut lit, &resolved[0], &|_| tick(transport_end))?;
+        prt.samples = lit.samples;
         // One BVH for the walks and the object's own light, built only if either runs.
         let bounce_strata = settings.interreflection.filter(|&s| s > 0);
         let needed = settings.walks.is_some() || bounce_strata.is_some();
@@ -247,6 +251,14 @@ impl Prt {
             &shared,
             first.as_ref().map(|f| f as _),
         )?;
+        // The vertices' bounce noise through the walks (`irradiance_noise`): the term read again
+        // under the draw's irradiance.
+        if let Some(mut noise) = self.irradiance_noise.take() {
+            let t = Instant::now();
+            noise.walks = self.walks_moved(mesh, &term, &media[0], &edges, halfspace, &noise)?;
+            self.report.seconds_irradiance_noise += t.elapsed().as_secs_f64();
+            self.irradiance_noise = Some(noise);
+        }
         let mut walked = Vec::with_capacity(beside.len());
         for (k, &i) in beside.iter().enumerate() {
             let own = self.radiosity_of(&media[i], false, false)?.values;
@@ -365,8 +377,24 @@ pub(super) fn transport_under(
     tick: &dyn Fn(f32) -> Result<()>,
 ) -> Result<(Transport, TreeShape)> {
     let colour = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
+    transport_projected(mesh, lit, &colour, basis, settings, report, shape, tick)
+}
+
+/// `transport_under` with the colour projection given (`irradiance_noise`: a draw of the
+/// irradiance's error gathered as the irradiance itself was).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn transport_projected(
+    mesh: &Mesh,
+    lit: &SampledLight,
+    colour: &Projection,
+    basis: &Basis,
+    settings: &PrtSettings,
+    report: &mut PrtReport,
+    shape: Option<&TreeShape>,
+    tick: &dyn Fn(f32) -> Result<()>,
+) -> Result<(Transport, TreeShape)> {
     let t_tree = Instant::now();
-    let tree = lit.tree(mesh, &colour, shape);
+    let tree = lit.tree(mesh, colour, shape);
     report.seconds_tree = t_tree.elapsed().as_secs_f64();
     let disc = ReceiverDisc::new(mesh, &tree, lit.spacing);
     let t_transport = Instant::now();
@@ -378,7 +406,7 @@ pub(super) fn transport_under(
         basis,
         &far,
         &disc,
-        &colour,
+        colour,
         &lit.vertex_irradiance,
         tick,
     )?;
@@ -397,8 +425,13 @@ pub(super) fn transport_under(
 pub(super) struct SampledLight {
     pub(super) spacing: f32,
     pub(super) samples: Vec<SurfaceSample>,
-    sample_irradiance: Vec<[f32; 3]>,
+    pub(super) sample_irradiance: Vec<[f32; 3]>,
     pub(super) vertex_irradiance: Vec<[f32; 3]>,
+    /// The standard error of the vertices' bounce off the rest of the scene, where it was
+    /// measured and is not zero everywhere (`PerSource::bounce_error`).
+    pub(super) vertex_error: Option<Vec<[f32; 3]>>,
+    /// The same at the samples.
+    pub(super) sample_error: Option<Vec<[f32; 3]>>,
 }
 
 /// The irradiance at a transport's samples (taken at the given spacing) and at its vertices.
@@ -456,7 +489,27 @@ impl SampledLight {
             samples,
             sample_irradiance,
             vertex_irradiance,
+            vertex_error: None,
+            sample_error: None,
         })
+    }
+
+    /// The vertices' bounce error with their areas, where it was measured.
+    /// One draw of it (`irradiance_noise`) for the representative `rep`.
+    pub(super) fn irradiance_noise(&self, mesh: &Mesh, rep: &Resolved) -> Option<IrradianceNoise> {
+        (self.vertex_error.as_ref())
+            .map(|e| IrradianceNoise::draw(e, mesh.vertex_areas(), rep.totals()))
+    }
+
+    /// The vertices' and the samples' bounce errors (`vertex_error`, `sample_error`), each
+    /// kept where some point has one.
+    pub(super) fn with_errors(mut self, vertices: Vec<[f32; 3]>, samples: Vec<[f32; 3]>) -> Self {
+        let kept = |e: Vec<[f32; 3]>, len: usize| {
+            (e.len() == len && e.iter().flatten().any(|&x| x > 0.0)).then_some(e)
+        };
+        self.vertex_error = kept(vertices, self.vertex_irradiance.len());
+        self.sample_error = kept(samples, self.sample_irradiance.len());
+        self
     }
 
     /// The `samples` (at `spacing`) and the vertices lit by `irradiance`.
@@ -507,7 +560,7 @@ pub(super) struct Projection {
 }
 
 impl Projection {
-    fn of(samples: &[[f32; 3]], vertices: &[[f32; 3]]) -> Self {
+    pub(super) fn of(samples: &[[f32; 3]], vertices: &[[f32; 3]]) -> Self {
         let colour = common_colour(samples, vertices);
         Self {
             colour,

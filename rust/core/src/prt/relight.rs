@@ -123,6 +123,7 @@ impl Prt {
             normals: self.normals.clone(),
             triangles: self.triangles.clone(),
             vertex_irradiance: self.vertex_irradiance.clone(),
+            irradiance_noise: self.irradiance_noise.clone(),
             near_radius: self.near_radius,
             whole_mesh: self.whole_mesh,
             eta: self.eta,
@@ -257,7 +258,7 @@ impl Prt {
         let mut out = RelightReport::default();
         // `self` is `relit`'s private copy (dropped on any error): its samples move in and out.
         let samples = std::mem::take(&mut self.samples);
-        let lit = sampled(samples)?;
+        let mut lit = sampled(samples)?;
         out.seconds_irradiance = start.elapsed().as_secs_f64();
         tick(0.2)?;
         let t = Instant::now();
@@ -275,9 +276,11 @@ impl Prt {
         self.transport = transport;
         self.tree_shape = Some(std::sync::Arc::new(shape));
         out.seconds_transport = t.elapsed().as_secs_f64();
+        self.report = report;
+        self.irradiance_noise = lit.irradiance_noise(mesh, &resolved[0]);
+        self.add_samples_noise(mesh, &mut lit, &resolved[0], &|_| tick(0.7))?;
         self.vertex_irradiance = lit.vertex_irradiance;
         self.samples = lit.samples;
-        self.report = report;
         self.carry_terms(mesh, &resolved[0], irradiance, true, progress, &mut out)?;
         out.seconds = start.elapsed().as_secs_f64();
         tick(1.0)?;
@@ -323,6 +326,12 @@ impl Prt {
                     edges: &edges,
                 };
                 term.relight(mesh, rep, &light, &halfspace)?;
+                if let Some(mut noise) = self.irradiance_noise.take() {
+                    let t = Instant::now();
+                    noise.walks = self.walks_moved(mesh, &term, rep, &edges, &halfspace, &noise)?;
+                    self.report.seconds_irradiance_noise += t.elapsed().as_secs_f64();
+                    self.irradiance_noise = Some(noise);
+                }
                 let mut relit = Vec::with_capacity(beside.len());
                 for (medium, mut t) in beside {
                     let own = self.radiosity_of(&medium, false, false)?.values;
@@ -455,7 +464,11 @@ fn kept_sampler<'a>(
             Some(ask),
         )?;
         merge(&r);
-        SampledLight::from_values(mesh, spacing, samples, at_samples, at_vertices)
+        let errors = (kept.vertices.bounce_error(), kept.samples.bounce_error());
+        Ok(
+            SampledLight::from_values(mesh, spacing, samples, at_samples, at_vertices)?
+                .with_errors(errors.0, errors.1),
+        )
     }
 }
 

@@ -134,6 +134,9 @@ pub struct PrtReport {
     pub last_own_light_rays: u64,
     pub interreflection_share: f64,
     pub seconds_interreflection: f64,
+    /// The walk term read again under one draw of the vertices' bounce error
+    /// (`irradiance_noise`): the noise that error brings through the walks.
+    pub seconds_irradiance_noise: f64,
     pub seconds_tree: f64,
     pub seconds_transport: f64,
     pub seconds_total: f64,

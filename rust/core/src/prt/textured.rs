@@ -220,6 +220,37 @@ impl Prt {
         for (e, a) in error_estimate.iter_mut().zip(direct) {
             *e += a;
         }
+        // The vertices' bounce noise (`irradiance_noise`): each vertex's gain blended from its
+        // nodes, split between its lobes, and turned into radiance as its B was.
+        let irradiance_noise = self.irradiance_noise.as_ref().map_or([0.0; 3], |n| {
+            let near = per_node(&|n| {
+                std::array::from_fn(|c| {
+                    f64::from(n.coefficients.vectors[c][0]) + n.coefficients.point_mass[c]
+                })
+            });
+            let picks = &table.picked.picks;
+            let finish = |v: usize, c: usize, x: f64| {
+                along
+                    .as_ref()
+                    .map_or(x, |f| x * blend(&f.along, &picks[v], c) * f.scale[c])
+            };
+            let gain = |v: usize, c: usize| {
+                finish(
+                    v,
+                    c,
+                    vertex.share(v) * blend(&near, &picks[v], c) + vertex.diffuse(v, c),
+                )
+            };
+            let scale = |v: usize, c: usize| {
+                let a = blend(&nodes.totals, &picks[v], c) / n.totals[c];
+                finish(v, c, vertex.share(v) * a)
+            };
+            let walked = self.walks.is_some() && walks;
+            n.relative(&radiosity, &gain, &scale, walked)
+        });
+        for (e, x) in error_estimate.iter_mut().zip(irradiance_noise) {
+            *e += x;
+        }
         if own.as_ref().is_some_and(|o| o.walked.is_some()) {
             add_indirect_noise(
                 &mut error_estimate,
@@ -257,6 +288,7 @@ impl Prt {
                 fit_seconds,
                 dot_seconds,
                 gpu: None,
+                irradiance_noise,
             },
         };
         Ok((evaluation, table))

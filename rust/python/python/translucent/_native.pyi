@@ -350,9 +350,10 @@ class Prt:
     def last_eval(self) -> dict[str, Any] | None:
         """The keys every method shares: method ("prt"), quantity ("radiosity" or "radiance"),
         error_estimate (per channel, relative), seconds, skipped (a list of {"what", "why"}); then
-        PRT's own: fit_seconds, dot_seconds, backend, fit_error, refresh_advised; GPU timings
-        when the GPU ran it; single_error_estimate and single_seconds when single scattering
-        was evaluated."""
+        PRT's own: fit_seconds, dot_seconds, backend, fit_error, irradiance_noise (the part of
+        error_estimate the irradiance's bounce noise brings, per channel), refresh_advised; GPU
+        timings when the GPU ran it; single_error_estimate and single_seconds when single
+        scattering was evaluated."""
     @property
     def refresh_advised(self) -> bool | None:
         """True when the last evaluation's estimated error says the material left the range the
