@@ -10,8 +10,8 @@ every object in it) carries its state, `CollectionLightLinking.link_state`.
 What the export follows (`link`): which props and which previewed objects each light lights (a
 prop left out sends none of it back; a previewed object left out still receives it from the props
 it lights: `translucent.Scene.link_light`), and which of them cast its shadows (`link_shadows`).
-A light lighting nothing exported is left out. The splatting follows none of it: `export.add_lights`
-puts a line in `ExportInfo.linking` saying so."""
+A light lighting nothing exported is left out, and `export.add_lights` puts a line in
+`ExportInfo.linking` saying so. Every method follows the rest (the splatting's light views too)."""
 
 from __future__ import annotations
 
@@ -69,14 +69,11 @@ def key(light: bpy.types.Object) -> tuple:
 def follow(light: bpy.types.Object, previewed: list[str], occluders: list[str]) -> tuple[bool, list[str]]:
     """Whether to export `light` (a light, or an emissive rectangle) for the previewed objects
     (names), `occluders` the other objects exported (names; the light's own object aside), and
-    the lines saying what of its linking is not followed: a light that lights none of the
-    exported objects is left out; the splatting follows no linking."""
+    the lines saying what its linking left out: a light that lights none of the exported objects
+    is left out."""
     occluders = [n for n in occluders if n != light.name]
     if not any(receives(light, n) for n in previewed + occluders):
         return False, [f"{light.name} lights none of the exported objects (light linking): left out"]
-    linked = getattr(light, "light_linking", None)
-    if any(getattr(linked, a, None) is not None for a in ("receiver_collection", "blocker_collection")):
-        return True, [f"{light.name}'s light and shadow linking: not followed by the splatting"]
     return True, []
 
 

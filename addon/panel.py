@@ -98,11 +98,9 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     if sess.edit_message:
         lines.append((sess.edit_message, "TIME" if mat.name in PREPARING else "ERROR"))
     lines += [(part, "NONE") for part in summary(sess).split("; ")]
-    # Light and shadow linking: what is followed (a light lighting none of the objects left out)
-    # and what is not.
-    followed = ("left out, its bounce off the other objects with it", "(shadow linking; not followed by the splatting)")
-    lines += [(line, "INFO" if line.endswith(followed) and not (sess.method == "splat" and "splatting" in line)
-               else "ERROR") for line in getattr(sess.info, "linking", [])]
+    # Light and shadow linking: every method follows it; a light lighting none of the exported
+    # objects is left out, and said so.
+    lines += [(line, "INFO") for line in getattr(sess.info, "linking", [])]
     if getattr(sess.info, "emitters", None):
         lines.append((f"{', '.join(sess.info.emitters)}: emissive, lighting the scene in Cycles; not a light here "
                       "(emissive meshes not followed: shadows and bounce only)", "ERROR"))

@@ -274,6 +274,11 @@ impl Tracer {
         }
     }
 
+    /// Whether the mesh's object `object` casts this tracer's shadows (shadow linking).
+    pub fn mesh_object_blocks(&self, object: u32) -> bool {
+        (self.linking.as_ref()).is_none_or(|l| l.mesh_object_blocks(object))
+    }
+
     /// Whether a triangle of occluder object `object` casts this tracer's shadows.
     fn blocks(&self, object: u32) -> bool {
         (self.linking.as_ref()).is_none_or(|l| l.occluder_blocks(object))

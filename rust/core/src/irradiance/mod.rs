@@ -158,14 +158,53 @@ pub fn irradiance_with_progress(
             bounds, lights, world, tracer, points, normals, settings, progress,
         );
     }
-    // Light and shadow linking: the lights linked alike together, each group through a
-    // tracer that follows their linking (the world with the unlinked lights).
+    let links: Vec<Option<Linking>> = (0..lights.len()).map(|k| scene.linking_of(k)).collect();
+    irradiance_of_linked_sources(
+        bounds,
+        (lights, &links),
+        world,
+        tracer,
+        points,
+        normals,
+        settings,
+        progress,
+    )
+}
+
+/// Lights, each with its light and shadow linking (`Scene::linking_of`; the same length).
+pub type LinkedLights<'a> = (&'a [Light], &'a [Option<Linking>]);
+
+/// `irradiance_of_sources` for `lights` each with its light and shadow linking (`links`, the
+/// same length; `Scene::linking_of`): the lights linked alike in one estimate, through a tracer
+/// that follows their linking, the world with the unlinked ones.
+#[allow(clippy::too_many_arguments)]
+pub fn irradiance_of_linked_sources(
+    bounds: (Vec3, Vec3),
+    (lights, links): LinkedLights<'_>,
+    world: &World,
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+    progress: Option<&ProgressFn>,
+) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
+    if links.len() != lights.len() {
+        return Err(Error::InvalidArgument(format!(
+            "{} lights but {} linkings",
+            lights.len(),
+            links.len()
+        )));
+    }
+    if links.iter().all(Option::is_none) {
+        return irradiance_of_sources(
+            bounds, lights, world, tracer, points, normals, settings, progress,
+        );
+    }
     let mut groups: Vec<(Option<Linking>, Vec<Light>)> = vec![(None, Vec::new())];
-    for (k, l) in lights.iter().enumerate() {
-        let linking = scene.linking_of(k);
-        match groups.iter_mut().find(|g| g.0 == linking) {
+    for (l, linking) in lights.iter().zip(links) {
+        match groups.iter_mut().find(|g| g.0 == *linking) {
             Some(g) => g.1.push(l.clone()),
-            None => groups.push((linking, vec![l.clone()])),
+            None => groups.push((linking.clone(), vec![l.clone()])),
         }
     }
     let mut sum = vec![[0.0f32; 3]; points.len()];

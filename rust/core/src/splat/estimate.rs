@@ -9,8 +9,8 @@
 //! cost 1.5-3 s on two cores (`docs/splat.md`).
 
 use crate::error::Result;
-use crate::irradiance::{irradiance_of_sources, Density, IrradianceSettings};
-use crate::lights::{Light, World};
+use crate::irradiance::{irradiance_of_linked_sources, Density, IrradianceSettings, LinkedLights};
+use crate::lights::World;
 use crate::metrics::relative_error;
 use crate::profiles::Resolved;
 use crate::progress::ProgressFn;
@@ -45,7 +45,7 @@ pub fn receivers(n: usize, k: usize) -> Vec<u32> {
 pub fn estimate(
     scene: &Scene,
     resolved: &Resolved,
-    (lights, world, tracer): (&[Light], &World, &Tracer),
+    (lights, world, tracer): (LinkedLights<'_>, &World, &Tracer),
     at: &[u32],
     values: &[[f64; 3]],
     progress: Option<&ProgressFn>,
@@ -58,7 +58,7 @@ pub fn estimate(
     };
     let bounds = mesh.bounds();
     let irr = |p: &[glam::Vec3], n: &[glam::Vec3], d: Density| {
-        irradiance_of_sources(bounds, lights, world, tracer, p, n, &s.for_density(d), None)
+        irradiance_of_linked_sources(bounds, lights, world, tracer, p, n, &s.for_density(d), None)
             .map(|(v, _)| v)
     };
     let settings = ReferenceSettings {

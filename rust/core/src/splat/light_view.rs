@@ -370,7 +370,9 @@ pub fn light_samples(
     Ok((samples, counts))
 }
 
-/// One cell's ray: its first hit on the mesh, and the sample there if light enters.
+/// One cell's ray: its first hit on the mesh, and the sample there if light enters. Where
+/// shadow linking leaves the hit's object out of the light's blockers (`Tracer::linked`), the
+/// ray goes on through it to the next hit, which is lit too (Cycles' shadow ray passes it).
 fn cast(
     view: &View,
     light: &Light,
@@ -378,17 +380,57 @@ fn cast(
     tracer: &Tracer,
     eta: f64,
     cell: Cell,
+    out: &mut (Vec<LightSample>, ViewCounts),
+) {
+    out.1.rays += 1;
+    let mut from = 0.0f32;
+    while let Some(hit) = tracer.intersect(
+        cell.origin + cell.direction * from,
+        cell.direction,
+        cell.t_max - from,
+    ) {
+        let t = from + hit.t;
+        let object = mesh.object_of_triangle(hit.triangle as usize);
+        sample_at(
+            view,
+            light,
+            mesh,
+            tracer,
+            eta,
+            &cell,
+            (hit.triangle, t),
+            out,
+        );
+        if tracer.mesh_object_blocks(object) {
+            break;
+        }
+        from = t;
+    }
+}
+
+/// The sample where the cell's ray meets `triangle` at distance `t`, if light enters there
+/// (light linking: if the light lights its object).
+#[allow(clippy::too_many_arguments)]
+fn sample_at(
+    view: &View,
+    light: &Light,
+    mesh: &Mesh,
+    tracer: &Tracer,
+    eta: f64,
+    cell: &Cell,
+    (triangle, t): (u32, f32),
     (samples, counts): &mut (Vec<LightSample>, ViewCounts),
 ) {
-    counts.rays += 1;
-    let Some(hit) = tracer.intersect(cell.origin, cell.direction, cell.t_max) else {
-        return;
-    };
     counts.hits += 1;
-    let p = cell.origin + cell.direction * hit.t;
+    let p = cell.origin + cell.direction * t;
+    let object = mesh.object_of_triangle(triangle as usize);
+    if !tracer.lights_object(object) {
+        counts.unlit += 1; // light linking: the light does not light this object
+        return;
+    }
     // Light enters where the surface's own normal faces it, as the irradiance estimator
     // takes it: the vertex normals interpolated at the hit.
-    let Some((flat, uv, shading)) = hit_surface(mesh, hit.triangle, p) else {
+    let Some((flat, uv, shading)) = hit_surface(mesh, triangle, p) else {
         return; // a degenerate triangle carries no surface
     };
     // The cell covers footprint / |n . w| of the triangle's plane, whichever way it is wound
@@ -407,7 +449,7 @@ fn cast(
     // as far as the light (a sun: without end), from the side of the plane the light is on.
     let toward_light = match view {
         View::Orthographic { .. } => f32::INFINITY,
-        View::Perspective { .. } => hit.t * (1.0 - 1e-5),
+        View::Perspective { .. } => t * (1.0 - 1e-5),
     };
     let lit_side = if flat.dot(cell.direction) < 0.0 {
         flat
@@ -430,21 +472,21 @@ fn cast(
     }
     let footprint = match view {
         View::Orthographic { .. } => cell.measure,
-        View::Perspective { .. } => cell.measure * f64::from(hit.t) * f64::from(hit.t),
+        View::Perspective { .. } => cell.measure * f64::from(t) * f64::from(t),
     };
     // An edge-on hit stands for its triangle at most, or for `GRAZING_CAP` footprints where
     // the cells are coarser than the triangles (Shah's 8-32 a side): capped at the triangle
     // alone, a coarse cell on a fine mesh lost all but a triangle's worth of its light.
-    let triangle = f64::from(mesh.triangle_areas()[hit.triangle as usize]);
-    let area = (footprint / f64::from(cos)).min(triangle.max(GRAZING_CAP * footprint));
+    let area_of_triangle = f64::from(mesh.triangle_areas()[triangle as usize]);
+    let area = (footprint / f64::from(cos)).min(area_of_triangle.max(GRAZING_CAP * footprint));
     counts.samples += 1;
     samples.push(LightSample {
         position: p,
         area: area as f32,
         cos,
         irradiance,
-        object: mesh.object_of_triangle(hit.triangle as usize),
-        triangle: hit.triangle,
+        object,
+        triangle,
         uv,
     });
 }

@@ -33,7 +33,7 @@ mod tests;
 use crate::error::{Error, Result};
 use crate::evaluation::{check_eye, Quantity, Skipped};
 use crate::irradiance::{
-    irradiance as irradiance_of_scene, irradiance_of_sources, IrradianceSettings,
+    irradiance as irradiance_of_scene, irradiance_of_linked_sources, IrradianceSettings,
 };
 use crate::lights::{Light, World};
 use crate::occluders::Occluders;
@@ -41,7 +41,7 @@ use crate::optics::Material;
 use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile, Resolved};
 use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
-use crate::scene::Scene;
+use crate::scene::{Linking, Scene};
 use crate::surface_terms::{self, TermReport, TermSettings, Terms};
 use camera::{camera_view, Camera, PixelHit};
 use glam::Vec3;
@@ -259,8 +259,9 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> Plan {
 struct Sources {
     splats: Vec<Splat>,
     /// The lights splatted and the world where it is peeled (what the point mass's irradiance
-    /// is taken from).
+    /// is taken from), each light with its light and shadow linking (`Scene::linking_of`).
     used: Vec<Light>,
+    links: Vec<Option<Linking>>,
     world: World,
     /// The mesh and the occluders that can shadow it from those lights.
     tracer: Tracer,
@@ -301,10 +302,11 @@ fn sources(
         peeled,
         mut skipped,
     } = plan(scene, &sphere);
-    let used: Vec<Light> = (views.iter().map(|(k, _)| *k))
+    let order: Vec<usize> = (views.iter().map(|(k, _)| *k))
         .chain(peeled.iter().map(|(k, _)| *k))
-        .map(|k| scene.lights[k].clone())
         .collect();
+    let used: Vec<Light> = order.iter().map(|&k| scene.lights[k].clone()).collect();
+    let links: Vec<Option<Linking>> = order.iter().map(|&k| scene.linking_of(k)).collect();
     let world = scene.world.clone();
     // The rest of the scene that can shadow the mesh from the lights splatted and the world.
     let (kept, _) = (scene.occluders).relevant(mesh.bounds(), &used, &world);
@@ -332,12 +334,14 @@ fn sources(
     for ((k, view), sizes) in views.iter().zip(planned) {
         let light = &scene.lights[*k];
         let t_light = Instant::now();
+        // Light and shadow linking: what this light lights and what casts its shadows.
+        let linked = tracer.linked(scene.linking_of(*k));
         let (s, counts) =
-            light_samples(view, light, mesh, &tracer, sizes.grid, eta, Some(&ticker))?;
+            light_samples(view, light, mesh, &linked, sizes.grid, eta, Some(&ticker))?;
         let (s, reused) = match reuse {
             Some(r) => {
                 let mut r = r.lock().unwrap_or_else(|e| e.into_inner());
-                let (s, c) = r.merge(*k, sizes.grid, light, mesh, &tracer, eta, (view, s));
+                let (s, c) = r.merge(*k, sizes.grid, light, mesh, &linked, eta, (view, s));
                 (s, Some(c))
             }
             None => (s, None),
@@ -383,7 +387,7 @@ fn sources(
             (&mesh_tracer, &tracer),
             &sphere,
             sizes.grid,
-            (&used[views.len()..], &world),
+            ((&used[views.len()..], &links[views.len()..]), &world),
             &irradiance,
             progress,
             (peel_from, to),
@@ -406,6 +410,7 @@ fn sources(
     Ok(Sources {
         splats,
         used,
+        links,
         world,
         tracer,
         mesh_tracer,
@@ -464,9 +469,9 @@ fn radiosity_at(
             eta: resolved.irradiance_eta(),
             ..Default::default()
         };
-        let (e, _) = irradiance_of_sources(
+        let (e, _) = irradiance_of_linked_sources(
             src.bounds,
-            &src.used,
+            (&src.used, &src.links),
             &src.world,
             &src.tracer,
             points,
@@ -501,7 +506,11 @@ fn estimated(
         ));
         return Ok(None);
     }
-    let sources = (src.used.as_slice(), &src.world, &src.tracer);
+    let sources = (
+        (src.used.as_slice(), src.links.as_slice()),
+        &src.world,
+        &src.tracer,
+    );
     let (e, report) = estimate::estimate(scene, resolved, sources, at, values, progress)?;
     src.report.estimate = Some(report);
     Ok(Some(e))

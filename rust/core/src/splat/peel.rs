@@ -29,8 +29,8 @@
 
 use super::light_view::{BoundingSphere, LightSample, View};
 use crate::error::Result;
-use crate::irradiance::{irradiance_of_sources, Density, IrradianceSettings};
-use crate::lights::{Light, World};
+use crate::irradiance::{irradiance_of_linked_sources, Density, IrradianceSettings, LinkedLights};
+use crate::lights::World;
 use crate::mesh::{hit_surface, Mesh};
 use crate::progress::{ProgressFn, Ticker};
 use crate::raytrace::Tracer;
@@ -200,7 +200,7 @@ pub fn peeled_samples(
     (mesh_tracer, shadows): (&Tracer, &Tracer),
     sphere: &BoundingSphere,
     n: u32,
-    (lights, world): (&[Light], &World),
+    (lights, world): (LinkedLights<'_>, &World),
     irradiance: &IrradianceSettings,
     progress: Option<&ProgressFn>,
     (from, to): (f32, f32),
@@ -214,7 +214,7 @@ pub fn peeled_samples(
     let points: Vec<Vec3> = crossings.iter().map(|c| c.position).collect();
     let normals: Vec<Vec3> = crossings.iter().map(|c| c.shading).collect();
     let lit = |f: f32| progress.is_none_or(|p| p(mid + (to - mid) * f.clamp(0.0, 1.0)));
-    let (e, report) = irradiance_of_sources(
+    let (e, report) = irradiance_of_linked_sources(
         mesh.bounds(),
         lights,
         world,

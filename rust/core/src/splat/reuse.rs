@@ -226,10 +226,13 @@ impl Cover {
     }
 }
 
-/// A kept sample lit by `light` now: None where it faces away, is shadowed, or nothing
-/// arrives.
+/// A kept sample lit by `light` now: None where it faces away, is shadowed, nothing arrives, or
+/// the light does not light its object (`tracer` follows the light's linking).
 fn relight(s: &Kept, light: &Light, mesh: &Mesh, tracer: &Tracer, eta: f64) -> Option<LightSample> {
     let tri = *mesh.triangles().get(s.triangle as usize)?;
+    if !tracer.lights_object(mesh.object_of_triangle(s.triangle as usize)) {
+        return None; // light linking: the light does not light its object now
+    }
     let [a, b, c] = tri.map(|v| mesh.positions()[v as usize]);
     let [u, v] = s.uv;
     let p = a * (1.0 - u - v) + b * u + c * v;

@@ -229,6 +229,79 @@ fn no_light_passes_between_objects() {
 }
 
 #[test]
+fn a_light_linked_to_one_object_lights_it_alone() {
+    // Two spheres side by side under a sun from above, each its own object and medium (no
+    // light passes between them): the sun linked to object 0 alone leaves object 1 black and
+    // object 0 as it was unlinked, vertex for vertex (the same light view, the same splats).
+    let mesh = sphere_pair(12, 1.0, 1.5);
+    let r = dipole("marble", 10.0);
+    let settings = SplatSettings {
+        eps: 0.01,
+        max_grid: 128,
+        ..Default::default()
+    };
+    let mut scene = sunlit(mesh.clone(), Vec3::new(0.2, 0.1, -1.0));
+    let unlinked = splat_radiosity(&scene, &r, &settings, None).unwrap().values;
+    scene.link_light(0, &[], Some(&[0])).unwrap();
+    let linked = splat_radiosity(&scene, &r, &settings, None).unwrap().values;
+    for v in 0..mesh.vertex_count() {
+        match mesh.object_of_vertex(v) {
+            0 => assert_eq!(linked[v], unlinked[v], "vertex {v}"),
+            _ => assert_eq!(linked[v], [0.0; 3], "vertex {v}"),
+        }
+    }
+    // Unlinked, the sun lit object 1 too.
+    let lit = |v: usize| mesh.object_of_vertex(v) == 1 && unlinked[v][0] > 0.0;
+    assert!((0..mesh.vertex_count()).any(lit));
+}
+
+#[test]
+fn an_object_left_out_of_a_lights_blockers_lets_its_light_through() {
+    // A 100 mm marble floor (object 1) under a 30 mm square (object 0) 5 mm above its centre,
+    // a sun straight down: the square shadows the floor's centre. Left out of the sun's
+    // blockers (Cycles' shadow linking), it casts no shadow and the centre gets the sun-lit
+    // plane's closed form (Jensen 2001: F_t(0) E R_total, less eps), as the open plane does;
+    // the square is still lit.
+    let floor = plane(81, 100.0);
+    let roof = plane(9, 30.0);
+    let count = floor.vertex_count() as u32;
+    let mut p = floor.positions().to_vec();
+    p.extend(roof.positions().iter().map(|x| *x + Vec3::Z * 5.0));
+    let mut t = floor.triangles().to_vec();
+    t.extend(roof.triangles().iter().map(|tri| tri.map(|v| v + count)));
+    let objects = (0..p.len() as u32).map(|v| u32::from(v < count)).collect();
+    let mesh = Mesh::new(p, t, None)
+        .and_then(|m| m.with_objects(objects))
+        .unwrap();
+    let centre = nearest(&floor, Vec3::ZERO);
+    let r = dipole("marble", 1.0);
+    let m = r.material;
+    let mut scene = sunlit(mesh.clone(), Vec3::new(0.0, 0.0, -1.0));
+    let settings = SplatSettings::default();
+    let shadowed = splat_radiosity(&scene, &r, &settings, None).unwrap().values;
+    scene.link_shadows(0, &[], Some(&[1])).unwrap();
+    let through = splat_radiosity(&scene, &r, &settings, None).unwrap().values;
+    for c in 0..3 {
+        let expect = (1.0 - 0.01)
+            * fresnel_transmittance(m.eta, 1.0)
+            * rd_total(m.sigma_a[c], m.sigma_s_prime()[c], m.eta);
+        let got = f64::from(through[centre][c]);
+        assert!(
+            (got / expect - 1.0).abs() < 0.02,
+            "channel {c}: {got} vs {expect} ({:+.2} %)",
+            100.0 * (got / expect - 1.0)
+        );
+        assert!(
+            f64::from(shadowed[centre][c]) < 0.1 * expect,
+            "{:?}",
+            shadowed[centre]
+        );
+    }
+    let top = count as usize + nearest(&roof, Vec3::ZERO);
+    assert!(through[top][0] > 0.0 && through[top] == shadowed[top]);
+}
+
+#[test]
 fn bad_settings_are_refused_naming_them_and_an_empty_mesh_cannot_be_built() {
     let scene = sunlit(sphere(6, 1.0), -Vec3::Z);
     let r = dipole("marble", 1.0);

@@ -181,7 +181,7 @@ fn unshadowed_peel(mesh: &Mesh) -> (Vec<LightSample>, PeelCounts) {
         (&Tracer::new(mesh), &Tracer::new(&speck)),
         &BoundingSphere::of(mesh),
         DEFAULT_PEEL_GRID,
-        (&[], &world),
+        ((&[], &[]), &world),
         &IrradianceSettings::default(),
         None,
         (0.0, 1.0),
