@@ -57,6 +57,10 @@ class ExportInfo:
     # Emissive rectangles found among the occluders (`_emissive_rectangle`), made area lights
     # by `add_lights`: (object, (centre, normal, axis_u, size_u, size_v, radiance)).
     emissive_rectangles: list = field(default_factory=list)
+    # Other emissive occluders' faces of one constant radiance (`_emissive_parts`), made mesh
+    # lights by `add_lights`: (object, positions, triangles, radiance, whole), `whole` where
+    # every emitting material of the object is one of those.
+    emissive_meshes: list = field(default_factory=list)
     # Lights whose light linking lights none of the exported objects (`linking.follow`), and
     # the lines saying what of the lights' linking is not followed.
     unlinked_lights: list[str] = field(default_factory=list)
@@ -262,6 +266,22 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
         added += 2
         link(obj, 2)
         info.lights.append(f"{obj.name} (emissive rectangle)")
+    # Other emissive meshes (a sphere, a tube, a neon sign) of one constant radiance per
+    # material: a mesh light emitting it from both sides of their faces, as Cycles' mesh
+    # emission does; being occluders too, they hide their own far side.
+    for obj, co, tris, radiance, whole in info.emissive_meshes:
+        kept, lines = linking.follow(obj, previewed, occluders)
+        info.linking.extend(lines)
+        if whole and obj.name in info.emitters:
+            info.emitters.remove(obj.name)
+        if not kept:
+            info.unlinked_lights.append(obj.name)
+            continue
+        k = max(radiance)
+        scene.add_mesh_light(co, tris, k, color=tuple(c / k for c in radiance))
+        added += 1
+        link(obj, 1)
+        info.lights.append(f"{obj.name} (emissive mesh)")
 
 
 # Object types Cycles renders as surfaces: their evaluated mesh casts the shadow.
@@ -336,6 +356,24 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
         rectangle = _emissive_rectangle(original, co, tris, slots)
         if rectangle is not None:
             info.emissive_rectangles.append((original, rectangle))
+        else:
+            parts, whole = _emissive_parts(original, tris, slots)
+            info.emissive_meshes.extend((original, co, part, radiance, whole) for part, radiance in parts)
+
+
+def _emissive_parts(obj, tris, slots):
+    """The faces of `obj` (`tris`, their material `slots`) whose material emits one constant
+    radiance (`translucent.cycles.emission`), as a list of (triangles, radiance) per such
+    material, and whether those are all it emits from (no textured or mixed emission)."""
+    parts, whole = [], True
+    for k in np.unique(slots):
+        mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+        radiance = cycles.emission(mat)
+        if radiance is not None:
+            parts.append((tris[slots == k], radiance))
+        elif cycles.emits(mat):
+            whole = False
+    return parts, whole
 
 
 def _emissive_rectangle(obj, co, tris, slots):

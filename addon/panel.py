@@ -103,7 +103,7 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     lines += [(line, "INFO") for line in getattr(sess.info, "linking", [])]
     if getattr(sess.info, "emitters", None):
         lines.append((f"{', '.join(sess.info.emitters)}: emissive, lighting the scene in Cycles; not a light here "
-                      "(emissive meshes not followed: shadows and bounce only)", "ERROR"))
+                      "(textured or mixed emission, or hidden from shadow rays: shadows and bounce only)", "ERROR"))
     if sess.last_eval is not None:
         lines.append((estimate_line(sess), "NONE"))
         # What the method's evaluation left out, and why (its own words).

@@ -49,6 +49,10 @@ def test_wrong_number_of_normals_is_rejected():
         (lambda s: s.set_world(color=(1, 1)), "3 components"),
         (lambda s: s.set_world(image=np.ones((4, 8, 2))), r"\(H, W, 3\)"),
         (lambda s: s.irradiance(eta=0.5), "eta"),
+        (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, float("nan"))], [(0, 1, 2)], 1.0), "not finite"),
+        (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, 1)], [(0, 1, 3)], 1.0), "index 3"),
+        (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, 1)], [(0, 1, 2)], -1.0), "strength"),
+        (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (2, 0, 1)], [(0, 1, 2)], 1.0), "no area"),
     ],
 )
 def test_bad_lights_raise_value_error(call, words):
@@ -56,6 +60,28 @@ def test_bad_lights_raise_value_error(call, words):
     s = translucent.Scene(p, t)
     with pytest.raises(ValueError, match=words):
         call(s)
+
+
+def test_a_small_emissive_sphere_lights_as_the_point_light_of_its_intensity():
+    # Far from it, a Lambertian sphere of radiance L and radius r is a point of radiant
+    # intensity I = pi r^2 L in every direction: a point light of power 4 pi I (the core's
+    # point light gives P / (4 pi d^2)). A 4 cm ball 15 cm from a 1 cm lamp (r / d <= 0.1: the
+    # near field's correction is under 1 %); the lamp an occluder too, as the add-on exports
+    # it, so its near side hides its far side. Area-weighted relative RMS per channel.
+    p, t = sphere(16, 0.04)
+    q, u = sphere(24, 0.01)
+    lamp = np.asarray(q) + np.array([0.15, 0.0, 0.0])
+    w = np.asarray(translucent.Scene(p, t).vertex_areas)[:, 0]
+    mesh = translucent.Scene(p, t)
+    mesh.add_mesh_light(lamp, u, 40.0, color=(1.0, 0.5, 0.25))
+    mesh.add_occluder(lamp, u, name="lamp")
+    point = translucent.Scene(p, t)
+    point.add_point_light((0.15, 0.0, 0.0), power=4.0 * math.pi**2 * 0.01**2 * 40.0, color=(1.0, 0.5, 0.25))
+    a = mesh.irradiance(eta=1.0, area_samples=64)
+    b = point.irradiance(eta=1.0)
+    rms = np.sqrt((w[:, None] * (a - b) ** 2).sum(0) / (w[:, None] * b**2).sum(0))
+    assert np.all(rms < 0.015), rms
+    assert b[:, 0].max() > 0.0
 
 
 def test_bad_prt_arguments_raise_value_error():

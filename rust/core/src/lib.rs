@@ -4,6 +4,7 @@
 
 // Shared: what every method uses.
 pub mod bake_points; // where Cycles' vertex bake samples a vertex (its corners, 0.1 mm in)
+pub mod emissive_mesh; // a mesh emitting light: triangles sampled by area, both sides
 pub mod error; // the one error type
 pub mod evaluation; // the one answer every method gives: values, error estimate, seconds, skips
 pub mod gpu; // the wgpu adapter the GPU paths share (a real GPU, or lavapipe where allowed)

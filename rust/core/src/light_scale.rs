@@ -115,6 +115,7 @@ fn same_but_emission(a: &Light, b: &Light) -> Option<([f32; 3], [f32; 3])> {
                 power: e2,
             },
         ) if p1 == p2 && d1 == d2 && u1 == u2 && su1 == su2 && sv1 == sv2 => Some((*e1, *e2)),
+        (Mesh(m1), Mesh(m2)) if m1.same_shape(m2) => Some((m1.radiance(), m2.radiance())),
         _ => None,
     }
 }

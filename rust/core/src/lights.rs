@@ -37,6 +37,9 @@ pub enum Light {
         size_v: f32,
         power: [f32; 3],
     },
+    /// A mesh emitting a uniform radiance from both sides of its triangles (an Emission
+    /// shader on any shape: `emissive_mesh`).
+    Mesh(std::sync::Arc<crate::emissive_mesh::EmissiveMesh>),
 }
 
 /// What surrounds the scene: radiance arriving from directions that escape the mesh.
@@ -179,15 +182,32 @@ impl Light {
         })
     }
 
+    /// A mesh emitting `radiance` [W/(unit^2 sr)] from both sides of `triangles`.
+    pub fn mesh(positions: &[Vec3], triangles: &[[u32; 3]], radiance: [f32; 3]) -> Result<Self> {
+        let m = crate::emissive_mesh::EmissiveMesh::new(positions, triangles, radiance)?;
+        Ok(Light::Mesh(std::sync::Arc::new(m)))
+    }
+
+    /// What it emits per channel: a sun's irradiance, a mesh's radiance, the others' power.
+    pub fn emission(&self) -> [f32; 3] {
+        match self {
+            Light::Sun { irradiance, .. } => *irradiance,
+            Light::Point { power, .. } | Light::Spot { power, .. } | Light::Area { power, .. } => {
+                *power
+            }
+            Light::Mesh(m) => m.radiance(),
+        }
+    }
+
+    /// Whether it is sampled at several points (an area light, an emissive mesh): its light
+    /// arrives from a spread of directions.
+    pub fn is_spread(&self) -> bool {
+        matches!(self, Light::Area { .. } | Light::Mesh(_))
+    }
+
     /// Whether the light emits anything at all (a black light costs no rays).
     pub fn is_black(&self) -> bool {
-        let c = match self {
-            Light::Sun { irradiance, .. } => irradiance,
-            Light::Point { power, .. } | Light::Spot { power, .. } | Light::Area { power, .. } => {
-                power
-            }
-        };
-        c.iter().all(|x| *x == 0.0)
+        self.emission().iter().all(|x| *x == 0.0)
     }
 
     /// Whether the light can reach any point of the box [`lo`, `hi`] that bounds the
@@ -226,6 +246,8 @@ impl Light {
                 let extent = (0.5 * (hi - lo)).dot(direction.abs());
                 (centre - *position).dot(*direction) + extent > 0.0
             }
+            // Two-sided and of any shape: it may reach anything.
+            Light::Mesh(_) => true,
         }
     }
 }
@@ -256,8 +278,29 @@ pub struct Incident {
 }
 
 impl Light {
-    /// The light arriving at `x` from the sample `u` in [0, 1)^2 (only area lights read it:
-    /// the point of the rectangle at (u - 1/2) x size). None where nothing arrives (outside a
+    /// `incident`, but an emissive mesh seen from outside its bounding sphere is sampled by
+    /// solid angle (`EmissiveMesh::toward`: a direction in the cone, the first surface along
+    /// it): far less noise than by area, where half the points lie on its far side. What the
+    /// irradiance estimate takes; the same `u` at points of one line does not give one
+    /// direction here (single scattering asks `incident`).
+    #[inline]
+    pub fn sample(&self, x: Vec3, u: [f32; 2]) -> Option<Incident> {
+        match self {
+            Light::Mesh(m) if m.has_cone_from(x) => {
+                let s = m.toward(x, u)?;
+                let k = s.solid_angle;
+                Some(Incident {
+                    direction: s.direction,
+                    distance: s.distance,
+                    value: m.radiance().map(|r| r * k),
+                })
+            }
+            _ => self.incident(x, u),
+        }
+    }
+
+    /// The light arriving at `x` from the sample `u` in [0, 1)^2 (only area lights and emissive
+    /// meshes read it: the point of the rectangle at (u - 1/2) x size, or of the mesh). None where nothing arrives (outside a
     /// spot's cone, behind an area light, at the light itself). The same `u` at every point
     /// of one line toward the light gives the same direction: single scattering finds where a
     /// ray enters the medium and asks again there.
@@ -328,6 +371,24 @@ impl Light {
                     direction: l,
                     distance: d,
                     value: power.map(|p| p / (PI * area) * cos_l * area / d2),
+                })
+            }
+            // Radiance L from both sides: one point of the area A stands for L |cos_l| A / d^2,
+            // where the emitter's own surface does not hide it from `x` (its far side). The
+            // shadow ray stops short of the point (`short_of`): the emitter, an occluder too as
+            // Cycles sees it, never shadows its own sampled point.
+            Light::Mesh(m) => {
+                let (q, n) = m.point(u);
+                let (l, d, d2) = toward(q)?;
+                let cos_l = n.dot(l).abs();
+                if cos_l <= 0.0 || m.hides(x, l, d) {
+                    return None;
+                }
+                let k = cos_l * m.area() / d2;
+                Some(Incident {
+                    direction: l,
+                    distance: m.short_of(d),
+                    value: m.radiance().map(|r| r * k),
                 })
             }
         }

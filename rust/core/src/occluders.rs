@@ -250,8 +250,8 @@ enum Volume {
         lo: [f32; 3],
         hi: [f32; 2],
     },
-    /// The bounding box of the mesh's box and the light (its point or its rectangle's
-    /// corners): the convex hull of the two, which every ray between them lies in, is inside.
+    /// The bounding box of the mesh's box and the light (its point, its rectangle's corners or
+    /// an emissive mesh's box): the convex hull of the two, which every ray between them lies in, is inside.
     Boxed { lo: Vec3, hi: Vec3 },
 }
 
@@ -303,6 +303,7 @@ impl Volume {
                         .concat(),
                 )
             }
+            Light::Mesh(m) => grow(&[m.bounds().0, m.bounds().1]),
         }
     }
 

@@ -134,12 +134,7 @@ impl<'a> SinglePaths<'a> {
                 continue;
             }
             linked.push(linking.map(|l| tracer.linked(Some(l))));
-            let c = match l {
-                Light::Sun { irradiance, .. } => *irradiance,
-                Light::Point { power, .. }
-                | Light::Spot { power, .. }
-                | Light::Area { power, .. } => *power,
-            };
+            let c = l.emission();
             let b = brightest(&c);
             sources.push(Source::Light(l));
             colours.push(c.map(|x| x / b));
@@ -171,13 +166,14 @@ impl<'a> SinglePaths<'a> {
         })
     }
 
-    /// Whether a group's light arrives from a spread of directions (an area light, the world)
-    /// rather than one (a point, spot or sun light).
+    /// Whether a group's light arrives from a spread of directions (an area light, an emissive
+    /// mesh, the world) rather than one (a point, spot or sun light).
     pub fn spread(&self, group: usize) -> bool {
-        matches!(
-            self.sources.get(group),
-            Some(Source::World(..)) | Some(Source::Light(Light::Area { .. }))
-        )
+        match self.sources.get(group) {
+            Some(Source::World(..)) => true,
+            Some(Source::Light(l)) => l.is_spread(),
+            None => false,
+        }
     }
 
     /// The colour of each group (brightest channel 1): arrivals carry that channel's weight.
@@ -206,11 +202,10 @@ impl<'a> SinglePaths<'a> {
         for (group, source) in self.sources.iter().enumerate() {
             match source {
                 Source::Light(light) => {
-                    let k = match light {
-                        Light::Area { .. } => {
-                            (self.settings.area_samples.max(1) as f32).sqrt().ceil() as u32
-                        }
-                        _ => 1,
+                    let k = if light.is_spread() {
+                        (self.settings.area_samples.max(1) as f32).sqrt().ceil() as u32
+                    } else {
+                        1
                     };
                     let count = (k * k) as f64;
                     let (su, sv) = (hash01(salt, 1), hash01(salt, 2));

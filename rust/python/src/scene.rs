@@ -226,6 +226,28 @@ impl PyScene {
         Ok(())
     }
 
+    /// A mesh emitting light from both sides of its triangles (an Emission shader on any
+    /// shape): radiance `strength` x `color` [W/(unit^2 sr)], Blender's Emission Strength and
+    /// Color. `positions` (N, 3), `triangles` (M, 3) indices into them; triangles of no area
+    /// emit nothing. ValueError names a position that is not finite, an index out of range,
+    /// a mesh with no area or a negative strength.
+    #[pyo3(signature = (positions, triangles, strength, color = None))]
+    fn add_mesh_light(
+        &mut self,
+        positions: &Bound<'_, PyAny>,
+        triangles: &Bound<'_, PyAny>,
+        strength: f64,
+        color: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let positions = vec3_array("positions", positions)?;
+        let triangles = triangle_array("triangles", triangles)?;
+        let radiance = colour_or_white("strength", strength, color)?;
+        let light = Light::mesh(&positions, &triangles, radiance).map_err(to_py)?;
+        self.scene.lights.push(light);
+        self.lighting_changed();
+        Ok(())
+    }
+
     /// The world: a uniform radiance `color` x `strength`, or an equirectangular (H, W, 3)
     /// radiance `image` x `strength` (Cycles' Environment Texture mapping). Giving both
     /// `color` and `image` is a ValueError: one world is one or the other.

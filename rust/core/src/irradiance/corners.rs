@@ -38,7 +38,7 @@ enum Corner {
 pub fn applies(light: &Light, tracer: &Tracer) -> bool {
     // With the rest of the scene's bounce, each point also gathers its own bounce rays; a
     // light that does not light the mesh (light linking) casts no direct ray at all.
-    !matches!(light, Light::Area { .. }) && !tracer.bounces() && tracer.lights_whole_mesh()
+    !light.is_spread() && !tracer.bounces() && tracer.lights_whole_mesh()
 }
 
 /// `light`'s irradiance at `points` (unit `normals`) lying on `on` (see the module), entering

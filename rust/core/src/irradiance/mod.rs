@@ -754,23 +754,25 @@ impl Estimator<'_> {
     /// and spots are one sample, an area light `area_samples` stratified points). No ray when
     /// the light is behind the surface.
     fn light(&mut self, light: &Light, area_samples: u32) -> [f32; 3] {
-        let k = match light {
-            Light::Area { .. } => (area_samples as f32).sqrt().ceil() as u32,
-            _ => 1,
+        let k = if light.is_spread() {
+            (area_samples as f32).sqrt().ceil() as u32
+        } else {
+            1
         };
         let mut sum = [0.0f32; 3];
         for a in 0..k {
             for b in 0..k {
                 // Only an area light reads the sample (and draws it: the world's stream of
                 // random numbers stays as it was for the other lights).
-                let u = match light {
-                    Light::Area { .. } => [
+                let u = if light.is_spread() {
+                    [
                         (a as f32 + self.rng.next()) / k as f32,
                         (b as f32 + self.rng.next()) / k as f32,
-                    ],
-                    _ => [0.5; 2],
+                    ]
+                } else {
+                    [0.5; 2]
                 };
-                let Some(inc) = light.incident(self.p, u) else {
+                let Some(inc) = light.sample(self.p, u) else {
                     continue;
                 };
                 let cos = self.n.dot(inc.direction);
@@ -876,7 +878,7 @@ impl Estimator<'_> {
             let y = self.tracer.offset_origin(hit.point, hit.normal);
             let mut e = [0.0f32; 3];
             for l in lights {
-                let Some(inc) = l.incident(hit.point, [rng.next(), rng.next()]) else {
+                let Some(inc) = l.sample(hit.point, [rng.next(), rng.next()]) else {
                     continue;
                 };
                 let c = hit.normal.dot(inc.direction);

@@ -580,3 +580,57 @@ fn the_bounce_error_is_the_unbiased_standard_error_of_the_mean() {
     // One value: its square bounds the variance (it is all we know).
     assert_eq!(mean_and_error(3.0, 9.0, 1), (3.0, 3.0));
 }
+
+#[test]
+fn an_emissive_sphere_gives_pi_l_sin_squared_of_its_angular_radius() {
+    // A Lambertian sphere of radiance L and radius r, its centre d above a point facing it
+    // (wholly above the horizon): E = pi L (r / d)^2 (the sphere's projected solid angle).
+    // Tessellated (96 rings) it holds a little less area: 0.1 %. It emits from both sides of
+    // its triangles, as Cycles' mesh emission does, and its near side hides its far side,
+    // whether or not it is an occluder as well (the add-on exports it as one, as Cycles'
+    // shadow rays see it). Averaged over 64 points of a small square below it; the points lie
+    // outside its bounding sphere, so it is sampled by solid angle. A shell around the points
+    // (they inside its bounding sphere: sampled by area) gives the closed form of a surface
+    // inside a uniformly glowing shell.
+    let (r, d, l) = (0.3f32, 2.0f32, 5.0f32);
+    let sphere = crate::mesh::test_meshes::sphere(96, r);
+    let moved: Vec<Vec3> = sphere
+        .positions()
+        .iter()
+        .map(|p| *p + Vec3::Z * d)
+        .collect();
+    let mut s = scene(0.02, false);
+    s.lights = vec![Light::mesh(&moved, sphere.triangles(), [l, 0.5 * l, 0.0]).unwrap()];
+    let pts: Vec<Vec3> = (0..64)
+        .map(|k| Vec3::new((k % 8) as f32 * 1e-3, (k / 8) as f32 * 1e-3, 0.0))
+        .collect();
+    let expect = std::f64::consts::PI * f64::from(l) * f64::from(r / d).powi(2);
+    let mean = |s: &Scene| {
+        let tracer = s.tracer();
+        let settings = IrradianceSettings {
+            area_samples: 256,
+            ..Default::default()
+        };
+        let (i, _) = irradiance(s, &tracer, &pts, &vec![Vec3::Z; pts.len()], &settings).unwrap();
+        assert!(i
+            .iter()
+            .all(|e| (e[1] / e[0] - 0.5).abs() < 1e-5 && e[2] == 0.0));
+        i.iter().map(|e| f64::from(e[0])).sum::<f64>() / 64.0
+    };
+    let alone = mean(&s);
+    assert!((alone / expect - 1.0).abs() < 0.01, "{alone} vs {expect}");
+    s.occluders
+        .add("lamp", &moved, sphere.triangles(), [0.0; 3])
+        .unwrap();
+    let hidden = mean(&s);
+    assert!((hidden / expect - 1.0).abs() < 0.01, "{hidden} vs {expect}");
+    // A 5 m shell around the points: E = pi L at a surface facing up (the upper hemisphere's
+    // cosine-weighted solid angle, pi; the lower half lies behind the surface).
+    let shell = crate::mesh::test_meshes::sphere(64, 5.0);
+    let mut inside = scene(0.02, false);
+    let glow = [l, 0.5 * l, 0.0];
+    inside.lights = vec![Light::mesh(shell.positions(), shell.triangles(), glow).unwrap()];
+    let within = mean(&inside);
+    let expect = std::f64::consts::PI * f64::from(l);
+    assert!((within / expect - 1.0).abs() < 0.01, "{within} vs {expect}");
+}

@@ -173,9 +173,9 @@ impl View {
                     around(p)
                 }
             }
-            Light::Area { .. } => Err(
-                "area lights have no one eye to view them from (Shah 2009 splats point and \
-                 directional lights)"
+            Light::Area { .. } | Light::Mesh(_) => Err(
+                "area lights and emissive meshes have no one eye to view them from (Shah 2009 \
+                 splats point and directional lights)"
                     .into(),
             ),
         }

@@ -196,6 +196,7 @@ fn light_kind(light: &Light) -> &'static str {
         Light::Point { .. } => "point",
         Light::Spot { .. } => "spot",
         Light::Area { .. } => "area",
+        Light::Mesh(_) => "emissive mesh",
     }
 }
 

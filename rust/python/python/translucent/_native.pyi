@@ -147,6 +147,13 @@ class Scene:
         color: RGB | None = None,
     ) -> None:
         """One-sided rectangle of `power` [W], emitting along `direction`."""
+    def add_mesh_light(
+        self, positions: npt.ArrayLike, triangles: npt.ArrayLike, strength: float, color: RGB | None = None
+    ) -> None:
+        """A mesh emitting radiance `strength` x `color` [W/(unit^2 sr)] from both sides of its
+        triangles (Blender's Emission shader on any shape): positions (N, 3), triangles (M, 3).
+        ValueError names a position that is not finite, an index out of range, a mesh with no
+        area or a negative strength."""
     def set_world(
         self, color: RGB | None = None, strength: float = 1.0, image: npt.ArrayLike | None = None
     ) -> None:
