@@ -607,7 +607,7 @@ impl PyPrt {
             d.set_item("single_error_estimate", l1.error_estimate.to_vec())?;
             d.set_item("single_seconds", l1.fit_seconds + l1.dot_seconds)?;
         }
-        let advised = e.error_estimate.is_some_and(|x| inner.refresh_advised(&x));
+        let advised = inner.refresh_advised_by(e);
         d.set_item("refresh_advised", advised || self.stale_reason().is_some())?;
         Ok(Some(d))
     }
@@ -624,9 +624,7 @@ impl PyPrt {
         }
         let inner = self.read()?;
         let last = held(&self.last);
-        Ok(last
-            .as_ref()
-            .map(|e| e.error_estimate.is_some_and(|x| inner.refresh_advised(&x))))
+        Ok(last.as_ref().map(|e| inner.refresh_advised_by(e)))
     }
 
     /// None while the precompute's lighting is the scene's; else a sentence saying the

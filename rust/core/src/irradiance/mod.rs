@@ -151,18 +151,12 @@ pub fn irradiance_with_progress(
     settings: &IrradianceSettings,
     progress: Option<&ProgressFn>,
 ) -> Result<(Vec<[f32; 3]>, IrradianceReport)> {
-    let (lights, world) = (&scene.lights, &scene.world);
-    let bounds = scene.mesh.bounds();
-    if !scene.links() {
-        return irradiance_of_sources(
-            bounds, lights, world, tracer, points, normals, settings, progress,
-        );
-    }
+    let lights = &scene.lights;
     let links: Vec<Option<Linking>> = (0..lights.len()).map(|k| scene.linking_of(k)).collect();
     irradiance_of_linked_sources(
-        bounds,
+        scene.mesh.bounds(),
         (lights, &links),
-        world,
+        &scene.world,
         tracer,
         points,
         normals,

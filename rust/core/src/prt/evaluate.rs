@@ -131,6 +131,16 @@ impl Prt {
         worst > REFRESH_FLOOR.max(REFRESH_FACTOR * (self.report.representative_error + noise))
     }
 
+    /// `refresh_advised` for an evaluation: its estimate less its irradiance's noise
+    /// (`PrtDetails::irradiance_noise`), which the representatives had too and no refresh
+    /// takes away. False without an estimate.
+    pub fn refresh_advised_by(&self, e: &Evaluation) -> bool {
+        e.error_estimate.is_some_and(|x| {
+            let noise = e.details.irradiance_noise;
+            self.refresh_advised(&std::array::from_fn(|c| x[c] - noise[c]))
+        })
+    }
+
     /// Multiple-scattering radiosity B = sum_j c_j T_j per vertex and channel (Xu 2007 eq. 9
     /// without the F_t/pi factor).
     pub fn radiosity(&self, material: &Material) -> Result<Evaluation> {

@@ -1,26 +1,28 @@
-//! The vertices' irradiance noise in the preview. The bounce off the rest of the scene is a
-//! Monte Carlo estimate at each vertex (`irradiance::Estimator::bounce`, with its standard
-//! error s_v), and B reads a vertex's irradiance E_v unaveraged in three places: the profile's
-//! point mass k E_v, the receiver's own disc M(near_radius) E_v (`rows::transport_row`, slot 0;
-//! Xu 2007 eq. 10 with the disc in closed form), and the walks, whose control variate and
-//! exits read the walked vertices' irradiance before their D is carried to every vertex
-//! (`walks::term`). Measured on Suzanne on a bright floor (docs/accuracy.md), the first two
-//! carry a fifth of it; the walks the rest.
+//! The irradiance's noise in the preview. The bounce off the rest of the scene is a Monte
+//! Carlo estimate at each point (`irradiance::Estimator::bounce`, with its standard error s).
+//! B reads a vertex's irradiance E_v unaveraged in three places: the profile's point mass
+//! k E_v, the receiver's own disc M(near_radius) E_v (`rows::transport_row`, slot 0; Xu 2007
+//! eq. 10 with the disc in closed form), and the walks, whose control variate and exits read
+//! the walked vertices' irradiance before their D is carried to every vertex (`walks::term`).
+//! The samples' irradiance reaches B summed under the kernel. Measured on Suzanne on a bright
+//! floor (docs/accuracy.md): the vertices' part 1.1-1.2 %, a fifth of it through the disc and
+//! the point mass; the samples' 0.7-0.8 %.
 //!
-//! B is linear in E, so the noise E's errors bring to B is propagated by one draw: each
-//! vertex's E moved by s_v times a random sign (Rademacher, one for its three channels: the draw's square is s_v^2 exactly,
-//! so the propagated variance sum_u G_vu^2 s_u^2 is what each vertex's B moves by on average),
-//! the walk term read again under it (`WalkTerm::relight`: no walk traced) for the first
-//! representative. An edit then scales the draw's two parts as it scales B's: the disc and the
-//! point mass by its own M(near) + k, the walk term by its slab total A over the
-//! representative's (the walk term is carried as D / A). The preview's noise in the error
-//! metric's terms (area-weighted relative RMS, `metrics`) is sqrt(sum_v A_v sigma_v^2 /
-//! sum_v A_v B_v^2) over that draw, sigma_v the move of B_v.
+//! B is linear in the irradiance, so the noise its errors bring to B is propagated by one draw:
+//! each vertex's and each sample's irradiance moved by its s times a random sign (Rademacher,
+//! one for its three channels: the draw's square is s^2 exactly, so the propagated variance
+//! sum_u G_vu^2 s_u^2 is what each vertex's B moves by on average), the transport gathered
+//! again under the samples' draw (same tree shape, no ray) and the walk term read again under
+//! both (`WalkTerm::relight`: no walk traced), for the first representative. An edit scales
+//! the parts as it scales B: the disc and the point mass by its own M(near) + k, the samples'
+//! and the walk term's by its slab total A over the representative's (the walk term is carried
+//! as D / A). The preview's noise in the error metric's terms (area-weighted relative RMS,
+//! `metrics`) is sqrt(sum_v A_v sigma_v^2 / sum_v A_v B_v^2) over that draw, sigma_v the move
+//! of B_v.
 //!
-//! Not in it: the samples' own bounce (summed under the kernel; measured 0.7-0.8 % on that
-//! Suzanne) and the lights' and the world's sampling.
+//! Not in it: the lights' and the world's own sampling (area lights, the traced world).
 
-use super::precompute::{transport_projected, Projection, SampledLight};
+use super::precompute::{transport_under, Projection, SampledLight};
 use super::Prt;
 use crate::error::Result;
 use crate::mesh::Mesh;
@@ -32,7 +34,8 @@ use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// One draw of the vertices' bounce error and what it moves in the walk term.
+/// One draw of the irradiance's bounce error: the vertices' own, and what the samples' and both
+/// move the representative's B by.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct IrradianceNoise {
     /// The vertices' areas, the error metric's weights.
@@ -132,6 +135,13 @@ fn signed(error: &[[f32; 3]], seed: u64) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// What each value moved by from `before` to `after`.
+fn moved_by(before: &[[f32; 3]], after: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    (before.iter().zip(after))
+        .map(|(b, a)| std::array::from_fn(|c| a[c] - b[c]))
+        .collect()
+}
+
 /// `values` moved by `draw`, kept >= 0 (an irradiance).
 fn moved(values: &[[f32; 3]], draw: &[[f32; 3]]) -> Vec<[f32; 3]> {
     (values.iter().zip(draw))
@@ -161,10 +171,10 @@ impl Prt {
         let kept = std::mem::replace(&mut lit.sample_irradiance, shifted);
         let mut scratch = self.report.clone();
         let (basis, shape) = (self.fitter.basis(), self.tree_shape.as_deref());
-        let gathered = transport_projected(
+        let gathered = transport_under(
             mesh,
             lit,
-            &colour,
+            Some(&colour),
             basis,
             &self.settings,
             &mut scratch,
@@ -175,11 +185,7 @@ impl Prt {
         let (transport, _) = gathered?;
         let c = self.coefficients_of(&rep.profiles)?;
         let (before, after) = (self.transport.dot(&c.vectors), transport.dot(&c.vectors));
-        Ok(Some(
-            (before.iter().zip(&after))
-                .map(|(b, a)| std::array::from_fn(|ch| a[ch] - b[ch]))
-                .collect(),
-        ))
+        Ok(Some(moved_by(&before, &after)))
     }
 
     /// The samples' part of `irradiance_noise` (`samples_moved`), where it has one, timed.
@@ -248,11 +254,7 @@ impl Prt {
             out
         };
         let (before, after) = (layer(term), layer(&moved));
-        Ok(Some(
-            (before.iter().zip(&after))
-                .map(|(b, a)| std::array::from_fn(|ch| a[ch] - b[ch]))
-                .collect(),
-        ))
+        Ok(Some(moved_by(&before, &after)))
     }
 }
 

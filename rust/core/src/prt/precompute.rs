@@ -125,6 +125,7 @@ impl Prt {
         let (transport, shape) = transport_under(
             mesh,
             &lit,
+            None,
             &knots.basis,
             settings,
             &mut report,
@@ -362,37 +363,31 @@ impl Prt {
     }
 }
 
-/// The half of the precompute that depends on the light: the colour projection, the sample
-/// tree weighted by the samples' irradiance (refilled from `shape`, an earlier light's tree
-/// over the same samples, where given; else split afresh), the receiver's disc and the
-/// transport rows T_j (Xu 2007 eq. 10) on `basis`; fills the report's counters and seconds.
-/// Returns the tree's shape for the next light.
+/// The half of the precompute that depends on the light: the colour projection (`colour`
+/// where given: `irradiance_noise` gathers a draw of the irradiance's error in the
+/// irradiance's own colours), the sample tree weighted by the samples' irradiance (refilled
+/// from `shape`, an earlier light's tree over the same samples, where given; else split
+/// afresh), the receiver's disc and the transport rows T_j (Xu 2007 eq. 10) on `basis`; fills
+/// the report's counters and seconds. Returns the tree's shape for the next light.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn transport_under(
     mesh: &Mesh,
     lit: &SampledLight,
+    colour: Option<&Projection>,
     basis: &Basis,
     settings: &PrtSettings,
     report: &mut PrtReport,
     shape: Option<&TreeShape>,
     tick: &dyn Fn(f32) -> Result<()>,
 ) -> Result<(Transport, TreeShape)> {
-    let colour = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
-    transport_projected(mesh, lit, &colour, basis, settings, report, shape, tick)
-}
-
-/// `transport_under` with the colour projection given (`irradiance_noise`: a draw of the
-/// irradiance's error gathered as the irradiance itself was).
-#[allow(clippy::too_many_arguments)]
-pub(super) fn transport_projected(
-    mesh: &Mesh,
-    lit: &SampledLight,
-    colour: &Projection,
-    basis: &Basis,
-    settings: &PrtSettings,
-    report: &mut PrtReport,
-    shape: Option<&TreeShape>,
-    tick: &dyn Fn(f32) -> Result<()>,
-) -> Result<(Transport, TreeShape)> {
+    let own;
+    let colour = match colour {
+        Some(c) => c,
+        None => {
+            own = Projection::of(&lit.sample_irradiance, &lit.vertex_irradiance);
+            &own
+        }
+    };
     let t_tree = Instant::now();
     let tree = lit.tree(mesh, colour, shape);
     report.seconds_tree = t_tree.elapsed().as_secs_f64();

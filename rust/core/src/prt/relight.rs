@@ -267,6 +267,7 @@ impl Prt {
         let (transport, shape) = transport_under(
             mesh,
             &lit,
+            None,
             self.fitter.basis(),
             &settings,
             &mut report,
