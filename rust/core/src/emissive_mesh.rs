@@ -46,6 +46,16 @@ impl std::fmt::Debug for EmissiveMesh {
     }
 }
 
+/// What sampling an emissive mesh by solid angle from a point gives (`EmissiveMesh::toward`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Toward {
+    /// The point lies within the emitter's bounding sphere: no cone to sample.
+    Inside,
+    /// The direction drawn meets none of its triangles: nothing arrives along it.
+    Miss,
+    Hit(ConeSample),
+}
+
 /// One sample of an emissive mesh by solid angle (`EmissiveMesh::toward`): the unit direction
 /// from the point, how far the emitter's first surface lies along it, and the solid angle the
 /// sample stands for (the cone's: L times it, times cos at the point, is the sample's E).
@@ -137,14 +147,15 @@ impl EmissiveMesh {
     /// subtends (pbrt-v4 §6.2.4, sampling a sphere by its cone), `u` in [0, 1)^2, and where the
     /// emitter's first surface lies along it: what Cycles' sphere light does, for any shape.
     /// The first surface met is the one seen from `x` (its far side is hidden, whichever way
-    /// it faces). None where the direction misses every triangle (then nothing arrives), or
-    /// where `x` lies within the bounding sphere (no cone: sample by area instead, `point`).
-    pub fn toward(&self, x: Vec3, u: [f32; 2]) -> Option<ConeSample> {
+    /// it faces). `Toward::Miss` where the direction misses every triangle (nothing arrives);
+    /// `Toward::Inside` where `x` lies within the bounding sphere (no cone: sample by area
+    /// instead, `point`).
+    pub fn toward(&self, x: Vec3, u: [f32; 2]) -> Toward {
         let (centre, radius) = self.sphere;
         let v = centre - x;
         let d = v.length();
         if !(d > 1.001 * radius && d.is_finite()) {
-            return None;
+            return Toward::Inside;
         }
         let axis = v / d;
         let sin2 = (radius / d).powi(2);
@@ -156,12 +167,14 @@ impl EmissiveMesh {
         let phi = 2.0 * std::f32::consts::PI * u[1];
         let (a, b) = axis.any_orthonormal_pair();
         let direction = (axis * cos_t + (a * phi.cos() + b * phi.sin()) * sin_t).normalize();
-        let hit = self.tracer.intersect(x, direction, d + radius)?;
-        Some(ConeSample {
-            direction,
-            distance: self.short_of(hit.t),
-            solid_angle: 2.0 * std::f32::consts::PI * one_minus,
-        })
+        match self.tracer.intersect(x, direction, d + radius) {
+            Some(hit) => Toward::Hit(ConeSample {
+                direction,
+                distance: self.short_of(hit.t),
+                solid_angle: 2.0 * std::f32::consts::PI * one_minus,
+            }),
+            None => Toward::Miss,
+        }
     }
 
     /// Whether the emitter's own surface lies between `x` and its point `d` along `l` (more
@@ -169,12 +182,6 @@ impl EmissiveMesh {
     pub fn hides(&self, x: Vec3, l: Vec3, d: f32) -> bool {
         let reach = d - self.margin();
         reach > 0.0 && self.tracer.intersect(x, l, reach).is_some()
-    }
-
-    /// Whether `toward` samples from `x` (it lies outside the bounding sphere).
-    pub fn has_cone_from(&self, x: Vec3) -> bool {
-        let (centre, radius) = self.sphere;
-        (centre - x).length() > 1.001 * radius
     }
 
     pub fn radiance(&self) -> [f32; 3] {

@@ -285,16 +285,17 @@ impl Light {
     /// direction here (single scattering asks `incident`).
     #[inline]
     pub fn sample(&self, x: Vec3, u: [f32; 2]) -> Option<Incident> {
+        use crate::emissive_mesh::Toward;
         match self {
-            Light::Mesh(m) if m.has_cone_from(x) => {
-                let s = m.toward(x, u)?;
-                let k = s.solid_angle;
-                Some(Incident {
+            Light::Mesh(m) => match m.toward(x, u) {
+                Toward::Hit(s) => Some(Incident {
                     direction: s.direction,
                     distance: s.distance,
-                    value: m.radiance().map(|r| r * k),
-                })
-            }
+                    value: m.radiance().map(|r| r * s.solid_angle),
+                }),
+                Toward::Miss => None,
+                Toward::Inside => self.incident(x, u),
+            },
             _ => self.incident(x, u),
         }
     }

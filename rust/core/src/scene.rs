@@ -178,11 +178,6 @@ impl Scene {
         self.linking.get(light).cloned().flatten()
     }
 
-    /// Whether some light is linked (`link_light`, `link_shadows`).
-    pub fn links(&self) -> bool {
-        self.linking.iter().any(Option::is_some)
-    }
-
     /// The tracer shadow rays of this scene are cast with: `mesh_tracer` (built over `mesh`)
     /// with the occluders that can shadow the mesh under the current lights and world, and
     /// every occluder with its albedo where some sends light back (the irradiance's bounce),

@@ -238,12 +238,12 @@ pub fn irradiance_of_sources(
 
 /// Irradiance at points with the standard error of its bounce part per point.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Estimated {
-    pub values: Vec<[f32; 3]>,
+struct Estimated {
+    values: Vec<[f32; 3]>,
     /// The standard error of each point's bounce off the rest of the scene (its rays' sample
     /// variance over their count; 0 where none was cast). The lights' and the world's own
     /// sampling is not in it.
-    pub bounce_error: Vec<[f32; 3]>,
+    bounce_error: Vec<[f32; 3]>,
 }
 
 /// `irradiance_of_sources` with each point's bounce error (`Estimated`).

@@ -41,8 +41,9 @@ pub struct PrtDetails {
     pub dot_seconds: f64,
     /// Upload, dispatch and readback when the GPU ran it.
     pub gpu: Option<crate::prt::gpu::GpuTimings>,
-    /// The relative noise, per channel, that the vertices' bounce off the rest of the scene
-    /// brings to B (`irradiance_noise`), inside `error_estimate`; 0 where nothing sends light back.
+    /// The relative noise, per channel, that the bounce off the rest of the scene (at the
+    /// vertices and the samples) brings to B (`irradiance_noise`), inside `error_estimate`; 0
+    /// where nothing sends light back.
     pub irradiance_noise: [f64; 3],
 }
 
@@ -230,8 +231,9 @@ impl Prt {
                 false,
             );
         }
-        // The vertices' bounce noise (`irradiance_noise`): through the receiver's own disc and the
-        // point mass, and through the walk term as it scales it (D / A).
+        // The irradiance's bounce noise (`irradiance_noise`): the vertices' through the
+        // receiver's own disc and the point mass, the samples' and the walk term's scaled as the
+        // edit scales them (A, and D / A).
         let irradiance_noise = self.irradiance_noise.as_ref().map_or([0.0; 3], |n| {
             let gain: [f64; 3] =
                 std::array::from_fn(|ch| f64::from(c.vectors[ch][0]) + c.point_mass[ch]);

@@ -489,8 +489,8 @@ impl SampledLight {
         })
     }
 
-    /// The vertices' bounce error with their areas, where it was measured.
-    /// One draw of it (`irradiance_noise`) for the representative `rep`.
+    /// One draw of the vertices' bounce error (`irradiance_noise`) for the representative
+    /// `rep`, where it was measured.
     pub(super) fn irradiance_noise(&self, mesh: &Mesh, rep: &Resolved) -> Option<IrradianceNoise> {
         (self.vertex_error.as_ref())
             .map(|e| IrradianceNoise::draw(e, mesh.vertex_areas(), rep.totals()))

@@ -398,7 +398,7 @@ fn cast(
             tracer,
             eta,
             &cell,
-            (hit.triangle, t),
+            (hit.triangle, object, t),
             out,
         );
         if tracer.mesh_object_blocks(object) {
@@ -408,8 +408,8 @@ fn cast(
     }
 }
 
-/// The sample where the cell's ray meets `triangle` at distance `t`, if light enters there
-/// (light linking: if the light lights its object).
+/// The sample where the cell's ray meets `triangle` (of the mesh's `object`) at distance `t`,
+/// if light enters there (light linking: if the light lights its object).
 #[allow(clippy::too_many_arguments)]
 fn sample_at(
     view: &View,
@@ -418,12 +418,11 @@ fn sample_at(
     tracer: &Tracer,
     eta: f64,
     cell: &Cell,
-    (triangle, t): (u32, f32),
+    (triangle, object, t): (u32, u32, f32),
     (samples, counts): &mut (Vec<LightSample>, ViewCounts),
 ) {
     counts.hits += 1;
     let p = cell.origin + cell.direction * t;
-    let object = mesh.object_of_triangle(triangle as usize);
     if !tracer.lights_object(object) {
         counts.unlit += 1; // light linking: the light does not light this object
         return;
