@@ -53,6 +53,12 @@ def test_wrong_number_of_normals_is_rejected():
         (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, 1)], [(0, 1, 3)], 1.0), "index 3"),
         (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, 1)], [(0, 1, 2)], -1.0), "strength"),
         (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (2, 0, 1)], [(0, 1, 2)], 1.0), "no area"),
+        (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, 1)], [(0, 1, 2)], 1.0, corner_colors=np.ones((1, 3))),
+         r"corner_colors must have shape \(T, 3, 3\)"),
+        (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, 1)], [(0, 1, 2)], 1.0, corner_colors=np.ones((2, 3, 3))),
+         "2 corner colours for 1 triangles"),
+        (lambda s: s.add_mesh_light([(0, 0, 1), (1, 0, 1), (0, 1, 1)], [(0, 1, 2)], 1.0,
+                                    corner_colors=-np.ones((1, 3, 3))), "corner colour -1"),
     ],
 )
 def test_bad_lights_raise_value_error(call, words):
@@ -82,6 +88,25 @@ def test_a_small_emissive_sphere_lights_as_the_point_light_of_its_intensity():
     rms = np.sqrt((w[:, None] * (a - b) ** 2).sum(0) / (w[:, None] * b**2).sum(0))
     assert np.all(rms < 0.015), rms
     assert b[:, 0].max() > 0.0
+
+
+def test_a_small_lamp_hidden_from_shadow_rays_lights_as_twice_the_point_light():
+    # The lamp above, its colour given per corner, hidden from shadow rays (and no occluder):
+    # its far side is seen through its near side, so far from it the lamp is a point of twice
+    # the intensity, 2 pi r^2 L.
+    p, t = sphere(16, 0.04)
+    q, u = sphere(24, 0.01)
+    lamp = np.asarray(q) + np.array([0.15, 0.0, 0.0])
+    w = np.asarray(translucent.Scene(p, t).vertex_areas)[:, 0]
+    mesh = translucent.Scene(p, t)
+    corners = np.tile(np.array([1.0, 0.5, 0.25]), (len(u), 3, 1))
+    mesh.add_mesh_light(lamp, u, 40.0, corner_colors=corners, visible_shadow=False)
+    point = translucent.Scene(p, t)
+    point.add_point_light((0.15, 0.0, 0.0), power=8.0 * math.pi**2 * 0.01**2 * 40.0, color=(1.0, 0.5, 0.25))
+    a = mesh.irradiance(eta=1.0, area_samples=64)
+    b = point.irradiance(eta=1.0)
+    rms = np.sqrt((w[:, None] * (a - b) ** 2).sum(0) / (w[:, None] * b**2).sum(0))
+    assert np.all(rms < 0.015), rms
 
 
 def test_bad_prt_arguments_raise_value_error():

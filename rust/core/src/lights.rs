@@ -188,6 +188,25 @@ impl Light {
         Ok(Light::Mesh(std::sync::Arc::new(m)))
     }
 
+    /// `mesh` with `radiance` times a factor per triangle corner (`EmissiveMesh::textured`),
+    /// hidden from shadow rays where `visible_shadow` is false.
+    pub fn textured_mesh(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        radiance: [f32; 3],
+        corners: Option<&[[[f32; 3]; 3]]>,
+        visible_shadow: bool,
+    ) -> Result<Self> {
+        let m = crate::emissive_mesh::EmissiveMesh::textured(
+            positions,
+            triangles,
+            radiance,
+            corners,
+            visible_shadow,
+        )?;
+        Ok(Light::Mesh(std::sync::Arc::new(m)))
+    }
+
     /// What it emits per channel: a sun's irradiance, a mesh's radiance, the others' power.
     pub fn emission(&self) -> [f32; 3] {
         match self {
@@ -291,7 +310,7 @@ impl Light {
                 Toward::Hit(s) => Some(Incident {
                     direction: s.direction,
                     distance: s.distance,
-                    value: m.radiance().map(|r| r * s.solid_angle),
+                    value: s.value,
                 }),
                 Toward::Miss => None,
                 Toward::Inside => self.incident(x, u),
@@ -374,22 +393,22 @@ impl Light {
                     value: power.map(|p| p / (PI * area) * cos_l * area / d2),
                 })
             }
-            // Radiance L from both sides: one point of the area A stands for L |cos_l| A / d^2,
-            // where the emitter's own surface does not hide it from `x` (its far side). The
-            // shadow ray stops short of the point (`short_of`): the emitter, an occluder too as
-            // Cycles sees it, never shadows its own sampled point.
+            // Radiance from both sides: one point q stands for L(q) |cos_l| A_i / (p_i d^2)
+            // (`EmissiveMesh::point`), where the emitter's own surface does not hide it from
+            // `x` (its far side). The shadow ray stops short of the point (`short_of`): the
+            // emitter, an occluder too as Cycles sees it, never shadows its own sampled point.
             Light::Mesh(m) => {
-                let (q, n) = m.point(u);
+                let (q, n, stands_for) = m.point(u);
                 let (l, d, d2) = toward(q)?;
                 let cos_l = n.dot(l).abs();
                 if cos_l <= 0.0 || m.hides(x, l, d) {
                     return None;
                 }
-                let k = cos_l * m.area() / d2;
+                let k = cos_l / d2;
                 Some(Incident {
                     direction: l,
                     distance: m.short_of(d),
-                    value: m.radiance().map(|r| r * k),
+                    value: stands_for.map(|r| r * k),
                 })
             }
         }

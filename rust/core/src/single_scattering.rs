@@ -91,7 +91,8 @@ pub struct Arrival {
 }
 
 enum Source<'a> {
-    Light(&'a Light),
+    /// A light; one group per channel for an emissive mesh whose colour varies over it.
+    Light(&'a Light, Option<usize>),
     /// The world; for an environment image, one group per channel.
     World(&'a World, Option<usize>),
 }
@@ -133,10 +134,21 @@ impl<'a> SinglePaths<'a> {
             if l.is_black() || !l.can_reach(lo, hi) || unlit {
                 continue;
             }
-            linked.push(linking.map(|l| tracer.linked(Some(l))));
             let c = l.emission();
+            if matches!(l, Light::Mesh(m) if m.varies_in_colour()) {
+                // Its colour is no one colour: each channel a group of its own.
+                for ch in 0..3 {
+                    let mut one = [0.0; 3];
+                    one[ch] = 1.0;
+                    linked.push(linking.as_ref().map(|l| tracer.linked(Some(l.clone()))));
+                    sources.push(Source::Light(l, Some(ch)));
+                    colours.push(one);
+                }
+                continue;
+            }
+            linked.push(linking.map(|l| tracer.linked(Some(l))));
             let b = brightest(&c);
-            sources.push(Source::Light(l));
+            sources.push(Source::Light(l, None));
             colours.push(c.map(|x| x / b));
         }
         match &scene.world {
@@ -171,7 +183,7 @@ impl<'a> SinglePaths<'a> {
     pub fn spread(&self, group: usize) -> bool {
         match self.sources.get(group) {
             Some(Source::World(..)) => true,
-            Some(Source::Light(l)) => l.is_spread(),
+            Some(Source::Light(l, _)) => l.is_spread(),
             None => false,
         }
     }
@@ -201,7 +213,8 @@ impl<'a> SinglePaths<'a> {
     pub fn arrivals(&self, x: Vec3, salt: u64, rays: &mut u64, f: &mut dyn FnMut(Arrival)) {
         for (group, source) in self.sources.iter().enumerate() {
             match source {
-                Source::Light(light) => {
+                Source::Light(light, channel) => {
+                    let c = channel.unwrap_or_else(|| max_channel(&self.colours[group]));
                     let k = if light.is_spread() {
                         (self.settings.area_samples.max(1) as f32).sqrt().ceil() as u32
                     } else {
@@ -219,9 +232,9 @@ impl<'a> SinglePaths<'a> {
                                 continue;
                             };
                             let value = |x_i: Vec3| {
-                                light.incident(x_i, u).map(|i| {
-                                    f64::from(i.value[max_channel(&self.colours[group])]) / count
-                                })
+                                light
+                                    .incident(x_i, u)
+                                    .map(|i| f64::from(i.value[c]) / count)
                             };
                             self.trace(group, x, inc.direction, inc.distance, &value, rays, f);
                         }
@@ -596,6 +609,64 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn an_emitter_of_two_colours_scatters_each_channel_from_its_own_part() {
+        // Two squares 5 above a plane, one glowing red and one, farther off, blue, as one
+        // emissive mesh through its corners' factors: single scattering in red equals that of
+        // the red square alone and in blue that of the blue square alone (each its own light),
+        // within the area samples' own difference. Its colour is no one colour: read as one
+        // (the brightest channel's value times the mean colour), blue would have red's light.
+        let mesh = plane(9, 40.0);
+        let mut scene = Scene::new(mesh);
+        let tracer = Tracer::new(&scene.mesh);
+        let square = |x: f32| {
+            [[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]].map(|[a, b]| Vec3::new(x + a, b, 5.0))
+        };
+        let positions: Vec<Vec3> = square(-1.0).into_iter().chain(square(6.0)).collect();
+        let triangles = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]];
+        let (red, blue) = ([[1.0, 0.0, 0.0]; 3], [[0.0, 0.0, 1.0]; 3]);
+        let m = Material::new([0.02, 0.1, 0.5], [1.0, 2.0, 3.0], 0.2, 1.3).unwrap();
+        let settings = PathSettings {
+            eta: 1.3,
+            area_samples: 1024,
+            ..Default::default()
+        };
+        let single = |scene: &Scene| {
+            let paths = SinglePaths::new(scene, &tracer, &settings).unwrap();
+            let (x, n) = (Vec3::new(0.3, -0.2, 0.0), Vec3::Z);
+            let mut rays = 0;
+            brute_force(
+                &paths,
+                &m,
+                Phase::HenyeyGreenstein,
+                x,
+                n,
+                None,
+                256,
+                &mut rays,
+            )
+        };
+        let light = |corners: &[[[f32; 3]; 3]]| {
+            Light::textured_mesh(&positions, &triangles, [4.0; 3], Some(corners), true).unwrap()
+        };
+        scene.lights = vec![light(&[red, red, blue, blue])];
+        let both = single(&scene);
+        let black = [[0.0; 3]; 3];
+        scene.lights = vec![light(&[red, red, black, black])];
+        let red_alone = single(&scene);
+        scene.lights = vec![light(&[black, black, blue, blue])];
+        let blue_alone = single(&scene);
+        assert!(red_alone[0] > 0.0 && blue_alone[2] > 0.0 && both[1] == 0.0);
+        assert!(
+            (both[0] / red_alone[0] - 1.0).abs() < 0.03,
+            "{both:?} {red_alone:?}"
+        );
+        assert!(
+            (both[2] / blue_alone[2] - 1.0).abs() < 0.03,
+            "{both:?} {blue_alone:?}"
+        );
     }
 
     #[test]

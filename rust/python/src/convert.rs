@@ -109,6 +109,22 @@ pub fn float_rows(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[f32; 3]
         .collect())
 }
 
+/// A (T, 3, 3) float array (per triangle, its three corners' RGB) as f32 blocks; the range is
+/// the core's to check.
+pub fn corner_rows(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<[[f32; 3]; 3]>> {
+    let arr = as_contiguous(value, "float64").map_err(|e| {
+        PyValueError::new_err(format!("{name} must be a (T, 3, 3) float array: {e}"))
+    })?;
+    let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
+    if shape.len() != 3 || shape[1] != 3 || shape[2] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "{name} must have shape (T, 3, 3): per triangle, its three corners' RGB; got {shape:?}"
+        )));
+    }
+    let rows = float_rows(name, &arr.call_method1("reshape", ((-1i64, 3i64),))?)?;
+    Ok(rows.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
 /// A 1-D float array as f32 values (read in double precision, as `float_rows`); the range is
 /// the core's to check.
 pub fn float_values(name: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<f32>> {

@@ -229,20 +229,37 @@ impl PyScene {
     /// A mesh emitting light from both sides of its triangles (an Emission shader on any
     /// shape): radiance `strength` x `color` [W/(unit^2 sr)], Blender's Emission Strength and
     /// Color. `positions` (N, 3), `triangles` (M, 3) indices into them; triangles of no area
-    /// emit nothing. ValueError names a position that is not finite, an index out of range,
-    /// a mesh with no area or a negative strength.
-    #[pyo3(signature = (positions, triangles, strength, color = None))]
+    /// emit nothing. `corner_colors` (M, 3, 3): a textured or mixed emission, each triangle's
+    /// corners' RGB factors of that radiance, blended across the triangle. `visible_shadow`
+    /// False: hidden from shadow rays (Blender's Object > Visibility > Ray Visibility > Shadow
+    /// off), its own near side no longer hides its far side. ValueError names a position that
+    /// is not finite, an index out of range, a mesh with no area, a negative strength or
+    /// factor, or corner colours of another shape.
+    #[pyo3(signature = (positions, triangles, strength, color = None, corner_colors = None, visible_shadow = true))]
     fn add_mesh_light(
         &mut self,
         positions: &Bound<'_, PyAny>,
         triangles: &Bound<'_, PyAny>,
         strength: f64,
         color: Option<&Bound<'_, PyAny>>,
+        corner_colors: Option<&Bound<'_, PyAny>>,
+        visible_shadow: bool,
     ) -> PyResult<()> {
         let positions = vec3_array("positions", positions)?;
         let triangles = triangle_array("triangles", triangles)?;
         let radiance = colour_or_white("strength", strength, color)?;
-        let light = Light::mesh(&positions, &triangles, radiance).map_err(to_py)?;
+        let corners = match corner_colors.filter(|c| !c.is_none()) {
+            Some(c) => Some(crate::convert::corner_rows("corner_colors", c)?),
+            None => None,
+        };
+        let light = Light::textured_mesh(
+            &positions,
+            &triangles,
+            radiance,
+            corners.as_deref(),
+            visible_shadow,
+        )
+        .map_err(to_py)?;
         self.scene.lights.push(light);
         self.lighting_changed();
         Ok(())

@@ -634,3 +634,110 @@ fn an_emissive_sphere_gives_pi_l_sin_squared_of_its_angular_radius() {
     let expect = std::f64::consts::PI * f64::from(l);
     assert!((within / expect - 1.0).abs() < 0.01, "{within} vs {expect}");
 }
+
+#[test]
+fn a_half_glowing_sphere_lights_what_sees_its_glowing_half_and_through_itself_when_shadowless() {
+    // The sphere of the test above, its faces below the equator glowing L (c0, c1, c2) = (1,
+    // 0.5, 0.25) through the corners' factors, those above black. The points below it see the
+    // cap z < -r^2/d of its near side only: the glowing half, pi L (r / d)^2 (sampled by solid
+    // angle, the cone's hit reading its triangle's factors). The upper half glowing instead:
+    // hidden by the near side, nothing. Hidden from shadow rays, the emitter hides nothing of
+    // itself (each direction of the cone adds up both its crossings): the whole sphere gives
+    // twice pi L (r / d)^2, its far side seen through its near side. Inside a shell glowing on its upper
+    // half only, a surface facing up receives the closed form pi L of the whole shell; on
+    // its lower half only, nothing.
+    let (r, d, l) = (0.3f32, 2.0f32, 5.0f32);
+    let sphere = crate::mesh::test_meshes::sphere(96, r);
+    let moved: Vec<Vec3> = sphere
+        .positions()
+        .iter()
+        .map(|p| *p + Vec3::Z * d)
+        .collect();
+    let tint = [1.0f32, 0.5, 0.25];
+    let glowing = |mesh: &crate::mesh::Mesh, lower: bool, upper: bool| -> Vec<[[f32; 3]; 3]> {
+        (mesh.triangles().iter())
+            .map(|t| {
+                let z: f32 = t.iter().map(|&i| mesh.positions()[i as usize].z).sum();
+                let on = if z < 0.0 { lower } else { upper };
+                [if on { tint } else { [0.0; 3] }; 3]
+            })
+            .collect()
+    };
+    let pts: Vec<Vec3> = (0..64)
+        .map(|k| Vec3::new((k % 8) as f32 * 1e-3, (k / 8) as f32 * 1e-3, 0.0))
+        .collect();
+    let mean = |lights: Vec<Light>| -> [f64; 3] {
+        let mut s = scene(0.02, false);
+        s.lights = lights;
+        let tracer = s.tracer();
+        let settings = IrradianceSettings {
+            area_samples: 256,
+            ..Default::default()
+        };
+        let (i, _) = irradiance(&s, &tracer, &pts, &vec![Vec3::Z; pts.len()], &settings).unwrap();
+        std::array::from_fn(|c| i.iter().map(|e| f64::from(e[c])).sum::<f64>() / 64.0)
+    };
+    let lamp = |lower, upper, shadow| {
+        let corners = glowing(&sphere, lower, upper);
+        Light::textured_mesh(&moved, sphere.triangles(), [l; 3], Some(&corners), shadow).unwrap()
+    };
+    let cap = std::f64::consts::PI * f64::from(l) * f64::from(r / d).powi(2);
+    let near = |got: [f64; 3], times: f64, what: &str| {
+        for c in 0..3 {
+            let expect = times * cap * f64::from(tint[c]);
+            assert!(
+                (got[c] - expect).abs() <= 0.015 * cap * times.max(1.0),
+                "{what}, channel {c}: {} vs {expect}",
+                got[c]
+            );
+        }
+    };
+    near(mean(vec![lamp(true, false, true)]), 1.0, "lower half");
+    near(
+        mean(vec![lamp(false, true, true)]),
+        0.0,
+        "upper half, hidden",
+    );
+    // Each half apart adds up to the whole: seen through the
+    // near side, the far crossings reach below the equator (to z = -r^2 / d), so a half alone
+    // has no closed form of its own.
+    let (up, down) = (
+        mean(vec![lamp(false, true, false)]),
+        mean(vec![lamp(true, false, false)]),
+    );
+    near(
+        std::array::from_fn(|c| up[c] + down[c]),
+        2.0,
+        "halves, shadowless",
+    );
+    near(
+        mean(vec![lamp(true, true, false)]),
+        2.0,
+        "whole, shadowless",
+    );
+    // Sampled by power inside a shell of 5 m (the points within its bounding sphere): no
+    // sample falls on the black half.
+    let shell = crate::mesh::test_meshes::sphere(64, 5.0);
+    let sky = |lower, upper| {
+        let corners = glowing(&shell, lower, upper);
+        let light = Light::textured_mesh(
+            shell.positions(),
+            shell.triangles(),
+            [l; 3],
+            Some(&corners),
+            true,
+        );
+        mean(vec![light.unwrap()])
+    };
+    let whole = std::f64::consts::PI * f64::from(l);
+    let upper = sky(false, true);
+    let lower = sky(true, false);
+    for c in 0..3 {
+        let expect = whole * f64::from(tint[c]);
+        assert!(
+            (upper[c] / expect - 1.0).abs() < 0.01,
+            "{upper:?} vs {expect}"
+        );
+        assert!(lower[c].abs() < 1e-3 * expect, "{lower:?}");
+    }
+}

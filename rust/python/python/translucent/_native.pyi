@@ -148,12 +148,22 @@ class Scene:
     ) -> None:
         """One-sided rectangle of `power` [W], emitting along `direction`."""
     def add_mesh_light(
-        self, positions: npt.ArrayLike, triangles: npt.ArrayLike, strength: float, color: RGB | None = None
+        self,
+        positions: npt.ArrayLike,
+        triangles: npt.ArrayLike,
+        strength: float,
+        color: RGB | None = None,
+        corner_colors: npt.ArrayLike | None = None,
+        visible_shadow: bool = True,
     ) -> None:
         """A mesh emitting radiance `strength` x `color` [W/(unit^2 sr)] from both sides of its
         triangles (Blender's Emission shader on any shape): positions (N, 3), triangles (M, 3).
-        ValueError names a position that is not finite, an index out of range, a mesh with no
-        area or a negative strength."""
+        `corner_colors` (M, 3, 3): a textured or mixed emission, each triangle's corners' RGB
+        factors of that radiance, blended across it (sampled by power, so black parts cost no
+        rays). `visible_shadow=False`: hidden from shadow rays (Object > Visibility > Ray
+        Visibility > Shadow off), its near side no longer hides its far side. ValueError names
+        a position that is not finite, an index out of range, a mesh with no area, a negative
+        strength or factor, or corner colours of another shape."""
     def set_world(
         self, color: RGB | None = None, strength: float = 1.0, image: npt.ArrayLike | None = None
     ) -> None:
