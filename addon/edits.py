@@ -8,7 +8,7 @@ import threading
 import bpy
 import numpy as np
 
-from . import export, jobs, textures, viewport, writeback
+from . import bake, export, jobs, textures, viewport, writeback
 from .principled import principled_key, show_medium
 from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, params, view_dependent
 
@@ -305,7 +305,7 @@ def follow_principled(_scene=None, depsgraph=None) -> None:
     """depsgraph_update_post: a previewed material that follows its Principled BSDF is shown
     again when any input it reads has changed (cheap when none did), its Base Color read again
     when what drives it changed (`follow_texture`)."""
-    if textures.BAKING:
+    if bake.BAKING:
         return  # the bake's own temporary data
     for name, s in list(SESSIONS.items()):
         mat = bpy.data.materials.get(name)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import time
 from dataclasses import dataclass, field
 
 import bpy
@@ -18,7 +19,7 @@ import numpy as np
 import translucent
 from translucent import cycles
 
-from . import linking
+from . import emission, linking
 
 
 @dataclass
@@ -47,6 +48,21 @@ class ObjectRange:
 
 
 @dataclass
+class MeshLight:
+    """An emitter's faces as one mesh light (`translucent.Scene.add_mesh_light`): world-space
+    positions, triangles and their radiance (one RGB, or per triangle corner, (T, 3, 3), where
+    Cycles' emission pass was baked); `visible_shadow` false for an object hidden from shadow
+    rays; `whole` where it is all the object emits."""
+    obj: object
+    positions: np.ndarray
+    triangles: np.ndarray
+    radiance: tuple = (1.0, 1.0, 1.0)
+    corners: np.ndarray | None = None
+    visible_shadow: bool = True
+    whole: bool = True
+
+
+@dataclass
 class ExportInfo:
     objects: list[ObjectRange] = field(default_factory=list)
     lights: list[str] = field(default_factory=list)
@@ -57,10 +73,12 @@ class ExportInfo:
     # Emissive rectangles found among the occluders (`_emissive_rectangle`), made area lights
     # by `add_lights`: (object, (centre, normal, axis_u, size_u, size_v, radiance)).
     emissive_rectangles: list = field(default_factory=list)
-    # Other emissive occluders' faces of one constant radiance (`_emissive_parts`), made mesh
-    # lights by `add_lights`: (object, positions, triangles, radiance, whole), `whole` where
-    # every emitting material of the object is one of those.
-    emissive_meshes: list = field(default_factory=list)
+    # Other emitters' faces (`_add_emitter`), made mesh lights by `add_lights`.
+    emissive_meshes: list[MeshLight] = field(default_factory=list)
+    # What was read of the emitters' textured or mixed emission, for the panel, and the
+    # emitters whose emission is still to be baked (`_bake_emitters`).
+    emission: list[str] = field(default_factory=list)
+    to_bake: list[MeshLight] = field(default_factory=list)
     # Lights whose light linking lights none of the exported objects (`linking.follow`), and
     # the lines saying what of the lights' linking is not followed.
     unlinked_lights: list[str] = field(default_factory=list)
@@ -144,8 +162,9 @@ def _evaluate(obj: bpy.types.Object, depsgraph, triangles: bool, instance=None):
 
 def evaluated_copy(obj: bpy.types.Object, depsgraph) -> bpy.types.Mesh:
     """A new mesh data-block holding `obj`'s evaluated mesh with every data layer (UV maps,
-    colour attributes), in object space: for a bake on a temporary copy (`textures`). The caller
-    removes it. The other place the add-on evaluates a mesh (`_evaluate` is the first)."""
+    colour attributes), in object space: for a bake on a temporary copy (`textures`,
+    `emission`). The caller removes it. The other place the add-on evaluates a mesh
+    (`_evaluate` is the first)."""
     return bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph), preserve_all_data_layers=True,
                                            depsgraph=depsgraph)
 
@@ -266,22 +285,26 @@ def add_lights(scene: translucent.Scene, bl_scene: bpy.types.Scene, info: Export
         added += 2
         link(obj, 2)
         info.lights.append(f"{obj.name} (emissive rectangle)")
-    # Other emissive meshes (a sphere, a tube, a neon sign) of one constant radiance per
-    # material: a mesh light emitting it from both sides of their faces, as Cycles' mesh
-    # emission does; being occluders too, they hide their own far side.
-    for obj, co, tris, radiance, whole in info.emissive_meshes:
-        kept, lines = linking.follow(obj, previewed, occluders)
+    # Other emissive meshes (a sphere, a tube, a neon sign): a mesh light emitting from both
+    # sides of their faces, as Cycles' mesh emission does, of one radiance per material or of
+    # Cycles' own emission pass per corner; being occluders too, they hide their own far side,
+    # unless hidden from shadow rays.
+    for m in info.emissive_meshes:
+        kept, lines = linking.follow(m.obj, previewed, occluders)
         info.linking.extend(lines)
-        if whole and obj.name in info.emitters:
-            info.emitters.remove(obj.name)
+        if m.whole and m.obj.name in info.emitters:
+            info.emitters.remove(m.obj.name)
         if not kept:
-            info.unlinked_lights.append(obj.name)
+            info.unlinked_lights.append(m.obj.name)
             continue
-        k = max(radiance)
-        scene.add_mesh_light(co, tris, k, color=tuple(c / k for c in radiance))
+        k = max(m.radiance)
+        scene.add_mesh_light(m.positions, m.triangles, k, color=tuple(c / k for c in m.radiance),
+                             corner_colors=m.corners, visible_shadow=m.visible_shadow)
         added += 1
-        link(obj, 1)
-        info.lights.append(f"{obj.name} (emissive mesh)")
+        link(m.obj, 1)
+        how = ", textured" if m.corners is not None else ""
+        how += "" if m.visible_shadow else ", hidden from shadow rays"
+        info.lights.append(f"{m.obj.name} (emissive mesh{how})")
 
 
 # Object types Cycles renders as surfaces: their evaluated mesh casts the shadow.
@@ -303,12 +326,14 @@ def _occluder_instances(depsgraph, previewed: set):
         yield original, inst
 
 
-def _add_key(keys: dict, obj, key: str) -> None:
+def _add_key(keys: dict, obj, key: str, kind: str = "occluder") -> None:
     # The geometry and what the object sends back (its slots' albedo: a colour edit relights);
     # an object instanced several times: its instances' keys in the depsgraph's order.
     albedo = [cycles.diffuse_albedo(s.material) for s in obj.material_slots] or [cycles.DEFAULT_SURFACE]
-    emission = [cycles.emission(s.material) for s in obj.material_slots]
-    keys[f"occluder {obj.name}"] = keys.get(f"occluder {obj.name}", "") + f"{key}:{albedo!r}:{emission!r};"
+    # What it emits: one radiance, or the digest of the nodes a textured or mixed one reads.
+    emits = [cycles.emission(s.material) or (emission.key(s.material) if cycles.emits(s.material) else None)
+             for s in obj.material_slots]
+    keys[f"{kind} {obj.name}"] = keys.get(f"{kind} {obj.name}", "") + f"{key}:{albedo!r}:{emits!r};"
 
 
 def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
@@ -322,7 +347,21 @@ def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
             _add_key(keys, original, _evaluate(original, depsgraph, triangles=False, instance=inst)[3])
         except RuntimeError:
             continue
+    for obj in _shadowless_emitters(depsgraph.scene, previewed):
+        try:
+            _add_key(keys, obj, _evaluate(obj, depsgraph, triangles=False)[3], kind="emitter")
+        except RuntimeError:
+            continue
     return keys
+
+
+def _shadowless_emitters(bl_scene, previewed: set):
+    """The objects Cycles renders as surfaces that emit light and are hidden from shadow rays
+    (not hidden from render, not previewed): they light the scene and shadow nothing."""
+    for obj in bl_scene.objects:
+        if (obj.type in _SURFACES and not obj.hide_render and not getattr(obj, "visible_shadow", True)
+                and obj.name not in previewed and any(cycles.emits(sl.material) for sl in obj.material_slots)):
+            yield obj
 
 
 def _add_parts(scene: translucent.Scene, obj, name: str, co, tris, slots, info: ExportInfo) -> None:
@@ -353,12 +392,52 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
         if len(co) == 0 or len(tris) == 0:
             continue
         _add_parts(scene, original, original.name, co, tris, slots, info)
-        rectangle = _emissive_rectangle(original, co, tris, slots)
-        if rectangle is not None:
-            info.emissive_rectangles.append((original, rectangle))
-        else:
-            parts, whole = _emissive_parts(original, tris, slots)
-            info.emissive_meshes.extend((original, co, part, radiance, whole) for part, radiance in parts)
+        _add_emitter(original, co, tris, slots, info, instance=inst)
+
+
+def _add_emitter(obj, co, tris, slots, info: ExportInfo, instance=None, visible_shadow: bool = True) -> None:
+    """The light `obj`'s faces (`tris` of world-space `co`, their material `slots`) emit, kept in
+    `info` for `add_lights`: an emissive rectangle as two area lights; faces of one constant
+    radiance per material as mesh lights; a textured or mixed emission (`cycles.emits` without
+    one `cycles.emission`) left for `_bake_emitters` (after the depsgraph's instances are
+    iterated: a bake adds data), or named in `info.emitters` where it is an instance's."""
+    rectangle = _emissive_rectangle(obj, co, tris, slots)
+    if rectangle is not None:
+        info.emissive_rectangles.append((obj, rectangle))
+        return
+    parts, whole = _emissive_parts(obj, tris, slots)
+    if not whole and (instance is None or not instance.is_instance):
+        info.to_bake.append(MeshLight(obj, co, tris, visible_shadow=visible_shadow))
+        return
+    if not whole:
+        info.emission.append(f"{obj.name}: an instance's textured or mixed emission is not read")
+    info.emissive_meshes.extend(MeshLight(obj, co, part, radiance, visible_shadow=visible_shadow, whole=whole)
+                                for part, radiance in parts)
+
+
+def _bake_emitters(info: ExportInfo) -> None:
+    """Each emitter of a textured or mixed emission in `info.to_bake` as one mesh light of
+    Cycles' emission pass at every face corner (`emission.corner_radiance` on a temporary copy
+    of its evaluated mesh), or named in `info.emitters` where the bake fails."""
+    for m in info.to_bake:
+        t0 = time.perf_counter()
+        mesh = evaluated_copy(m.obj, bpy.context.evaluated_depsgraph_get())
+        try:
+            m.corners = emission.corner_radiance(m.obj, mesh, m.obj.matrix_world, m.triangles)
+        except ValueError as e:
+            info.emission.append(f"{m.obj.name}: its emission was not read ({e})")
+            continue
+        finally:
+            bpy.data.meshes.remove(mesh)
+        glowing = m.corners.reshape(len(m.triangles), -1).max(axis=1) > 0.0
+        if glowing.any():
+            m.triangles, m.corners = m.triangles[glowing], m.corners[glowing]
+            info.emissive_meshes.append(m)
+        elif m.obj.name in info.emitters:
+            info.emitters.remove(m.obj.name)  # black wherever Cycles looked: no light
+        info.emission.append(f"{m.obj.name}: emission read by Cycles at {3 * len(glowing):,} face corners "
+                             f"in {1000 * (time.perf_counter() - t0):.0f} ms")
+    info.to_bake = []
 
 
 def _emissive_parts(obj, tris, slots):
@@ -519,12 +598,18 @@ def export_scene(
         # shadow rays see them, and send light back; they neither scatter nor receive the preview.
         _add_parts(scene, obj, f"{obj.name} [other materials]", p, t, slots, info)
     add_occluders(scene, depsgraph, {o.name for o in objects}, info)
-    # An emissive object that casts no shadow (hidden from shadow rays) still lights the scene
-    # in Cycles: named as well.
-    for obj in bl_scene.objects:
-        if (obj.type in _SURFACES and not obj.hide_render and f"occluder {obj.name}" not in info.occluder_keys
-                and obj not in objects and any(cycles.emits(sl.material) for sl in obj.material_slots)):
-            info.emitters.append(obj.name)
+    # An emissive object hidden from shadow rays still lights the scene in Cycles: a light
+    # that shadows nothing, not even its own far side (named where it cannot be read).
+    for obj in _shadowless_emitters(bl_scene, {o.name for o in objects}):
+        try:
+            co, tris, _, key, slots = _evaluate(obj, depsgraph, triangles=True)
+        except RuntimeError:
+            continue
+        _add_key(info.occluder_keys, obj, key, kind="emitter")
+        info.emitters.append(obj.name)
+        if len(co) and len(tris):
+            _add_emitter(obj, co, tris, slots, info, visible_shadow=False)
+    _bake_emitters(info)
     add_lights(scene, bl_scene, info)
     set_world(scene, bl_scene, info)
     return scene, info

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
-from . import edits, export, jobs, textures
+from . import bake, edits, export, jobs, textures
 from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, view_dependent
 
 DEBOUNCE_S = 0.3
@@ -106,7 +106,7 @@ def follow_scene(scene, depsgraph) -> None:
     tagged: armature, shape keys, modifiers, edit mode; a previewed object, or a prop that
     shadows it) and whether a light or the world changed, and schedules the debounced check.
     Evaluates no mesh."""
-    if not SESSIONS or textures.BAKING:
+    if not SESSIONS or bake.BAKING:
         return  # nothing previewed, or the Base Color bake's own temporary data
     tagged, lighting, linked = set(), False, False
     for u in depsgraph.updates:

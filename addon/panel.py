@@ -101,9 +101,10 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     # Light and shadow linking: every method follows it; a light lighting none of the exported
     # objects is left out, and said so.
     lines += [(line, "INFO") for line in getattr(sess.info, "linking", [])]
+    lines += [(line, "INFO") for line in getattr(sess.info, "emission", [])]
     if getattr(sess.info, "emitters", None):
         lines.append((f"{', '.join(sess.info.emitters)}: emissive, lighting the scene in Cycles; not a light here "
-                      "(textured or mixed emission, or hidden from shadow rays: shadows and bounce only)", "ERROR"))
+                      "(its emission could not be read: shadows and bounce only)", "ERROR"))
     if sess.last_eval is not None:
         lines.append((estimate_line(sess), "NONE"))
         # What the method's evaluation left out, and why (its own words).

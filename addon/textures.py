@@ -10,7 +10,6 @@ images and scene are only read."""
 
 from __future__ import annotations
 
-import hashlib
 import time
 from dataclasses import dataclass, field
 
@@ -19,14 +18,8 @@ import numpy as np
 
 from translucent import cycles
 
-from . import export
+from . import bake, export
 from .principled import principled_inputs, principled_node
-
-BAKE_SCENE = "Translucent Base Color bake"
-# True while a bake runs: the add-on's depsgraph handlers ignore the updates the bake's own
-# temporary data causes.
-BAKING = False
-
 
 # The Principled inputs read per vertex where a link drives them (PRT).
 FOLLOWED = ("Base Color", "Subsurface Weight")
@@ -66,37 +59,10 @@ def _upstream(mat: bpy.types.Material) -> list:
 
 
 def tree_key(mat: bpy.types.Material) -> str:
-    """What the baked colours depend on, as a digest: the nodes upstream of the Base Color
-    (`_upstream`), their inputs' values, their properties and the links between them, and the
-    state of the images they read (name, size, file, dirty flag). Equal keys, the same bake; a
-    slider of the Principled node itself leaves it as it is."""
-    parts = []
-    nodes = _upstream(mat)
-    names = {n.name for n in nodes}
-    for node in nodes:
-        parts.append((node.name, node.bl_idname))
-        for sock in node.inputs:
-            v = getattr(sock, "default_value", None)
-            parts.append((sock.identifier, tuple(v) if hasattr(v, "__len__") and not isinstance(v, str) else v))
-            parts.extend((link.from_node.name, link.from_socket.identifier, sock.identifier) for link in sock.links)
-        for prop in node.bl_rna.properties:
-            if prop.identifier in {"rna_type", "location", "width", "height", "select", "dimensions",
-                                   "location_absolute", "warning_propagation", "name", "label"}:
-                continue
-            try:
-                value = getattr(node, prop.identifier)
-            except AttributeError:
-                continue
-            if isinstance(value, bpy.types.Image):
-                # The image's pixels: reloaded, replaced or painted (the dirty flag; strokes after
-                # the first come through the depsgraph, `edits.follow_principled`).
-                parts.append((value.name, tuple(value.size), value.is_dirty, value.filepath))
-            elif isinstance(value, bpy.types.ID):
-                parts.append((prop.identifier, value.name))
-            elif isinstance(value, (int, float, str, bool)):
-                parts.append((prop.identifier, value))
-    parts.append(sorted(names))
-    return hashlib.blake2b(repr(parts).encode(), digest_size=16).hexdigest()
+    """What the baked colours depend on, as a digest: the nodes upstream of the followed inputs
+    (`_upstream`), by `bake.nodes_key`. Equal keys, the same bake; a slider of the Principled
+    node itself leaves it as it is."""
+    return bake.nodes_key(_upstream(mat))
 
 
 def _emission_copy(mat: bpy.types.Material, socket: str = "Base Color") -> bpy.types.Material:
@@ -134,19 +100,11 @@ def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], de
     message says why)."""
     if not linked(mat, socket):
         raise ValueError(f"the {socket} of {mat.name!r} is not driven by a link")
-    global BAKING
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     t0 = time.perf_counter()
-    made_meshes, made_objects, copy, scene = [], [], None, None
-    BAKING = True
+    made_meshes, copy = [], None
     try:
         copy = _emission_copy(mat, socket)
-        scene = bpy.data.scenes.new(BAKE_SCENE)
-        scene.render.engine = "CYCLES"
-        scene.cycles.device = "CPU"
-        scene.cycles.samples = 1
-        scene.cycles.use_denoising = False
-        scene.cycles.use_adaptive_sampling = False
         for obj in objects:
             mesh = export.evaluated_copy(obj, depsgraph)
             made_meshes.append(mesh)
@@ -154,40 +112,16 @@ def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], de
             mesh.materials.append(copy)
             if len(mesh.polygons):
                 mesh.polygons.foreach_set("material_index", np.zeros(len(mesh.polygons), dtype=np.int32))
-            attr = mesh.color_attributes.new("translucent_base_color", "FLOAT_COLOR", "POINT")
-            mesh.color_attributes.active_color = attr
-            tmp = bpy.data.objects.new(f"{obj.name} (Base Color bake)", mesh)
-            made_objects.append(tmp)
-            tmp.matrix_world = obj.matrix_world
-            scene.collection.objects.link(tmp)
-        layer = scene.view_layers[0]
-        with bpy.context.temp_override(scene=scene, view_layer=layer, active_object=made_objects[0],
-                                       object=made_objects[0], selected_objects=made_objects,
-                                       selected_editable_objects=made_objects):
-            for tmp in made_objects:
-                tmp.select_set(True, view_layer=layer)
-            layer.objects.active = made_objects[0]
-            result = bpy.ops.object.bake(type="EMIT", target="VERTEX_COLORS")
-        if result != {"FINISHED"}:
-            raise ValueError(f"Cycles' bake of the {socket} returned {result}")
-        out = {}
-        for obj, mesh in zip(objects, made_meshes):
-            px = np.empty(len(mesh.vertices) * 4, np.float32)
-            mesh.color_attributes["translucent_base_color"].data.foreach_get("color", px)
-            out[obj.name] = px.reshape(-1, 4)[:, :3].copy()
-        return out, time.perf_counter() - t0
-    except RuntimeError as e:
-        raise ValueError(f"Cycles' bake of the {socket} failed: {e}") from e
+        try:
+            baked = bake.emission([(mesh, obj.matrix_world, []) for obj, mesh in zip(objects, made_meshes)])
+        except ValueError as e:
+            raise ValueError(f"{e} (reading the {socket})") from e
+        return {obj.name: colours for obj, colours in zip(objects, baked)}, time.perf_counter() - t0
     finally:
-        for tmp in made_objects:
-            bpy.data.objects.remove(tmp)
         for mesh in made_meshes:
             bpy.data.meshes.remove(mesh)
         if copy is not None:
             bpy.data.materials.remove(copy)
-        if scene is not None:
-            bpy.data.scenes.remove(scene)
-        BAKING = False
 
 
 def per_exported_vertex(baked: dict, info) -> np.ndarray:
