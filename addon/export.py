@@ -60,6 +60,8 @@ class MeshLight:
     corners: np.ndarray | None = None
     visible_shadow: bool = True
     whole: bool = True
+    # Where only some faces may emit (a previewed object's faces of other materials): those.
+    faces: np.ndarray | None = None
 
 
 @dataclass
@@ -331,9 +333,7 @@ def _add_key(keys: dict, obj, key: str, kind: str = "occluder") -> None:
     # an object instanced several times: its instances' keys in the depsgraph's order.
     albedo = [cycles.diffuse_albedo(s.material) for s in obj.material_slots] or [cycles.DEFAULT_SURFACE]
     # What it emits: one radiance, or the digest of the nodes a textured or mixed one reads.
-    emits = [cycles.emission(s.material) or (emission.key(s.material) if cycles.emits(s.material) else None)
-             for s in obj.material_slots]
-    keys[f"{kind} {obj.name}"] = keys.get(f"{kind} {obj.name}", "") + f"{key}:{albedo!r}:{emits!r};"
+    keys[f"{kind} {obj.name}"] = keys.get(f"{kind} {obj.name}", "") + f"{key}:{albedo!r}:{_glow_key(obj)};"
 
 
 def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
@@ -352,7 +352,18 @@ def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
             _add_key(keys, obj, _evaluate(obj, depsgraph, triangles=False)[3], kind="emitter")
         except RuntimeError:
             continue
+    for name in previewed:
+        obj = bpy.data.objects.get(name)
+        if obj is not None and any(cycles.emits(s.material) for s in obj.material_slots):
+            keys[f"glow {name}"] = _glow_key(obj)
     return keys
+
+
+def _glow_key(obj) -> str:
+    """What a previewed object's glowing faces of other materials emit (`_add_key`'s part), as
+    a string: their emission changed, the preview is rebuilt."""
+    return repr([cycles.emission(s.material) or (emission.key(s.material) if cycles.emits(s.material) else None)
+                 for s in obj.material_slots])
 
 
 def _shadowless_emitters(bl_scene, previewed: set):
@@ -395,19 +406,21 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
         _add_emitter(original, co, tris, slots, info, instance=inst)
 
 
-def _add_emitter(obj, co, tris, slots, info: ExportInfo, instance=None, visible_shadow: bool = True) -> None:
-    """The light `obj`'s faces (`tris` of world-space `co`, their material `slots`) emit, kept in
-    `info` for `add_lights`: an emissive rectangle as two area lights; faces of one constant
-    radiance per material as mesh lights; a textured or mixed emission (`cycles.emits` without
-    one `cycles.emission`) left for `_bake_emitters` (after the depsgraph's instances are
-    iterated: a bake adds data), or named in `info.emitters` where it is an instance's."""
-    rectangle = _emissive_rectangle(obj, co, tris, slots)
+def _add_emitter(obj, co, tris, slots, info: ExportInfo, instance=None, visible_shadow: bool = True,
+                 faces: np.ndarray | None = None) -> None:
+    """The light `obj`'s faces (`tris` of world-space `co`, their material `slots`; only those
+    `faces` selects where given) emit, kept in `info` for `add_lights`: an emissive rectangle
+    as two area lights; faces of one constant radiance per material as mesh lights; a textured
+    or mixed emission (`cycles.emits` without one `cycles.emission`) left for `_bake_emitters`
+    (after the depsgraph's instances are iterated: a bake adds data), or named in
+    `info.emitters` where it is an instance's."""
+    rectangle = _emissive_rectangle(obj, co, tris, slots) if faces is None else None
     if rectangle is not None:
         info.emissive_rectangles.append((obj, rectangle))
         return
-    parts, whole = _emissive_parts(obj, tris, slots)
+    parts, whole = _emissive_parts(obj, tris if faces is None else tris[faces], slots if faces is None else slots[faces])
     if not whole and (instance is None or not instance.is_instance):
-        info.to_bake.append(MeshLight(obj, co, tris, visible_shadow=visible_shadow))
+        info.to_bake.append(MeshLight(obj, co, tris, visible_shadow=visible_shadow, faces=faces))
         return
     if not whole:
         info.emission.append(f"{obj.name}: an instance's textured or mixed emission is not read")
@@ -430,6 +443,8 @@ def _bake_emitters(info: ExportInfo) -> None:
         finally:
             bpy.data.meshes.remove(mesh)
         glowing = m.corners.reshape(len(m.triangles), -1).max(axis=1) > 0.0
+        if m.faces is not None:
+            glowing &= m.faces
         if glowing.any():
             m.triangles, m.corners = m.triangles[glowing], m.corners[glowing]
             info.emissive_meshes.append(m)
@@ -557,7 +572,7 @@ def export_scene(
     bl_scene = bl_scene or bpy.context.scene
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     info = ExportInfo()
-    parts_p, parts_t, parts_n, others = [], [], [], []
+    parts_p, parts_t, parts_n, others, glows = [], [], [], [], []
     offset = 0
     for obj in objects:
         if obj.type != "MESH":
@@ -569,6 +584,9 @@ def export_scene(
             if not mine.any():
                 info.without_faces.append(obj.name)
                 continue
+            if not mine.all() and any(cycles.emits(m) for m in other_materials(obj, np.where(mine, -1, slots)).values()):
+                # Faces of another material that glow (eyes, a lamp's bulb): a light of their own.
+                glows.append((obj, p, t, slots, ~mine))
             if not mine.all() and others_scatter:
                 kept_slots = other_slots(t, slots, mine, len(p))
                 if any(cycles.emits(m) for m in other_materials(obj, kept_slots).values()):
@@ -598,6 +616,11 @@ def export_scene(
         # shadow rays see them, and send light back; they neither scatter nor receive the preview.
         _add_parts(scene, obj, f"{obj.name} [other materials]", p, t, slots, info)
     add_occluders(scene, depsgraph, {o.name for o in objects}, info)
+    for obj, p, t, slots, faces in glows:
+        _add_emitter(obj, p, t, slots, info, faces=faces)
+    for obj in objects:
+        if any(cycles.emits(s.material) for s in obj.material_slots):
+            info.occluder_keys[f"glow {obj.name}"] = _glow_key(obj)  # as `occluder_keys` reads it
     # An emissive object hidden from shadow rays still lights the scene in Cycles: a light
     # that shadows nothing, not even its own far side (named where it cannot be read).
     for obj in _shadowless_emitters(bl_scene, {o.name for o in objects}):

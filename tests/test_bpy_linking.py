@@ -465,3 +465,39 @@ def test_a_textured_lamp_lights_a_grid_as_cycles_does(addon):
         print(f"visible_shadow {shadow}: preview / Cycles on the whole {ratio}, area-weighted relative RMS {rms}")
         assert np.all(np.abs(ratio - 1.0) < 0.03), ratio
         assert np.all(rms < 0.05), rms
+
+
+def test_glowing_faces_of_another_material_on_the_ball_light_it(addon):
+    # A 1 cm bulb beside the ball, part of the ball's own mesh, in a second material, an
+    # Emission (a lantern's bulb): its faces are a mesh light of their own (not previewed),
+    # lighting the ball and the floor that sends it back, and named nowhere as unfollowed. The
+    # light is linear in their Strength (the dipole: no walks chosen by the light); a change of
+    # it changes what following compares.
+    import bpy
+
+    from addon import export, session
+
+    mat, obj, rim = _scene(bpy)
+    mat.translucent.profile = "DIPOLE"
+    bulb = _emission(bpy, "Bulb", 0.0)
+    obj.data.materials.append(bulb)
+    bpy.ops.mesh.primitive_ico_sphere_add(radius=0.01, subdivisions=2, location=(0.07, -0.03, 0.02))
+    lamp = bpy.context.active_object
+    lamp.data.materials.append(bulb)
+    bpy.ops.object.select_all(action="DESELECT")
+    lamp.select_set(True)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.join()  # the bulb's faces keep their material, now the Ball's second slot
+    dark = _preview(bpy, mat, obj)
+    bulb.node_tree.nodes["Emission"].inputs["Strength"].default_value = 40.0
+    keys = session.SESSIONS[mat.name].info.occluder_keys
+    assert export.occluder_keys(bpy.context.evaluated_depsgraph_get(), {obj.name}) != keys
+    once = _preview(bpy, mat, obj)
+    info = session.SESSIONS[mat.name].info
+    assert "Ball (emissive mesh)" in info.lights and info.emitters == [], (info.lights, info.emitters)
+    assert export.occluder_keys(bpy.context.evaluated_depsgraph_get(), {obj.name}) == info.occluder_keys
+    bulb.node_tree.nodes["Emission"].inputs["Strength"].default_value = 80.0
+    twice = _preview(bpy, mat, obj)
+    assert np.abs(once - dark).max() > 0.01 * dark.max()
+    np.testing.assert_allclose(twice - dark, 2.0 * (once - dark), rtol=1e-3, atol=1e-5 * dark.max())
