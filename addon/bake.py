@@ -72,6 +72,20 @@ def emission(parts: list[tuple[bpy.types.Mesh, object, list]], domain: str = "PO
         BAKING = False
 
 
+def upstream(start: list) -> list:
+    """The nodes `start` and every node they read from, directly or through other nodes
+    (groups' insides are in their own trees: a group node counts by its inputs and its tree's
+    name)."""
+    seen, stack = {}, list(start)
+    while stack:
+        n = stack.pop()
+        if n.name in seen:
+            continue
+        seen[n.name] = n
+        stack.extend(link.from_node for sock in n.inputs for link in sock.links)
+    return list(seen.values())
+
+
 def nodes_key(nodes: list) -> str:
     """What a bake reading `nodes` depends on, as a digest: their inputs' values, their
     properties and the links between them, and the state of the images they read (name, size,

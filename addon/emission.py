@@ -21,14 +21,7 @@ def _surface_nodes(mat: bpy.types.Material) -> list:
                                          None)
     if out is None:
         return []
-    seen, stack = {}, [link.from_node for link in out.inputs["Surface"].links]
-    while stack:
-        n = stack.pop()
-        if n.name in seen:
-            continue
-        seen[n.name] = n
-        stack.extend(link.from_node for sock in n.inputs for link in sock.links)
-    return list(seen.values())
+    return bake.upstream([link.from_node for link in out.inputs["Surface"].links])
 
 
 def key(mat: bpy.types.Material) -> str:

@@ -47,15 +47,7 @@ def _upstream(mat: bpy.types.Material) -> list:
     node = principled_node(mat)
     if node is None:
         return []
-    seen = {}
-    stack = [node.inputs[s].links[0].from_node for s in FOLLOWED if linked(mat, s)]
-    while stack:
-        n = stack.pop()
-        if n.name in seen:
-            continue
-        seen[n.name] = n
-        stack.extend(link.from_node for sock in n.inputs for link in sock.links)
-    return list(seen.values())
+    return bake.upstream([node.inputs[s].links[0].from_node for s in FOLLOWED if linked(mat, s)])
 
 
 def tree_key(mat: bpy.types.Material) -> str:

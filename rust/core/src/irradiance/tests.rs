@@ -581,6 +581,30 @@ fn the_bounce_error_is_the_unbiased_standard_error_of_the_mean() {
     assert_eq!(mean_and_error(3.0, 9.0, 1), (3.0, 3.0));
 }
 
+/// A sphere of radius `r` (96 rings) centred `d` above the origin, and its triangles.
+fn lamp_sphere(r: f32, d: f32) -> (Vec<Vec3>, crate::mesh::Mesh) {
+    let sphere = crate::mesh::test_meshes::sphere(96, r);
+    let moved = (sphere.positions().iter())
+        .map(|p| *p + Vec3::Z * d)
+        .collect();
+    (moved, sphere)
+}
+
+/// The mean irradiance per channel over 64 points of a 7 mm square at the origin, facing up,
+/// 256 samples of each spread light.
+fn mean_below(s: &Scene) -> [f64; 3] {
+    let pts: Vec<Vec3> = (0..64)
+        .map(|k| Vec3::new((k % 8) as f32 * 1e-3, (k / 8) as f32 * 1e-3, 0.0))
+        .collect();
+    let tracer = s.tracer();
+    let settings = IrradianceSettings {
+        area_samples: 256,
+        ..Default::default()
+    };
+    let (i, _) = irradiance(s, &tracer, &pts, &vec![Vec3::Z; pts.len()], &settings).unwrap();
+    std::array::from_fn(|c| i.iter().map(|e| f64::from(e[c])).sum::<f64>() / 64.0)
+}
+
 #[test]
 fn an_emissive_sphere_gives_pi_l_sin_squared_of_its_angular_radius() {
     // A Lambertian sphere of radiance L and radius r, its centre d above a point facing it
@@ -593,29 +617,14 @@ fn an_emissive_sphere_gives_pi_l_sin_squared_of_its_angular_radius() {
     // (they inside its bounding sphere: sampled by area) gives the closed form of a surface
     // inside a uniformly glowing shell.
     let (r, d, l) = (0.3f32, 2.0f32, 5.0f32);
-    let sphere = crate::mesh::test_meshes::sphere(96, r);
-    let moved: Vec<Vec3> = sphere
-        .positions()
-        .iter()
-        .map(|p| *p + Vec3::Z * d)
-        .collect();
+    let (moved, sphere) = lamp_sphere(r, d);
     let mut s = scene(0.02, false);
     s.lights = vec![Light::mesh(&moved, sphere.triangles(), [l, 0.5 * l, 0.0]).unwrap()];
-    let pts: Vec<Vec3> = (0..64)
-        .map(|k| Vec3::new((k % 8) as f32 * 1e-3, (k / 8) as f32 * 1e-3, 0.0))
-        .collect();
     let expect = std::f64::consts::PI * f64::from(l) * f64::from(r / d).powi(2);
     let mean = |s: &Scene| {
-        let tracer = s.tracer();
-        let settings = IrradianceSettings {
-            area_samples: 256,
-            ..Default::default()
-        };
-        let (i, _) = irradiance(s, &tracer, &pts, &vec![Vec3::Z; pts.len()], &settings).unwrap();
-        assert!(i
-            .iter()
-            .all(|e| (e[1] / e[0] - 0.5).abs() < 1e-5 && e[2] == 0.0));
-        i.iter().map(|e| f64::from(e[0])).sum::<f64>() / 64.0
+        let e = mean_below(s);
+        assert!((e[1] / e[0] - 0.5).abs() < 1e-5 && e[2] == 0.0, "{e:?}");
+        e[0]
     };
     let alone = mean(&s);
     assert!((alone / expect - 1.0).abs() < 0.01, "{alone} vs {expect}");
@@ -643,16 +652,11 @@ fn a_half_glowing_sphere_lights_what_sees_its_glowing_half_and_through_itself_wh
     // angle, the cone's hit reading its triangle's factors). The upper half glowing instead:
     // hidden by the near side, nothing. Hidden from shadow rays, the emitter hides nothing of
     // itself (each direction of the cone adds up both its crossings): the whole sphere gives
-    // twice pi L (r / d)^2, its far side seen through its near side. Inside a shell glowing on its upper
-    // half only, a surface facing up receives the closed form pi L of the whole shell; on
-    // its lower half only, nothing.
+    // twice pi L (r / d)^2, its far side seen through its near side. Inside a shell glowing
+    // on its upper half only, a surface facing up receives the closed form pi L of the whole
+    // shell; on its lower half only, nothing.
     let (r, d, l) = (0.3f32, 2.0f32, 5.0f32);
-    let sphere = crate::mesh::test_meshes::sphere(96, r);
-    let moved: Vec<Vec3> = sphere
-        .positions()
-        .iter()
-        .map(|p| *p + Vec3::Z * d)
-        .collect();
+    let (moved, sphere) = lamp_sphere(r, d);
     let tint = [1.0f32, 0.5, 0.25];
     let glowing = |mesh: &crate::mesh::Mesh, lower: bool, upper: bool| -> Vec<[[f32; 3]; 3]> {
         (mesh.triangles().iter())
@@ -663,19 +667,10 @@ fn a_half_glowing_sphere_lights_what_sees_its_glowing_half_and_through_itself_wh
             })
             .collect()
     };
-    let pts: Vec<Vec3> = (0..64)
-        .map(|k| Vec3::new((k % 8) as f32 * 1e-3, (k / 8) as f32 * 1e-3, 0.0))
-        .collect();
     let mean = |lights: Vec<Light>| -> [f64; 3] {
         let mut s = scene(0.02, false);
         s.lights = lights;
-        let tracer = s.tracer();
-        let settings = IrradianceSettings {
-            area_samples: 256,
-            ..Default::default()
-        };
-        let (i, _) = irradiance(&s, &tracer, &pts, &vec![Vec3::Z; pts.len()], &settings).unwrap();
-        std::array::from_fn(|c| i.iter().map(|e| f64::from(e[c])).sum::<f64>() / 64.0)
+        mean_below(&s)
     };
     let lamp = |lower, upper, shadow| {
         let corners = glowing(&sphere, lower, upper);
