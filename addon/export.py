@@ -360,8 +360,10 @@ def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
 
 
 def _glow_key(obj) -> str:
-    """What a previewed object's glowing faces of other materials emit (`_add_key`'s part), as
-    a string: their emission changed, the preview is rebuilt."""
+    """What each of `obj`'s material slots emits, as a string: one radiance, the digest of the
+    nodes a textured or mixed emission reads (`emission.key`), or None. Part of an occluder's
+    or emitter's key, and a previewed object's own ("glow NAME"): a change rebuilds the
+    preview."""
     return repr([cycles.emission(s.material) or (emission.key(s.material) if cycles.emits(s.material) else None)
                  for s in obj.material_slots])
 

@@ -248,8 +248,9 @@ impl EmissiveMesh {
     /// subtends (pbrt-v4 §6.2.4, sampling a sphere by its cone), `u` in [0, 1)^2, and where the
     /// emitter's first surface lies along it: what Cycles' sphere light does, for any shape.
     /// The first surface met is the one seen from `x` (its far side is hidden, whichever way
-    /// it faces); hidden from shadow rays, every surface along it is seen and added up. `Toward::Miss` where the direction misses every triangle (nothing arrives);
-    /// `Toward::Inside` where `x` lies within the bounding sphere (no cone: sample by area
+    /// it faces); hidden from shadow rays, every surface along it is seen and added up.
+    /// `Toward::Miss` where the direction misses every triangle (nothing arrives);
+    /// `Toward::Inside` where `x` lies within the bounding sphere (no cone: sample by power
     /// instead, `point`).
     pub fn toward(&self, x: Vec3, u: [f32; 2]) -> Toward {
         let (centre, radius) = self.sphere;
