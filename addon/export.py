@@ -62,6 +62,8 @@ class MeshLight:
     whole: bool = True
     # Where only some faces may emit (a previewed object's faces of other materials): those.
     faces: np.ndarray | None = None
+    # Waiting for its bake: the faces of one constant radiance, the lights kept if it fails.
+    fallback: list = field(default_factory=list)
 
 
 @dataclass
@@ -421,19 +423,20 @@ def _add_emitter(obj, co, tris, slots, info: ExportInfo, instance=None, visible_
         info.emissive_rectangles.append((obj, rectangle))
         return
     parts, whole = _emissive_parts(obj, tris if faces is None else tris[faces], slots if faces is None else slots[faces])
+    constant = [MeshLight(obj, co, part, radiance, visible_shadow=visible_shadow, whole=whole) for part, radiance in parts]
     if not whole and (instance is None or not instance.is_instance):
-        info.to_bake.append(MeshLight(obj, co, tris, visible_shadow=visible_shadow, faces=faces))
+        info.to_bake.append(MeshLight(obj, co, tris, visible_shadow=visible_shadow, faces=faces, fallback=constant))
         return
     if not whole:
         info.emission.append(f"{obj.name}: an instance's textured or mixed emission is not read")
-    info.emissive_meshes.extend(MeshLight(obj, co, part, radiance, visible_shadow=visible_shadow, whole=whole)
-                                for part, radiance in parts)
+    info.emissive_meshes.extend(constant)
 
 
 def _bake_emitters(info: ExportInfo) -> None:
     """Each emitter of a textured or mixed emission in `info.to_bake` as one mesh light of
     Cycles' emission pass at every face corner (`emission.corner_radiance` on a temporary copy
-    of its evaluated mesh), or named in `info.emitters` where the bake fails."""
+    of its evaluated mesh); where the bake fails, its faces of one constant radiance alone,
+    the object named in `info.emitters`."""
     for m in info.to_bake:
         t0 = time.perf_counter()
         mesh = evaluated_copy(m.obj, bpy.context.evaluated_depsgraph_get())
@@ -441,6 +444,7 @@ def _bake_emitters(info: ExportInfo) -> None:
             m.corners = emission.corner_radiance(m.obj, mesh, m.obj.matrix_world, m.triangles)
         except ValueError as e:
             info.emission.append(f"{m.obj.name}: its emission was not read ({e})")
+            info.emissive_meshes.extend(m.fallback)
             continue
         finally:
             bpy.data.meshes.remove(mesh)

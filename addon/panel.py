@@ -103,8 +103,8 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     lines += [(line, "INFO") for line in getattr(sess.info, "linking", [])]
     lines += [(line, "INFO") for line in getattr(sess.info, "emission", [])]
     if getattr(sess.info, "emitters", None):
-        lines.append((f"{', '.join(sess.info.emitters)}: emissive, lighting the scene in Cycles; not a light here "
-                      "(its emission could not be read: shadows and bounce only)", "ERROR"))
+        lines.append((f"{', '.join(sess.info.emitters)}: emits light in Cycles that the preview does not have "
+                      "(its emission could not be read; those faces shadow and bounce only)", "ERROR"))
     if sess.last_eval is not None:
         lines.append((estimate_line(sess), "NONE"))
         # What the method's evaluation left out, and why (its own words).

@@ -261,7 +261,7 @@ def test_emissive_meshes_light_as_area_lights_or_mesh_lights(addon):
     assert "Softbox (emissive rectangle)" in info.lights and "Orb (emissive mesh)" in info.lights, info.lights
     assert "Ghost (emissive mesh, hidden from shadow rays)" in info.lights, info.lights
     lines = [text for text, _ in panel.status_lines(mat)]
-    assert not [t for t in lines if "not a light here" in t], lines
+    assert not [t for t in lines if "emits light in Cycles that the preview does not have" in t], lines
     # The Orb's light is linear in its Strength: twice it adds twice as much to the ball (the
     # dipole: no walks chosen by the light).
     mat.translucent.profile = "DIPOLE"
@@ -501,3 +501,38 @@ def test_glowing_faces_of_another_material_on_the_ball_light_it(addon):
     twice = _preview(bpy, mat, obj)
     assert np.abs(once - dark).max() > 0.01 * dark.max()
     np.testing.assert_allclose(twice - dark, 2.0 * (once - dark), rtol=1e-3, atol=1e-5 * dark.max())
+
+
+def test_an_emission_whose_bake_fails_keeps_its_constant_faces_and_is_named(addon, monkeypatch):
+    # A lamp whose upper faces glow through nodes and whose lower faces glow a constant
+    # Emission: read whole by Cycles' bake, one textured mesh light. Where the bake fails (made
+    # to fail here), the constant faces are still a light, and the lamp is named in the panel
+    # as emitting more than the preview has.
+    import bpy
+
+    from addon import emission, panel, session
+
+    mat, obj, rim = _scene(bpy)
+    mat.translucent.profile = "DIPOLE"
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.02, segments=16, ring_count=8, location=(0.1, 0.0, 0.02))
+    lamp = bpy.context.active_object
+    lamp.name = "Lamp"
+    lamp.data.materials.append(_half_glowing(bpy, "Half glow", 30.0))
+    lamp.data.materials.append(_emission(bpy, "Glow 30", 30.0))
+    lower = np.array([p.center.z < 0.0 for p in lamp.data.polygons])
+    lamp.data.polygons.foreach_set("material_index", lower.astype(np.int32))
+    lamp.data.update()
+    _preview(bpy, mat, obj)
+    info = session.SESSIONS[mat.name].info
+    assert "Lamp (emissive mesh, textured)" in info.lights and info.emitters == [], (info.lights, info.emitters)
+
+    def fail(*_a, **_k):
+        raise ValueError("made to fail")
+
+    monkeypatch.setattr(emission, "corner_radiance", fail)
+    _preview(bpy, mat, obj)
+    info = session.SESSIONS[mat.name].info
+    assert "Lamp (emissive mesh)" in info.lights and info.emitters == ["Lamp"], (info.lights, info.emitters)
+    lines = [text for text, _ in panel.status_lines(mat)]
+    assert any("Lamp: its emission was not read (made to fail)" in t for t in lines), lines
+    assert any("Lamp: emits light in Cycles that the preview does not have" in t for t in lines), lines
