@@ -6,6 +6,7 @@ happens. The user's objects, meshes, materials and images are only read."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 
 import bpy
@@ -13,9 +14,24 @@ import numpy as np
 
 BAKE_SCENE = "Translucent bake"
 ATTRIBUTE = "translucent_bake"
-# True while a bake runs: the add-on's depsgraph handlers ignore the updates the bake's own
-# temporary data causes.
+# True while a bake runs (`baking`): the add-on's depsgraph handlers ignore the updates the
+# bake's own temporary data causes.
 BAKING = False
+_DEPTH = 0
+
+
+@contextlib.contextmanager
+def baking():
+    """`BAKING` for the block, its temporary copies included (nested blocks keep it on until
+    the outermost ends)."""
+    global BAKING, _DEPTH
+    _DEPTH += 1
+    BAKING = True
+    try:
+        yield
+    finally:
+        _DEPTH -= 1
+        BAKING = _DEPTH > 0
 
 
 def emission(parts: list[tuple[bpy.types.Mesh, object, list]], domain: str = "POINT") -> list[np.ndarray]:
@@ -25,9 +41,12 @@ def emission(parts: list[tuple[bpy.types.Mesh, object, list]], domain: str = "PO
     corner in loop order ("CORNER"). Each mesh is placed at its matrix, so Object and Generated
     coordinates agree with the object's; the third item lists (slot index, material) pairs the
     object links at object level. Raises ValueError when the bake fails (the message says why)."""
-    global BAKING
+    with baking():
+        return _emission(parts, domain)
+
+
+def _emission(parts, domain: str) -> list[np.ndarray]:
     made, scene = [], None
-    BAKING = True
     try:
         scene = bpy.data.scenes.new(BAKE_SCENE)
         scene.render.engine = "CYCLES"
@@ -69,7 +88,6 @@ def emission(parts: list[tuple[bpy.types.Mesh, object, list]], domain: str = "PO
             bpy.data.objects.remove(tmp)
         if scene is not None:
             bpy.data.scenes.remove(scene)
-        BAKING = False
 
 
 def upstream(start: list) -> list:

@@ -176,8 +176,9 @@ def edit(material: bpy.types.Material) -> None:
         return  # the hierarchy is being updated in place on a worker thread: shown when done
     settings = material.translucent
     if settings.source == "PRINCIPLED":
-        s.principled_key = principled_key(material)
         follow_texture(material, s)
+        # After the reading: a linked Radius or Scale read again moves the inputs' mean.
+        s.principled_key = principled_key(material)
     try:
         m = settings.material()
     except ValueError as e:

@@ -19,7 +19,7 @@ import numpy as np
 import translucent
 from translucent import cycles
 
-from . import emission, linking
+from . import bake, emission, linking
 
 
 @dataclass
@@ -439,15 +439,18 @@ def _bake_emitters(info: ExportInfo) -> None:
     the object named in `info.emitters`."""
     for m in info.to_bake:
         t0 = time.perf_counter()
-        mesh = evaluated_copy(m.obj, bpy.context.evaluated_depsgraph_get())
+        depsgraph = bpy.context.evaluated_depsgraph_get()
         try:
-            m.corners = emission.corner_radiance(m.obj, mesh, m.obj.matrix_world, m.triangles)
+            with bake.baking():  # the copy's updates are the bake's own
+                mesh = evaluated_copy(m.obj, depsgraph)
+                try:
+                    m.corners = emission.corner_radiance(m.obj, mesh, m.obj.matrix_world, m.triangles)
+                finally:
+                    bpy.data.meshes.remove(mesh)
         except ValueError as e:
             info.emission.append(f"{m.obj.name}: its emission was not read ({e})")
             info.emissive_meshes.extend(m.fallback)
             continue
-        finally:
-            bpy.data.meshes.remove(mesh)
         glowing = m.corners.reshape(len(m.triangles), -1).max(axis=1) > 0.0
         if m.faces is not None:
             glowing &= m.faces

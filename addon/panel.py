@@ -155,12 +155,13 @@ class TRANSLUCENT_PT_material(bpy.types.Panel):
                 connected = principled.connected_inputs(mat)
                 sess = SESSIONS.get(mat.name)
                 if sess is not None and sess.texture_message:
-                    followed = any(x is not None for x in (sess.base_color, sess.subsurface_weight, sess.others))
+                    means = principled.MEANS.get(mat.name, {})
+                    followed = bool(means) or any(x is not None for x in (sess.base_color, sess.subsurface_weight,
+                                                                          sess.others))
                     col.label(text=sess.texture_message, icon="TEXTURE" if followed else "ERROR")
-                    if sess.base_color is not None:
-                        connected = [c for c in connected if not c.startswith("Base Color (")]
-                    if sess.subsurface_weight is not None:
-                        connected = [c for c in connected if not c.startswith("Subsurface Weight (")]
+                    read = [*means, *(["Base Color"] if sess.base_color is not None else []),
+                            *(["Subsurface Weight"] if sess.subsurface_weight is not None else [])]
+                    connected = [c for c in connected if not any(c.startswith(f"{name} (") for name in read)]
                 if connected:
                     col.label(text=f"Connected, not followed: {', '.join(connected)}; the socket's own value is "
                                    "used everywhere", icon="ERROR")

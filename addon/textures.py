@@ -19,10 +19,13 @@ import numpy as np
 from translucent import cycles
 
 from . import bake, export
-from .principled import principled_inputs, principled_node
+from .principled import MEANS, principled_inputs, principled_node
 
 # The Principled inputs read per vertex where a link drives them (PRT).
 FOLLOWED = ("Base Color", "Subsurface Weight")
+# Those read where a link drives them and previewed at their mean over the vertices (PRT): the
+# transport's samples and knots are spaced for one radius (`principled.MEANS`).
+AVERAGED = ("Subsurface Radius", "Subsurface Scale")
 
 
 def linked(mat: bpy.types.Material, socket: str) -> bool:
@@ -37,8 +40,9 @@ def linked_base_color(mat: bpy.types.Material) -> bool:
 
 
 def linked_any(mat: bpy.types.Material) -> bool:
-    """Whether a link drives any input read per vertex (`FOLLOWED`)."""
-    return any(linked(mat, s) for s in FOLLOWED)
+    """Whether a link drives any input read per vertex (`FOLLOWED`) or as its mean
+    (`AVERAGED`)."""
+    return any(linked(mat, s) for s in FOLLOWED + AVERAGED)
 
 
 def _upstream(mat: bpy.types.Material) -> list:
@@ -47,7 +51,7 @@ def _upstream(mat: bpy.types.Material) -> list:
     node = principled_node(mat)
     if node is None:
         return []
-    return bake.upstream([node.inputs[s].links[0].from_node for s in FOLLOWED if linked(mat, s)])
+    return bake.upstream([node.inputs[s].links[0].from_node for s in FOLLOWED + AVERAGED if linked(mat, s)])
 
 
 def tree_key(mat: bpy.types.Material) -> str:
@@ -93,6 +97,12 @@ def bake_base_color(mat: bpy.types.Material, objects: list[bpy.types.Object], de
     if not linked(mat, socket):
         raise ValueError(f"the {socket} of {mat.name!r} is not driven by a link")
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    with bake.baking():  # the copies too: their updates are the bake's own
+        return _bake_copies(mat, objects, depsgraph, socket)
+
+
+def _bake_copies(mat, objects, depsgraph, socket: str) -> tuple[dict, float]:
+    """`bake_base_color`'s copies made, baked and removed again."""
     t0 = time.perf_counter()
     made_meshes, copy = [], None
     try:
@@ -224,6 +234,31 @@ def beside_others(base_color: np.ndarray, others: np.ndarray) -> tuple[np.ndarra
     return colours, previewed
 
 
+def _shown(v) -> str:
+    """A value or an RGB triple for the panel, four significant digits."""
+    return f"{float(v):.4g}" if np.ndim(v) == 0 else "(" + ", ".join(f"{float(x):.4g}" for x in v) + ")"
+
+
+def read_means(mat: bpy.types.Material, info) -> list[str]:
+    """Each linked Subsurface Radius and Scale (`AVERAGED`) read by Cycles at the exported
+    vertices and kept as their mean in `principled.MEANS` (the preview's one medium), and the
+    panel's lines saying over what range it varies. Raises ValueError as `for_export`."""
+    means, lines = {}, []
+    for socket in AVERAGED:
+        if not linked(mat, socket):
+            continue
+        values, _ = for_export(mat, info, socket=socket)
+        if socket == "Subsurface Scale":
+            values = values[:, 0]
+        mean = values.mean(axis=0)
+        means[socket] = float(mean) if np.ndim(mean) == 0 else tuple(float(x) for x in mean)
+        lo, hi = values.min(axis=0), values.max(axis=0)
+        lines.append(f"{socket} from {input_source(mat, socket)}: {_shown(lo)} to {_shown(hi)} at {len(values):,} "
+                     f"vertices, previewed at their mean {_shown(mean)}: one medium, not per vertex yet")
+    MEANS[mat.name] = means  # replaced whole once read: no moment without one
+    return lines
+
+
 def reading_key(mat: bpy.types.Material, info, method: str) -> str:
     """What `read` depends on, as a string ("" where it reads nothing): the node tree's key
     where a link drives a followed input, and the Base Color where the faces of other materials
@@ -241,16 +276,19 @@ def reading_key(mat: bpy.types.Material, info, method: str) -> str:
 def read(mat: bpy.types.Material, info, method: str) -> Reading:
     """The Base Color and the Subsurface Weight of `mat` per vertex of the exported scene `info`,
     for a transport built by `method`: read by Cycles (`for_export`) where a link drives them
-    and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits); the
-    hierarchy and the splatting do not read them yet, and the line says so. Where the faces of
+    and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits), and
+    a linked Radius and Scale read to their mean (`read_means`); the hierarchy and the
+    splatting do not read them yet, and the line says so. Where the faces of
     other materials were exported to scatter (`export.export_scene(others_scatter=True)`), their
     vertices take their own albedo and the previewed ones the Base Color. Nothing otherwise."""
     if method == "prt":
         read_others(info)
     others = others_in(info) if method == "prt" else None
+    if not any(linked(mat, k) for k in AVERAGED):
+        MEANS.pop(mat.name, None)
     if mat.translucent.source != "PRINCIPLED" or not (linked_any(mat) or others is not None):
         return Reading()
-    sockets = [s for s in FOLLOWED if linked(mat, s)]
+    sockets = [s for s in FOLLOWED + AVERAGED if linked(mat, s)]
     names = " and ".join(sockets)
     if method != "prt":
         who = "the splatting" if method == "splat" else "the hierarchy"
@@ -259,6 +297,7 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     out = Reading(key=reading_key(mat, info, method))
     lines = []
     try:
+        lines += read_means(mat, info)
         previewed = None
         if linked(mat, "Base Color"):
             out.colours, line = for_export(mat, info)

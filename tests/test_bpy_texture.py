@@ -10,7 +10,7 @@ walks' and the bake's noise); the socket's own value shown uniformly, as before,
 import numpy as np
 import pytest
 
-from helpers import mesh_hash, read_preview
+from helpers import draw_panel, mesh_hash, read_preview
 
 pytestmark = pytest.mark.bpy
 
@@ -194,3 +194,61 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
                for o, b in zip(objs, bakes)]
     print(f"the socket's value shown uniformly: {[f'{100 * e:.2f} %' for e in uniform]}")
     assert min(uniform) > 1.5 * max(errors), (uniform, errors)
+
+
+def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
+    # A Subsurface Scale and Radius driven by links are read by Cycles at the vertices and
+    # previewed at their mean (one medium: the transport is spaced for one radius). Driven by
+    # constants through nodes (a Value node, a Combine XYZ), the preview is the one with those
+    # values typed into the sockets (the same medium exactly: 1e-5). Driven by a Noise Texture,
+    # the panel names the range, the mean and that it is not per vertex; the connected line no
+    # longer lists them; and the preview is the one with the mean typed in.
+    import bpy
+
+    from addon import principled, session
+
+    mat, tex, objs = _scene(bpy, "checker")
+    mat.node_tree.links.remove(mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0])
+    mat.translucent.enabled = True
+    p = mat.node_tree.nodes["Principled BSDF"]
+    p.inputs["Subsurface Scale"].default_value = 0.004
+    p.inputs["Subsurface Radius"].default_value = (1.0, 0.5, 0.25)
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    typed = read_preview(objs[0]).copy()
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    value = nodes.new("ShaderNodeValue")
+    value.outputs[0].default_value = 0.004
+    xyz = nodes.new("ShaderNodeCombineXYZ")
+    for k, v in enumerate((1.0, 0.5, 0.25)):
+        xyz.inputs[k].default_value = v
+    p.inputs["Subsurface Scale"].default_value = 0.02  # stale values behind the links
+    p.inputs["Subsurface Radius"].default_value = (0.1, 0.1, 0.1)
+    links.new(value.outputs[0], p.inputs["Subsurface Scale"])
+    links.new(xyz.outputs[0], p.inputs["Subsurface Radius"])
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    np.testing.assert_allclose(read_preview(objs[0]), typed, rtol=1e-5, atol=1e-7)
+    means = principled.MEANS[mat.name]
+    assert abs(means["Subsurface Scale"] - 0.004) < 1e-6, means
+    # A Noise Texture between 0.002 and 0.006.
+    noise = nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 40.0
+    ramp = nodes.new("ShaderNodeMapRange")
+    ramp.inputs["To Min"].default_value = 0.002
+    ramp.inputs["To Max"].default_value = 0.006
+    links.new(noise.outputs["Fac"], ramp.inputs["Value"])
+    links.new(ramp.outputs["Result"], p.inputs["Subsurface Scale"])
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    textured = read_preview(objs[0]).copy()
+    mean = principled.MEANS[mat.name]["Subsurface Scale"]
+    assert 0.002 < mean < 0.006 and abs(mean - 0.004) > 1e-6, mean
+    labels = draw_panel(addon, mat)
+    line = next(t for t in labels if "Subsurface Scale from Map Range: " in t)
+    assert f"previewed at their mean {mean:.4g}: one medium, not per vertex yet" in line, line
+    assert "Subsurface Radius from Combine XYZ: (1, 0.5, 0.25) to (1, 0.5, 0.25)" in line, line
+    assert not any(t.startswith("Connected, not followed") for t in labels), labels
+    assert session.SESSIONS[mat.name].texture_message
+    links.remove(p.inputs["Subsurface Scale"].links[0])
+    p.inputs["Subsurface Scale"].default_value = mean
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    assert mat.name not in principled.MEANS or "Subsurface Scale" not in principled.MEANS[mat.name]
+    np.testing.assert_allclose(read_preview(objs[0]), textured, rtol=1e-4, atol=1e-7)
