@@ -387,7 +387,10 @@ impl EmissiveMesh {
         // A_i / p_i: the total weight over the triangle's weight per unit area.
         let stands_for = match &self.corners {
             None => self.area,
-            Some(k) => (self.weight / triangle_weight(self.radiance, &k[i])) as f32,
+            Some(k) => match triangle_weight(self.radiance, &k[i]) {
+                w if w > 0.0 => (self.weight / w) as f32,
+                _ => 0.0, // a black light's: nothing to stand for
+            },
         };
         (
             a * bary[0] + b * bary[1] + c * bary[2],
@@ -479,6 +482,7 @@ mod tests {
         let black = [[[0.0; 3]; 3]; 2];
         let m = EmissiveMesh::textured(&p, &t, [1.0; 3], Some(&black), true).unwrap();
         assert_eq!(m.radiance(), [0.0; 3]);
+        assert_eq!(m.point([0.3, 0.6]).2, [0.0; 3]);
         let err = |r: Result<EmissiveMesh>| r.unwrap_err().to_string();
         let mut bad = corners;
         bad[1][2][0] = -1.0;
