@@ -291,6 +291,7 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     sockets = [s for s in FOLLOWED + AVERAGED if linked(mat, s)]
     names = " and ".join(sockets)
     if method != "prt":
+        MEANS.pop(mat.name, None)  # the socket's value, as the line says, not a PRT reading's mean
         who = "the splatting" if method == "splat" else "the hierarchy"
         return Reading(message=f"{names} from {input_source(mat, sockets[0])}: not followed by "
                                f"{who} yet, the socket's value shown (PRT follows it)")

@@ -252,3 +252,12 @@ def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     assert mat.name not in principled.MEANS or "Subsurface Scale" not in principled.MEANS[mat.name]
     np.testing.assert_allclose(read_preview(objs[0]), textured, rtol=1e-4, atol=1e-7)
+    # The hierarchy does not read it: the socket's value, as its line says, not PRT's mean.
+    links.new(ramp.outputs["Result"], p.inputs["Subsurface Scale"])
+    p.inputs["Subsurface Scale"].default_value = 0.005
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    assert "Subsurface Scale" in principled.MEANS[mat.name]  # PRT's reading
+    mat.translucent.method = "HIERARCHY"
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    assert mat.name not in principled.MEANS
+    assert principled.principled_inputs(mat).scale == pytest.approx(0.005)
