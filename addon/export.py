@@ -64,6 +64,9 @@ class MeshLight:
     faces: np.ndarray | None = None
     # Waiting for its bake: the faces of one constant radiance, the lights kept if it fails.
     fallback: list = field(default_factory=list)
+    # An instance's world matrix (a copy: the depsgraph's instances last only while iterated),
+    # where the bake's copy of `obj`'s evaluated mesh is placed; None: `obj`'s own.
+    matrix: object = None
 
 
 @dataclass
@@ -330,12 +333,21 @@ def _occluder_instances(depsgraph, previewed: set):
         yield original, inst
 
 
-def _add_key(keys: dict, obj, key: str, kind: str = "occluder") -> None:
+def slot_materials(obj, instance=None) -> list:
+    """The material in each of `obj`'s slots as Cycles renders it (None for an empty slot): an
+    instance's read from its evaluated object while the depsgraph is iterated (geometry nodes
+    give their instances materials of their own, the Set Material node's), as the user's
+    data-blocks."""
+    slots = obj.material_slots if instance is None else instance.object.material_slots
+    return [None if sl.material is None else sl.material.original for sl in slots]
+
+
+def _add_key(keys: dict, obj, key: str, materials: list, kind: str = "occluder") -> None:
     # The geometry and what the object sends back (its slots' albedo: a colour edit relights);
     # an object instanced several times: its instances' keys in the depsgraph's order.
-    albedo = [cycles.diffuse_albedo(s.material) for s in obj.material_slots] or [cycles.DEFAULT_SURFACE]
+    albedo = [cycles.diffuse_albedo(m) for m in materials] or [cycles.DEFAULT_SURFACE]
     # What it emits: one radiance, or the digest of the nodes a textured or mixed one reads.
-    keys[f"{kind} {obj.name}"] = keys.get(f"{kind} {obj.name}", "") + f"{key}:{albedo!r}:{_glow_key(obj)};"
+    keys[f"{kind} {obj.name}"] = keys.get(f"{kind} {obj.name}", "") + f"{key}:{albedo!r}:{_glow_key(materials)};"
 
 
 def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
@@ -346,28 +358,28 @@ def occluder_keys(depsgraph, previewed: set) -> dict[str, str]:
     keys: dict[str, str] = {}
     for original, inst in _occluder_instances(depsgraph, previewed):
         try:
-            _add_key(keys, original, _evaluate(original, depsgraph, triangles=False, instance=inst)[3])
+            _add_key(keys, original, _evaluate(original, depsgraph, triangles=False, instance=inst)[3],
+                     slot_materials(original, inst))
         except RuntimeError:
             continue
     for obj in _shadowless_emitters(depsgraph.scene, previewed):
         try:
-            _add_key(keys, obj, _evaluate(obj, depsgraph, triangles=False)[3], kind="emitter")
+            _add_key(keys, obj, _evaluate(obj, depsgraph, triangles=False)[3], slot_materials(obj), kind="emitter")
         except RuntimeError:
             continue
     for name in previewed:
         obj = bpy.data.objects.get(name)
         if obj is not None and any(cycles.emits(s.material) for s in obj.material_slots):
-            keys[f"glow {name}"] = _glow_key(obj)
+            keys[f"glow {name}"] = _glow_key(slot_materials(obj))
     return keys
 
 
-def _glow_key(obj) -> str:
-    """What each of `obj`'s material slots emits, as a string: one radiance, the digest of the
-    nodes a textured or mixed emission reads (`emission.key`), or None. Part of an occluder's
-    or emitter's key, and a previewed object's own ("glow NAME"): a change rebuilds the
-    preview."""
-    return repr([cycles.emission(s.material) or (emission.key(s.material) if cycles.emits(s.material) else None)
-                 for s in obj.material_slots])
+def _glow_key(materials: list) -> str:
+    """What each of an object's slots' `materials` emits, as a string: one radiance, the digest
+    of the nodes a textured or mixed emission reads (`emission.key`), or None. Part of an
+    occluder's or emitter's key, and a previewed object's own ("glow NAME"): a change rebuilds
+    the preview."""
+    return repr([cycles.emission(m) or (emission.key(m) if cycles.emits(m) else None) for m in materials])
 
 
 def _shadowless_emitters(bl_scene, previewed: set):
@@ -379,13 +391,14 @@ def _shadowless_emitters(bl_scene, previewed: set):
             yield obj
 
 
-def _add_parts(scene: translucent.Scene, obj, name: str, co, tris, slots, info: ExportInfo) -> None:
+def _add_parts(scene: translucent.Scene, obj, name: str, co, tris, slots, info: ExportInfo, materials: list) -> None:
     """`tris` of `obj` as occluders, one per material slot they use, each sending light back by
-    its material's diffuse albedo (`translucent.cycles.diffuse_albedo`): named `name` where they
-    use one slot, "OBJECT [Material]" for each where several."""
+    its material's diffuse albedo (`translucent.cycles.diffuse_albedo`; `materials`: each slot's,
+    `slot_materials`): named `name` where they use one slot, "OBJECT [Material]" for each where
+    several."""
     used = np.unique(slots)
     for k in used:
-        mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+        mat = materials[k] if k < len(materials) else None
         if cycles.emits(mat) and obj.name not in info.emitters:
             info.emitters.append(obj.name)
         label = name if len(used) == 1 else f"{obj.name} [{mat.name if mat is not None else 'no material'}]"
@@ -403,32 +416,34 @@ def add_occluders(scene: translucent.Scene, depsgraph, previewed: set, info: Exp
             co, tris, _, key, slots = _evaluate(original, depsgraph, triangles=True, instance=inst)
         except RuntimeError:
             continue
-        _add_key(info.occluder_keys, original, key)
+        materials = slot_materials(original, inst)
+        _add_key(info.occluder_keys, original, key, materials)
         if len(co) == 0 or len(tris) == 0:
             continue
-        _add_parts(scene, original, original.name, co, tris, slots, info)
-        _add_emitter(original, co, tris, slots, info, instance=inst)
+        _add_parts(scene, original, original.name, co, tris, slots, info, materials)
+        _add_emitter(original, co, tris, slots, info, materials, instance=inst)
 
 
-def _add_emitter(obj, co, tris, slots, info: ExportInfo, instance=None, visible_shadow: bool = True,
+def _add_emitter(obj, co, tris, slots, info: ExportInfo, materials: list, instance=None, visible_shadow: bool = True,
                  faces: np.ndarray | None = None) -> None:
     """The light `obj`'s faces (`tris` of world-space `co`, their material `slots`; only those
     `faces` selects where given) emit, kept in `info` for `add_lights`: an emissive rectangle
     as two area lights; faces of one constant radiance per material as mesh lights; a textured
     or mixed emission (`cycles.emits` without one `cycles.emission`) left for `_bake_emitters`
-    (after the depsgraph's instances are iterated: a bake adds data), or named in
-    `info.emitters` where it is an instance's."""
-    rectangle = _emissive_rectangle(obj, co, tris, slots) if faces is None else None
+    (after the depsgraph's instances are iterated: a bake adds data); an instance's baked on a
+    copy of its object's evaluated mesh placed at the instance's matrix."""
+    rectangle = _emissive_rectangle(co, tris, slots, materials) if faces is None else None
     if rectangle is not None:
         info.emissive_rectangles.append((obj, rectangle))
         return
-    parts, whole = _emissive_parts(obj, tris if faces is None else tris[faces], slots if faces is None else slots[faces])
+    parts, whole = _emissive_parts(tris if faces is None else tris[faces], slots if faces is None else slots[faces],
+                                   materials)
     constant = [MeshLight(obj, co, part, radiance, visible_shadow=visible_shadow, whole=whole) for part, radiance in parts]
-    if not whole and (instance is None or not instance.is_instance):
-        info.to_bake.append(MeshLight(obj, co, tris, visible_shadow=visible_shadow, faces=faces, fallback=constant))
-        return
     if not whole:
-        info.emission.append(f"{obj.name}: an instance's textured or mixed emission is not read")
+        matrix = instance.matrix_world.copy() if instance is not None and instance.is_instance else None
+        info.to_bake.append(MeshLight(obj, co, tris, visible_shadow=visible_shadow, faces=faces, fallback=constant,
+                                      matrix=matrix))
+        return
     info.emissive_meshes.extend(constant)
 
 
@@ -436,7 +451,10 @@ def _bake_emitters(info: ExportInfo) -> None:
     """Each emitter of a textured or mixed emission in `info.to_bake` as one mesh light of
     Cycles' emission pass at every face corner (`emission.corner_radiance` on a temporary copy
     of its evaluated mesh); where the bake fails, its faces of one constant radiance alone,
-    the object named in `info.emitters`."""
+    the object named in `info.emitters`. An instance's emission is its object's mesh baked at
+    the instance's place (Object and Generated coordinates as the instance's own); an instance
+    of geometry no object holds (a geometry-nodes mesh) has no such copy and keeps its constant
+    faces, named."""
     for m in info.to_bake:
         t0 = time.perf_counter()
         depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -444,11 +462,15 @@ def _bake_emitters(info: ExportInfo) -> None:
             with bake.baking():  # the copy's updates are the bake's own
                 mesh = evaluated_copy(m.obj, depsgraph)
                 try:
-                    m.corners = emission.corner_radiance(m.obj, mesh, m.obj.matrix_world, m.triangles)
+                    matrix = m.obj.matrix_world if m.matrix is None else m.matrix
+                    m.corners = emission.corner_radiance(m.obj, mesh, matrix, m.triangles)
                 finally:
                     bpy.data.meshes.remove(mesh)
         except ValueError as e:
-            info.emission.append(f"{m.obj.name}: its emission was not read ({e})")
+            what = "an instance's emission" if m.matrix is not None else "its emission"
+            line = f"{m.obj.name}: {what} was not read ({e})"
+            if line not in info.emission:  # once for all its instances
+                info.emission.append(line)
             info.emissive_meshes.extend(m.fallback)
             continue
         glowing = m.corners.reshape(len(m.triangles), -1).max(axis=1) > 0.0
@@ -464,13 +486,14 @@ def _bake_emitters(info: ExportInfo) -> None:
     info.to_bake = []
 
 
-def _emissive_parts(obj, tris, slots):
-    """The faces of `obj` (`tris`, their material `slots`) whose material emits one constant
-    radiance (`translucent.cycles.emission`), as a list of (triangles, radiance) per such
-    material, and whether those are all it emits from (no textured or mixed emission)."""
+def _emissive_parts(tris, slots, materials: list):
+    """The faces `tris` (their material `slots`, each slot's of `materials`) whose material
+    emits one constant radiance (`translucent.cycles.emission`), as a list of (triangles,
+    radiance) per such material, and whether those are all it emits from (no textured or mixed
+    emission)."""
     parts, whole = [], True
     for k in np.unique(slots):
-        mat = obj.material_slots[k].material if k < len(obj.material_slots) else None
+        mat = materials[k] if k < len(materials) else None
         radiance = cycles.emission(mat)
         if radiance is not None:
             parts.append((tris[slots == k], radiance))
@@ -479,14 +502,15 @@ def _emissive_parts(obj, tris, slots):
     return parts, whole
 
 
-def _emissive_rectangle(obj, co, tris, slots):
-    """An emissive rectangle (a softbox, a light panel): `obj`'s faces one material of constant
-    emission (`translucent.cycles.emission`) on four corners that make a rectangle; as
-    (centre, unit normal, unit axis_u, size_u, size_v, radiance), else None."""
+def _emissive_rectangle(co, tris, slots, materials: list):
+    """An emissive rectangle (a softbox, a light panel): faces `tris` of `co`, all of one slot
+    whose material (of `materials`) emits a constant radiance (`translucent.cycles.emission`),
+    on four corners that make a rectangle; as (centre, unit normal, unit axis_u, size_u,
+    size_v, radiance), else None."""
     used = np.unique(slots)
-    if len(used) != 1 or used[0] >= len(obj.material_slots):
+    if len(used) != 1 or used[0] >= len(materials):
         return None
-    radiance = cycles.emission(obj.material_slots[int(used[0])].material)
+    radiance = cycles.emission(materials[int(used[0])])
     corners = np.unique(tris)
     if radiance is None or len(corners) != 4:
         return None
@@ -623,13 +647,13 @@ def export_scene(
     for obj, p, t, slots in others:
         # Faces of other materials (eyes, teeth, clothes) shadow the previewed faces as Cycles'
         # shadow rays see them, and send light back; they neither scatter nor receive the preview.
-        _add_parts(scene, obj, f"{obj.name} [other materials]", p, t, slots, info)
+        _add_parts(scene, obj, f"{obj.name} [other materials]", p, t, slots, info, slot_materials(obj))
     add_occluders(scene, depsgraph, {o.name for o in objects}, info)
     for obj, p, t, slots, faces in glows:
-        _add_emitter(obj, p, t, slots, info, faces=faces)
+        _add_emitter(obj, p, t, slots, info, slot_materials(obj), faces=faces)
     for obj in objects:
         if any(cycles.emits(s.material) for s in obj.material_slots):
-            info.occluder_keys[f"glow {obj.name}"] = _glow_key(obj)  # as `occluder_keys` reads it
+            info.occluder_keys[f"glow {obj.name}"] = _glow_key(slot_materials(obj))  # as `occluder_keys` reads it
     # An emissive object hidden from shadow rays still lights the scene in Cycles: a light
     # that shadows nothing, not even its own far side (named where it cannot be read).
     for obj in _shadowless_emitters(bl_scene, {o.name for o in objects}):
@@ -637,10 +661,10 @@ def export_scene(
             co, tris, _, key, slots = _evaluate(obj, depsgraph, triangles=True)
         except RuntimeError:
             continue
-        _add_key(info.occluder_keys, obj, key, kind="emitter")
+        _add_key(info.occluder_keys, obj, key, slot_materials(obj), kind="emitter")
         info.emitters.append(obj.name)
         if len(co) and len(tris):
-            _add_emitter(obj, co, tris, slots, info, visible_shadow=False)
+            _add_emitter(obj, co, tris, slots, info, slot_materials(obj), visible_shadow=False)
     _bake_emitters(info)
     add_lights(scene, bl_scene, info)
     set_world(scene, bl_scene, info)

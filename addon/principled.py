@@ -20,9 +20,9 @@ READ = ("Base Color", "Subsurface Radius", "Subsurface Scale", "Subsurface Aniso
 def connected_inputs(mat) -> list[str]:
     """The inputs the preview reads that a link drives (an image texture, a colour attribute, a
     procedural), each with the node it comes from. PRT follows a linked Base Color and
-    Subsurface Weight per vertex and a linked Radius and Scale by their mean (`textures`); for
-    the others the preview takes the socket's own value, uniformly, where Cycles evaluates the
-    link per point (the panel says so)."""
+    Subsurface Weight per vertex and a linked Radius, Scale and Roughness by their mean
+    (`textures`); for the others the preview takes the socket's own value, uniformly, where
+    Cycles evaluates the link per point (the panel says so)."""
     node = principled_node(mat)
     if node is None:
         return []
@@ -30,17 +30,17 @@ def connected_inputs(mat) -> list[str]:
             if name in node.inputs and node.inputs[name].is_linked]
 
 
-# Material name -> {socket: value}: a linked Subsurface Radius or Scale read by Cycles at the
-# exported vertices and previewed at their mean (`textures.read`), in place of the socket's
-# own value while the link stays.
+# Material name -> {socket: value}: a linked Subsurface Radius, Scale or Roughness read by
+# Cycles at the exported vertices and previewed at their mean (`textures.read`), in place of
+# the socket's own value while the link stays.
 MEANS: dict[str, dict] = {}
-_MEAN_FIELDS = {"Subsurface Radius": "radius", "Subsurface Scale": "scale"}
+_MEAN_FIELDS = {"Subsurface Radius": "radius", "Subsurface Scale": "scale", "Roughness": "roughness"}
 
 
 def principled_inputs(mat):
     """The Principled BSDF inputs Cycles' subsurface answer depends on (`cycles.Principled`),
-    or None when the material has no Principled BSDF. A linked Subsurface Radius or Scale
-    takes the mean `textures.read` found (`MEANS`) where there is one."""
+    or None when the material has no Principled BSDF. A linked Subsurface Radius, Scale or
+    Roughness takes the mean `textures.read` found (`MEANS`) where there is one."""
     import dataclasses
 
     from translucent import cycles

@@ -24,8 +24,9 @@ from .principled import MEANS, principled_inputs, principled_node
 # The Principled inputs read per vertex where a link drives them (PRT).
 FOLLOWED = ("Base Color", "Subsurface Weight")
 # Those read where a link drives them and previewed at their mean over the vertices (PRT): the
-# transport's samples and knots are spaced for one radius (`principled.MEANS`).
-AVERAGED = ("Subsurface Radius", "Subsurface Scale")
+# transport's samples and knots are spaced for one radius, and the walk table is one Roughness's
+# (`principled.MEANS`).
+AVERAGED = ("Subsurface Radius", "Subsurface Scale", "Roughness")
 
 
 def linked(mat: bpy.types.Material, socket: str) -> bool:
@@ -240,7 +241,7 @@ def _shown(v) -> str:
 
 
 def read_means(mat: bpy.types.Material, info) -> list[str]:
-    """Each linked Subsurface Radius and Scale (`AVERAGED`) read by Cycles at the exported
+    """Each linked Subsurface Radius, Scale and Roughness (`AVERAGED`) read by Cycles at the exported
     vertices and kept as their mean in `principled.MEANS` (the preview's one medium), and the
     panel's lines saying over what range it varies. Raises ValueError as `for_export`."""
     means, lines = {}, []
@@ -248,7 +249,7 @@ def read_means(mat: bpy.types.Material, info) -> list[str]:
         if not linked(mat, socket):
             continue
         values, _ = for_export(mat, info, socket=socket)
-        if socket == "Subsurface Scale":
+        if principled_node(mat).inputs[socket].type == "VALUE":
             values = values[:, 0]
         mean = values.mean(axis=0)
         means[socket] = float(mean) if np.ndim(mean) == 0 else tuple(float(x) for x in mean)
@@ -277,7 +278,7 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     """The Base Color and the Subsurface Weight of `mat` per vertex of the exported scene `info`,
     for a transport built by `method`: read by Cycles (`for_export`) where a link drives them
     and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits), and
-    a linked Radius and Scale read to their mean (`read_means`); the hierarchy and the
+    a linked Radius, Scale and Roughness read to their mean (`read_means`); the hierarchy and the
     splatting do not read them yet, and the line says so. Where the faces of
     other materials were exported to scatter (`export.export_scene(others_scatter=True)`), their
     vertices take their own albedo and the previewed ones the Base Color. Nothing otherwise."""

@@ -362,6 +362,134 @@ def test_a_textured_emission_lights_where_cycles_says_it_glows(addon):
     assert np.abs((lower - dark) - (by_texture - dark)).max() > 0.05 * (by_texture - dark).max()
 
 
+def test_an_instances_textured_emission_lights_as_the_object_placed_there(addon):
+    # A lamp glowing (60) where the world's Z lies above 2 cm, through nodes (Geometry
+    # Position), kept in a collection of its own (not in the scene) and instanced by an Empty
+    # turned and moved beside the ball: Cycles' emission pass is baked on a copy of the lamp's
+    # mesh placed at the instance. Its corners glow where the instance's surface lies above
+    # 2 cm (at the lamp's own place, the origin, only a cap would), and the instance lights the
+    # ball as the lamp itself placed there does (the object's path, checked against constant
+    # slots above).
+    import bpy
+
+    from addon import panel, session
+
+    mat, obj, rim = _scene(bpy)
+    mat.translucent.profile = "DIPOLE"
+    rim.hide_render = True
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.03, segments=24, ring_count=12)
+    lamp = bpy.context.active_object
+    lamp.name = "Lamp"
+    glow = _half_glowing(bpy, "Half glow", 60.0)
+    tree = glow.node_tree
+    position = tree.nodes.new("ShaderNodeNewGeometry")
+    tree.links.new(position.outputs["Position"], tree.nodes["Separate XYZ"].inputs[0])
+    tree.nodes["Math"].inputs[1].default_value = 0.02
+    lamp.data.materials.append(glow)
+    lamps = bpy.data.collections.new("Lamps")
+    for c in list(lamp.users_collection):
+        c.objects.unlink(lamp)
+    lamps.objects.link(lamp)
+    empty = bpy.data.objects.new("Lamp instance", None)
+    empty.instance_type = "COLLECTION"
+    empty.instance_collection = lamps
+    empty.location = (0.12, 0.0, 0.02)
+    empty.rotation_euler = (0.7, 0.0, 0.3)
+    bpy.context.scene.collection.objects.link(empty)
+    before = (mesh_hash(lamp.data), tuple(lamp.matrix_world.translation), len(bpy.data.meshes),
+              len(bpy.data.objects), len(bpy.data.scenes))
+    instanced = _preview(bpy, mat, obj)
+    assert (mesh_hash(lamp.data), tuple(lamp.matrix_world.translation), len(bpy.data.meshes),
+            len(bpy.data.objects), len(bpy.data.scenes)) == before
+    info = session.SESSIONS[mat.name].info
+    assert "Lamp (emissive mesh, textured)" in info.lights and info.emitters == [], (info.lights, info.emitters)
+    lines = [text for text, _ in panel.status_lines(mat)]
+    assert any("Lamp: emission read by Cycles at" in t for t in lines), lines
+    (light,) = info.emissive_meshes  # the triangles with a glowing corner
+    z = light.positions[light.triangles][..., 2]
+    agree = ((light.corners[..., 0] > 30.0) == (z > 0.02)).mean()  # corners on the line may go either way
+    assert agree > 0.97, agree
+    # The lamp itself where the instance was.
+    bpy.context.scene.collection.objects.unlink(empty)
+    lamps.objects.unlink(lamp)
+    bpy.context.scene.collection.objects.link(lamp)
+    lamp.matrix_world = empty.matrix_world
+    placed = _preview(bpy, mat, obj)
+    lamp.hide_render = True
+    dark = _preview(bpy, mat, obj)
+    assert np.abs(placed - dark).max() > 0.05 * dark.max()  # the lamp lights the ball
+    np.testing.assert_allclose(instanced - dark, placed - dark, rtol=1e-3, atol=1e-4 * dark.max())
+
+
+def _glowing_points(bpy, glow, realize: bool):
+    """A one-vertex object at (0.1, 0, 0.02) whose geometry nodes instance a 1.5 cm ico sphere
+    there in the material `glow` (Set Material: the instance's own, in no slot of the object),
+    realized into the object's own mesh with `realize`."""
+    mesh = bpy.data.meshes.new("Point")
+    mesh.from_pydata([(0.0, 0.0, 0.0)], [], [])
+    host = bpy.data.objects.new("Host", mesh)
+    host.location = (0.1, 0.0, 0.02)
+    bpy.context.scene.collection.objects.link(host)
+    group = bpy.data.node_groups.new("Glowing points", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    given, out = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    ico = nodes.new("GeometryNodeMeshIcoSphere")
+    ico.inputs["Radius"].default_value = 0.015
+    ico.inputs["Subdivisions"].default_value = 2
+    material = nodes.new("GeometryNodeSetMaterial")
+    material.inputs["Material"].default_value = glow
+    on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    links.new(ico.outputs["Mesh"], material.inputs["Geometry"])
+    links.new(given.outputs[0], on_points.inputs["Points"])
+    links.new(material.outputs[0], on_points.inputs["Instance"])
+    result = on_points.outputs[0]
+    if realize:
+        realized = nodes.new("GeometryNodeRealizeInstances")
+        links.new(result, realized.inputs[0])
+        result = realized.outputs[0]
+    links.new(result, out.inputs[0])
+    host.modifiers.new("Glowing points", "NODES").node_group = group
+    return host
+
+
+def test_geometry_nodes_instances_emit_by_their_own_material(addon):
+    # Geometry nodes instance an ico sphere whose Set Material gives it an Emission the object
+    # holds in none of its slots: the instance is lit by that material (it was read from the
+    # object's slots, and the light dropped unseen), as the same sphere realized into the
+    # object's own mesh is. A textured emission on such an instance (geometry no object holds,
+    # so no copy to bake) keeps its faces as shadow and bounce and is named in the panel.
+    import bpy
+
+    from addon import panel, session
+
+    mat, obj, rim = _scene(bpy)
+    mat.translucent.profile = "DIPOLE"
+    rim.hide_render = True
+    glow = _emission(bpy, "Glow 40", 40.0)
+    host = _glowing_points(bpy, glow, realize=False)
+    instanced = _preview(bpy, mat, obj)
+    info = session.SESSIONS[mat.name].info
+    assert "Host (emissive mesh)" in info.lights and info.emitters == [], (info.lights, info.emitters)
+    bpy.data.objects.remove(host)
+    host = _glowing_points(bpy, glow, realize=True)
+    realized = _preview(bpy, mat, obj)
+    host.hide_render = True
+    dark = _preview(bpy, mat, obj)
+    host.hide_render = False
+    assert np.abs(realized - dark).max() > 0.05 * dark.max()  # the sphere lights the ball
+    np.testing.assert_allclose(instanced - dark, realized - dark, rtol=1e-3, atol=1e-4 * dark.max())
+    bpy.data.objects.remove(host)
+    host = _glowing_points(bpy, _half_glowing(bpy, "Half glow", 40.0), realize=False)
+    _preview(bpy, mat, obj)
+    info = session.SESSIONS[mat.name].info
+    assert info.emitters == ["Host"] and "Host (emissive mesh, textured)" not in info.lights, info.lights
+    lines = [text for text, _ in panel.status_lines(mat)]
+    assert sum("Host: an instance's emission was not read" in t for t in lines) == 1, lines
+    assert any("Host: emits light in Cycles that the preview does not have" in t for t in lines), lines
+
+
 def test_an_emissive_rectangle_lights_as_cycles_lights_it(addon):
     # Cycles itself says how an emissive rectangle's Strength S compares with an area light's
     # Power: a white diffuse grid baked under a 10 cm emissive square of S = 20 and under a

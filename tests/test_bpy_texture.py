@@ -261,3 +261,54 @@ def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     assert mat.name not in principled.MEANS
     assert principled.principled_inputs(mat).scale == pytest.approx(0.005)
+
+
+def test_a_linked_roughness_is_previewed_at_its_mean(addon):
+    # A Roughness driven by a link is read by Cycles at the vertices and previewed at its mean
+    # (one walk table: Cycles' walk enters through a rough interface of that Roughness, and
+    # the specular layer over the exit is weighted by it). Through a Value node, with a stale
+    # value behind the link, the preview is the one with the value typed in (1e-5), which the
+    # stale one is not; through a Noise Texture, the one with the mean typed in, the panel
+    # naming the range and the mean.
+    import bpy
+
+    from addon import principled
+
+    mat, tex, objs = _scene(bpy, "checker")
+    mat.node_tree.links.remove(mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0])
+    mat.translucent.enabled = True
+    p = mat.node_tree.nodes["Principled BSDF"]
+    p.inputs["Roughness"].default_value = 0.9
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    stale = read_preview(objs[0]).copy()
+    p.inputs["Roughness"].default_value = 0.3
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    typed = read_preview(objs[0]).copy()
+    assert np.abs(typed - stale).max() > 1e-3 * typed.max()
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    value = nodes.new("ShaderNodeValue")
+    value.outputs[0].default_value = 0.3
+    p.inputs["Roughness"].default_value = 0.9  # stale behind the link
+    links.new(value.outputs[0], p.inputs["Roughness"])
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    np.testing.assert_allclose(read_preview(objs[0]), typed, rtol=1e-5, atol=1e-7)
+    assert abs(principled.MEANS[mat.name]["Roughness"] - 0.3) < 1e-6
+    noise = nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 40.0
+    ramp = nodes.new("ShaderNodeMapRange")
+    ramp.inputs["To Min"].default_value = 0.2
+    ramp.inputs["To Max"].default_value = 0.6
+    links.new(noise.outputs["Fac"], ramp.inputs["Value"])
+    links.new(ramp.outputs["Result"], p.inputs["Roughness"])
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    textured = read_preview(objs[0]).copy()
+    mean = principled.MEANS[mat.name]["Roughness"]
+    assert 0.2 < mean < 0.6 and abs(mean - 0.3) > 1e-3, mean
+    labels = draw_panel(addon, mat)
+    line = next(t for t in labels if "Roughness from Map Range: " in t)
+    assert f"previewed at their mean {mean:.4g}: one medium, not per vertex yet" in line, line
+    assert not any(t.startswith("Connected, not followed") for t in labels), labels
+    links.remove(p.inputs["Roughness"].links[0])
+    p.inputs["Roughness"].default_value = mean
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    np.testing.assert_allclose(read_preview(objs[0]), textured, rtol=1e-4, atol=1e-7)
