@@ -539,7 +539,7 @@ mod tests {
             let (e, _) = kept
                 .evaluate(&scene, &tracer, mesh.positions(), mesh.normals(), &settings)
                 .unwrap();
-            (e, kept.bounce_error())
+            (e, kept.sampling_error())
         };
         let ((a, stated), (b, _)) = (run(0), run(1));
         for c in 0..3 {

@@ -236,17 +236,18 @@ pub fn irradiance_of_sources(
     Ok((estimated.values, report))
 }
 
-/// Irradiance at points with the standard error of its bounce part per point.
+/// Irradiance at points with the standard error of its Monte Carlo parts per point.
 #[derive(Debug, Clone, Default, PartialEq)]
 struct Estimated {
     values: Vec<[f32; 3]>,
-    /// The standard error of each point's bounce off the rest of the scene (its rays' sample
-    /// variance over their count; 0 where none was cast). The lights' and the world's own
-    /// sampling is not in it.
-    bounce_error: Vec<[f32; 3]>,
+    /// The standard error of each point's sampled parts, in quadrature: the bounce off the rest
+    /// of the scene (its rays' sample variance over their count), an area or mesh light's
+    /// points and the traced world's rays (`Strata`). 0 where nothing was sampled (suns, point
+    /// and spot lights, the world by its coefficients).
+    sampling_error: Vec<[f32; 3]>,
 }
 
-/// `irradiance_of_sources` with each point's bounce error (`Estimated`).
+/// `irradiance_of_sources` with each point's sampling error (`Estimated`).
 #[allow(clippy::too_many_arguments)]
 fn estimate_sources(
     bounds: (Vec3, Vec3),
@@ -327,7 +328,7 @@ fn estimate_sources(
     };
     let estimated = Estimated {
         values: results.iter().map(|r| r.value).collect(),
-        bounce_error: results.iter().map(|r| r.bounce_error).collect(),
+        sampling_error: results.iter().map(|r| r.sampling_error).collect(),
     };
     Ok((estimated, report))
 }
@@ -360,11 +361,15 @@ fn estimate_point(
         ticker,
     };
     let mut sum = [0.0f32; 3];
-    let mut bounce_error = [0.0f32; 3];
+    // The sampled parts' variances, added: the lights', the world's and the bounce's draws
+    // are independent.
+    let mut variance = [0.0f64; 3];
     // Light linking: lights that do not light the mesh here reach it by the bounce alone.
     let lit = reaching.direct == 0 || tracer.lights_point(p, n);
     for l in reaching.lights[..reaching.direct].iter().filter(|_| lit) {
-        add(&mut sum, est.light(l, settings.area_samples.max(1)));
+        let (e, v) = est.light(l, settings.area_samples.max(1));
+        add(&mut sum, e);
+        add64(&mut variance, v);
     }
     if let Some(coefficients) = world_sh {
         let mut y = [0.0f64; 9];
@@ -379,7 +384,9 @@ fn estimate_point(
         });
         add(&mut sum, e);
     } else if let Some(w) = world {
-        add(&mut sum, est.world(w, settings.world_samples.max(1)));
+        let (e, v) = est.world(w, settings.world_samples.max(1));
+        add(&mut sum, e);
+        add64(&mut variance, v);
     }
     if tracer.bounces() && (!reaching.lights.is_empty() || world.is_some()) {
         // A stream of its own: the lights' and the world's draws stay as they were. With no
@@ -396,22 +403,82 @@ fn estimate_point(
         let direct = sum;
         let (mean, error) = est.bounce(&reaching.lights, world, (rays, most), direct, &mut rng);
         add(&mut sum, mean);
-        bounce_error = error;
+        add64(&mut variance, error.map(|e| f64::from(e) * f64::from(e)));
     }
     Point {
         value: sum,
-        bounce_error,
+        sampling_error: variance.map(|v| v.sqrt() as f32),
         rays: est.rays,
     }
 }
 
-/// One point's estimate: its irradiance, the standard error of its bounce part (0 where no
-/// bounce ray was cast) and the rays it cast.
+/// One point's estimate: its irradiance, the standard error of its sampled parts (0 where
+/// nothing was sampled) and the rays it cast.
 #[derive(Debug, Clone, Copy, Default)]
 struct Point {
     value: [f32; 3],
-    bounce_error: [f32; 3],
+    sampling_error: [f32; 3],
     rays: u64,
+}
+
+/// The variance of a mean over k x k strata, one value each, pushed row by row. One value per
+/// stratum cannot tell a stratum's variance. Pairing neighbours (collapsed strata, Cochran
+/// 1977, *Sampling Techniques*, 3rd ed., §5A.12) counts the light's gradient across them
+/// (its cosine and distance) as noise: it stated 2.6x the seed-to-seed variance of an area
+/// light's penumbra, second differences along rows 1.7-1.9x. So the strata are split as a
+/// checkerboard into two halves, each a stratified estimate over the whole light (two
+/// half-buffers, as Rousselle, Knaus and Zwicker 2012 estimate a pixel's variance): both
+/// halves' strata have the same centroid, so a linear gradient cancels in the difference of
+/// their means D = A - B, and with the strata's variances alike
+/// E[D^2] = s^2 (1/n_a + 1/n_b) while Var(mean) = s^2 / n: Var(mean) = D^2 n_a n_b / n^2 (D^2/4
+/// for k even). One degree of freedom a point: noisy point by point, unbiased in the sums over
+/// points the preview's noise is made of (`prt::irradiance_noise`). A lone value (k = 1)
+/// stands by its square (E[x^2] bounds the variance from above, as one bounce ray's does,
+/// `mean_and_error`).
+struct Strata {
+    k: u32,
+    n: u32,
+    /// The two halves' sums (the white squares' first) and counts.
+    sums: [[f64; 3]; 2],
+    counts: [u32; 2],
+}
+
+impl Strata {
+    fn new(k: u32) -> Strata {
+        Strata {
+            k: k.max(1),
+            n: 0,
+            sums: [[0.0; 3]; 2],
+            counts: [0; 2],
+        }
+    }
+
+    fn push(&mut self, x: [f32; 3]) {
+        let (a, b) = (self.n / self.k, self.n % self.k);
+        let half = ((a + b) % 2) as usize;
+        add64(&mut self.sums[half], x.map(f64::from));
+        self.counts[half] += 1;
+        self.n += 1;
+    }
+
+    /// The variance of the mean of the values pushed, times `scale`^2.
+    fn variance_of_mean(&self, scale: f64) -> [f64; 3] {
+        let n = f64::from(self.n.max(1));
+        let [na, nb] = self.counts.map(f64::from);
+        if nb == 0.0 {
+            return self.sums[0].map(|x| (x * scale / n).powi(2));
+        }
+        std::array::from_fn(|c| {
+            let d = self.sums[0][c] / na - self.sums[1][c] / nb;
+            d * d * na * nb / (n * n) * scale * scale
+        })
+    }
+}
+
+fn add64(sum: &mut [f64; 3], x: [f64; 3]) {
+    for c in 0..3 {
+        sum[c] += x[c];
+    }
 }
 
 /// A point asked for more bounce rays (`vertex_bounce_factor` > 1) casts them in batches of
@@ -505,7 +572,7 @@ struct Reaching<'a> {
 #[derive(Debug, Default)]
 pub struct PerSource {
     settings: Option<IrradianceSettings>,
-    /// Each source's values and bounce errors (`Estimated`).
+    /// Each source's values and sampling errors (`Estimated`).
     parts: Vec<(Source, Estimated)>,
     /// How many points the last `evaluate` estimated.
     points: usize,
@@ -656,7 +723,7 @@ impl PerSource {
                     let mut v = old.swap_remove(i).1;
                     let scale = |x: &mut [f32; 3]| *x = std::array::from_fn(|c| x[c] * k[c]);
                     v.values.par_iter_mut().for_each(scale);
-                    v.bounce_error.par_iter_mut().for_each(scale);
+                    v.sampling_error.par_iter_mut().for_each(scale);
                     v
                 }
                 (None, None, Some((light, triangles))) => {
@@ -670,7 +737,7 @@ impl PerSource {
                     rays += r;
                     // No bounce on this path (`corners::applies`): nothing random.
                     Estimated {
-                        bounce_error: vec![[0.0; 3]; v.len()],
+                        sampling_error: vec![[0.0; 3]; v.len()],
                         values: v,
                     }
                 }
@@ -692,12 +759,13 @@ impl PerSource {
         ))
     }
 
-    /// The standard error of the bounce in the last `evaluate`'s irradiance, per point: the
-    /// sources' errors added. Each source casts its bounce rays along the same directions from
-    /// a point (one stream per point), so their errors are correlated; the sum of standard
-    /// errors bounds the error of the sum.
-    pub fn bounce_error(&self) -> Vec<[f32; 3]> {
-        self.summed(|e| &e.bounce_error)
+    /// The standard error of the sampled parts (the bounce, area and mesh lights, the traced
+    /// world: `Estimated::sampling_error`) in the last `evaluate`'s irradiance, per point: the
+    /// sources' errors added. Each source draws from the same stream at a point (its bounce
+    /// rays along the same directions, its area samples at the same strata), so their errors
+    /// are correlated; the sum of standard errors bounds the error of the sum.
+    pub fn sampling_error(&self) -> Vec<[f32; 3]> {
+        self.summed(|e| &e.sampling_error)
     }
 
     /// `of` of every source, added point by point.
@@ -745,46 +813,63 @@ impl Estimator<'_> {
 
     /// What one light gives the point: E = mean over its samples of F_t cos times what
     /// `Light::incident` says arrives (the one sampler every light goes through: suns, points
-    /// and spots are one sample, an area light `area_samples` stratified points). No ray when
-    /// the light is behind the surface.
-    fn light(&mut self, light: &Light, area_samples: u32) -> [f32; 3] {
+    /// and spots are one sample, an area light `area_samples` stratified points), and the
+    /// variance of that mean (`Strata`; 0 for a light of one exact sample). No ray when the
+    /// light is behind the surface.
+    fn light(&mut self, light: &Light, area_samples: u32) -> ([f32; 3], [f64; 3]) {
         let k = if light.is_spread() {
             (area_samples as f32).sqrt().ceil() as u32
         } else {
             1
         };
         let mut sum = [0.0f32; 3];
+        let mut strata = Strata::new(k);
         for a in 0..k {
             for b in 0..k {
-                // Only an area light reads the sample (and draws it: the world's stream of
-                // random numbers stays as it was for the other lights).
-                let u = if light.is_spread() {
-                    [
-                        (a as f32 + self.rng.next()) / k as f32,
-                        (b as f32 + self.rng.next()) / k as f32,
-                    ]
-                } else {
-                    [0.5; 2]
-                };
-                let Some(inc) = light.sample(self.p, u) else {
-                    continue;
-                };
-                let cos = self.n.dot(inc.direction);
-                if cos <= 0.0 || !self.visible(inc.direction, inc.distance * (1.0 - 1e-5)) {
-                    continue;
-                }
-                add(&mut sum, scaled(&inc.value, self.fresnel(cos) * cos));
+                let value = self.light_sample(light, a, b, k);
+                strata.push(value);
+                add(&mut sum, value);
             }
         }
-        scaled(&sum, 1.0 / (k * k) as f32)
+        let variance = if light.is_spread() {
+            strata.variance_of_mean(1.0)
+        } else {
+            [0.0; 3]
+        };
+        (scaled(&sum, 1.0 / (k * k) as f32), variance)
     }
 
-    /// Cosine-weighted hemisphere sampling: E ~ (pi / N) sum F_t L V.
-    fn world(&mut self, world: &World, samples: u32) -> [f32; 3] {
+    /// The light's sample of stratum (a, b) of k x k: F_t cos times what arrives, 0 where the
+    /// light is behind the surface or hidden.
+    fn light_sample(&mut self, light: &Light, a: u32, b: u32, k: u32) -> [f32; 3] {
+        // Only an area light reads the sample (and draws it: the world's stream of random
+        // numbers stays as it was for the other lights).
+        let u = if light.is_spread() {
+            [
+                (a as f32 + self.rng.next()) / k as f32,
+                (b as f32 + self.rng.next()) / k as f32,
+            ]
+        } else {
+            [0.5; 2]
+        };
+        let Some(inc) = light.sample(self.p, u) else {
+            return [0.0; 3];
+        };
+        let cos = self.n.dot(inc.direction);
+        if cos <= 0.0 || !self.visible(inc.direction, inc.distance * (1.0 - 1e-5)) {
+            return [0.0; 3];
+        }
+        scaled(&inc.value, self.fresnel(cos) * cos)
+    }
+
+    /// Cosine-weighted hemisphere sampling: E ~ (pi / N) sum F_t L V, and the variance of that
+    /// mean (`Strata`).
+    fn world(&mut self, world: &World, samples: u32) -> ([f32; 3], [f64; 3]) {
         let (t, b) = self.n.any_orthonormal_pair();
         let k = (samples as f32).sqrt().ceil() as u32;
         let count = k * k;
         let mut sum = [0.0f32; 3];
+        let mut strata = Strata::new(k);
         for a in 0..k {
             // A row of the grid per tick: 1024 rays at the limit (`limits::WORLD_SAMPLES`).
             if !self.ticker.add(u64::from(k)) {
@@ -795,14 +880,19 @@ impl Estimator<'_> {
                 let u1 = (a as f32 + self.rng.next()) / k as f32;
                 let u2 = (c as f32 + self.rng.next()) / k as f32;
                 let (dir, cos) = cosine_direction(t, b, self.n, u1, u2);
-                if !self.visible(dir, f32::INFINITY) {
-                    continue;
-                }
-                let l = world.radiance(dir);
-                add(&mut sum, scaled(&l, self.fresnel(cos)));
+                let value = if self.visible(dir, f32::INFINITY) {
+                    scaled(&world.radiance(dir), self.fresnel(cos))
+                } else {
+                    [0.0; 3]
+                };
+                strata.push(value);
+                add(&mut sum, value);
             }
         }
-        scaled(&sum, PI / count as f32)
+        (
+            scaled(&sum, PI / count as f32),
+            strata.variance_of_mean(f64::from(PI)),
+        )
     }
 }
 

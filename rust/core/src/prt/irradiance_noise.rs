@@ -1,5 +1,7 @@
-//! The irradiance's noise in the preview. The bounce off the rest of the scene is a Monte
-//! Carlo estimate at each point (`irradiance::Estimator::bounce`, with its standard error s).
+//! The irradiance's noise in the preview. Its sampled parts are Monte Carlo estimates at each
+//! point, each with its standard error: the bounce off the rest of the scene
+//! (`irradiance::Estimator::bounce`), an area or mesh light's points and the traced world's
+//! rays (stratified: `irradiance::Strata`, collapsed strata); s is theirs in quadrature.
 //! B reads a vertex's irradiance E_v unaveraged in three places: the profile's point mass
 //! k E_v, the receiver's own disc M(near_radius) E_v (`rows::transport_row`, slot 0; Xu 2007
 //! eq. 10 with the disc in closed form), and the walks, whose control variate and exits read
@@ -20,7 +22,8 @@
 //! `metrics`) is sqrt(sum_v A_v sigma_v^2 / sum_v A_v B_v^2) over that draw, sigma_v the move
 //! of B_v.
 //!
-//! Not in it: the lights' and the world's own sampling (area lights, the traced world).
+//! Not in it: suns, point and spot lights and the world read by its nine coefficients, which
+//! are exact at a point (no random number).
 
 use super::precompute::{transport_under, Projection, SampledLight};
 use super::Prt;
@@ -34,7 +37,7 @@ use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// One draw of the irradiance's bounce error: the vertices' own, and what the samples' and both
+/// One draw of the irradiance's sampling error: the vertices' own, and what the samples' and both
 /// move the representative's B by.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct IrradianceNoise {
@@ -42,9 +45,9 @@ pub(super) struct IrradianceNoise {
     pub areas: Vec<f32>,
     /// s_v times a random sign per vertex.
     pub draw: Vec<[f32; 3]>,
-    /// What a draw of the samples' bounce error (their irradiance moved as the vertices' is)
+    /// What a draw of the samples' sampling error (their irradiance moved as the vertices' is)
     /// moves the first representative's half-space B by, through the transport (None where
-    /// the samples have no bounce error).
+    /// the samples have no sampling error).
     pub samples: Option<Vec<[f32; 3]>>,
     /// What both draws move the walk term by at each vertex, for the first representative
     /// (None without walks).
@@ -150,7 +153,7 @@ fn moved(values: &[[f32; 3]], draw: &[[f32; 3]]) -> Vec<[f32; 3]> {
 }
 
 impl Prt {
-    /// What a draw of the samples' bounce error moves the representative `rep`'s half-space B
+    /// What a draw of the samples' sampling error moves the representative `rep`'s half-space B
     /// by: the transport gathered again (same tree shape, same basis) under the samples'
     /// irradiance moved by it, dotted with `rep`'s coefficients, less the transport's own.
     /// None where `lit` has no samples' error. `tick` checks for a cancel.
@@ -202,7 +205,7 @@ impl Prt {
         }
         let t = Instant::now();
         let moved = self.samples_moved(mesh, lit, rep, tick)?;
-        // Samples with a bounce error and vertices with none (a point's rays all agreeing):
+        // Samples with a sampling error and vertices with none (a point's rays all agreeing):
         // the vertices' draw is zero.
         let noise = self.irradiance_noise.get_or_insert_with(|| {
             IrradianceNoise::draw(

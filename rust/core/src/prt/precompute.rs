@@ -422,8 +422,9 @@ pub(super) struct SampledLight {
     pub(super) samples: Vec<SurfaceSample>,
     pub(super) sample_irradiance: Vec<[f32; 3]>,
     pub(super) vertex_irradiance: Vec<[f32; 3]>,
-    /// The standard error of the vertices' bounce off the rest of the scene, where it was
-    /// measured and is not zero everywhere (`PerSource::bounce_error`).
+    /// The standard error of the vertices' sampled irradiance (the bounce off the rest of the
+    /// scene, area and mesh lights, the traced world), where it was measured and is not zero
+    /// everywhere (`PerSource::sampling_error`).
     pub(super) vertex_error: Option<Vec<[f32; 3]>>,
     /// The same at the samples.
     pub(super) sample_error: Option<Vec<[f32; 3]>>,
@@ -489,14 +490,14 @@ impl SampledLight {
         })
     }
 
-    /// One draw of the vertices' bounce error (`irradiance_noise`) for the representative
+    /// One draw of the vertices' sampling error (`irradiance_noise`) for the representative
     /// `rep`, where it was measured.
     pub(super) fn irradiance_noise(&self, mesh: &Mesh, rep: &Resolved) -> Option<IrradianceNoise> {
         (self.vertex_error.as_ref())
             .map(|e| IrradianceNoise::draw(e, mesh.vertex_areas(), rep.totals()))
     }
 
-    /// The vertices' and the samples' bounce errors (`vertex_error`, `sample_error`), each
+    /// The vertices' and the samples' sampling errors (`vertex_error`, `sample_error`), each
     /// kept where some point has one.
     pub(super) fn with_errors(mut self, vertices: Vec<[f32; 3]>, samples: Vec<[f32; 3]>) -> Self {
         let kept = |e: Vec<[f32; 3]>, len: usize| {

@@ -465,7 +465,10 @@ fn kept_sampler<'a>(
             Some(ask),
         )?;
         merge(&r);
-        let errors = (kept.vertices.bounce_error(), kept.samples.bounce_error());
+        let errors = (
+            kept.vertices.sampling_error(),
+            kept.samples.sampling_error(),
+        );
         Ok(
             SampledLight::from_values(mesh, spacing, samples, at_samples, at_vertices)?
                 .with_errors(errors.0, errors.1),

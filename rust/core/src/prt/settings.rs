@@ -134,7 +134,7 @@ pub struct PrtReport {
     pub last_own_light_rays: u64,
     pub interreflection_share: f64,
     pub seconds_interreflection: f64,
-    /// The walk term read again under one draw of the vertices' bounce error
+    /// The walk term read again under one draw of the vertices' sampling error
     /// (`irradiance_noise`): the noise that error brings through the walks.
     pub seconds_irradiance_noise: f64,
     pub seconds_tree: f64,
