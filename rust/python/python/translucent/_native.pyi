@@ -368,7 +368,8 @@ class Prt:
         """The keys every method shares: method ("prt"), quantity ("radiosity" or "radiance"),
         error_estimate (per channel, relative), seconds, skipped (a list of {"what", "why"}); then
         PRT's own: fit_seconds, dot_seconds, backend, fit_error, irradiance_noise (the part of
-        error_estimate the irradiance's bounce noise brings, per channel), refresh_advised; GPU
+        error_estimate the irradiance's sampling brings, per channel: the bounce off the rest of
+        the scene, area and mesh lights' points, the traced world's rays), refresh_advised; GPU
         timings when the GPU ran it; single_error_estimate and single_seconds when single
         scattering was evaluated."""
     @property
