@@ -50,6 +50,18 @@ def _preview(bpy, mat, obj):
     return read_preview(obj).copy()
 
 
+def _same_light(bpy, mat, obj, emitter, a, b):
+    """Asserts that previews `a` and `b` add the same light to the ball over the preview with
+    `emitter` hidden from render (1e-3), and that `b` adds some (5 % of the brightest); returns
+    that dark preview."""
+    emitter.hide_render = True
+    dark = _preview(bpy, mat, obj)
+    emitter.hide_render = False
+    assert np.abs(b - dark).max() > 0.05 * dark.max()  # the emitter lights the ball
+    np.testing.assert_allclose(a - dark, b - dark, rtol=1e-3, atol=1e-4 * dark.max())
+    return dark
+
+
 def test_a_light_linked_away_from_the_ball_reaches_it_by_the_floor_alone(addon):
     # Cycles' light linking lights the receivers only, and each receiver sends that light on:
     # Rim lighting the floor alone reaches the ball only as the floor's bounce; lighting the
@@ -350,12 +362,7 @@ def test_a_textured_emission_lights_where_cycles_says_it_glows(addon):
     upper = np.array([p.center.z > 0.0 for p in lamp.data.polygons])
     lamp.data.polygons.foreach_set("material_index", np.where(upper, 0, 1).astype(np.int32))
     lamp.data.update()
-    by_slots = _preview(bpy, mat, obj)
-    lamp.hide_render = True
-    dark = _preview(bpy, mat, obj)
-    lamp.hide_render = False
-    assert np.abs(by_slots - dark).max() > 0.05 * dark.max()  # the lamp lights the ball
-    np.testing.assert_allclose(by_texture - dark, by_slots - dark, rtol=1e-3, atol=1e-4 * dark.max())
+    dark = _same_light(bpy, mat, obj, lamp, by_texture, _preview(bpy, mat, obj))
     lamp.data.materials.clear()
     lamp.data.materials.append(_half_glowing(bpy, "Lower glow", 60.0, below=True))
     lower = _preview(bpy, mat, obj)
@@ -414,11 +421,7 @@ def test_an_instances_textured_emission_lights_as_the_object_placed_there(addon)
     lamps.objects.unlink(lamp)
     bpy.context.scene.collection.objects.link(lamp)
     lamp.matrix_world = empty.matrix_world
-    placed = _preview(bpy, mat, obj)
-    lamp.hide_render = True
-    dark = _preview(bpy, mat, obj)
-    assert np.abs(placed - dark).max() > 0.05 * dark.max()  # the lamp lights the ball
-    np.testing.assert_allclose(instanced - dark, placed - dark, rtol=1e-3, atol=1e-4 * dark.max())
+    _same_light(bpy, mat, obj, lamp, instanced, _preview(bpy, mat, obj))
 
 
 def _glowing_points(bpy, glow, realize: bool):
@@ -474,12 +477,7 @@ def test_geometry_nodes_instances_emit_by_their_own_material(addon):
     assert "Host (emissive mesh)" in info.lights and info.emitters == [], (info.lights, info.emitters)
     bpy.data.objects.remove(host)
     host = _glowing_points(bpy, glow, realize=True)
-    realized = _preview(bpy, mat, obj)
-    host.hide_render = True
-    dark = _preview(bpy, mat, obj)
-    host.hide_render = False
-    assert np.abs(realized - dark).max() > 0.05 * dark.max()  # the sphere lights the ball
-    np.testing.assert_allclose(instanced - dark, realized - dark, rtol=1e-3, atol=1e-4 * dark.max())
+    _same_light(bpy, mat, obj, host, instanced, _preview(bpy, mat, obj))
     bpy.data.objects.remove(host)
     host = _glowing_points(bpy, _half_glowing(bpy, "Half glow", 40.0), realize=False)
     _preview(bpy, mat, obj)

@@ -196,6 +196,41 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
     assert min(uniform) > 1.5 * max(errors), (uniform, errors)
 
 
+def _uniform_scene(bpy):
+    """`_scene`'s two spheres with the checker's link taken off the Base Color, the preview on:
+    the material, the objects and its Principled BSDF node."""
+    mat, _, objs = _scene(bpy, "checker")
+    p = mat.node_tree.nodes["Principled BSDF"]
+    mat.node_tree.links.remove(p.inputs["Base Color"].links[0])
+    mat.translucent.enabled = True
+    return mat, objs, p
+
+
+def _read_at_its_mean(addon, bpy, mat, obj, socket: str, span: tuple, before: float):
+    """Links a Noise Texture (Scale 40) through a Map Range to `span` into the Principled input
+    `socket` and precomputes; asserts the mean read lies in `span` away from `before`, that
+    the panel's line says it is previewed at it and that no input is left "Connected, not
+    followed". Returns `obj`'s preview, the mean, the panel's line and the Map Range node."""
+    from addon import principled
+
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    noise = nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 40.0
+    ramp = nodes.new("ShaderNodeMapRange")
+    ramp.inputs["To Min"].default_value, ramp.inputs["To Max"].default_value = span
+    links.new(noise.outputs["Fac"], ramp.inputs["Value"])
+    links.new(ramp.outputs["Result"], nodes["Principled BSDF"].inputs[socket])
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    preview = read_preview(obj).copy()
+    mean = principled.MEANS[mat.name][socket]
+    assert span[0] < mean < span[1] and abs(mean - before) > 1e-3 * span[1], mean
+    labels = draw_panel(addon, mat)
+    line = next(t for t in labels if f"{socket} from Map Range: " in t)
+    assert f"previewed at their mean {mean:.4g}: one medium, not per vertex yet" in line, line
+    assert not any(t.startswith("Connected, not followed") for t in labels), labels
+    return preview, mean, line, ramp
+
+
 def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
     # A Subsurface Scale and Radius driven by links are read by Cycles at the vertices and
     # previewed at their mean (one medium: the transport is spaced for one radius). Driven by
@@ -207,10 +242,7 @@ def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
 
     from addon import principled, session
 
-    mat, tex, objs = _scene(bpy, "checker")
-    mat.node_tree.links.remove(mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0])
-    mat.translucent.enabled = True
-    p = mat.node_tree.nodes["Principled BSDF"]
+    mat, objs, p = _uniform_scene(bpy)
     p.inputs["Subsurface Scale"].default_value = 0.004
     p.inputs["Subsurface Radius"].default_value = (1.0, 0.5, 0.25)
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
@@ -229,23 +261,8 @@ def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
     np.testing.assert_allclose(read_preview(objs[0]), typed, rtol=1e-5, atol=1e-7)
     means = principled.MEANS[mat.name]
     assert abs(means["Subsurface Scale"] - 0.004) < 1e-6, means
-    # A Noise Texture between 0.002 and 0.006.
-    noise = nodes.new("ShaderNodeTexNoise")
-    noise.inputs["Scale"].default_value = 40.0
-    ramp = nodes.new("ShaderNodeMapRange")
-    ramp.inputs["To Min"].default_value = 0.002
-    ramp.inputs["To Max"].default_value = 0.006
-    links.new(noise.outputs["Fac"], ramp.inputs["Value"])
-    links.new(ramp.outputs["Result"], p.inputs["Subsurface Scale"])
-    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
-    textured = read_preview(objs[0]).copy()
-    mean = principled.MEANS[mat.name]["Subsurface Scale"]
-    assert 0.002 < mean < 0.006 and abs(mean - 0.004) > 1e-6, mean
-    labels = draw_panel(addon, mat)
-    line = next(t for t in labels if "Subsurface Scale from Map Range: " in t)
-    assert f"previewed at their mean {mean:.4g}: one medium, not per vertex yet" in line, line
+    textured, mean, line, ramp = _read_at_its_mean(addon, bpy, mat, objs[0], "Subsurface Scale", (0.002, 0.006), 0.004)
     assert "Subsurface Radius from Combine XYZ: (1, 0.5, 0.25) to (1, 0.5, 0.25)" in line, line
-    assert not any(t.startswith("Connected, not followed") for t in labels), labels
     assert session.SESSIONS[mat.name].texture_message
     links.remove(p.inputs["Subsurface Scale"].links[0])
     p.inputs["Subsurface Scale"].default_value = mean
@@ -274,10 +291,7 @@ def test_a_linked_roughness_is_previewed_at_its_mean(addon):
 
     from addon import principled
 
-    mat, tex, objs = _scene(bpy, "checker")
-    mat.node_tree.links.remove(mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0])
-    mat.translucent.enabled = True
-    p = mat.node_tree.nodes["Principled BSDF"]
+    mat, objs, p = _uniform_scene(bpy)
     p.inputs["Roughness"].default_value = 0.9
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     stale = read_preview(objs[0]).copy()
@@ -293,21 +307,7 @@ def test_a_linked_roughness_is_previewed_at_its_mean(addon):
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     np.testing.assert_allclose(read_preview(objs[0]), typed, rtol=1e-5, atol=1e-7)
     assert abs(principled.MEANS[mat.name]["Roughness"] - 0.3) < 1e-6
-    noise = nodes.new("ShaderNodeTexNoise")
-    noise.inputs["Scale"].default_value = 40.0
-    ramp = nodes.new("ShaderNodeMapRange")
-    ramp.inputs["To Min"].default_value = 0.2
-    ramp.inputs["To Max"].default_value = 0.6
-    links.new(noise.outputs["Fac"], ramp.inputs["Value"])
-    links.new(ramp.outputs["Result"], p.inputs["Roughness"])
-    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
-    textured = read_preview(objs[0]).copy()
-    mean = principled.MEANS[mat.name]["Roughness"]
-    assert 0.2 < mean < 0.6 and abs(mean - 0.3) > 1e-3, mean
-    labels = draw_panel(addon, mat)
-    line = next(t for t in labels if "Roughness from Map Range: " in t)
-    assert f"previewed at their mean {mean:.4g}: one medium, not per vertex yet" in line, line
-    assert not any(t.startswith("Connected, not followed") for t in labels), labels
+    textured, mean, _, _ = _read_at_its_mean(addon, bpy, mat, objs[0], "Roughness", (0.2, 0.6), 0.3)
     links.remove(p.inputs["Roughness"].links[0])
     p.inputs["Roughness"].default_value = mean
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
