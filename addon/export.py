@@ -661,10 +661,11 @@ def export_scene(
             co, tris, _, key, slots = _evaluate(obj, depsgraph, triangles=True)
         except RuntimeError:
             continue
-        _add_key(info.occluder_keys, obj, key, slot_materials(obj), kind="emitter")
+        materials = slot_materials(obj)
+        _add_key(info.occluder_keys, obj, key, materials, kind="emitter")
         info.emitters.append(obj.name)
         if len(co) and len(tris):
-            _add_emitter(obj, co, tris, slots, info, slot_materials(obj), visible_shadow=False)
+            _add_emitter(obj, co, tris, slots, info, materials, visible_shadow=False)
     _bake_emitters(info)
     add_lights(scene, bl_scene, info)
     set_world(scene, bl_scene, info)

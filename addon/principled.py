@@ -3,6 +3,8 @@ depends on (`translucent.cycles`), and the medium they map to shown in the coeff
 
 from __future__ import annotations
 
+import dataclasses
+
 
 def principled_node(mat):
     """The material's first Principled BSDF node, or None."""
@@ -41,8 +43,6 @@ def principled_inputs(mat):
     """The Principled BSDF inputs Cycles' subsurface answer depends on (`cycles.Principled`),
     or None when the material has no Principled BSDF. A linked Subsurface Radius, Scale or
     Roughness takes the mean `textures.read` found (`MEANS`) where there is one."""
-    import dataclasses
-
     from translucent import cycles
 
     node = principled_node(mat)

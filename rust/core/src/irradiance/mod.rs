@@ -369,7 +369,7 @@ fn estimate_point(
     for l in reaching.lights[..reaching.direct].iter().filter(|_| lit) {
         let (e, v) = est.light(l, settings.area_samples.max(1));
         add(&mut sum, e);
-        add64(&mut variance, v);
+        add(&mut variance, v);
     }
     if let Some(coefficients) = world_sh {
         let mut y = [0.0f64; 9];
@@ -386,7 +386,7 @@ fn estimate_point(
     } else if let Some(w) = world {
         let (e, v) = est.world(w, settings.world_samples.max(1));
         add(&mut sum, e);
-        add64(&mut variance, v);
+        add(&mut variance, v);
     }
     if tracer.bounces() && (!reaching.lights.is_empty() || world.is_some()) {
         // A stream of its own: the lights' and the world's draws stay as they were. With no
@@ -403,7 +403,7 @@ fn estimate_point(
         let direct = sum;
         let (mean, error) = est.bounce(&reaching.lights, world, (rays, most), direct, &mut rng);
         add(&mut sum, mean);
-        add64(&mut variance, error.map(|e| f64::from(e) * f64::from(e)));
+        add(&mut variance, error.map(|e| f64::from(e) * f64::from(e)));
     }
     Point {
         value: sum,
@@ -456,7 +456,7 @@ impl Strata {
     fn push(&mut self, x: [f32; 3]) {
         let (a, b) = (self.n / self.k, self.n % self.k);
         let half = ((a + b) % 2) as usize;
-        add64(&mut self.sums[half], x.map(f64::from));
+        add(&mut self.sums[half], x.map(f64::from));
         self.counts[half] += 1;
         self.n += 1;
     }
@@ -472,12 +472,6 @@ impl Strata {
             let d = self.sums[0][c] / na - self.sums[1][c] / nb;
             d * d * na * nb / (n * n) * scale * scale
         })
-    }
-}
-
-fn add64(sum: &mut [f64; 3], x: [f64; 3]) {
-    for c in 0..3 {
-        sum[c] += x[c];
     }
 }
 
@@ -778,7 +772,8 @@ impl PerSource {
     }
 }
 
-fn add(sum: &mut [f32; 3], x: [f32; 3]) {
+/// `x` added to `sum`, channel by channel (irradiance in f32, variances in f64).
+fn add<T: std::ops::AddAssign + Copy>(sum: &mut [T; 3], x: [T; 3]) {
     for c in 0..3 {
         sum[c] += x[c];
     }

@@ -1,7 +1,8 @@
 //! The irradiance's noise in the preview. Its sampled parts are Monte Carlo estimates at each
 //! point, each with its standard error: the bounce off the rest of the scene
 //! (`irradiance::Estimator::bounce`), an area or mesh light's points and the traced world's
-//! rays (stratified: `irradiance::Strata`, collapsed strata); s is theirs in quadrature.
+//! rays (stratified: `irradiance::Strata`, the strata's checkerboard halves); s is theirs in
+//! quadrature.
 //! B reads a vertex's irradiance E_v unaveraged in three places: the profile's point mass
 //! k E_v, the receiver's own disc M(near_radius) E_v (`rows::transport_row`, slot 0; Xu 2007
 //! eq. 10 with the disc in closed form), and the walks, whose control variate and exits read
