@@ -21,6 +21,7 @@ pub mod profiles; // radial profiles R(r): the dipole, Cycles' random walk tabul
 pub mod progress; // progress and cancelling of long loops (a Ticker over an atomic counter)
 pub mod quadrature; // Gauss–Legendre and Simpson rules
 pub mod raytrace; // BVH, shadow rays, rays from inside a part, the inside test (obvhs)
+pub mod receiver_color; // a Base Color per vertex for a method summing one medium: B scaled per receiver
 pub mod scene; // a mesh with its lights
 pub mod shadow_edges; // the irradiance on a finer grid where a shadow's edge crosses a triangle
 pub mod single_scattering; // Xu 2007 eq. 5's path model, phase functions, brute force

@@ -94,12 +94,23 @@ impl Terms {
         }
     }
 
+    /// Whether the walks (the direct term's and the own light's) cover `medium`'s diffusion
+    /// lengths (`WalkTerm::covers`); true before any walk.
+    pub fn covers(&self, medium: &Resolved) -> bool {
+        let own = self.bounce.as_ref().and_then(|b| b.walked.as_ref());
+        self.walks.iter().chain(own).all(|w| w.covers(medium))
+    }
+
     /// Computes the terms under `lit` (walked anew when `fresh` or never walked; else the kept
-    /// walks and rays read again).
+    /// walks and rays read again). `beside`: other media with their half-space B under `lit`;
+    /// walked anew, those whose lengths the representative's do not reach are walked too
+    /// (`walks::media_to_walk`, the ray budget shared); carried, those kept are read again
+    /// where `beside` still holds their medium, and dropped where it does not.
     pub fn update(
         &mut self,
         lit: &Lit<'_>,
         rep: &Resolved,
+        beside: &[(Resolved, Vec<[f32; 3]>)],
         fresh: bool,
         progress: Option<&ProgressFn>,
     ) -> Result<()> {
@@ -123,20 +134,55 @@ impl Terms {
         let kept = if fresh { None } else { self.walks.take() };
         let walks = match kept.filter(WalkTerm::relightable) {
             Some(mut term) => {
+                let mut carried = Vec::new();
+                for (medium, mut t) in term.take_beside() {
+                    if let Some((_, b)) = beside.iter().find(|(m, _)| m.material == medium.material)
+                    {
+                        t.relight(mesh, &medium, &exits, b)?;
+                        carried.push((medium, t));
+                    }
+                }
                 term.relight(mesh, rep, &exits, lit.halfspace)?;
+                term.set_beside(carried);
                 term
             }
             None => {
                 self.report.carried_pose = false;
-                WalkTerm::compute(
+                let mut media = vec![rep.clone()];
+                media.extend(beside.iter().map(|(m, _)| m.clone()));
+                let walked = crate::walks::media_to_walk(&media);
+                let mut shared = self.settings.walks.clone();
+                shared.rays /= 1 + walked.len() as u64;
+                let share = 1.0 / (1 + walked.len()) as f32;
+                let part =
+                    |k: usize| progress.map(move |p| move |f: f32| p(share * (k as f32 + f)));
+                let first = part(0);
+                let mut term = WalkTerm::compute(
                     mesh,
                     lit.tracer,
                     rep,
                     &exits,
                     lit.halfspace,
-                    &self.settings.walks,
-                    progress,
-                )?
+                    &shared,
+                    first.as_ref().map(|f| f as _),
+                )?;
+                let mut others = Vec::with_capacity(walked.len());
+                for (k, &i) in walked.iter().enumerate() {
+                    let (medium, b) = &beside[i - 1];
+                    let tick = part(k + 1);
+                    let t = WalkTerm::compute(
+                        mesh,
+                        lit.tracer,
+                        medium,
+                        &exits,
+                        b,
+                        &shared,
+                        tick.as_ref().map(|f| f as _),
+                    )?;
+                    others.push((medium.clone(), t));
+                }
+                term.set_beside(others);
+                term
             }
         };
         self.report.walks = Some(walks.report.clone());
@@ -192,10 +238,15 @@ impl Terms {
         self.report.own_light_share =
             own_light::share(&cast.irradiance, direct, mesh.vertex_areas(), &receiving);
         // What walks make of the indirect light beyond its local conversion, as PRT's does.
+        let beside = self
+            .walks
+            .as_ref()
+            .map_or_else(Vec::new, |w| w.beside_media());
         let walked = own_light::walked_term(
             mesh,
             lit.tracer,
             rep,
+            &beside,
             &cast.irradiance,
             &self.settings.walks,
             walked_before,

@@ -6,12 +6,15 @@ use crate::convert::{non_negative, rgb_array};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::{Mutex, MutexGuard};
 use translucent_core::hierarchy::{
     Evaluation as HierarchyEvaluation, Hierarchy, HierarchySettings, Mode, Receivers,
 };
+use translucent_core::optics::principled::PrincipledInputs;
+use translucent_core::receiver_color::ReceiverColors;
 
 /// A face-cluster hierarchy over a scene (a copy: `update` changes it, not the Scene).
 /// Shared between threads: every evaluation changes its links, so one runs at a time (the
@@ -109,15 +112,30 @@ impl PyHierarchy {
     }
 
     /// Radiosity B per vertex, (N, 3) float32: the quantity `reference_radiosity` integrates
-    /// (the profile over the direct irradiance, plus Cycles' diffuse lobe). Releases the GIL.
+    /// (the profile over the direct irradiance, plus Cycles' diffuse lobe). `base_color`: an
+    /// (N, 3) Principled Base Color per vertex (saturated to [0, 1] as Cycles does) for a
+    /// material made by `Material.from_principled`: the mean colour's medium summed and each
+    /// vertex scaled by its own medium's slab total (`receiver_color`). Releases the GIL.
+    #[pyo3(signature = (material, base_color = None, media = 2))]
     fn radiosity<'py>(
         &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
+        base_color: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
+        let colored = colored_inputs(&material, base_color)?;
+        let media = non_negative("media", media)?;
         let b = run(py, None, |tick| {
-            self.lock().radiosity_with_progress(&m, Some(tick))
+            let mut h = self.lock();
+            match &colored {
+                Some((inputs, rows)) => {
+                    let colors = receiver_colors(&h, inputs, rows, media)?;
+                    h.radiosity_colored(&colors, Some(tick))
+                }
+                None => h.radiosity_with_progress(&m, Some(tick)),
+            }
         })?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
@@ -125,18 +143,29 @@ impl PyHierarchy {
     }
 
     /// Radiance toward the point `eye`, L = W(w_o) B / pi, (N, 3) float32; without `eye`,
-    /// along each vertex normal (what a Cycles bake records).
-    #[pyo3(signature = (material, eye = None))]
+    /// along each vertex normal (what a Cycles bake records). `base_color` as `radiosity`.
+    #[pyo3(signature = (material, eye = None, base_color = None, media = 2))]
     fn radiance<'py>(
         &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         eye: Option<&Bound<'_, PyAny>>,
+        base_color: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
+        let colored = colored_inputs(&material, base_color)?;
+        let media = non_negative("media", media)?;
         let b = run(py, None, |tick| {
-            self.lock().radiance_with_progress(&m, eye, Some(tick))
+            let mut h = self.lock();
+            match &colored {
+                Some((inputs, rows)) => {
+                    let colors = receiver_colors(&h, inputs, rows, media)?;
+                    h.radiance_colored(&colors, eye, Some(tick))
+                }
+                None => h.radiance_with_progress(&m, eye, Some(tick)),
+            }
         })?;
         let out = rgb_array(py, &b.values);
         self.keep(b);
@@ -284,4 +313,41 @@ impl PyHierarchy {
             1e3 * r.seconds
         ))
     }
+}
+
+/// The Principled inputs and the Base Color rows of `base_color=`, or None without it. A
+/// material not made by `Material.from_principled` has no Base Color to vary.
+fn colored_inputs(
+    material: &PyMaterial,
+    base_color: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Option<(PrincipledInputs, Vec<[f32; 3]>)>> {
+    let Some(rows) = base_color else {
+        return Ok(None);
+    };
+    let inputs = material.principled.ok_or_else(|| {
+        PyValueError::new_err(
+            "base_color per vertex needs a material made by Material.from_principled \
+             (it is a Principled BSDF input)",
+        )
+    })?;
+    Ok(Some((
+        inputs,
+        crate::convert::float_rows("base_color", rows)?,
+    )))
+}
+
+/// Each vertex's scale for the hierarchy's profile and vertex areas (`receiver_color`).
+fn receiver_colors(
+    h: &Hierarchy,
+    inputs: &PrincipledInputs,
+    rows: &[[f32; 3]],
+    media: usize,
+) -> translucent_core::error::Result<ReceiverColors> {
+    ReceiverColors::new(
+        h.settings().profile,
+        inputs,
+        rows,
+        h.scene().mesh.vertex_areas(),
+        media,
+    )
 }

@@ -20,6 +20,7 @@
 //! samples it.
 
 pub mod clusters;
+mod colored;
 pub mod edges;
 pub mod far;
 pub mod links;
@@ -39,7 +40,7 @@ use crate::mesh::{interpolated_normal, Mesh};
 use crate::occluders::Occluders;
 use crate::optics::Material;
 use crate::profiles::table::{walk_table_with_progress, TableKey};
-use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile};
+use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile, Resolved};
 use crate::progress::{cancel_only, ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
@@ -104,6 +105,9 @@ pub struct Hierarchy {
     terms: Option<terms::Terms>,
     /// The next evaluation walks the terms anew (`retrace_terms`).
     retrace: bool,
+    /// Media the walks must cover beside the representative (a textured Base Color's media,
+    /// `colored`): walked too where its lengths do not reach theirs.
+    walk_media: Vec<Material>,
 }
 
 /// Each channel's decay length (infinite where nothing diffuses).
@@ -284,6 +288,7 @@ impl Hierarchy {
             report,
             terms: settings.terms.clone().map(terms::Terms::new),
             retrace: false,
+            walk_media: Vec::new(),
             settings,
         })
     }
@@ -611,7 +616,7 @@ impl Hierarchy {
         let needs_terms = self
             .terms
             .as_ref()
-            .is_some_and(|t| !t.current || self.retrace);
+            .is_some_and(|t| !t.current || self.retrace || !self.walk_media.is_empty());
         let direct = if needs_terms {
             stage(progress, 0.0, 0.2)
         } else {
@@ -668,6 +673,44 @@ impl Hierarchy {
         out
     }
 
+    /// Whether a medium of `walk_media` lies beyond the lengths walked (a new walk is due).
+    fn walk_media_uncovered(&self) -> Result<bool> {
+        let Some(t) = self.terms.as_ref().filter(|t| t.rep.is_some()) else {
+            return Ok(false);
+        };
+        for m in &self.walk_media {
+            if !t.covers(&crate::profiles::Resolved::new(ProfileKind::Cycles, m)?) {
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
+
+    /// `walk_media` other than `rep`, each with its half-space B under this light and shape
+    /// (this evaluation's report kept; the profiles are the last medium's after, so the next
+    /// evaluation of another material links again).
+    fn beside_media(&mut self, rep: &Material) -> Result<Vec<(Resolved, Vec<[f32; 3]>)>> {
+        let media: Vec<Material> = (self.walk_media.iter())
+            .filter(|m| *m != rep)
+            .copied()
+            .collect();
+        if media.is_empty() {
+            return Ok(Vec::new());
+        }
+        let report = self.report.clone();
+        let out = media
+            .iter()
+            .map(|m| {
+                Ok((
+                    Resolved::new(ProfileKind::Cycles, m)?,
+                    self.radiosity_values(m, None)?,
+                ))
+            })
+            .collect();
+        self.report = report;
+        out
+    }
+
     /// Adds the walks' term and the own light for `material` to `values` (B per vertex), and
     /// their noise to the error estimate; carries (or walks, the first time or after
     /// `retrace_terms`) them to the current light and shape first, for the representative.
@@ -680,9 +723,11 @@ impl Hierarchy {
         let Some(current) = self.terms.as_ref().map(|t| t.current) else {
             return Ok(());
         };
-        if !current || self.retrace {
+        let uncovered = self.walk_media_uncovered()?;
+        if !current || self.retrace || uncovered {
             let rep = self.terms.as_ref().and_then(|t| t.rep).unwrap_or(*material);
-            let fresh = self.retrace || self.terms.as_ref().is_some_and(|t| t.rep.is_none());
+            let fresh =
+                self.retrace || uncovered || self.terms.as_ref().is_some_and(|t| t.rep.is_none());
             // The representative's half-space B under this light and shape (its own evaluation
             // when another material is asked for; this evaluation's report kept).
             let halfspace = if rep == *material {
@@ -700,6 +745,7 @@ impl Hierarchy {
                 None => return Err(Error::InvalidArgument("no vertex irradiance".into())),
             };
             let resolved = crate::profiles::Resolved::new(ProfileKind::Cycles, &rep)?;
+            let beside = self.beside_media(&rep)?;
             let lit = terms::Lit {
                 scene: &self.scene,
                 tracer: &self.tracer,
@@ -708,7 +754,7 @@ impl Hierarchy {
                 halfspace: &halfspace,
             };
             let mut terms = self.terms.take().expect("checked above");
-            let done = terms.update(&lit, &resolved, fresh, progress);
+            let done = terms.update(&lit, &resolved, &beside, fresh, progress);
             self.terms = Some(terms);
             done?;
             self.retrace = false;

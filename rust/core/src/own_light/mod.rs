@@ -217,39 +217,69 @@ pub fn cast(
 /// geometry too (what falls on the front of an ear comes out at its back). On
 /// `INDIRECT_WALK_SHARE` of the direct walks' budget `g` (E_ind is a few per cent of the light,
 /// so is the noise that share leaves), no refinement, no shrinkage; `before` (a kept term) is
-/// read under it instead of walked again. PRT's precompute and the hierarchy both call it.
+/// read under it instead of walked again. `beside`: media walked beside `rep` (the direct
+/// term's, `WalkTerm::beside_media`), each on the same share; a kept one is read again where
+/// `beside` still holds it. PRT's precompute and the hierarchy both call it.
+#[allow(clippy::too_many_arguments)]
 pub fn walked_term(
     mesh: &Mesh,
     tracer: &Tracer,
     rep: &Resolved,
+    beside: &[Resolved],
     indirect: &[[f32; 3]],
     g: &crate::walks::WalkTermSettings,
     before: Option<WalkTerm>,
     progress: Option<&ProgressFn>,
 ) -> Result<WalkTerm> {
-    let receiving = rep.totals();
-    let local: Vec<[f32; 3]> = indirect
-        .iter()
-        .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
-        .collect();
     let lit = crate::walks::ExitLight {
         vertices: indirect,
         edges: &crate::shadow_edges::ShadowEdges::none(),
     };
+    let one = |medium: &Resolved, before: Option<WalkTerm>| -> Result<WalkTerm> {
+        let receiving = medium.totals();
+        let local: Vec<[f32; 3]> = indirect
+            .iter()
+            .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
+            .collect();
+        match before {
+            Some(mut term) => {
+                term.relight(mesh, medium, &lit, &local)?;
+                Ok(term)
+            }
+            None => {
+                let shared = crate::walks::WalkTermSettings {
+                    rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
+                    vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
+                    refine: false,
+                    shrink: false,
+                    ..g.clone()
+                };
+                WalkTerm::compute(mesh, tracer, medium, &lit, &local, &shared, progress)
+            }
+        }
+    };
     match before.filter(WalkTerm::relightable) {
         Some(mut term) => {
-            term.relight(mesh, rep, &lit, &local)?;
+            let mut carried = Vec::new();
+            for (m, t) in term.take_beside() {
+                if beside.iter().any(|b| b.material == m.material) {
+                    let t = one(&m, Some(t))?;
+                    carried.push((m, t));
+                }
+            }
+            let mut term = one(rep, Some(term))?;
+            term.set_beside(carried);
             Ok(term)
         }
         None => {
-            let shared = crate::walks::WalkTermSettings {
-                rays: (g.rays as f64 * INDIRECT_WALK_SHARE) as u64,
-                vertices: ((g.vertices as f64 * INDIRECT_WALK_SHARE) as usize).max(1),
-                refine: false,
-                shrink: false,
-                ..g.clone()
-            };
-            WalkTerm::compute(mesh, tracer, rep, &lit, &local, &shared, progress)
+            let mut term = one(rep, None)?;
+            let others = (beside.iter())
+                .map(|m| Ok((m.clone(), one(m, None)?)))
+                .collect::<Result<Vec<_>>>()?;
+            if !others.is_empty() {
+                term.set_beside(others);
+            }
+            Ok(term)
         }
     }
 }

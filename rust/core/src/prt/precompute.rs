@@ -343,6 +343,7 @@ impl Prt {
                     mesh,
                     tracer,
                     rep,
+                    &[],
                     &irradiance,
                     g,
                     walked_before,

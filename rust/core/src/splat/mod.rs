@@ -890,7 +890,7 @@ impl Splatting {
                 vertices: &vertices,
                 halfspace: &half,
             };
-            t.update(&lit, &rep_resolved, fresh, progress)?;
+            t.update(&lit, &rep_resolved, &[], fresh, progress)?;
         }
         let resolved = Resolved::new(self.profile, material)?;
         let mut added = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];

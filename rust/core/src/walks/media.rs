@@ -66,6 +66,17 @@ impl WalkTerm {
         (table, k % CHANNELS)
     }
 
+    /// Whether every channel of `medium` that carries light lies within `LENGTH_MARGIN` of the
+    /// lengths walked (this medium's and those beside it): read there, no refresh is due.
+    pub fn covers(&self, medium: &Resolved) -> bool {
+        self.lengths.is_empty() || ln_lengths(medium).iter().all(|&x| !self.pick(x).1)
+    }
+
+    /// The media walked beside this one.
+    pub fn beside_media(&self) -> Vec<Resolved> {
+        self.beside.iter().map(|(m, _)| m.clone()).collect()
+    }
+
     /// Takes the media walked beside this one out (to relight them, `set_beside` puts them
     /// back).
     pub fn take_beside(&mut self) -> Vec<(Resolved, WalkTerm)> {

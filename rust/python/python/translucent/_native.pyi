@@ -585,10 +585,28 @@ class Hierarchy:
         `mode`: "on_the_fly" (everything from scratch each evaluation, no links kept),
         "render" (links kept; a light change gathers again over them), "incremental" (links
         kept and re-checked after a material or geometry change). Releases the GIL."""
-    def radiosity(self, material: Material) -> npt.NDArray[np.float32]:
-        """B per vertex, (N, 3): what `reference_radiosity` integrates."""
-    def radiance(self, material: Material, eye: Vec3 | None = None) -> npt.NDArray[np.float32]:
-        """L = W(w_o) B / pi toward `eye`, or along each normal without one."""
+    def radiosity(
+        self, material: Material, base_color: npt.ArrayLike | None = None, media: int = 2
+    ) -> npt.NDArray[np.float32]:
+        """B per vertex, (N, 3): what `reference_radiosity` integrates. `base_color`: (N, 3)
+        Principled Base Color per vertex (linear RGB, saturated to [0, 1] as Cycles does) for a
+        `Material.from_principled` material, whose own Base Color is then unused: each vertex
+        scatters as its own Base Color's medium, as Cycles' walk takes the medium where it
+        starts. The hierarchy sums `media` media (1-16; Base Colors at the vertices'
+        area-weighted quantiles, per channel) and blends the two around each vertex's colour,
+        each scaled by the vertex's own slab total: exact under a light uniform over the
+        profile's reach and at a vertex of a medium's colour. `last_eval["error_estimate"]`
+        adds what the blend misses, measured at the estimate's receivers against each one's own
+        medium, and the totals' table error. Costs `media` evaluations."""
+    def radiance(
+        self,
+        material: Material,
+        eye: Vec3 | None = None,
+        base_color: npt.ArrayLike | None = None,
+        media: int = 2,
+    ) -> npt.NDArray[np.float32]:
+        """L = W(w_o) B / pi toward `eye`, or along each normal without one. `base_color` and
+        `media` as `radiosity` (W and Cycles' view factor then the first medium's)."""
     def update(
         self,
         positions: npt.ArrayLike | None = None,

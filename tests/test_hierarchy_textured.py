@@ -1,0 +1,139 @@
+"""`Hierarchy.radiosity(base_color=...)` (issue 30, point 2, in the hierarchy): each vertex
+scatters as its own Base Color's medium, as Cycles' walk takes the medium where it starts. The
+ground truth is `reference_radiosity` with each receiver's own medium (a brute-force integral of
+that medium's profile over the lit surface), independent of the media the hierarchy blends."""
+
+import numpy as np
+import pytest
+import translucent
+
+from helpers import sphere
+
+
+def _mat(c):
+    return translucent.Material.from_principled(c, (1.0, 0.5, 0.25), 0.02)
+
+
+def _rms(got, ref):
+    return np.sqrt(((got - ref) ** 2).sum(0) / (ref**2).sum(0))
+
+
+@pytest.fixture(scope="module")
+def lit():
+    p, t = sphere(16, 0.02)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.6, 0.2, -0.77), irradiance=1.0)
+    # Eight wedges by longitude, two colours; each wedge is ~15 mm wide at the equator
+    # against a red diffusion length of 1.6 mm.
+    wedge = (np.floor(np.arctan2(p[:, 1], p[:, 0]) / (np.pi / 4)) % 2)[:, None] == 0
+    stripes = np.where(wedge, [0.9, 0.7, 0.5], [0.2, 0.15, 0.1]).astype(np.float32)
+    receivers = np.arange(0, len(p), 4)
+    return p, s, stripes, receivers
+
+
+def _reference(s, colours, receivers, profile):
+    ref = np.zeros((len(receivers), 3))
+    groups = {}
+    for k, v in enumerate(receivers):
+        groups.setdefault(tuple(float(x) for x in colours[v]), []).append(k)
+    for c, ks in groups.items():
+        ref[ks] = translucent.reference_radiosity(s, _mat(c), receivers=[int(receivers[k]) for k in ks], profile=profile)
+    return ref
+
+
+def test_two_colours_two_media_are_each_vertex_its_own_medium(lit):
+    p, s, stripes, receivers = lit
+    ref = _reference(s, stripes, receivers, "cycles")
+    h = translucent.Hierarchy(s, _mat(0.5), profile="cycles")
+    got = h.radiosity(_mat(0.5), base_color=stripes, media=2)
+    err = _rms(got[receivers], ref)
+    assert err.max() < 0.015, err  # the hierarchy's own bar is 2 %
+    estimate = np.array(h.last_eval["error_estimate"])
+    assert h.last_eval["seconds"] > 0
+    # The material's own Base Color, uniformly, is far off: the test can tell.
+    uniform = _rms(h.radiosity(_mat(0.5))[receivers], ref)
+    assert uniform.min() > 0.2, uniform
+    assert estimate.shape == (3,) and np.all(np.isfinite(estimate))
+
+
+def test_a_ramp_summed_with_fewer_media_states_what_it_misses(lit):
+    # A continuous ramp in z: no medium is every vertex's own. The blend's miss grows as the
+    # media thin out, and the estimate (measured at its own receivers) says so.
+    p, s, stripes, receivers = lit
+    ramp = stripes.copy()
+    ramp[:, 1] = 0.1 + 0.8 * (p[:, 2] / 0.02 * 0.5 + 0.5)
+    ref = _reference(s, ramp, receivers, "dipole")
+    h = translucent.Hierarchy(s, _mat(0.5), profile="dipole")
+    errors, estimates = [], []
+    for media in (1, 6):
+        got = h.radiosity(_mat(0.5), base_color=ramp, media=media)
+        errors.append(_rms(got[receivers], ref)[1])
+        estimates.append(h.last_eval["error_estimate"][1])
+    assert errors[1] < errors[0], errors
+    for e, est in zip(errors, estimates):
+        assert 0.5 * e - 0.003 <= est <= 2.0 * e + 0.005, (errors, estimates)
+
+
+def test_one_colour_per_vertex_is_the_uniform_material(lit):
+    p, s, _, _ = lit
+    h = translucent.Hierarchy(s, _mat(0.6), profile="cycles")
+    uniform = h.radiance(_mat(0.6))
+    for media in (1, 3):
+        per_vertex = h.radiance(_mat(0.3), base_color=np.full((len(p), 3), 0.6), media=media)
+        np.testing.assert_allclose(per_vertex, uniform, rtol=1e-5, atol=1e-9)
+
+
+def test_base_colour_arguments_are_checked(lit):
+    p, s, _, _ = lit
+    h = translucent.Hierarchy(s, _mat(0.5), profile="dipole", estimate_receivers=0)
+    n = len(p)
+    with pytest.raises(ValueError, match="base_color has 3 rows"):
+        h.radiosity(_mat(0.5), base_color=np.full((3, 3), 0.5))
+    bad = np.full((n, 3), 0.5)
+    bad[2, 0] = np.nan
+    with pytest.raises(ValueError, match="base_color of vertex 2"):
+        h.radiance(_mat(0.5), base_color=bad)
+    with pytest.raises(ValueError, match="base_color must have shape"):
+        h.radiosity(_mat(0.5), base_color=np.full((n, 2), 0.5))
+    with pytest.raises(ValueError, match="Material.from_principled"):
+        h.radiosity(translucent.Material.preset("marble"), base_color=np.full((n, 3), 0.5))
+    with pytest.raises(ValueError, match="media = 0"):
+        h.radiosity(_mat(0.5), base_color=np.full((n, 3), 0.5), media=0)
+    with pytest.raises(ValueError, match="media = -1"):
+        h.radiosity(_mat(0.5), base_color=np.full((n, 3), 0.5), media=-1)
+    # No estimate asked, none made up.
+    h.radiosity(_mat(0.5), base_color=np.full((n, 3), 0.5))
+    assert h.last_eval["error_estimate"] is None
+
+
+def test_with_the_walks_every_medium_is_walked_and_carried_to_a_new_light(lit):
+    # The checker's two media lie far apart in diffusion length (Base Color 0.85 against 0.25
+    # in red: single-scattering albedo 0.995 against 0.69). Walked for the material the
+    # hierarchy was built with alone, their terms would be read far beyond the walked lengths
+    # (the estimate then says 100 % per term); the media are walked beside it instead, and
+    # a new light reads the same walks again.
+    p, s, _, _ = lit
+    wedge = (np.floor(np.arctan2(p[:, 1], p[:, 0]) / (np.pi / 4)) % 2)[:, None] == 0
+    checker = np.where(wedge, [0.85, 0.45, 0.3], [0.25, 0.4, 0.7]).astype(np.float32)
+
+    def mat(c):
+        return translucent.Material.from_principled(c, (1.0, 0.2, 0.1), 0.005)
+
+    h = translucent.Hierarchy(s, mat(0.5), profile="cycles", walks=True, estimate_receivers=16)
+    h.radiance(mat(0.5), base_color=checker)
+    walks = h.report["terms"]["walks"]
+    assert walks["media"] >= 2 and h.report["terms"]["walks_indirect"]["media"] == walks["media"]
+    assert max(h.last_eval["error_estimate"]) < 0.05, h.last_eval["error_estimate"]
+    traced = walks["walks"]
+    # A new light: the same walks read again (none traced), against a hierarchy built under it.
+    moved = translucent.Scene(*sphere(16, 0.02))
+    moved.add_sun((-0.5, 0.6, -0.62), irradiance=1.0)
+    h.update(lights=moved)
+    relit = h.radiance(mat(0.5), base_color=checker)
+    walks = h.report["terms"]["walks"]
+    assert walks["media"] >= 2 and walks["walks"] == traced
+    assert max(h.last_eval["error_estimate"]) < 0.05
+    fresh = translucent.Hierarchy(moved, mat(0.5), profile="cycles", walks=True, estimate_receivers=16)
+    again = fresh.radiance(mat(0.5), base_color=checker)
+    lit_ = again.sum(1) > 1e-3 * again.sum(1).max()
+    assert _rms(relit[lit_], again[lit_]).max() < 0.03, _rms(relit[lit_], again[lit_])
