@@ -100,7 +100,7 @@ def follow_texture(material: bpy.types.Material, s: Session, force: bool = False
     """Read the Base Color per vertex again when what it depends on changed
     (`textures.reading_key`: the node tree's key, the Base Color beside other materials' faces;
     or `force`: an image it reads was edited), when a link now drives it, or drop it when none
-    does. PRT only (the hierarchy says it shows the socket's value)."""
+    does. PRT and the hierarchy (the splatting says it shows the socket's value)."""
     key = textures.reading_key(material, s.info, s.method)
     if key and not force and key == s.texture_key:
         return
@@ -200,6 +200,8 @@ def edit(material: bpy.types.Material) -> None:
     textured = {}
     if s.method == "prt":
         textured = textures.Reading(colours=s.base_color, weights=s.subsurface_weight, others=s.others).kwargs()
+    elif s.method == "hierarchy" and s.base_color is not None:
+        textured = {"base_color": s.base_color}  # media blended around each vertex's colour
     if s.method == "splat":
         colors = _splatted(material, s)
         if colors is None:
@@ -318,7 +320,7 @@ def follow_principled(_scene=None, depsgraph=None) -> None:
         if painted:
             follow_texture(mat, s, force=True)
         if (painted or principled_key(mat) != s.principled_key
-                or (s.method == "prt" and _texture_changed(mat, s))):
+                or (s.method in ("prt", "hierarchy") and _texture_changed(mat, s))):
             edit(mat)
 
 

@@ -113,6 +113,11 @@ class HierarchyJob(Job):
                                                     eps=HIERARCHY_EPS, mode="on_the_fly", world_shadows=True,
                                                     estimate_receivers=HIERARCHY_ESTIMATE_RECEIVERS,
                                                     walks=kwargs["profile"] == "cycles")
+            colours = getattr(self, "base_color", None)
+            if colours is not None:
+                # A Base Color per vertex: its media summed here, off the UI thread (with the
+                # walks, those beyond the walked lengths are walked now, not at the first edit).
+                self.result.radiance(self._material, base_color=colours)
         except BaseException as e:  # reported by the follow refresh, which falls back to PRT
             self.error = e
 
