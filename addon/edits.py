@@ -64,13 +64,14 @@ def _splatted(material: bpy.types.Material, s: Session):
     evaluation was for it; else None, and the scene is splatted again for it on a worker thread
     (headless: at once), the edit shown when that is done. The old preview stays meanwhile; an
     edit made while one runs is splatted after it (the job's end runs the edit again)."""
-    key = params(material.translucent)
+    key = (params(material.translucent), s.texture_key)
     if s.evaluated is not None and s.evaluated[0] == key:
         return s.evaluated[1]
     name = material.name
     if name in JOBS:
         return None  # the Splat is busy on a worker thread: its end runs this edit again
     job = jobs.SplatJob(None, material.translucent.material(), key, previous=s.transport)
+    job.base_color = s.base_color  # a Base Color read per vertex: media blended around it
     s.edit_message = "splatting the edit in the background (nothing precomputed)"
 
     def done(mat):
@@ -100,7 +101,8 @@ def follow_texture(material: bpy.types.Material, s: Session, force: bool = False
     """Read the Base Color per vertex again when what it depends on changed
     (`textures.reading_key`: the node tree's key, the Base Color beside other materials' faces;
     or `force`: an image it reads was edited), when a link now drives it, or drop it when none
-    does. PRT and the hierarchy (the splatting says it shows the socket's value)."""
+    does. Every method (the hierarchy and the splatting blend media around each vertex's
+    colour)."""
     key = textures.reading_key(material, s.info, s.method)
     if key and not force and key == s.texture_key:
         return
@@ -320,7 +322,7 @@ def follow_principled(_scene=None, depsgraph=None) -> None:
         if painted:
             follow_texture(mat, s, force=True)
         if (painted or principled_key(mat) != s.principled_key
-                or (s.method in ("prt", "hierarchy") and _texture_changed(mat, s))):
+                or (s.method in ("prt", "hierarchy", "splat") and _texture_changed(mat, s))):
             edit(mat)
 
 

@@ -259,7 +259,9 @@ class SplatJob(Job):
                 splat.update(lights=scene)
             posed = self._change == "deformation" and splat.walks
             self._span = (0.0, POSE_SHARE) if posed else (0.0, 1.0)
-            colors = splat.radiance(self._material, progress=self._tick)
+            colours = getattr(self, "base_color", None)
+            textured = {} if colours is None else {"base_color": colours}  # media blended per vertex
+            colors = splat.radiance(self._material, progress=self._tick, **textured)
             what = {"light": "lights changed: ", "deformation": "posed: "}.get(self._change, "")
             if posed:
                 self.first_seconds = time.perf_counter() - t0
@@ -269,7 +271,7 @@ class SplatJob(Job):
                 self.first = splat
                 self._span = (POSE_SHARE, 1.0)
                 splat.retrace_walks()
-                colors = splat.radiance(self._material, progress=self._tick)
+                colors = splat.radiance(self._material, progress=self._tick, **textured)
                 what = f"refined: walks traced on the pose after {self.first_seconds:.2f} s carried; "
             self.colors, self.last_eval = colors, dict(splat.last_eval)
             self.stage_message = (f"splatted ({what}nothing precomputed): {time.perf_counter() - t0:.2f} s, "
@@ -343,7 +345,7 @@ def start(material: bpy.types.Material, bl_scene=None, method: str = "prt",
 
     if method == "splat":
         same = (relight or pose) and carried("splat")
-        job = SplatJob(scene, s.material(), params(s), previous=previous.transport if same else None,
+        job = SplatJob(scene, s.material(), (params(s), texture.key), previous=previous.transport if same else None,
                        change="deformation" if pose else "light" if relight else "",
                        profile=s.profile_name(), settings=splat_settings(bl_scene))
     elif method == "hierarchy":

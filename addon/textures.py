@@ -265,9 +265,9 @@ def read_means(mat: bpy.types.Material, info) -> list[str]:
 def reading_key(mat: bpy.types.Material, info, method: str) -> str:
     """What `read` depends on, as a string ("" where it reads nothing): the node tree's key
     where a link drives a followed input, and the Base Color where the faces of other materials
-    scatter beside the previewed ones (PRT and, the node tree alone, the hierarchy; a
-    Principled material only)."""
-    if method not in ("prt", "hierarchy") or mat.translucent.source != "PRINCIPLED":
+    scatter beside the previewed ones (PRT; the node tree alone for the hierarchy and the
+    splatting; a Principled material only)."""
+    if method not in ("prt", "hierarchy", "splat") or mat.translucent.source != "PRINCIPLED":
         return ""
     key = tree_key(mat) if linked_any(mat) else ""
     if method == "prt" and has_others(info):
@@ -281,9 +281,8 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     """The Base Color and the Subsurface Weight of `mat` per vertex of the exported scene `info`,
     for a transport built by `method`: read by Cycles (`for_export`) where a link drives them
     and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits), and
-    a linked Radius, Scale and Roughness read to their mean (`read_means`); the hierarchy reads
-    the Base Color and the means (not the weight), the splatting none yet, and the line says
-    so. Where the faces of other materials were exported to scatter
+    a linked Radius, Scale and Roughness read to their mean (`read_means`); the hierarchy and
+    the splatting read the Base Color and the means (not the weight), and the line says so. Where the faces of other materials were exported to scatter
     (`export.export_scene(others_scatter=True)`), their vertices take their own albedo and the
     previewed ones the Base Color. Nothing otherwise."""
     if method == "prt":
@@ -295,12 +294,8 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
         return Reading()
     sockets = [s for s in FOLLOWED + AVERAGED if linked(mat, s)]
     names = " and ".join(sockets)
-    if method == "splat":
-        MEANS.pop(mat.name, None)  # the socket's value, as the line says, not a PRT reading's mean
-        return Reading(message=f"{names} from {input_source(mat, sockets[0])}: not followed by "
-                               "the splatting yet, the socket's value shown (PRT and the hierarchy follow it)")
-    if method == "hierarchy":
-        return _read_for_hierarchy(mat, info, names)
+    if method in ("hierarchy", "splat"):
+        return _read_for_blended(mat, info, names, method)
     out = Reading(key=reading_key(mat, info, method))
     lines = []
     try:
@@ -333,11 +328,12 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     return out
 
 
-def _read_for_hierarchy(mat: bpy.types.Material, info, names: str) -> Reading:
-    """`read` for the hierarchy: the Base Color per vertex (`Hierarchy.radiance(base_color=...)`
-    blends media around each vertex's colour) and a linked Radius, Scale and Roughness at their
-    mean; a linked Subsurface Weight is not followed there yet, and the line says so."""
-    out = Reading(key=reading_key(mat, info, "hierarchy"))
+def _read_for_blended(mat: bpy.types.Material, info, names: str, method: str) -> Reading:
+    """`read` for the hierarchy and the splatting at the vertices: the Base Color per vertex
+    (their `radiance(base_color=...)` blends media around each vertex's colour) and a linked
+    Radius, Scale and Roughness at their mean; a linked Subsurface Weight is not followed there
+    yet, and the line says so."""
+    out = Reading(key=reading_key(mat, info, method))
     lines = []
     try:
         lines += read_means(mat, info)
@@ -347,8 +343,8 @@ def _read_for_hierarchy(mat: bpy.types.Material, info, names: str) -> Reading:
     except ValueError as e:
         return Reading(message=f"{names} not read per vertex ({e}): the socket's value shown")
     if linked(mat, "Subsurface Weight"):
-        lines.append("Subsurface Weight: not followed by the hierarchy yet, the socket's value shown "
-                     "(PRT follows it)")
+        who = "the hierarchy" if method == "hierarchy" else "the splatting"
+        lines.append(f"Subsurface Weight: not followed by {who} yet, the socket's value shown (PRT follows it)")
     out.message = "; ".join(lines)
     return out
 

@@ -123,10 +123,11 @@ def test_a_textured_base_colour_matches_a_cycles_bake_of_the_textured_material(a
     assert min(uniform) > 3 * max(errors), (uniform, errors)
 
 
-def test_the_hierarchy_follows_a_textured_base_colour(addon):
-    # The same checker previewed by the hierarchy: each vertex's Base Color read by Cycles, the
-    # media at the checker's two colours summed and blended per vertex
-    # (`Hierarchy.radiance(base_color=...)`), against the same Cycles bake as PRT's.
+@pytest.mark.parametrize("method", ["HIERARCHY", "SPLAT"])
+def test_the_hierarchy_and_the_splatting_follow_a_textured_base_colour(addon, method):
+    # The same checker previewed by the hierarchy and by the splatting at the vertices: each
+    # vertex's Base Color read by Cycles, the media at the checker's two colours summed and
+    # blended per vertex (`radiance(base_color=...)`), against the same Cycles bake as PRT's.
     import bpy
     import translucent
     from addon import export, session
@@ -134,20 +135,20 @@ def test_the_hierarchy_follows_a_textured_base_colour(addon):
     mat, tex, objs = _scene(bpy, "checker")
     before = _user_data(bpy, mat, objs)
     mat.translucent.enabled = True
-    mat.translucent.method = "HIERARCHY"
+    mat.translucent.method = method
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     s = session.SESSIONS[mat.name]
-    assert s.method == "hierarchy"
+    assert s.method == method.lower()
     assert s.texture_message.startswith("Base Color from Checker Texture: read by Cycles at 964 vertices")
     assert s.base_color is not None
     assert _user_data(bpy, mat, objs) == before
-    bakes, errors = _against_cycles(bpy, s, objs, "hierarchy, checker")
+    bakes, errors = _against_cycles(bpy, s, objs, f"{method.lower()}, checker")
     mat.node_tree.links.remove(mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0])
     bpy.context.view_layer.update()
     assert s.base_color is None
     uniform = [max(translucent.relative_error(read_preview(o), b, export.export_scene([o])[0].vertex_areas[:, 0])["rms"])
                for o, b in zip(objs, bakes)]
-    print(f"hierarchy, the socket's value shown uniformly: {[f'{100 * e:.2f} %' for e in uniform]}")
+    print(f"{method.lower()}, the socket's value shown uniformly: {[f'{100 * e:.2f} %' for e in uniform]}")
     assert min(uniform) > 3 * max(errors), (uniform, errors)
 
 
@@ -297,8 +298,8 @@ def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     assert mat.name not in principled.MEANS or "Subsurface Scale" not in principled.MEANS[mat.name]
     np.testing.assert_allclose(read_preview(objs[0]), textured, rtol=1e-4, atol=1e-7)
-    # The hierarchy reads it too, at its mean (the stale socket value not used); the splatting
-    # does not: the socket's value, as its line says.
+    # The hierarchy reads it too, at its mean (the stale socket value not used), and so does
+    # the splatting at the vertices.
     links.new(ramp.outputs["Result"], p.inputs["Subsurface Scale"])
     p.inputs["Subsurface Scale"].default_value = 0.005
     mat.translucent.method = "HIERARCHY"
@@ -307,10 +308,10 @@ def test_a_linked_radius_and_scale_are_previewed_at_their_mean(addon):
     assert principled.principled_inputs(mat).scale == pytest.approx(mean, rel=1e-5)
     from addon import textures
 
+    principled.MEANS.pop(mat.name)
     line = textures.read(mat, session.SESSIONS[mat.name].info, "splat").message
-    assert "not followed by the splatting yet" in line, line
-    assert mat.name not in principled.MEANS
-    assert principled.principled_inputs(mat).scale == pytest.approx(0.005)
+    assert "Subsurface Scale from Map Range" in line, line
+    assert principled.principled_inputs(mat).scale == pytest.approx(mean, rel=1e-5)
 
 
 def test_a_linked_roughness_is_previewed_at_its_mean(addon):

@@ -6,7 +6,6 @@ use crate::convert::{non_negative, rgb_array};
 use crate::material::PyMaterial;
 use crate::scene::PyScene;
 use numpy::PyArray2;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::{Mutex, MutexGuard};
@@ -125,7 +124,7 @@ impl PyHierarchy {
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let colored = colored_inputs(&material, base_color)?;
+        let colored = crate::material::colored_inputs(&material, base_color)?;
         let media = non_negative("media", media)?;
         let b = run(py, None, |tick| {
             let mut h = self.lock();
@@ -155,7 +154,7 @@ impl PyHierarchy {
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let colored = colored_inputs(&material, base_color)?;
+        let colored = crate::material::colored_inputs(&material, base_color)?;
         let media = non_negative("media", media)?;
         let b = run(py, None, |tick| {
             let mut h = self.lock();
@@ -313,27 +312,6 @@ impl PyHierarchy {
             1e3 * r.seconds
         ))
     }
-}
-
-/// The Principled inputs and the Base Color rows of `base_color=`, or None without it. A
-/// material not made by `Material.from_principled` has no Base Color to vary.
-fn colored_inputs(
-    material: &PyMaterial,
-    base_color: Option<&Bound<'_, PyAny>>,
-) -> PyResult<Option<(PrincipledInputs, Vec<[f32; 3]>)>> {
-    let Some(rows) = base_color else {
-        return Ok(None);
-    };
-    let inputs = material.principled.ok_or_else(|| {
-        PyValueError::new_err(
-            "base_color per vertex needs a material made by Material.from_principled \
-             (it is a Principled BSDF input)",
-        )
-    })?;
-    Ok(Some((
-        inputs,
-        crate::convert::float_rows("base_color", rows)?,
-    )))
 }
 
 /// Each vertex's scale for the hierarchy's profile and vertex areas (`receiver_color`).

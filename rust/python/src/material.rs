@@ -370,3 +370,24 @@ pub fn principled_for_medium(
 pub fn layer_weight(roughness: f64, cos_view: f64, ior: f64) -> PyResult<f64> {
     principled::checked_layer_weight(roughness, cos_view, ior).map_err(to_py)
 }
+
+/// The Principled inputs and the Base Color rows of `base_color=`, or None without it. A
+/// material not made by `Material.from_principled` has no Base Color to vary.
+pub fn colored_inputs(
+    material: &PyMaterial,
+    base_color: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Option<(PrincipledInputs, Vec<[f32; 3]>)>> {
+    let Some(rows) = base_color else {
+        return Ok(None);
+    };
+    let inputs = material.principled.ok_or_else(|| {
+        PyValueError::new_err(
+            "base_color per vertex needs a material made by Material.from_principled \
+             (it is a Principled BSDF input)",
+        )
+    })?;
+    Ok(Some((
+        inputs,
+        crate::convert::float_rows("base_color", rows)?,
+    )))
+}

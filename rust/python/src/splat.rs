@@ -280,36 +280,64 @@ impl PySplat {
         }
     }
 
-    /// Radiosity B per vertex, (N, 3) float32: the quantity `reference_radiosity` integrates.
-    /// Releases the GIL; `progress(fraction)` as for every long call (False cancels).
-    #[pyo3(signature = (material, progress = None))]
+    /// Radiosity B per vertex, (N, 3) float32. `base_color`: an (N, 3) Principled Base Color
+    /// per vertex for a material made by `Material.from_principled`: `media` media splatted
+    /// and blended around each vertex's colour (`receiver_color`), the estimate taken against
+    /// each estimate receiver's own medium. Releases the GIL; `progress(fraction)` as for every
+    /// long call (False cancels).
+    #[pyo3(signature = (material, progress = None, base_color = None, media = 2))]
     fn radiosity<'py>(
         &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+        base_color: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let e = run(py, progress, |tick| self.read().radiosity(&m, Some(tick)))?;
+        let colored = crate::material::colored_inputs(&material, base_color)?;
+        let media = crate::convert::non_negative("media", media)?;
+        let e = run(py, progress, |tick| {
+            let s = self.read();
+            match &colored {
+                Some((inputs, rows)) => {
+                    let colors = receiver_colors(&s, inputs, rows, media)?;
+                    s.radiosity_colored(&colors, Some(tick))
+                }
+                None => s.radiosity(&m, Some(tick)),
+            }
+        })?;
         let out = rgb_array(py, &e.values);
         self.keep(e);
         Ok(out)
     }
 
     /// Radiance toward the point `eye`, L = W(w_o) V B / pi, (N, 3) float32; without `eye`,
-    /// along each vertex normal (what a Cycles bake records).
-    #[pyo3(signature = (material, eye = None, progress = None))]
+    /// along each vertex normal (what a Cycles bake records). `base_color` and `media` as
+    /// `radiosity`.
+    #[pyo3(signature = (material, eye = None, progress = None, base_color = None, media = 2))]
     fn radiance<'py>(
         &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         eye: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+        base_color: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
+        let colored = crate::material::colored_inputs(&material, base_color)?;
+        let media = crate::convert::non_negative("media", media)?;
         let e = run(py, progress, |tick| {
-            self.read().radiance(&m, eye, Some(tick))
+            let s = self.read();
+            match &colored {
+                Some((inputs, rows)) => {
+                    let colors = receiver_colors(&s, inputs, rows, media)?;
+                    s.radiance_colored(&colors, eye, Some(tick))
+                }
+                None => s.radiance(&m, eye, Some(tick)),
+            }
         })?;
         let out = rgb_array(py, &e.values);
         self.keep(e);
@@ -478,4 +506,21 @@ impl PySplat {
             if s.gpu().is_some() { "gpu" } else { "cpu" }
         )
     }
+}
+
+/// Each vertex's blend of the media for the splatting's profile and vertex areas
+/// (`receiver_color`).
+fn receiver_colors(
+    s: &Splatting,
+    inputs: &translucent_core::optics::principled::PrincipledInputs,
+    rows: &[[f32; 3]],
+    media: usize,
+) -> translucent_core::error::Result<translucent_core::receiver_color::ReceiverColors> {
+    translucent_core::receiver_color::ReceiverColors::new(
+        s.profile(),
+        inputs,
+        rows,
+        s.scene().mesh.vertex_areas(),
+        media,
+    )
 }

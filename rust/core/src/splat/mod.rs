@@ -20,6 +20,7 @@
 //! centre (`receivers`).
 
 pub mod camera;
+mod colored;
 pub mod estimate;
 pub mod gpu;
 pub mod light_view;
@@ -852,19 +853,24 @@ impl Splatting {
     /// The walks' term and own light for `material` per vertex (what they add to B), walked or
     /// carried first where the light or shape changed; `halfspace`: the splatted B at the
     /// vertices for `material`, when the caller has it. None without the walks.
+    /// `beside`: other media with their splatted B (a textured Base Color's, `colored`): the
+    /// walks are walked again where they do not cover one, and walk those beside the
+    /// representative (`Terms::update`).
     fn layer(
         &self,
         material: &Material,
         halfspace: Option<&[[f32; 3]]>,
+        beside: &[(Resolved, Vec<[f32; 3]>)],
         progress: Option<&ProgressFn>,
     ) -> Result<Option<(Vec<[f32; 3]>, TermReport)>> {
         let Some(terms) = &self.terms else {
             return Ok(None);
         };
         let mut t = terms.lock().unwrap_or_else(|e| e.into_inner());
-        if !t.current {
+        let uncovered = t.rep.is_some() && !beside.iter().all(|(m, _)| t.covers(m));
+        if !t.current || uncovered {
             let rep = t.rep.unwrap_or(*material);
-            let fresh = t.rep.is_none();
+            let fresh = t.rep.is_none() || uncovered;
             let rep_resolved = Resolved::new(self.profile, &rep)?;
             let half = match halfspace.filter(|_| rep == *material) {
                 Some(h) => h.to_vec(),
@@ -890,7 +896,11 @@ impl Splatting {
                 vertices: &vertices,
                 halfspace: &half,
             };
-            t.update(&lit, &rep_resolved, &[], fresh, progress)?;
+            let others: Vec<(Resolved, Vec<[f32; 3]>)> = (beside.iter())
+                .filter(|(m, _)| m.material != rep)
+                .cloned()
+                .collect();
+            t.update(&lit, &rep_resolved, &others, fresh, progress)?;
         }
         let resolved = Resolved::new(self.profile, material)?;
         let mut added = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];
@@ -923,7 +933,7 @@ impl Splatting {
             self.reuse.as_ref(),
             progress,
         )?;
-        if let Some((added, report)) = self.layer(material, Some(&e.values), None)? {
+        if let Some((added, report)) = self.layer(material, Some(&e.values), &[], None)? {
             for (b, a) in e.values.iter_mut().zip(&added) {
                 *b = std::array::from_fn(|c| (b[c] + a[c]).max(0.0));
             }
@@ -943,7 +953,7 @@ impl Splatting {
     ) -> Result<Render> {
         let start = Instant::now();
         let resolved = Resolved::new(self.profile, material)?;
-        let layer = self.layer(material, None, None)?;
+        let layer = self.layer(material, None, &[], None)?;
         let mut r = render_with_layer(
             &self.scene,
             &resolved,

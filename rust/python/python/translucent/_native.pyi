@@ -479,12 +479,28 @@ class Splat:
     @property
     def backend(self) -> Literal["gpu", "cpu"]:
         """"gpu" where renders draw on a GPU, else "cpu"."""
-    def radiosity(self, material: Material, progress: Progress | None = None) -> npt.NDArray[np.float32]:
-        """(N, 3) radiosity B per vertex; Cancelled when `progress` returns False."""
-    def radiance(
-        self, material: Material, eye: Vec3 | None = None, progress: Progress | None = None
+    def radiosity(
+        self,
+        material: Material,
+        progress: Progress | None = None,
+        base_color: npt.ArrayLike | None = None,
+        media: int = 2,
     ) -> npt.NDArray[np.float32]:
-        """(N, 3) radiance toward `eye` (scene units) or along each normal (None)."""
+        """(N, 3) radiosity B per vertex; Cancelled when `progress` returns False. `base_color`:
+        (N, 3) Principled Base Color per vertex for a `Material.from_principled` material, as
+        `Hierarchy.radiosity`: `media` media (1-16) splatted and blended around each vertex's
+        colour; the estimate is read against each estimate receiver's own medium. Not in
+        `render` yet."""
+    def radiance(
+        self,
+        material: Material,
+        eye: Vec3 | None = None,
+        progress: Progress | None = None,
+        base_color: npt.ArrayLike | None = None,
+        media: int = 2,
+    ) -> npt.NDArray[np.float32]:
+        """(N, 3) radiance toward `eye` (scene units) or along each normal (None); `base_color`
+        and `media` as `radiosity`."""
     def render(
         self,
         material: Material,

@@ -1,7 +1,8 @@
-"""`Hierarchy.radiosity(base_color=...)` (issue 30, point 2, in the hierarchy): each vertex
-scatters as its own Base Color's medium, as Cycles' walk takes the medium where it starts. The
-ground truth is `reference_radiosity` with each receiver's own medium (a brute-force integral of
-that medium's profile over the lit surface), independent of the media the hierarchy blends."""
+"""`Hierarchy.radiosity(base_color=...)` and `Splat.radiosity(base_color=...)` (issue 30,
+point 2, in the methods that sum one medium at a time): each vertex scatters as its own Base
+Color's medium, as Cycles' walk takes the medium where it starts. The ground truth is
+`reference_radiosity` with each receiver's own medium (a brute-force integral of that medium's
+profile over the lit surface), independent of the media the methods blend."""
 
 import numpy as np
 import pytest
@@ -137,3 +138,40 @@ def test_with_the_walks_every_medium_is_walked_and_carried_to_a_new_light(lit):
     again = fresh.radiance(mat(0.5), base_color=checker)
     lit_ = again.sum(1) > 1e-3 * again.sum(1).max()
     assert _rms(relit[lit_], again[lit_]).max() < 0.03, _rms(relit[lit_], again[lit_])
+
+
+def test_the_splatting_blends_the_media_at_the_vertices(lit):
+    # The same wedges splatted (its own error on this sphere is 1-2 %): each vertex its own
+    # medium; the estimate read against each receiver's own medium, so it is there and small.
+    p, s, stripes, receivers = lit
+    ref = _reference(s, stripes, receivers, "cycles")
+    sp = translucent.Splat(s, profile="cycles")
+    got = sp.radiosity(_mat(0.5), base_color=stripes, media=2)
+    err = _rms(got[receivers], ref)
+    assert err.max() < 0.03, err
+    estimate = sp.last_eval["error_estimate"]
+    assert estimate is not None and 0 < max(estimate) < 0.05, estimate
+    uniform = _rms(sp.radiosity(_mat(0.5))[receivers], ref)
+    assert uniform.min() > 0.2, uniform
+    n = len(p)
+    with pytest.raises(ValueError, match="base_color of vertex 2"):
+        bad = stripes.copy()
+        bad[2, 1] = np.inf
+        sp.radiance(_mat(0.5), base_color=bad)
+    with pytest.raises(ValueError, match="media = 17"):
+        sp.radiosity(_mat(0.5), base_color=np.full((n, 3), 0.5), media=17)
+    quiet = translucent.Splat(s, profile="dipole", estimate_receivers=0)
+    quiet.radiosity(_mat(0.5), base_color=stripes)
+    assert quiet.last_eval["error_estimate"] is None
+    assert any(x["what"] == "error estimate" for x in quiet.last_eval["skipped"])
+
+
+def test_the_splatting_walks_every_medium(lit):
+    p, s, _, _ = lit
+    wedge = (np.floor(np.arctan2(p[:, 1], p[:, 0]) / (np.pi / 4)) % 2)[:, None] == 0
+    checker = np.where(wedge, [0.85, 0.45, 0.3], [0.25, 0.4, 0.7]).astype(np.float32)
+    m = translucent.Material.from_principled(0.5, (1.0, 0.2, 0.1), 0.005)
+    sp = translucent.Splat(s, profile="cycles", walks=True, estimate_receivers=4)
+    sp.radiance(m, base_color=checker)
+    terms = sp.report["terms"]
+    assert terms["walks"]["media"] >= 2 and terms["walks_indirect"]["media"] == terms["walks"]["media"]
