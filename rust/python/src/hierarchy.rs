@@ -12,8 +12,6 @@ use std::sync::{Mutex, MutexGuard};
 use translucent_core::hierarchy::{
     Evaluation as HierarchyEvaluation, Hierarchy, HierarchySettings, Mode, Receivers,
 };
-use translucent_core::optics::principled::PrincipledInputs;
-use translucent_core::receiver_color::ReceiverColors;
 
 /// A face-cluster hierarchy over a scene (a copy: `update` changes it, not the Scene).
 /// Shared between threads: every evaluation changes its links, so one runs at a time (the
@@ -124,13 +122,12 @@ impl PyHierarchy {
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let colored = crate::material::colored_inputs(&material, base_color)?;
-        let media = non_negative("media", media)?;
+        let colored = crate::material::colored(&material, base_color, media)?;
         let b = run(py, None, |tick| {
             let mut h = self.lock();
             match &colored {
-                Some((inputs, rows)) => {
-                    let colors = receiver_colors(&h, inputs, rows, media)?;
+                Some(c) => {
+                    let colors = c.build(h.settings().profile, h.scene().mesh.vertex_areas())?;
                     h.radiosity_colored(&colors, Some(tick))
                 }
                 None => h.radiosity_with_progress(&m, Some(tick)),
@@ -154,13 +151,12 @@ impl PyHierarchy {
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let colored = crate::material::colored_inputs(&material, base_color)?;
-        let media = non_negative("media", media)?;
+        let colored = crate::material::colored(&material, base_color, media)?;
         let b = run(py, None, |tick| {
             let mut h = self.lock();
             match &colored {
-                Some((inputs, rows)) => {
-                    let colors = receiver_colors(&h, inputs, rows, media)?;
+                Some(c) => {
+                    let colors = c.build(h.settings().profile, h.scene().mesh.vertex_areas())?;
                     h.radiance_colored(&colors, eye, Some(tick))
                 }
                 None => h.radiance_with_progress(&m, eye, Some(tick)),
@@ -312,20 +308,4 @@ impl PyHierarchy {
             1e3 * r.seconds
         ))
     }
-}
-
-/// Each vertex's scale for the hierarchy's profile and vertex areas (`receiver_color`).
-fn receiver_colors(
-    h: &Hierarchy,
-    inputs: &PrincipledInputs,
-    rows: &[[f32; 3]],
-    media: usize,
-) -> translucent_core::error::Result<ReceiverColors> {
-    ReceiverColors::new(
-        h.settings().profile,
-        inputs,
-        rows,
-        h.scene().mesh.vertex_areas(),
-        media,
-    )
 }

@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 use translucent_core::optics::principled::{self, PrincipledInputs};
 use translucent_core::optics::{Layers, Material, Stack, TopLayer};
 use translucent_core::profiles::{table, ProfileKind, Resolved};
+use translucent_core::receiver_color::ReceiverColors;
 
 /// A homogeneous translucent material: the medium (coefficients in 1/scene unit) and the
 /// Principled BSDF layers Cycles puts around its subsurface lobe.
@@ -371,12 +372,33 @@ pub fn layer_weight(roughness: f64, cos_view: f64, ior: f64) -> PyResult<f64> {
     principled::checked_layer_weight(roughness, cos_view, ior).map_err(to_py)
 }
 
-/// The Principled inputs and the Base Color rows of `base_color=`, or None without it. A
-/// material not made by `Material.from_principled` has no Base Color to vary.
-pub fn colored_inputs(
+/// A Base Color per vertex asked of a method that blends media (`base_color=`, `media=`).
+pub struct Colored {
+    inputs: PrincipledInputs,
+    rows: Vec<[f32; 3]>,
+    media: usize,
+}
+
+impl Colored {
+    /// The media and each vertex's blend of them for `kind` over vertices of `areas`
+    /// (`receiver_color`).
+    pub fn build(
+        &self,
+        kind: ProfileKind,
+        areas: &[f32],
+    ) -> translucent_core::error::Result<ReceiverColors> {
+        ReceiverColors::new(kind, &self.inputs, &self.rows, areas, self.media)
+    }
+}
+
+/// The Principled inputs, the Base Color rows of `base_color=` and `media`, or None without
+/// `base_color`. A material not made by `Material.from_principled` has no Base Color to vary.
+pub fn colored(
     material: &PyMaterial,
     base_color: Option<&Bound<'_, PyAny>>,
-) -> PyResult<Option<(PrincipledInputs, Vec<[f32; 3]>)>> {
+    media: i64,
+) -> PyResult<Option<Colored>> {
+    let media = crate::convert::non_negative("media", media)?;
     let Some(rows) = base_color else {
         return Ok(None);
     };
@@ -386,8 +408,10 @@ pub fn colored_inputs(
              (it is a Principled BSDF input)",
         )
     })?;
-    Ok(Some((
+    let rows = crate::convert::float_rows("base_color", rows)?;
+    Ok(Some(Colored {
         inputs,
-        crate::convert::float_rows("base_color", rows)?,
-    )))
+        rows,
+        media,
+    }))
 }

@@ -295,13 +295,12 @@ impl PySplat {
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let colored = crate::material::colored_inputs(&material, base_color)?;
-        let media = crate::convert::non_negative("media", media)?;
+        let colored = crate::material::colored(&material, base_color, media)?;
         let e = run(py, progress, |tick| {
             let s = self.read();
             match &colored {
-                Some((inputs, rows)) => {
-                    let colors = receiver_colors(&s, inputs, rows, media)?;
+                Some(c) => {
+                    let colors = c.build(s.profile(), s.scene().mesh.vertex_areas())?;
                     s.radiosity_colored(&colors, Some(tick))
                 }
                 None => s.radiosity(&m, Some(tick)),
@@ -327,13 +326,12 @@ impl PySplat {
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let colored = crate::material::colored_inputs(&material, base_color)?;
-        let media = crate::convert::non_negative("media", media)?;
+        let colored = crate::material::colored(&material, base_color, media)?;
         let e = run(py, progress, |tick| {
             let s = self.read();
             match &colored {
-                Some((inputs, rows)) => {
-                    let colors = receiver_colors(&s, inputs, rows, media)?;
+                Some(c) => {
+                    let colors = c.build(s.profile(), s.scene().mesh.vertex_areas())?;
                     s.radiance_colored(&colors, eye, Some(tick))
                 }
                 None => s.radiance(&m, eye, Some(tick)),
@@ -506,21 +504,4 @@ impl PySplat {
             if s.gpu().is_some() { "gpu" } else { "cpu" }
         )
     }
-}
-
-/// Each vertex's blend of the media for the splatting's profile and vertex areas
-/// (`receiver_color`).
-fn receiver_colors(
-    s: &Splatting,
-    inputs: &translucent_core::optics::principled::PrincipledInputs,
-    rows: &[[f32; 3]],
-    media: usize,
-) -> translucent_core::error::Result<translucent_core::receiver_color::ReceiverColors> {
-    translucent_core::receiver_color::ReceiverColors::new(
-        s.profile(),
-        inputs,
-        rows,
-        s.scene().mesh.vertex_areas(),
-        media,
-    )
 }
