@@ -105,8 +105,11 @@ def materials_in(bl_scene: bpy.types.Scene) -> list[bpy.types.Material]:
 
 
 def state_key(bl_scene: bpy.types.Scene, view: View, materials) -> tuple:
-    """What the image depends on, to compare: the view, and per material its settings and the
-    geometry of its objects and of the rest of the scene, the lights and the world."""
+    """What the image depends on, to compare: the view, and per material its settings, what
+    drives a linked Base Color and the geometry of its objects and of the rest of the scene, the
+    lights and the world."""
+    from . import textures
+
     depsgraph = bpy.context.evaluated_depsgraph_get()
     parts = [view.key(), tuple(sorted(export.lighting_keys(bl_scene).items())),
              bl_scene.translucent_splat.eps, bl_scene.translucent_splat.max_grid, bl_scene.translucent_splat.backend]
@@ -114,7 +117,8 @@ def state_key(bl_scene: bpy.types.Scene, view: View, materials) -> tuple:
     for mat in materials:
         objects = objects_with(mat, bl_scene)
         everything.update(o.name for o in objects)
-        parts.append((mat.name, params(mat.translucent), mat.translucent.profile,
+        texture = textures.tree_key(mat) if textures.linked(mat, "Base Color") else ""  # followed
+        parts.append((mat.name, params(mat.translucent), mat.translucent.profile, texture,
                       tuple(export.object_geometry_key(o, depsgraph) for o in objects)))
     parts.append(tuple(sorted(export.occluder_keys(depsgraph, everything).items())))
     return tuple(parts)
@@ -189,7 +193,7 @@ class RenderJob(jobs.Job):
             radiance = np.zeros((h, w, 3), np.float32)
             mask = np.zeros((h, w), np.int32)
             objects, reports = [], {}
-            for k, (name, scene, names, profile, material) in enumerate(self.parts):
+            for k, (name, scene, names, profile, material, colours) in enumerate(self.parts):
                 splat = _splat_for(name, scene, names, profile, self.settings)
                 span = (k / len(self.parts), (k + 1) / len(self.parts))
 
@@ -197,8 +201,9 @@ class RenderJob(jobs.Job):
                     self.progress = span[0] + (span[1] - span[0]) * f
                     return not self.cancel
 
+                textured = {} if colours is None else {"base_color": colours}  # media blended per pixel
                 img, m = splat.render(material, eye=self.view.eye, target=self.view.target, up=self.view.up,
-                                      fov=self.view.fov, size=self.view.size, progress=tick)
+                                      fov=self.view.fov, size=self.view.size, progress=tick, **textured)
                 seen = m > 0
                 radiance[seen] = img[seen]
                 mask[seen] = m[seen] + len(objects)
@@ -209,6 +214,36 @@ class RenderJob(jobs.Job):
             self.result = Rendered(radiance, mask, objects, self.view, self.key, time.perf_counter() - t0, reports)
         except BaseException as e:  # reported by whoever polls the job
             self.error = e
+
+
+# Per material: the Base Color read per exported vertex for the image, and what it was read for
+# (the node tree upstream of it and the exported positions), so a moved light or a new view
+# renders again without a bake.
+_COLOURS: dict[str, tuple] = {}
+
+
+def _base_colours(mat: bpy.types.Material, info, scene) -> np.ndarray | None:
+    """The Base Color per exported vertex where a link drives it (`textures.for_export`, baked by
+    Cycles; read again only when the node tree or the geometry changed), else None; None too
+    where it cannot be read (the note then names it as not followed)."""
+    import hashlib
+
+    from . import textures
+
+    if not textures.linked(mat, "Base Color"):
+        _COLOURS.pop(mat.name, None)
+        return None
+    positions = np.ascontiguousarray(np.asarray(scene.positions, np.float32))
+    key = (textures.tree_key(mat), hashlib.blake2b(positions.tobytes(), digest_size=16).hexdigest())
+    kept = _COLOURS.get(mat.name)
+    if kept is not None and kept[0] == key:
+        return kept[1]
+    try:
+        colours, _ = textures.for_export(mat, info)
+    except ValueError:
+        return None
+    _COLOURS[mat.name] = (key, colours)
+    return colours
 
 
 def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | None = None) -> RenderJob:
@@ -225,12 +260,16 @@ def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | 
             continue
         scene, info = export.export_scene(objects, bl_scene=bl_scene, material=mat)
         s = mat.translucent
-        parts.append((mat.name, scene, [r.name for r in info.objects], s.profile_name(), s.material()))
-        if s.source == "PRINCIPLED" and principled.connected_inputs(mat):
+        colours = _base_colours(mat, info, scene) if s.source == "PRINCIPLED" else None
+        parts.append((mat.name, scene, [r.name for r in info.objects], s.profile_name(), s.material(), colours))
+        connected = principled.connected_inputs(mat) if s.source == "PRINCIPLED" else []
+        if colours is not None:
+            connected = [c for c in connected if not c.startswith("Base Color (")]
+        if connected:
             # Said, not shown silently: the image takes the sockets' own values everywhere.
-            notes[mat.name] = {"what": "linked inputs: " + ", ".join(principled.connected_inputs(mat)),
+            notes[mat.name] = {"what": "linked inputs: " + ", ".join(connected),
                                "why": "not followed by the splatting image yet: the socket's own value is "
-                                      "used everywhere (the per-vertex preview follows a linked Base Color)"}
+                                      "used everywhere (a linked Base Color is followed)"}
     if not parts:
         raise ValueError("no mesh object uses a previewed material")
     settings = bl_scene.translucent_splat

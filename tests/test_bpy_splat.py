@@ -179,25 +179,57 @@ def test_a_viewports_view_is_read_from_its_matrices(addon):
     assert splat_view.region_view(SimpleNamespace(width=1000, height=500), rv3d, 320) is None
 
 
-def test_a_texture_the_image_does_not_follow_is_said_not_hidden(addon):
+def test_the_image_follows_a_textured_base_colour_and_names_what_it_does_not(addon):
     import bpy
+    import numpy as np
 
     from addon import splat_view
 
-    # A Principled material whose Base Color comes from a checker: the image takes the socket's
-    # own value everywhere, and the report and the panel's line say so.
+    # A Principled material whose Base Color comes from a checker: the image reads it per vertex
+    # (baked by Cycles, as the per-vertex preview does) and blends media per pixel, so the
+    # checker shows; a texture on the Roughness is not followed, and the report and the
+    # panel's line say so.
     mat = bpy.data.materials.new("Checked")
     mat.translucent.enabled, mat.translucent.source = True, "PRINCIPLED"
-    checker = mat.node_tree.nodes.new("ShaderNodeTexChecker")
-    mat.node_tree.links.new(checker.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=16, ring_count=8)
+    nodes = mat.node_tree.nodes
+    checker = nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 3.0
+    checker.inputs["Color1"].default_value = (0.9, 0.3, 0.2, 1.0)
+    checker.inputs["Color2"].default_value = (0.1, 0.2, 0.6, 1.0)
+    p = nodes["Principled BSDF"]
+    p.inputs["Subsurface Weight"].default_value = 1.0
+    mat.node_tree.links.new(checker.outputs["Color"], p.inputs["Base Color"])
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=24, ring_count=12)
     bpy.context.active_object.data.materials.append(mat)
     key_light(bpy)
     add_camera(bpy, (0.0, -0.3, 0.05))
-    assert bpy.ops.translucent.render_splatting(width=24, height=18) == {"FINISHED"}
+    assert bpy.ops.translucent.render_splatting(width=32, height=24) == {"FINISHED"}
+    report = splat_view.STATE["last"].reports[mat.name]
+    assert not [x for x in report["skipped"] if x["what"].startswith("linked inputs")], report["skipped"]
+    assert "textures not followed" not in splat_view.STATE["message"]
+    textured = splat_view.STATE["last"].radiance.copy()
+    seen = splat_view.STATE["last"].mask > 0
+    # The link removed and each square's colour typed in instead: every pixel of the textured
+    # image lies between those two uniform images (1 % of the brightest beside), and many
+    # pixels sit on one or on the other: the squares show.
+    mat.node_tree.links.remove(p.inputs["Base Color"].links[0])
+    uniform = []
+    for colour in ((0.9, 0.3, 0.2, 1.0), (0.1, 0.2, 0.6, 1.0)):
+        p.inputs["Base Color"].default_value = colour
+        assert bpy.ops.translucent.render_splatting(width=32, height=24) == {"FINISHED"}
+        uniform.append(splat_view.STATE["last"].radiance[seen].copy())
+    lo, hi = np.minimum(*uniform), np.maximum(*uniform)
+    x, tol = textured[seen], 0.01 * textured[seen].max()
+    assert np.all((x >= lo - tol) & (x <= hi + tol))
+    near = [np.all(np.abs(x - u) <= 0.05 * np.maximum(u, tol), axis=1).mean() for u in uniform]
+    assert min(near) > 0.15, near
+    # A texture on the Roughness: named, not hidden.
+    noise = nodes.new("ShaderNodeTexNoise")
+    mat.node_tree.links.new(noise.outputs["Fac"], p.inputs["Roughness"])
+    assert bpy.ops.translucent.render_splatting(width=32, height=24) == {"FINISHED"}
     report = splat_view.STATE["last"].reports[mat.name]
     said = [x for x in report["skipped"] if x["what"].startswith("linked inputs")]
-    assert len(said) == 1 and "Base Color (Checker Texture)" in said[0]["what"], report["skipped"]
+    assert len(said) == 1 and "Roughness (Noise Texture)" in said[0]["what"], report["skipped"]
     assert "textures not followed in Checked" in splat_view.STATE["message"]
 
 

@@ -175,3 +175,32 @@ def test_the_splatting_walks_every_medium(lit):
     sp.radiance(m, base_color=checker)
     terms = sp.report["terms"]
     assert terms["walks"]["media"] >= 2 and terms["walks_indirect"]["media"] == terms["walks"]["media"]
+
+
+def test_the_splatting_image_blends_the_media_per_pixel():
+    # Two balls, one Base Color each (each ball its own medium, so nothing crosses between
+    # them): two media hold exactly the two colours channel by channel, and every pixel of a
+    # ball is that ball's colour's own uniform render, rendered apart here. (A channel may come
+    # from the other medium's render, whose splats are sized for all its channels: 1e-4 apart.)
+    p1, t1 = sphere(12, 0.02)
+    p = np.concatenate([p1 - [0.03, 0, 0], p1 + [0.03, 0, 0]]).astype(np.float32)
+    t = np.concatenate([t1, t1 + len(p1)])
+    objects = np.repeat([0, 1], len(p1))
+    s = translucent.Scene(p, t, objects=objects)
+    s.add_sun((0.3, 0.5, -0.8), irradiance=2.0)
+    a, b = (0.85, 0.45, 0.3), (0.25, 0.4, 0.7)
+    colours = np.where(objects[:, None] == 0, a, b).astype(np.float32)
+    sp = translucent.Splat(s, profile="dipole", estimate_receivers=4)
+    view = dict(eye=(0.0, -0.25, 0.05), target=(0.0, 0.0, 0.0), size=(48, 24))
+    image, mask = sp.render(_mat(0.5), base_color=colours, **view)
+    estimate = sp.last_eval["error_estimate"]
+    assert estimate is not None and max(estimate) < 0.1, estimate
+    for k, colour in enumerate((a, b)):
+        own, own_mask = sp.render(_mat(colour), **view)
+        np.testing.assert_array_equal(mask, own_mask)
+        seen = mask == k + 1
+        assert seen.sum() > 50
+        np.testing.assert_allclose(image[seen], own[seen], rtol=1e-3, atol=1e-3 * own[seen].max())
+    # The material's own Base Color everywhere instead: far from it.
+    plain, _ = sp.render(_mat(0.5), **view)
+    assert np.abs(plain[mask > 0] - image[mask > 0]).max() > 0.2 * image[mask > 0].max()

@@ -94,6 +94,13 @@ impl Terms {
         }
     }
 
+    /// The media walked beside the representative (none before any walk).
+    pub fn beside_media(&self) -> Vec<Resolved> {
+        self.walks
+            .as_ref()
+            .map_or_else(Vec::new, |w| w.beside_media())
+    }
+
     /// Whether the walks (the direct term's and the own light's) cover `medium`'s diffusion
     /// lengths (`WalkTerm::covers`); true before any walk.
     pub fn covers(&self, medium: &Resolved) -> bool {

@@ -345,9 +345,11 @@ impl PySplat {
     /// The camera's image (Shah 2009's passes 2-4): a pinhole at `eye` looking at `target`,
     /// `up` the image's up, `fov` the angle [rad] across the larger side of `size` = (width,
     /// height). Returns ((H, W, 3) float32 radiance, row 0 the top; (H, W) int32 mask: the
-    /// object seen plus 1, 0 where the pixel sees no previewed object). Releases the GIL;
-    /// `progress(fraction)` as for every long call (False cancels).
-    #[pyo3(signature = (material, eye, target, up = None, fov = DEFAULT_FOV, size = None, progress = None))]
+    /// object seen plus 1, 0 where the pixel sees no previewed object). `base_color` and
+    /// `media` as `radiosity` (each pixel blends the media with its triangle's corners'
+    /// weights). Releases the GIL; `progress(fraction)` as for every long call (False cancels).
+    #[pyo3(signature = (material, eye, target, up = None, fov = DEFAULT_FOV, size = None, progress = None,
+        base_color = None, media = 2))]
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn render<'py>(
         &self,
@@ -359,8 +361,11 @@ impl PySplat {
         fov: f64,
         size: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+        base_color: Option<&Bound<'_, PyAny>>,
+        #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<i32>>)> {
         let m = material.inner;
+        let colored = crate::material::colored(&material, base_color, media)?;
         let eye = vec3("eye", eye)?;
         let target = vec3("target", target)?;
         let up = match up.filter(|u| !u.is_none()) {
@@ -374,7 +379,14 @@ impl PySplat {
         let camera =
             Camera::new(eye, target, up, fov, (width, height)).map_err(crate::convert::to_py)?;
         let r = run(py, progress, |tick| {
-            self.read().render(&m, &camera, Some(tick))
+            let s = self.read();
+            match &colored {
+                Some(c) => {
+                    let colors = c.build(s.profile(), s.scene().mesh.vertex_areas())?;
+                    s.render_colored(&colors, &camera, Some(tick))
+                }
+                None => s.render(&m, &camera, Some(tick)),
+            }
         })?;
         let (h, w) = (r.height as usize, r.width as usize);
         let flat: Vec<f32> = r.evaluation.values.iter().flatten().copied().collect();

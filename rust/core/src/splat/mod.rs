@@ -63,6 +63,9 @@ pub use sizes::{DEFAULT_EPS, DEFAULT_MAX_GRID, MAX_GRID};
 /// One material evaluated by the splatting (`evaluation::Evaluation`), with its report.
 pub type Evaluation = crate::evaluation::Evaluation<SplatReport>;
 
+/// What the walks' term and own light add to B per vertex, and their report (`Splatting::layer`).
+type Layer = (Vec<[f32; 3]>, TermReport);
+
 /// The splatting's two knobs (Shah 2009 "Algorithm Implementation Steps").
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplatSettings {
@@ -281,6 +284,9 @@ struct Sources {
 pub struct Passes<'a> {
     pub gpu: Option<&'a GpuSplatter>,
     pub reuse: Option<&'a Mutex<Reuse>>,
+    /// B is gathered at the estimate's vertices (`Render::at_vertices`) but not read against
+    /// the ground truth: the caller estimates (`colored`: against each vertex's own medium).
+    pub no_truth: bool,
 }
 
 /// Pass 1: each light's view of `scene.mesh` (`progress` from `from` to `to`, per row of rays),
@@ -595,6 +601,12 @@ pub struct Render {
     pub mask: Vec<u32>,
     pub width: u32,
     pub height: u32,
+    /// The pixels that see the previewed mesh: where, on which triangle (a per-vertex input is
+    /// interpolated there).
+    pub hits: Vec<PixelHit>,
+    /// B (half-space, before any layer) at the estimate's vertices
+    /// (`estimate::receivers`), in their order.
+    pub at_vertices: Vec<[f64; 3]>,
 }
 
 /// `Render` of `scene` seen by `camera`. `progress`: the light views to 30 %, the camera view
@@ -715,7 +727,11 @@ pub fn render_with_layer(
             std::array::from_fn(|c| (bv[c] * k[c] / std::f64::consts::PI) as f32);
         mask[h.pixel as usize] = h.object + 1;
     }
-    let error_estimate = estimated(scene, resolved, &mut src, &at, &at_vertices, progress)?;
+    let error_estimate = if passes.no_truth {
+        None
+    } else {
+        estimated(scene, resolved, &mut src, &at, &at_vertices, progress)?
+    };
     tick(progress, 1.0)?;
     Ok(Render {
         evaluation: Evaluation {
@@ -729,6 +745,8 @@ pub fn render_with_layer(
         mask,
         width: camera.width(),
         height: camera.height(),
+        hits,
+        at_vertices,
     })
 }
 
@@ -862,19 +880,35 @@ impl Splatting {
         halfspace: Option<&[[f32; 3]]>,
         beside: &[(Resolved, Vec<[f32; 3]>)],
         progress: Option<&ProgressFn>,
-    ) -> Result<Option<(Vec<[f32; 3]>, TermReport)>> {
+    ) -> Result<Option<Layer>> {
         let Some(terms) = &self.terms else {
             return Ok(None);
         };
         let mut t = terms.lock().unwrap_or_else(|e| e.into_inner());
-        let uncovered = t.rep.is_some() && !beside.iter().all(|(m, _)| t.covers(m));
+        let resolved = Resolved::new(self.profile, material)?;
+        // A medium the walks do not reach is walked anew rather than read far outside the
+        // walked lengths: this material as the representative (the whole budget, as at the
+        // first evaluation), one given beside it beside it.
+        let own_uncovered = t.rep.is_some() && !t.covers(&resolved);
+        let uncovered =
+            own_uncovered || (t.rep.is_some() && !beside.iter().all(|(m, _)| t.covers(m)));
         if !t.current || uncovered {
-            let rep = t.rep.unwrap_or(*material);
+            let rep = match t.rep {
+                Some(r) if !own_uncovered => r,
+                _ => *material,
+            };
             let fresh = t.rep.is_none() || uncovered;
             let rep_resolved = Resolved::new(self.profile, &rep)?;
+            let quiet = SplatSettings {
+                estimate_receivers: 0,
+                ..self.settings
+            };
+            let splatted = |m: &Resolved| -> Result<Vec<[f32; 3]>> {
+                Ok(splat_radiosity(&self.scene, m, &quiet, None)?.values)
+            };
             let half = match halfspace.filter(|_| rep == *material) {
                 Some(h) => h.to_vec(),
-                None => splat_radiosity(&self.scene, &rep_resolved, &self.settings, None)?.values,
+                None => splatted(&rep_resolved)?,
             };
             let mesh = &self.scene.mesh;
             let tracer = self.scene.tracer();
@@ -896,13 +930,22 @@ impl Splatting {
                 vertices: &vertices,
                 halfspace: &half,
             };
-            let others: Vec<(Resolved, Vec<[f32; 3]>)> = (beside.iter())
+            // Beside the representative: the media given and, carried to a new light or pose,
+            // the media walked beside it before (each with its splatted B, so none is dropped).
+            let mut others: Vec<(Resolved, Vec<[f32; 3]>)> = (beside.iter())
                 .filter(|(m, _)| m.material != rep)
                 .cloned()
                 .collect();
+            if !fresh {
+                for m in t.beside_media() {
+                    if m.material != rep && !others.iter().any(|(x, _)| x.material == m.material) {
+                        let b = splatted(&m)?;
+                        others.push((m, b));
+                    }
+                }
+            }
             t.update(&lit, &rep_resolved, &others, fresh, progress)?;
         }
-        let resolved = Resolved::new(self.profile, material)?;
         let mut added = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];
         let mut error = [0.0; 3];
         // A layer of its own (added to B at each vertex or pixel): signed, floored with B.
@@ -963,6 +1006,7 @@ impl Splatting {
             Passes {
                 gpu: self.gpu.as_ref(),
                 reuse: self.reuse.as_ref(),
+                no_truth: false,
             },
             progress,
         )?;

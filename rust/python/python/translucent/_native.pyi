@@ -489,8 +489,8 @@ class Splat:
         """(N, 3) radiosity B per vertex; Cancelled when `progress` returns False. `base_color`:
         (N, 3) Principled Base Color per vertex for a `Material.from_principled` material, as
         `Hierarchy.radiosity`: `media` media (1-16) splatted and blended around each vertex's
-        colour; the estimate is read against each estimate receiver's own medium. Not in
-        `render` yet."""
+        colour; the estimate is read against each estimate receiver's own medium. `render`
+        takes them too."""
     def radiance(
         self,
         material: Material,
@@ -510,13 +510,17 @@ class Splat:
         fov: float = 0.6911503837897546,
         size: tuple[int, int] | None = None,
         progress: Progress | None = None,
+        base_color: npt.ArrayLike | None = None,
+        media: int = 2,
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]:
         """The camera's image: a pinhole at `eye` looking at `target` (scene units), `up` the
         image's up (default +Z), `fov` [rad] across the larger side of `size` = (width, height)
         (default (800, 600); fov's default is Blender's 50 mm lens on its 36 mm sensor). Returns
         the (H, W, 3) radiance toward the eye, row 0 the top (0 off the previewed objects and
         where the rest of the scene stands in front), and an (H, W) mask: the object seen plus
-        1, 0 for none. ValueError naming eye, target, up, fov or size; Cancelled when
+        1, 0 for none. `base_color` and `media` as `radiosity`: each pixel
+        blends the media's radiance with its triangle's corners' weights interpolated at the
+        hit. ValueError naming eye, target, up, fov, size, base_color or media; Cancelled when
         `progress` returns False."""
     def update(
         self,
