@@ -282,7 +282,8 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     for a transport built by `method`: read by Cycles (`for_export`) where a link drives them
     and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits), and
     a linked Radius, Scale and Roughness read to their mean (`read_means`); the hierarchy and
-    the splatting read the Base Color and the means (not the weight), and the line says so. Where the faces of other materials were exported to scatter
+    the splatting read the Base Color and the means (not the weight), and the line says so.
+    Where the faces of other materials were exported to scatter
     (`export.export_scene(others_scatter=True)`), their vertices take their own albedo and the
     previewed ones the Base Color. Nothing otherwise."""
     if method == "prt":
@@ -294,8 +295,9 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
         return Reading()
     sockets = [s for s in FOLLOWED + AVERAGED if linked(mat, s)]
     names = " and ".join(sockets)
-    if method in ("hierarchy", "splat"):
-        return _read_for_blended(mat, info, names, method)
+    # The hierarchy and the splatting blend media around each vertex's Base Color: no
+    # representatives, no weight per vertex.
+    blended = method in ("hierarchy", "splat")
     out = Reading(key=reading_key(mat, info, method))
     lines = []
     try:
@@ -309,10 +311,14 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
             out.colours, previewed = beside_others(base, others)
             lines.append(f"{int((~previewed).sum()):,} vertices of other materials scatter as their own colour, "
                          "not previewed (Cycles' walk may leave through their faces)")
-        if out.colours is not None:
+        if out.colours is not None and not blended:
             out.materials = representatives(principled_inputs(mat), out.colours, previewed)
         if linked(mat, "Subsurface Weight"):
-            if mat.translucent.profile_name() != "cycles":
+            if blended:
+                who = "the hierarchy" if method == "hierarchy" else "the splatting"
+                lines.append(f"Subsurface Weight: not followed by {who} yet, the socket's value shown "
+                             "(PRT follows it)")
+            elif mat.translucent.profile_name() != "cycles":
                 lines.append("Subsurface Weight: per vertex with Cycles' profile only, the socket's value shown")
             else:
                 grey, line = for_export(mat, info, socket="Subsurface Weight")
@@ -324,27 +330,6 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
         # A uniform material beside other materials' faces: the previewed vertices cost a
         # uniform edit, the others' albedo passed apart (`Prt.radiance(others=...)`).
         out.colours, out.others = None, others
-    out.message = "; ".join(lines)
-    return out
-
-
-def _read_for_blended(mat: bpy.types.Material, info, names: str, method: str) -> Reading:
-    """`read` for the hierarchy and the splatting at the vertices: the Base Color per vertex
-    (their `radiance(base_color=...)` blends media around each vertex's colour) and a linked
-    Radius, Scale and Roughness at their mean; a linked Subsurface Weight is not followed there
-    yet, and the line says so."""
-    out = Reading(key=reading_key(mat, info, method))
-    lines = []
-    try:
-        lines += read_means(mat, info)
-        if linked(mat, "Base Color"):
-            out.colours, line = for_export(mat, info)
-            lines.append(line)
-    except ValueError as e:
-        return Reading(message=f"{names} not read per vertex ({e}): the socket's value shown")
-    if linked(mat, "Subsurface Weight"):
-        who = "the hierarchy" if method == "hierarchy" else "the splatting"
-        lines.append(f"Subsurface Weight: not followed by {who} yet, the socket's value shown (PRT follows it)")
     out.message = "; ".join(lines)
     return out
 

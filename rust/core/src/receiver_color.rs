@@ -32,6 +32,17 @@ pub struct Blend {
     pub b: f32,
 }
 
+impl Blend {
+    /// a S_j + b S_{j+1}, with `sum(m)` medium m's sum (S_{j+1} read only where b is not 0:
+    /// past the last medium there is none).
+    #[inline]
+    pub fn apply(self, sum: impl Fn(usize) -> f64) -> f64 {
+        let j = self.j as usize;
+        let next = if self.b != 0.0 { sum(j + 1) } else { 0.0 };
+        f64::from(self.a) * sum(j) + f64::from(self.b) * next
+    }
+}
+
 /// The media summed and each vertex's blend of them.
 #[derive(Debug, Clone)]
 pub struct ReceiverColors {
@@ -148,27 +159,20 @@ impl ReceiverColors {
         })
     }
 
+    /// The Material of each medium summed, in `media`' order.
+    pub fn materials(&self) -> Result<Vec<Material>> {
+        self.media.iter().map(Material::from_principled).collect()
+    }
+
     /// Vertex `v`'s B from each medium's sum at it (`sums[j]`).
     pub fn blend_at(&self, v: usize, sums: &[[f64; 3]]) -> [f64; 3] {
-        std::array::from_fn(|c| {
-            let Blend { j, a, b } = self.blends[v][c];
-            let j = j as usize;
-            let next = if b != 0.0 { sums[j + 1][c] } else { 0.0 };
-            f64::from(a) * sums[j][c] + f64::from(b) * next
-        })
+        std::array::from_fn(|c| self.blends[v][c].apply(|m| sums[m][c]))
     }
 
     /// B per vertex from each medium's B per vertex (`sums[j]`, in `media`' order).
     pub fn blend(&self, sums: &[Vec<[f32; 3]>]) -> Vec<[f32; 3]> {
-        (0..self.blends.len())
-            .map(|v| {
-                std::array::from_fn(|c| {
-                    let Blend { j, a, b } = self.blends[v][c];
-                    let j = j as usize;
-                    let next = if b != 0.0 { sums[j + 1][v][c] } else { 0.0 };
-                    a * sums[j][v][c] + b * next
-                })
-            })
+        (self.blends.iter().enumerate())
+            .map(|(v, b)| std::array::from_fn(|c| b[c].apply(|m| f64::from(sums[m][v][c])) as f32))
             .collect()
     }
 }

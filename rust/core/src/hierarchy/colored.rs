@@ -39,13 +39,10 @@ impl Hierarchy {
         let mut lookups = Vec::with_capacity(k);
         let mut last = None;
         let mut error: Option<[f64; 3]> = Some([0.0; 3]);
-        let media = (colors.media.iter())
-            .map(Material::from_principled)
-            .collect::<Result<Vec<_>>>()?;
+        let media = colors.materials()?;
         if self.terms.is_some() {
             self.walk_media = media.clone(); // the walks cover every medium (`add_terms`)
         }
-        let tol = self.settings.support_tolerance;
         for (j, material) in media.iter().enumerate() {
             let share = |f: f32| progress.is_none_or(|p| p((j as f32 + f) / k as f32));
             let e = self.radiosity_with_progress(material, Some(&share))?;
@@ -54,11 +51,7 @@ impl Hierarchy {
                 _ => None,
             };
             sums.push(e.values.clone());
-            let exact = self.settings.profile.profiles(material)?;
-            let lookup: [LookupProfile; 3] =
-                std::array::from_fn(|c| LookupProfile::new(&exact[c], tol));
-            let rgb = LookupRgb::new(&lookup);
-            lookups.push((lookup, rgb));
+            lookups.push(self.lookups_of(material)?);
             last = Some(e);
         }
         let mut e = last.ok_or_else(|| Error::InvalidArgument("no media to sum".into()))?;
@@ -91,11 +84,8 @@ impl Hierarchy {
         crate::evaluation::check_eye(eye)?;
         let start = Instant::now();
         let mut e = self.radiosity_colored(colors, progress)?;
-        let material = Material::from_principled(&colors.media[0])?;
-        let model = self.settings.profile;
-        let profiles = model.profiles(&material)?;
-        let exit = |cos_o| model.exit_weights(&material, &profiles, cos_o);
-        e.into_radiance(&self.scene.mesh, eye, &exit, start);
+        let first = Material::from_principled(&colors.media[0])?;
+        self.turn_to_radiance(&mut e, &first, eye, start)?;
         Ok(e)
     }
 
@@ -116,8 +106,6 @@ impl Hierarchy {
         let picks: Vec<usize> = (0..k).map(|i| (i as f64 * step) as usize).collect();
         let positions = self.scene.mesh.positions();
         let areas = self.scene.mesh.vertex_areas();
-        let tol = self.settings.support_tolerance;
-        let kind = self.settings.profile;
         let pairs: Vec<(f64, [f64; 3], [f64; 3])> = picks
             .par_iter()
             .map(|&v| -> Result<(f64, [f64; 3], [f64; 3])> {
@@ -129,10 +117,7 @@ impl Hierarchy {
                     })
                     .collect();
                 let blended = colors.blend_at(v, &sums);
-                let exact = kind.profiles(&colors.medium_at(v)?)?;
-                let own_lookup: [LookupProfile; 3] =
-                    std::array::from_fn(|c| LookupProfile::new(&exact[c], tol));
-                let own_rgb = LookupRgb::new(&own_lookup);
+                let (own_lookup, own_rgb) = self.lookups_of(&colors.medium_at(v)?)?;
                 let own = self.context(&own_lookup, &own_rgb, true, 0.25);
                 let fine = own.gather_at(&own.links_at(x));
                 Ok((f64::from(areas[v]), blended, fine))

@@ -564,12 +564,19 @@ impl Hierarchy {
                 walk_table_with_progress(&key, progress.map(|_| &ask as &ProgressFn))?;
             }
         }
+        let (lookup, rgb) = self.lookups_of(material)?;
+        self.profiles = Some((*material, lookup, rgb));
+        Ok(true)
+    }
+
+    /// `material`'s three profiles under this hierarchy's kind, tabulated for its links (the
+    /// support cut at `support_tolerance`), and their channels together.
+    fn lookups_of(&self, material: &Material) -> Result<([LookupProfile; 3], LookupRgb)> {
         let exact = self.settings.profile.profiles(material)?;
         let tol = self.settings.support_tolerance;
         let lookup = std::array::from_fn(|c| LookupProfile::new(&exact[c], tol));
         let rgb = LookupRgb::new(&lookup);
-        self.profiles = Some((*material, lookup, rgb));
-        Ok(true)
+        Ok((lookup, rgb))
     }
 
     fn context<'a>(
@@ -1234,11 +1241,24 @@ impl Hierarchy {
         crate::evaluation::check_eye(eye)?;
         let start = Instant::now();
         let mut e = self.radiosity_with_progress(material, progress)?;
+        self.turn_to_radiance(&mut e, material, eye, start)?;
+        Ok(e)
+    }
+
+    /// `e` (B per vertex) as radiance toward `eye` through `material`'s exit weight and view
+    /// factor, its seconds counted from `start`.
+    fn turn_to_radiance(
+        &self,
+        e: &mut Evaluation,
+        material: &Material,
+        eye: Option<Vec3>,
+        start: Instant,
+    ) -> Result<()> {
         let model = self.settings.profile;
         let profiles = model.profiles(material)?;
         let exit = |cos_o| model.exit_weights(material, &profiles, cos_o);
         e.into_radiance(&self.scene.mesh, eye, &exit, start);
-        Ok(e)
+        Ok(())
     }
 
     /// The links stored per receiver (render and incremental modes), for tests and tools: per

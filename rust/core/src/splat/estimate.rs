@@ -45,12 +45,34 @@ pub fn receivers(n: usize, k: usize) -> Vec<u32> {
 pub fn estimate(
     scene: &Scene,
     resolved: &Resolved,
-    (lights, world, tracer): (LinkedLights<'_>, &World, &Tracer),
+    sources: (LinkedLights<'_>, &World, &Tracer),
     at: &[u32],
     values: &[[f64; 3]],
     progress: Option<&ProgressFn>,
 ) -> Result<([f64; 3], EstimateReport)> {
     let t = Instant::now();
+    let (truth, level) = truth_at(scene, resolved, sources, at, progress)?;
+    let got: Vec<[f32; 3]> = values.iter().map(|v| v.map(|x| x as f32)).collect();
+    Ok((
+        relative_rms_at(scene, at, &got, &truth)?,
+        EstimateReport {
+            receivers: at.len(),
+            level,
+            seconds: t.elapsed().as_secs_f64(),
+        },
+    ))
+}
+
+/// The ground truth at the vertices `at` (`reference_radiosity` of `resolved`'s material at a
+/// tolerance of 1 %, at most level 3), lit by `lights` and `world` through `tracer`, and the
+/// subdivision level it reached. `progress` is asked only whether to go on.
+pub fn truth_at(
+    scene: &Scene,
+    resolved: &Resolved,
+    (lights, world, tracer): (LinkedLights<'_>, &World, &Tracer),
+    at: &[u32],
+    progress: Option<&ProgressFn>,
+) -> Result<(Vec<[f32; 3]>, u32)> {
     let mesh = &scene.mesh;
     let s = IrradianceSettings {
         eta: resolved.irradiance_eta(),
@@ -76,18 +98,19 @@ pub fn estimate(
         &settings,
         Some(&cancel),
     )?;
-    let got: Vec<[f32; 3]> = values.iter().map(|v| v.map(|x| x as f32)).collect();
-    let weights: Vec<f32> = at
-        .iter()
-        .map(|&v| mesh.vertex_areas()[v as usize])
+    Ok((truth.radiosity, truth.level))
+}
+
+/// The area-weighted relative RMS per channel of `got` against `truth`, both at the vertices
+/// `at`.
+pub fn relative_rms_at(
+    scene: &Scene,
+    at: &[u32],
+    got: &[[f32; 3]],
+    truth: &[[f32; 3]],
+) -> Result<[f64; 3]> {
+    let weights: Vec<f32> = (at.iter())
+        .map(|&v| scene.mesh.vertex_areas()[v as usize])
         .collect();
-    let err = relative_error(&got, &truth.radiosity, &weights)?;
-    Ok((
-        err.rel_rms,
-        EstimateReport {
-            receivers: at.len(),
-            level: truth.level,
-            seconds: t.elapsed().as_secs_f64(),
-        },
-    ))
+    Ok(relative_error(got, truth, &weights)?.rel_rms)
 }

@@ -66,6 +66,13 @@ pub type Evaluation = crate::evaluation::Evaluation<SplatReport>;
 /// What the walks' term and own light add to B per vertex, and their report (`Splatting::layer`).
 type Layer = (Vec<[f32; 3]>, TermReport);
 
+/// Adds a layer (`Layer`: signed, what the walks take away too) to B per vertex, B floored at 0.
+fn add_layer(b: &mut [[f32; 3]], layer: &[[f32; 3]]) {
+    for (x, a) in b.iter_mut().zip(layer) {
+        *x = std::array::from_fn(|c| (x[c] + a[c]).max(0.0));
+    }
+}
+
 /// The splatting's two knobs (Shah 2009 "Algorithm Implementation Steps").
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplatSettings {
@@ -977,9 +984,7 @@ impl Splatting {
             progress,
         )?;
         if let Some((added, report)) = self.layer(material, Some(&e.values), &[], None)? {
-            for (b, a) in e.values.iter_mut().zip(&added) {
-                *b = std::array::from_fn(|c| (b[c] + a[c]).max(0.0));
-            }
+            add_layer(&mut e.values, &added);
             Self::with_terms(&mut e, report);
             e.seconds = start.elapsed().as_secs_f64();
         }
