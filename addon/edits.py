@@ -52,36 +52,55 @@ def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting,
     session.remap = nearest_original_vertices(objects, info)
     _take_texture(session, job)
     if getattr(job, "colors", None) is not None:
-        session.evaluated = (job.key, job.colors, job.last_eval)  # the splatting's evaluation
+        # The splatting's or the hierarchy's evaluation, made on the worker.
+        session.evaluated, session.report = (job.key, job.colors, job.last_eval), job.report
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
     return session
 
 
-def _splatted(material: bpy.types.Material, s: Session):
-    """Method = Splatting: the radiance for the material as it is now, when the session's last
-    evaluation was for it; else None, and the scene is splatted again for it on a worker thread
-    (headless: at once), the edit shown when that is done. The old preview stays meanwhile; an
-    edit made while one runs is splatted after it (the job's end runs the edit again)."""
+def _evaluated(material: bpy.types.Material, s: Session):
+    """Method = Splatting or Hierarchy, whose every edit evaluates again (the splatting splats
+    the scene, the hierarchy sums its links: seconds): the radiance for the material as it is
+    now, when the session's last evaluation was for it; else None, and it is evaluated for it on
+    a worker thread (headless: at once), the edit shown when that is done. The old preview stays
+    meanwhile. An edit made while one is evaluated cancels it (`jobs.EditJob.supersedable`) and
+    runs when it has stopped; while the transport is refreshed (a light, a pose), after that."""
     key = (params(material.translucent), s.texture_key)
     if s.evaluated is not None and s.evaluated[0] == key:
         return s.evaluated[1]
     name = material.name
-    if name in JOBS:
-        return None  # the Splat is busy on a worker thread: its end runs this edit again
-    job = jobs.SplatJob(None, material.translucent.material(), key, previous=s.transport)
-    job.base_color = s.base_color  # a Base Color read per vertex: media blended around it
-    s.edit_message = "splatting the edit in the background (nothing precomputed)"
+    running = JOBS.get(name)
+    if running is not None:
+        if getattr(running, "supersedable", False) and running.key != key:
+            running.cancel = True  # overtaken: it stops at its next progress call
+        return None  # its end runs this edit again
+    m = material.translucent.material()
+    if s.method == "splat":
+        job = jobs.SplatJob(None, m, key, previous=s.transport)
+        job.supersedable, job.label = True, "Splatting the edit in the background"
+        s.edit_message = "splatting the edit in the background (nothing precomputed)"
+    else:
+        job = jobs.EditJob(s.transport, m, key)
+    # A Base Color read per vertex (media blended around it) and, for the hierarchy, the weight.
+    job.base_color, job.subsurface_weight = s.base_color, s.subsurface_weight
 
     def done(mat):
         if SESSIONS.get(name) is s:
-            s.evaluated = (job.key, job.colors, job.last_eval)
+            s.evaluated, s.report = (job.key, job.colors, job.last_eval), job.report
             s.edit_message = ""
             edit(mat)
 
     def failed(error):
-        s.edit_message = f"not shown: {error}"
+        mat = bpy.data.materials.get(name)
+        if SESSIONS.get(name) is not s or mat is None:
+            return
+        if job.cancel:
+            s.edit_message = ""
+            edit(mat)  # overtaken by a later edit: that one evaluated now
+        else:
+            s.edit_message = f"not shown: {error}"
 
     jobs.in_background(name, job, done, failed)
     return None
@@ -128,7 +147,8 @@ def show_first(material: bpy.types.Material, job: jobs.Job, objects, info, light
     session.remap = nearest_original_vertices(objects, info)
     _take_texture(session, job)
     if getattr(job, "first_colors", None) is not None:
-        session.evaluated = (job.key, job.first_colors, job.first_eval)  # the splatting's carried pose
+        # The splatting's carried pose (the job goes on with the same Splat: its report is busy).
+        session.evaluated, session.report = (job.key, job.first_colors, job.first_eval), job.first_report
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
@@ -174,8 +194,6 @@ def edit(material: bpy.types.Material) -> None:
     s = SESSIONS.get(material.name)
     if s is None or not material.translucent.enabled:
         return
-    if s.method == "hierarchy" and material.name in JOBS:
-        return  # the hierarchy is being updated in place on a worker thread: shown when done
     settings = material.translucent
     if settings.source == "PRINCIPLED":
         follow_texture(material, s)
@@ -199,17 +217,13 @@ def edit(material: bpy.types.Material) -> None:
     # Radiance leaving along each normal (a view-independent viewport colour), or toward the
     # viewport's eye where single scattering makes it depend on the view.
     # A Base Color read per vertex (`follow_texture`): each vertex scatters as its own medium.
-    textured = {}
-    if s.method == "prt":
-        textured = textures.Reading(colours=s.base_color, weights=s.subsurface_weight, others=s.others).kwargs()
-    elif s.method == "hierarchy" and s.base_color is not None:
-        textured = {"base_color": s.base_color}  # media blended around each vertex's colour
-    if s.method == "splat":
-        colors = _splatted(material, s)
+    if s.method in ("splat", "hierarchy"):
+        colors = _evaluated(material, s)
         if colors is None:
-            return  # splatting on a worker thread: this edit runs again when it is done
+            return  # evaluated on a worker thread: this edit runs again when it is done
         s.last_eval = dict(s.evaluated[2])
     else:
+        textured = textures.Reading(colours=s.base_color, weights=s.subsurface_weight, others=s.others).kwargs()
         try:
             eye = s.eye if s.eye is not None and view_dependent(s) else None
             colors = transport.radiance(m, eye, **textured)

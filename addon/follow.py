@@ -266,7 +266,7 @@ def _follow_refresh(mat: bpy.types.Material, s: Session) -> None:
         if getattr(job, "retrace", False) and mat.name not in JOBS:
             again = jobs.RetraceJob(job.result, mat.translucent.material())
             for key in ("method", "base_color", "subsurface_weight", "others", "texture_key", "texture_message",
-                        "chosen_for", "profile"):
+                        "chosen_for", "profile", "key"):
                 setattr(again, key, getattr(job, key, None))
             edits.in_background(mat.name, again, objects, info, lighting, failed, message)
 

@@ -88,7 +88,8 @@ class TRANSLUCENT_OT_precompute(bpy.types.Operator):
             return None
         if mat.name in JOBS:
             # A second press while a job runs does not start a second one.
-            self.report({"WARNING"}, f"a precompute for {mat.name} is already running")
+            what = "an edit is being evaluated" if getattr(JOBS[mat.name], "supersedable", False) else "a precompute is running"
+            self.report({"WARNING"}, f"{what} for {mat.name}: press again when it is done")
             return None
         try:
             method, self._method_message = jobs.resolve_method(mat.translucent.method, "precompute")

@@ -23,7 +23,8 @@ def _bounce_only(r: dict) -> str:
 def summary(sess: Session) -> str:
     """What the precompute did and left out, in one line for the status bar and the panel: the
     export's part, then the method's own report as it gives it."""
-    r, info = sess.transport.report, sess.info
+    # The report the last evaluation on a worker left (the transport may be busy on another).
+    r, info = (sess.report if sess.report is not None else sess.transport.report), sess.info
     scene = f"{len(sess.objects)} object(s) ({len(info.skipped_objects)} without the material skipped)"
     if info.without_faces:
         scene += f", {', '.join(info.without_faces)} holding it on no face left out"
@@ -77,7 +78,7 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
     if st == "running":
         job = JOBS[mat.name]
         background = getattr(job, "background", False)
-        what = "Refreshing in the background" if background else "Precomputing"
+        what = getattr(job, "label", "") or ("Refreshing in the background" if background else "Precomputing")
         lines.append((f"{what} {100 * job.progress:.0f} %{'' if background else ' (Esc cancels)'}", "TIME"))
     if st == "none":
         lines.append(("No transport: press Precompute", "INFO"))

@@ -67,9 +67,12 @@ class Session:
     others: object = None
     texture_key: str = ""
     texture_message: str = ""
-    # Method = Splatting (nothing precomputed: each evaluation splats again, on a worker
-    # thread): the last evaluation as (what it was for: `params`, (N, 3) radiance, last_eval).
+    # Method = Splatting or Hierarchy (each edit evaluates again, on a worker thread): the last
+    # evaluation as (what it was for: `params` and the texture's key, (N, 3) radiance, last_eval).
     evaluated: tuple | None = None
+    # The hierarchy's or the splatting's report as that evaluation left it: the panel reads it
+    # here, as a worker may hold the transport (its `report` then says it is busy).
+    report: dict | None = None
 
 
 # material name -> Session

@@ -19,6 +19,8 @@ import pathlib
 import numpy as np
 import pytest
 
+import translucent
+
 from helpers import draw_panel, lit_sphere, mesh_hash, read_preview
 
 pytestmark = pytest.mark.bpy
@@ -437,6 +439,67 @@ def test_with_a_ui_the_refresh_runs_on_a_worker_and_the_old_preview_stays_until_
     assert session.SESSIONS[mat.name] is not sess and session.state(mat) == "ready"
     assert not np.allclose(read_preview(obj), first)
     relit_like_a_precompute(bpy, session, mat, obj)
+
+
+def test_a_hierarchy_edit_runs_on_a_worker_and_the_last_edit_wins(addon, monkeypatch):
+    """With a UI, a slider edit of a material the hierarchy previews (which sums its links again:
+    seconds on a real mesh) is evaluated on a worker thread: the UI thread returns at once, the
+    old preview stays, and the panel draws from the report the last evaluation left (the
+    hierarchy says "busy" to any other thread meanwhile). An edit made while one runs cancels
+    it, and what is shown in the end is the hierarchy's answer for the last edit."""
+    import threading
+
+    import bpy
+
+    from addon import jobs, session
+
+    mat, obj, _ = lit_sphere(bpy, method="HIERARCHY")
+    sess = session.SESSIONS[mat.name]
+    first = read_preview(obj)
+    timers = []
+    monkeypatch.setattr(jobs, "headless", lambda: False)
+    monkeypatch.setattr(bpy.app.timers, "register", lambda fn, first_interval=0.0, persistent=False: timers.append(fn))
+    monkeypatch.setattr(bpy.app.timers, "is_registered", lambda fn: fn in timers)
+    # The first job is held at its first progress call (before its work starts) until the
+    # second edit has been made.
+    gate, tick = threading.Event(), jobs.EditJob._tick
+
+    def held(job, f):
+        gate.wait(60)
+        return tick(job, f)
+
+    monkeypatch.setattr(jobs.EditJob, "_tick", held)
+
+    def settle():
+        while mat.name in session.JOBS:
+            session.JOBS[mat.name]._thread.join(timeout=120)
+            for poll in [fn for fn in timers if fn.__name__ == "poll"]:
+                timers.remove(poll)
+                poll()
+
+    s = mat.translucent
+    s.sigma_a = (0.02, 0.03, 0.05)
+    job = session.JOBS[mat.name]
+    assert isinstance(job, jobs.EditJob) and job._thread.ident is not None, "started on a worker thread"
+    np.testing.assert_array_equal(read_preview(obj), first)
+    transport, sess.transport = sess.transport, None  # the panel must not need it
+    lines = " ".join(draw_panel(addon, mat))
+    sess.transport = transport
+    assert "Evaluating the edit in the background" in lines and "hierarchy (Mertens 2003)" in lines
+    s.sigma_a = (0.05, 0.06, 0.08)
+    assert job.cancel and session.JOBS[mat.name] is job, "the running edit is told to stop"
+    gate.set()
+    settle()
+    assert isinstance(job.error, translucent.Cancelled), "the overtaken edit stopped"
+    assert session.SESSIONS[mat.name] is sess and sess.edit_message == ""
+    assert sess.evaluated[0] == (session.params(s), sess.texture_key)
+    expected = sess.transport.radiance(s.material())
+    np.testing.assert_allclose(read_preview(obj), expected, rtol=1e-5, atol=1e-9)
+    assert not np.allclose(read_preview(obj), first)
+    # An edit back to a material already shown is evaluated again, as any other.
+    s.sigma_a = (0.02, 0.03, 0.05)
+    settle()
+    np.testing.assert_allclose(read_preview(obj), sess.transport.radiance(s.material()), rtol=1e-5, atol=1e-9)
 
 
 def test_the_hierarchy_method_previews_and_follows_a_deformation(addon):

@@ -184,16 +184,18 @@ def test_a_texture_edit_is_read_again_by_itself(addon, monkeypatch):
     assert len(bakes) == 2 and not np.array_equal(read_preview(objs[0]), now)
 
 
-def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
+@pytest.mark.parametrize("method", ["PRT", "HIERARCHY"])
+def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon, method):
     # The Subsurface Weight from a checker (1 on one square, 0.1 on the other) under a uniform
     # Base Color: where it is low the diffuse lobe beside the walk takes over. Read by Cycles per
-    # vertex and split per vertex (`Prt.radiance(subsurface_weight=...)`), against Cycles'
-    # bake of the same material.
+    # vertex and split per vertex (`Prt.radiance(subsurface_weight=...)`, the hierarchy's
+    # `radiance(subsurface_weight=...)`), against Cycles' bake of the same material.
     import bpy
     import translucent
     from addon import export, session
 
     mat, tex, objs = _scene(bpy, "checker")
+    mat.translucent.method = method
     p = mat.node_tree.nodes["Principled BSDF"]
     mat.node_tree.links.remove(p.inputs["Base Color"].links[0])
     p.inputs["Base Color"].default_value = (*COLOUR_A, 1.0)
@@ -205,6 +207,7 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
     mat.translucent.enabled = True
     assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
     s = session.SESSIONS[mat.name]
+    assert s.method == method.lower()
     assert s.texture_message.startswith("Subsurface Weight from Checker Texture: read by Cycles at 964 vertices")
     assert s.base_color is None and s.subsurface_weight is not None
     assert _user_data(bpy, mat, objs) == before
@@ -213,7 +216,7 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon):
     low, high = np.isclose(w, 0.1, atol=1e-3), np.isclose(w, 1.0, atol=1e-3)
     assert low.sum() > 200 and high.sum() > 200 and (low | high).mean() > 0.7, "both squares on the spheres"
     assert w.min() >= 0.1 - 1e-3 and w.max() <= 1.0
-    bakes, errors = _against_cycles(bpy, s, objs, "weight")
+    bakes, errors = _against_cycles(bpy, s, objs, f"{method.lower()}, weight")
 
     # The link removed: the socket's own weight, 0.5, everywhere again, farther from the bake.
     mat.node_tree.links.remove(p.inputs["Subsurface Weight"].links[0])

@@ -233,3 +233,32 @@ def test_the_world_by_nine_coefficients_or_shadowed_on_request():
     assert sh.report["rays"] < traced.report["rays"]
     a, b = sh.radiosity(m), traced.radiosity(m)
     assert np.abs(a / b - 1).max() < 0.05, np.abs(a / b - 1).max()
+
+
+@pytest.mark.parametrize("textured", [False, True])
+def test_an_evaluation_reports_progress_and_a_cancel_leaves_the_hierarchy_answering_as_before(textured):
+    """`radiosity(progress=)`: the fractions rise in [0, 1] and reach 1; False at any tick stops
+    the call (`Cancelled`), and the same Hierarchy then evaluates what a fresh one gives (the
+    add-on cancels an edit overtaken by the next one on its worker thread)."""
+    p, t = sphere(14, 0.02)
+    scene = lit(p, t, light=(0.05, -0.03, 0.06))
+    m0 = translucent.Material.from_principled((0.8, 0.5, 0.3), (1.0, 0.4, 0.2), 0.005)
+    m1 = translucent.Material.from_principled((0.5, 0.6, 0.4), (1.0, 0.4, 0.2), 0.005)
+    kw = {"base_color": np.where(p[:, :1] > 0, (0.9, 0.5, 0.3), (0.3, 0.6, 0.8)).astype(np.float32)} if textured else {}
+    make = lambda: translucent.Hierarchy(scene, m0, profile="cycles", walks=True, walk_rays=200_000)  # noqa: E731
+    fresh = make().radiosity(m1, **kw)
+    h = make()
+    seen = []
+    assert np.allclose(h.radiosity(m1, progress=lambda f: seen.append(f) or True, **kw), fresh, rtol=1e-5, atol=0)
+    assert seen and seen == sorted(seen) and 0.0 <= seen[0] and seen[-1] == pytest.approx(1.0)
+    # Before any work (the first call comes before the work starts): always stopped.
+    with pytest.raises(translucent.Cancelled):
+        h.radiosity(m0, progress=lambda f: False, **kw)
+    np.testing.assert_allclose(h.radiosity(m1, **kw), fresh, rtol=1e-5, atol=0)
+    # Once the work has reported progress (the calls come every ~0.1 s: a short evaluation may
+    # end before one comes, and then returns its answer).
+    try:
+        h.radiosity(m0, progress=lambda f: f <= 0.0, **kw)
+    except translucent.Cancelled:
+        pass
+    np.testing.assert_allclose(h.radiosity(m1, **kw), fresh, rtol=1e-5, atol=0)

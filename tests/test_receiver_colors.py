@@ -204,3 +204,73 @@ def test_the_splatting_image_blends_the_media_per_pixel():
     # The material's own Base Color everywhere instead: far from it.
     plain, _ = sp.render(_mat(0.5), **view)
     assert np.abs(plain[mask > 0] - image[mask > 0]).max() > 0.2 * image[mask > 0].max()
+
+
+def _weighted(c, w):
+    return translucent.Material.from_principled(c, (1.0, 0.5, 0.25), 0.02, subsurface_weight=w)
+
+
+def test_a_subsurface_weight_per_vertex_is_each_vertex_its_own_weight(lit):
+    """Two weights by wedge (and the checker's colours): each receiver against
+    `reference_radiosity` of a uniform material of its own weight and colour (the profile's
+    point mass there: Cycles' diffuse lobe beside the walk, an independent route)."""
+    p, s, stripes, receivers = lit
+    weights = np.where(stripes[:, 0] > 0.5, 0.9, 0.2).astype(np.float32)
+    ref = np.zeros((len(receivers), 3))
+    for w in (0.2, 0.9):
+        for c in {tuple(float(x) for x in stripes[v]) for v in receivers}:
+            ks = [k for k, v in enumerate(receivers) if abs(weights[v] - w) < 1e-6 and tuple(stripes[v]) == c]
+            if ks:
+                ref[ks] = translucent.reference_radiosity(s, _weighted(c, w), receivers=[int(receivers[k]) for k in ks],
+                                                          profile="cycles")
+    h = translucent.Hierarchy(s, _mat(0.5), profile="cycles")
+    got = h.radiosity(_weighted(0.5, 0.5), base_color=stripes, subsurface_weight=weights)
+    err = _rms(got[receivers], ref)
+    assert err.max() < 0.015, err
+    # Each weight read as the other (weights swapped between the wedges) is off by more than
+    # the bar: the test can tell. (Cycles chooses the walk's albedo so that its total is the
+    # Base Color, so the two lobes differ in how far the light spreads, not in how much.)
+    swapped = h.radiosity(_weighted(0.5, 0.5), base_color=stripes, subsurface_weight=1.1 - weights)
+    off = _rms(swapped[receivers], ref)
+    print("own weights", err, "swapped", off)
+    assert off.min() > 2 * err.max(), (off, err)
+
+
+def test_one_subsurface_weight_everywhere_is_the_uniform_material_of_that_weight():
+    """With the walks and the object's own light: one weight at every vertex splits each
+    vertex's lobes as the uniform material's point mass does (Cycles' walk table), and a weight
+    per vertex is, vertex by vertex, the blend of weights 0 and 1 where no own light mixes
+    them."""
+    p, t = sphere(12, 0.02)
+    s = translucent.Scene(p, t)
+    s.add_sun((0.6, 0.2, -0.77), irradiance=1.0)
+    n = len(p)
+    h = translucent.Hierarchy(s, _mat(0.6), profile="cycles", walks=True, walk_rays=200_000)
+    for w in (0.0, 0.4, 0.9):
+        uniform = h.radiosity(_weighted(0.6, w))
+        per_vertex = h.radiosity(_weighted(0.6, 0.2), subsurface_weight=np.full(n, w))
+        np.testing.assert_allclose(per_vertex, uniform, rtol=3e-3, atol=1e-9)
+    half = translucent.Hierarchy(s, _mat(0.6), profile="cycles")
+    w = np.linspace(0.0, 1.0, n).astype(np.float32)
+    diffuse = half.radiosity(_mat(0.6), subsurface_weight=np.zeros(n))
+    medium = half.radiosity(_mat(0.6), subsurface_weight=np.ones(n))
+    mixed = half.radiosity(_mat(0.6), subsurface_weight=w)
+    np.testing.assert_allclose(mixed, w[:, None] * medium + (1 - w[:, None]) * diffuse, rtol=1e-4, atol=1e-9)
+    assert np.abs(medium - diffuse).max() > 0.05 * np.abs(diffuse).max(), "the two lobes must differ here"
+
+
+def test_subsurface_weight_arguments_are_checked_by_the_hierarchy():
+    p, t = sphere(6, 0.02)
+    s = translucent.Scene(p, t)
+    s.add_sun((0, 0, -1), irradiance=1.0)
+    n = len(p)
+    h = translucent.Hierarchy(s, _mat(0.5), profile="cycles")
+    with pytest.raises(ValueError, match="subsurface_weight has 3 values"):
+        h.radiosity(_mat(0.5), subsurface_weight=np.full(3, 0.5))
+    with pytest.raises(ValueError, match=r"subsurface_weight of vertex 1 is 1.5: must lie in \[0, 1\]"):
+        h.radiance(_mat(0.5), subsurface_weight=np.array([0.5, 1.5] + [0.5] * (n - 2)))
+    with pytest.raises(ValueError, match="subsurface_weight per vertex needs a material made by"):
+        h.radiosity(translucent.Material.preset("marble"), subsurface_weight=np.full(n, 0.5))
+    dipole = translucent.Hierarchy(s, _mat(0.5), profile="dipole")
+    with pytest.raises(ValueError, match="subsurface_weight per vertex splits the Principled lobes"):
+        dipole.radiosity(_mat(0.5), subsurface_weight=np.full(n, 0.5))

@@ -13,6 +13,12 @@
 //!
 //! T(x) per channel is read from a table at Base Colors k / `NODES_PER_UNIT`, blended linearly;
 //! every interval read is checked at its midpoint, and the worst miss is the table's error.
+//!
+//! A Subsurface Weight per vertex (`ReceiverColors::weighted`, Cycles' profile) splits the
+//! Principled BSDF's lobes under its layers (`optics::principled::lobe_weights`): the media are
+//! summed whole (weight 1) and each vertex takes w of its blend and (1 - w) of the diffuse lobe,
+//! (1 - Metallic)(1 - Transmission) a(x_o) times the light at x_o (`Lobes::apply`), every part
+//! linear in w, as PRT's textured path does (docs/textures.md).
 
 use crate::error::{Error, Result};
 use crate::optics::principled::PrincipledInputs;
@@ -55,6 +61,35 @@ pub struct ReceiverColors {
     pub colors: Vec<[f32; 3]>,
     /// Per channel: the table's worst relative miss at the midpoint of an interval read.
     pub table_error: [f64; 3],
+    /// A Subsurface Weight per vertex (`weighted`); None: the inputs' own weight everywhere.
+    pub lobes: Option<Lobes>,
+}
+
+/// The Principled lobes' split per vertex by its Subsurface Weight.
+#[derive(Debug, Clone)]
+pub struct Lobes {
+    /// The Subsurface Weight per vertex, in [0, 1].
+    pub weights: Vec<f32>,
+    /// (1 - Metallic)(1 - Transmission): what lies under the specular layer.
+    pub below: f64,
+    /// Per channel, what the surface sends on along the normal per unit irradiance
+    /// (`Resolved::sent_on`), each vertex's two lobes by its weight, area-weighted over the
+    /// vertices: the object's own light is sent by this mean (PRT's textured path does so).
+    pub sent: [f64; 3],
+}
+
+impl Lobes {
+    /// B = w B_medium + (1 - w) below a L per vertex: `b` holds each vertex's B of its medium at
+    /// weight 1, `light` the light its diffuse lobe takes (irradiance plus the own light).
+    pub fn apply(&self, b: &mut [[f32; 3]], colors: &[[f32; 3]], light: &[[f32; 3]]) {
+        for (v, bv) in b.iter_mut().enumerate() {
+            let w = f64::from(self.weights[v]);
+            for c in 0..3 {
+                let diffuse = self.below * f64::from(colors[v][c]) * f64::from(light[v][c]);
+                bv[c] = (w * f64::from(bv[c]) + (1.0 - w) * diffuse) as f32;
+            }
+        }
+    }
 }
 
 impl ReceiverColors {
@@ -148,7 +183,88 @@ impl ReceiverColors {
             blends,
             colors,
             table_error: table.error,
+            lobes: None,
         })
+    }
+
+    /// `new` with a Subsurface Weight per vertex (`weights`, in [0, 1], Cycles' profile only):
+    /// the media summed at weight 1 (`inputs.subsurface_weight` is not read) and each vertex's
+    /// lobes split by its own weight (`Lobes`). Errors name `subsurface_weight`.
+    pub fn weighted(
+        kind: ProfileKind,
+        inputs: &PrincipledInputs,
+        colors: &[[f32; 3]],
+        areas: &[f32],
+        media: usize,
+        weights: &[f32],
+    ) -> Result<ReceiverColors> {
+        if kind != ProfileKind::Cycles {
+            return Err(Error::InvalidArgument(
+                "subsurface_weight per vertex splits the Principled lobes: Cycles' profile only \
+                 (the dipole has no lobes)"
+                    .into(),
+            ));
+        }
+        if weights.len() != areas.len() {
+            return Err(Error::InvalidArgument(format!(
+                "subsurface_weight has {} values for {} vertices",
+                weights.len(),
+                areas.len()
+            )));
+        }
+        if let Some(v) = (weights.iter()).position(|w| !(w.is_finite() && (0.0..=1.0).contains(w)))
+        {
+            return Err(Error::InvalidArgument(format!(
+                "subsurface_weight of vertex {v} is {}: must lie in [0, 1]",
+                weights[v]
+            )));
+        }
+        let whole = PrincipledInputs {
+            subsurface_weight: 1.0,
+            ..*inputs
+        };
+        let mut out = Self::new(kind, &whole, colors, areas, media)?;
+        // What each lobe sends on along the normal: the diffuse lobe's is affine in its colour
+        // (its albedo below the layer plus the layer's reflection), read at 0 and 1; the
+        // subsurface lobe's at each medium, interpolated between the two around the vertex.
+        let sent_of = |w: f64, a: [f64; 3]| -> Result<[f64; 3]> {
+            let m = Material::from_principled(&PrincipledInputs {
+                base_color: a,
+                subsurface_weight: w,
+                ..*inputs
+            })?;
+            Ok(Resolved::new(kind, &m)?.sent_on(1.0))
+        };
+        let (d0, d1) = (sent_of(0.0, [0.0; 3])?, sent_of(0.0, [1.0; 3])?);
+        let whole_sent = (out.media.iter())
+            .map(|m| sent_of(1.0, m.base_color))
+            .collect::<Result<Vec<_>>>()?;
+        let mut sent = [0.0f64; 3];
+        let mut area = 0.0f64;
+        for (v, (&w, &a)) in weights.iter().zip(areas).enumerate() {
+            let (w, a) = (f64::from(w), f64::from(a));
+            area += a;
+            for c in 0..3 {
+                let j = out.blends[v][c].j as usize;
+                let x = f64::from(out.colors[v][c]);
+                let whole = match (out.media.get(j), out.media.get(j + 1)) {
+                    (Some(m0), Some(m1)) if m1.base_color[c] > m0.base_color[c] => {
+                        let (x0, x1) = (m0.base_color[c], m1.base_color[c]);
+                        let t = ((x - x0) / (x1 - x0)).clamp(0.0, 1.0);
+                        (1.0 - t) * whole_sent[j][c] + t * whole_sent[j + 1][c]
+                    }
+                    _ => whole_sent[j][c],
+                };
+                let diffuse = d0[c] + x * (d1[c] - d0[c]);
+                sent[c] += a * (w * whole + (1.0 - w) * diffuse);
+            }
+        }
+        out.lobes = Some(Lobes {
+            weights: weights.to_vec(),
+            below: (1.0 - inputs.metallic) * (1.0 - inputs.transmission),
+            sent: sent.map(|s| if area > 0.0 { s / area } else { 0.0 }),
+        });
+        Ok(out)
     }
 
     /// The medium of vertex `v`'s own Base Color (the estimate sums it again with this).
@@ -359,5 +475,81 @@ mod tests {
         .unwrap();
         assert_eq!(r.colors[0], [1.0, 0.0, 0.5]);
         assert_eq!(r.blends[0][..2], r.blends[1][..2]);
+    }
+
+    fn sent(w: f64, x: [f64; 3], metallic: f64) -> [f64; 3] {
+        let m = Material::from_principled(&PrincipledInputs {
+            base_color: x,
+            subsurface_weight: w,
+            metallic,
+            ..inputs()
+        })
+        .unwrap();
+        Resolved::new(ProfileKind::Cycles, &m).unwrap().sent_on(1.0)
+    }
+
+    /// The lobes' split: B = w B_medium + (1 - w) below a L per vertex, and what the surface
+    /// sends on is each vertex's lobes by its weight, against the slab albedo of a material of
+    /// that weight resolved directly (one colour, so one medium: nothing interpolated). The
+    /// media are summed at weight 1 whatever the inputs say.
+    #[test]
+    fn a_weight_per_vertex_splits_the_lobes() {
+        let metallic = 0.25;
+        let base = PrincipledInputs {
+            subsurface_weight: 0.3, // not read: the media are whole
+            metallic,
+            ..inputs()
+        };
+        let a = [0.7f32, 0.4, 0.2];
+        let colors = vec![a; 4];
+        for w in [0.0f32, 0.4, 1.0] {
+            let r = ReceiverColors::weighted(
+                ProfileKind::Cycles,
+                &base,
+                &colors,
+                &[1.0; 4],
+                1,
+                &[w; 4],
+            )
+            .unwrap();
+            assert_eq!(r.media[0].subsurface_weight, 1.0);
+            let lobes = r.lobes.as_ref().unwrap();
+            let expect = sent(f64::from(w), a.map(f64::from), metallic);
+            for (c, (got, want)) in lobes.sent.iter().zip(expect).enumerate() {
+                assert!(
+                    (got - want).abs() <= 1e-6 * want.max(1e-3),
+                    "w {w} channel {c}: {got} vs {want}"
+                );
+            }
+            let mut b = vec![[2.0f32, 3.0, 5.0]; 4];
+            lobes.apply(&mut b, &r.colors, &[[10.0, 20.0, 30.0]; 4]);
+            for c in 0..3 {
+                let whole = [2.0, 3.0, 5.0][c];
+                let diffuse = 0.75 * f64::from(a[c]) * [10.0, 20.0, 30.0][c];
+                let expect = f64::from(w) * whole + (1.0 - f64::from(w)) * diffuse;
+                assert!(
+                    (f64::from(b[0][c]) - expect).abs() <= 1e-5 * expect,
+                    "{w} {c}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bad_weights_are_refused_naming_the_argument() {
+        let colors = vec![[0.5f32; 3]; 3];
+        let areas = [1.0f32; 3];
+        for (kind, weights) in [
+            (ProfileKind::Cycles, vec![0.5f32; 2]),
+            (ProfileKind::Cycles, vec![0.5, 1.5, 0.5]),
+            (ProfileKind::Cycles, vec![0.5, -0.1, 0.5]),
+            (ProfileKind::Cycles, vec![0.5, f32::NAN, 0.5]),
+            (ProfileKind::Dipole, vec![0.5f32; 3]),
+        ] {
+            let e = ReceiverColors::weighted(kind, &inputs(), &colors, &areas, 2, &weights)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("subsurface_weight"), "{e}");
+        }
     }
 }

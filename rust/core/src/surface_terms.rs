@@ -268,16 +268,32 @@ impl Terms {
         })
     }
 
+    /// The object's own light at each vertex (its irradiance, not yet through a profile) from
+    /// a surface sending `sent` on (`Bounce::ratio`); None without it. A vertex's diffuse lobe
+    /// takes it as it takes the direct light (`receiver_color::Lobes`).
+    pub fn own_irradiance(&self, sent: [f64; 3]) -> Option<Vec<[f32; 3]>> {
+        let b = self.bounce.as_ref()?;
+        let k = b.ratio(sent).map(|r| r as f32);
+        Some(
+            b.irradiance
+                .iter()
+                .map(|e| std::array::from_fn(|c| k[c] * e[c]))
+                .collect(),
+        )
+    }
+
     /// Adds the terms for `material` to `radiosity` (B per vertex) and their noise to `error`.
     /// `signed`: `radiosity` is a layer of its own, not B (the splatting adds it to B at each
     /// pixel): a term that takes light away stays negative in it, where added to B it floors
-    /// B at 0.
+    /// B at 0. `sent`: what the surface sends on to the own light where its vertices differ
+    /// (`receiver_color::Lobes::sent`); None: what `material` sends.
     pub fn add_to(
         &self,
         radiosity: &mut [[f32; 3]],
         material: &Resolved,
         error: &mut [f64; 3],
         signed: bool,
+        sent: Option<[f64; 3]>,
     ) -> Result<()> {
         if !self.current {
             return Err(Error::InvalidArgument(
@@ -295,14 +311,9 @@ impl Terms {
             }
         }
         if let Some(b) = &self.bounce {
-            b.add_to(
-                radiosity,
-                material,
-                true,
-                self.report.own_light_share,
-                error,
-                signed,
-            );
+            let ratio = b.ratio(sent.unwrap_or_else(|| material.sent_on(1.0)));
+            let share = self.report.own_light_share;
+            b.add_scaled(radiosity, material, ratio, true, share, error, signed);
         }
         Ok(())
     }

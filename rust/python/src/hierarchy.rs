@@ -112,18 +112,24 @@ impl PyHierarchy {
     /// (the profile over the direct irradiance, plus Cycles' diffuse lobe). `base_color`: an
     /// (N, 3) Principled Base Color per vertex (saturated to [0, 1] as Cycles does) for a
     /// material made by `Material.from_principled`: the mean colour's medium summed and each
-    /// vertex scaled by its own medium's slab total (`receiver_color`). Releases the GIL.
-    #[pyo3(signature = (material, base_color = None, media = 2))]
+    /// vertex scaled by its own medium's slab total (`receiver_color`). `subsurface_weight`:
+    /// an (N,) Principled Subsurface Weight per vertex in [0, 1] (Cycles' profile): the media
+    /// summed whole and each vertex's lobes split by its weight. Releases the GIL;
+    /// `progress(fraction)` as for every long call (False cancels).
+    #[pyo3(signature = (material, base_color = None, media = 2, progress = None,
+        subsurface_weight = None))]
     fn radiosity<'py>(
         &self,
         py: Python<'py>,
         material: PyRef<'_, PyMaterial>,
         base_color: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+        subsurface_weight: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let colored = crate::material::colored(&material, base_color, media)?;
-        let b = run(py, None, |tick| {
+        let colored = crate::material::colored(&material, base_color, media, subsurface_weight)?;
+        let b = run(py, progress, |tick| {
             let mut h = self.lock();
             match &colored {
                 Some(c) => {
@@ -139,8 +145,11 @@ impl PyHierarchy {
     }
 
     /// Radiance toward the point `eye`, L = W(w_o) B / pi, (N, 3) float32; without `eye`,
-    /// along each vertex normal (what a Cycles bake records). `base_color` as `radiosity`.
-    #[pyo3(signature = (material, eye = None, base_color = None, media = 2))]
+    /// along each vertex normal (what a Cycles bake records). `base_color`,
+    /// `subsurface_weight` and `progress` as `radiosity`.
+    #[pyo3(signature = (material, eye = None, base_color = None, media = 2, progress = None,
+        subsurface_weight = None))]
+    #[allow(clippy::too_many_arguments)]
     fn radiance<'py>(
         &self,
         py: Python<'py>,
@@ -148,11 +157,13 @@ impl PyHierarchy {
         eye: Option<&Bound<'_, PyAny>>,
         base_color: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+        subsurface_weight: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let colored = crate::material::colored(&material, base_color, media)?;
-        let b = run(py, None, |tick| {
+        let colored = crate::material::colored(&material, base_color, media, subsurface_weight)?;
+        let b = run(py, progress, |tick| {
             let mut h = self.lock();
             match &colored {
                 Some(c) => {

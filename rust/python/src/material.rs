@@ -375,43 +375,70 @@ pub fn layer_weight(roughness: f64, cos_view: f64, ior: f64) -> PyResult<f64> {
 /// A Base Color per vertex asked of a method that blends media (`base_color=`, `media=`).
 pub struct Colored {
     inputs: PrincipledInputs,
-    rows: Vec<[f32; 3]>,
+    /// The Base Color per vertex; None: the material's own at every vertex (a weight alone).
+    rows: Option<Vec<[f32; 3]>>,
     media: usize,
+    /// The Subsurface Weight per vertex (`subsurface_weight=`), where given.
+    weights: Option<Vec<f32>>,
 }
 
 impl Colored {
     /// The media and each vertex's blend of them for `kind` over vertices of `areas`
-    /// (`receiver_color`).
+    /// (`receiver_color`), with the lobes split by the weight where one is given.
     pub fn build(
         &self,
         kind: ProfileKind,
         areas: &[f32],
     ) -> translucent_core::error::Result<ReceiverColors> {
-        ReceiverColors::new(kind, &self.inputs, &self.rows, areas, self.media)
+        let own;
+        let rows = match &self.rows {
+            Some(r) => r,
+            None => {
+                own = vec![self.inputs.base_color.map(|x| x as f32); areas.len()];
+                &own
+            }
+        };
+        match &self.weights {
+            Some(w) => ReceiverColors::weighted(kind, &self.inputs, rows, areas, self.media, w),
+            None => ReceiverColors::new(kind, &self.inputs, rows, areas, self.media),
+        }
     }
 }
 
-/// The Principled inputs, the Base Color rows of `base_color=` and `media`, or None without
-/// `base_color`. A material not made by `Material.from_principled` has no Base Color to vary.
+/// The Principled inputs, the Base Color rows of `base_color=`, `media` and the Subsurface
+/// Weight of `subsurface_weight=`, or None without either. A material not made by
+/// `Material.from_principled` has no Principled input to vary.
 pub fn colored(
     material: &PyMaterial,
     base_color: Option<&Bound<'_, PyAny>>,
     media: i64,
+    subsurface_weight: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Option<Colored>> {
     let media = crate::convert::non_negative("media", media)?;
-    let Some(rows) = base_color else {
+    if base_color.is_none() && subsurface_weight.is_none() {
         return Ok(None);
+    }
+    let what = if base_color.is_some() {
+        "base_color"
+    } else {
+        "subsurface_weight"
     };
     let inputs = material.principled.ok_or_else(|| {
-        PyValueError::new_err(
-            "base_color per vertex needs a material made by Material.from_principled \
-             (it is a Principled BSDF input)",
-        )
+        PyValueError::new_err(format!(
+            "{what} per vertex needs a material made by Material.from_principled (it is a \
+             Principled BSDF input)"
+        ))
     })?;
-    let rows = crate::convert::float_rows("base_color", rows)?;
+    let rows = base_color
+        .map(|r| crate::convert::float_rows("base_color", r))
+        .transpose()?;
+    let weights = subsurface_weight
+        .map(|w| crate::convert::float_values("subsurface_weight", w))
+        .transpose()?;
     Ok(Some(Colored {
         inputs,
         rows,
         media,
+        weights,
     }))
 }

@@ -295,7 +295,7 @@ impl PySplat {
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let colored = crate::material::colored(&material, base_color, media)?;
+        let colored = crate::material::colored(&material, base_color, media, None)?;
         let e = run(py, progress, |tick| {
             let s = self.read();
             match &colored {
@@ -326,7 +326,7 @@ impl PySplat {
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let colored = crate::material::colored(&material, base_color, media)?;
+        let colored = crate::material::colored(&material, base_color, media, None)?;
         let e = run(py, progress, |tick| {
             let s = self.read();
             match &colored {
@@ -365,7 +365,7 @@ impl PySplat {
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
     ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<i32>>)> {
         let m = material.inner;
-        let colored = crate::material::colored(&material, base_color, media)?;
+        let colored = crate::material::colored(&material, base_color, media, None)?;
         let eye = vec3("eye", eye)?;
         let target = vec3("target", target)?;
         let up = match up.filter(|u| !u.is_none()) {

@@ -43,19 +43,40 @@ impl Hierarchy {
         if self.terms.is_some() {
             self.walk_media = media.clone(); // the walks cover every medium (`add_terms`)
         }
-        for (j, material) in media.iter().enumerate() {
-            let share = |f: f32| progress.is_none_or(|p| p((j as f32 + f) / k as f32));
-            let e = self.radiosity_with_progress(material, Some(&share))?;
-            error = match (error, e.error_estimate) {
-                (Some(a), Some(b)) => Some(std::array::from_fn(|c| a[c].max(b[c]))),
-                _ => None,
-            };
-            sums.push(e.values.clone());
-            lookups.push(self.lookups_of(material)?);
-            last = Some(e);
-        }
+        self.own_sent = colors.lobes.as_ref().map(|l| l.sent);
+        let summed = (|| -> Result<()> {
+            for (j, material) in media.iter().enumerate() {
+                let share = |f: f32| progress.is_none_or(|p| p((j as f32 + f) / k as f32));
+                let e = self.radiosity_with_progress(material, Some(&share))?;
+                error = match (error, e.error_estimate) {
+                    (Some(a), Some(b)) => Some(std::array::from_fn(|c| a[c].max(b[c]))),
+                    _ => None,
+                };
+                sums.push(e.values.clone());
+                lookups.push(self.lookups_of(material)?);
+                last = Some(e);
+            }
+            Ok(())
+        })();
+        self.own_sent = None;
+        summed?;
         let mut e = last.ok_or_else(|| Error::InvalidArgument("no media to sum".into()))?;
         e.values = colors.blend(&sums);
+        if let Some(lobes) = &colors.lobes {
+            // Each vertex's diffuse lobe: its Base Color times the light at it, the direct
+            // irradiance and the own light (`receiver_color::Lobes`).
+            let eta = self.settings.profile.irradiance_eta(&media[0]);
+            self.sample_vertices(eta)?;
+            let mut light = match &self.vertex_irradiance {
+                Some((v, _)) => v.clone(),
+                None => return Err(Error::InvalidArgument("no vertex irradiance".into())),
+            };
+            let own = (self.terms.as_ref()).and_then(|t| t.own_irradiance(lobes.sent));
+            for (l, o) in light.iter_mut().zip(own.iter().flatten()) {
+                *l = std::array::from_fn(|c| l[c] + o[c]);
+            }
+            lobes.apply(&mut e.values, &colors.colors, &light);
+        }
         if let Some(err) = error.as_mut() {
             let t = Instant::now();
             let missed = self.blend_error(colors, &lookups)?;

@@ -108,6 +108,9 @@ pub struct Hierarchy {
     /// Media the walks must cover beside the representative (a textured Base Color's media,
     /// `colored`): walked too where its lengths do not reach theirs.
     walk_media: Vec<Material>,
+    /// What the surface sends on to its own light while a Subsurface Weight per vertex is
+    /// evaluated (`receiver_color::Lobes::sent`); None: each material's own.
+    own_sent: Option<[f64; 3]>,
 }
 
 /// Each channel's decay length (infinite where nothing diffuses).
@@ -289,6 +292,7 @@ impl Hierarchy {
             terms: settings.terms.clone().map(terms::Terms::new),
             retrace: false,
             walk_media: Vec::new(),
+            own_sent: None,
             settings,
         })
     }
@@ -769,7 +773,7 @@ impl Hierarchy {
         let resolved = crate::profiles::Resolved::new(ProfileKind::Cycles, material)?;
         let terms = self.terms.as_ref().expect("checked above");
         let mut error = self.report.error_estimate.unwrap_or([0.0; 3]);
-        terms.add_to(values, &resolved, &mut error, false)?;
+        terms.add_to(values, &resolved, &mut error, false, self.own_sent)?;
         if self.report.error_estimate.is_some() {
             self.report.error_estimate = Some(error);
         }

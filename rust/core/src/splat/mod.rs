@@ -956,7 +956,7 @@ impl Splatting {
         let mut added = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];
         let mut error = [0.0; 3];
         // A layer of its own (added to B at each vertex or pixel): signed, floored with B.
-        t.add_to(&mut added, &resolved, &mut error, true)?;
+        t.add_to(&mut added, &resolved, &mut error, true, None)?;
         Ok(Some((added, t.report.clone())))
     }
 

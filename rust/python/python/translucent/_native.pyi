@@ -606,7 +606,12 @@ class Hierarchy:
         "render" (links kept; a light change gathers again over them), "incremental" (links
         kept and re-checked after a material or geometry change). Releases the GIL."""
     def radiosity(
-        self, material: Material, base_color: npt.ArrayLike | None = None, media: int = 2
+        self,
+        material: Material,
+        base_color: npt.ArrayLike | None = None,
+        media: int = 2,
+        progress: Progress | None = None,
+        subsurface_weight: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """B per vertex, (N, 3): what `reference_radiosity` integrates. `base_color`: (N, 3)
         Principled Base Color per vertex (linear RGB, saturated to [0, 1] as Cycles does) for a
@@ -617,16 +622,26 @@ class Hierarchy:
         each scaled by the vertex's own slab total: exact under a light uniform over the
         profile's reach and at a vertex of a medium's colour. `last_eval["error_estimate"]`
         adds what the blend misses, measured at the estimate's receivers against each one's own
-        medium, and the totals' table error. Costs `media` evaluations."""
+        medium, and the totals' table error. Costs `media` evaluations. `subsurface_weight`:
+        (N,) Principled Subsurface Weight per vertex in [0, 1] (Cycles' profile only), with or
+        without `base_color`: the media summed at weight 1 and each vertex taking w of its blend
+        and (1 - w) of the diffuse lobe, (1 - Metallic)(1 - Transmission) times its Base Color
+        times its irradiance plus the own light (the object's own light sent by the vertices'
+        mean of both lobes). `progress(fraction)` as
+        for every long call: False cancels (`Cancelled`), the links of an unfinished refinement
+        dropped, the hierarchy as it was."""
     def radiance(
         self,
         material: Material,
         eye: Vec3 | None = None,
         base_color: npt.ArrayLike | None = None,
         media: int = 2,
+        progress: Progress | None = None,
+        subsurface_weight: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
-        """L = W(w_o) B / pi toward `eye`, or along each normal without one. `base_color` and
-        `media` as `radiosity` (W and Cycles' view factor then the first medium's)."""
+        """L = W(w_o) B / pi toward `eye`, or along each normal without one. `base_color`,
+        `media`, `progress` and `subsurface_weight` as `radiosity` (W and Cycles' view factor
+        then the first medium's)."""
     def update(
         self,
         positions: npt.ArrayLike | None = None,
