@@ -127,15 +127,21 @@ class HierarchyJob(Job):
             self.error = e
 
 
+def per_vertex(job: Job) -> dict:
+    """The job's Base Color and Subsurface Weight per vertex, where read, as the hierarchy's and
+    the splatting's keyword arguments (media blended around each vertex's colour, the lobes
+    split by its weight)."""
+    read = (("base_color", getattr(job, "base_color", None)),
+            ("subsurface_weight", getattr(job, "subsurface_weight", None)))
+    return {k: v for k, v in read if v is not None}
+
+
 def evaluate(job: Job, hierarchy, material) -> None:
     """`hierarchy`'s radiance along the normals for `material` (with the job's Base Color and
     Subsurface Weight per vertex where it has them), kept on the job as `colors` with its
     `last_eval` and `report`
     for the edit that shows it; on the worker thread, stopping when the job is cancelled."""
-    # A Base Color (media blended per vertex) and a Subsurface Weight per vertex, where read.
-    textured = {k: v for k, v in (("base_color", getattr(job, "base_color", None)),
-                                  ("subsurface_weight", getattr(job, "subsurface_weight", None))) if v is not None}
-    job.colors = hierarchy.radiance(material, progress=job._tick, **textured)
+    job.colors = hierarchy.radiance(material, progress=job._tick, **per_vertex(job))
     job.last_eval, job.report = dict(hierarchy.last_eval), dict(hierarchy.report)
 
 
@@ -302,8 +308,7 @@ class SplatJob(Job):
                 splat.update(lights=scene)
             posed = self._change == "deformation" and splat.walks
             self._span = (0.0, POSE_SHARE) if posed else (0.0, 1.0)
-            colours = getattr(self, "base_color", None)
-            textured = {} if colours is None else {"base_color": colours}  # media blended per vertex
+            textured = per_vertex(self)  # media blended per vertex, lobes split by the weight
             colors = splat.radiance(self._material, progress=self._tick, **textured)
             what = {"light": "lights changed: ", "deformation": "posed: "}.get(self._change, "")
             if posed:

@@ -281,9 +281,9 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
     """The Base Color and the Subsurface Weight of `mat` per vertex of the exported scene `info`,
     for a transport built by `method`: read by Cycles (`for_export`) where a link drives them
     and PRT previews them (the weight with Cycles' profile, the one whose lobes it splits), and
-    a linked Radius, Scale and Roughness read to their mean (`read_means`); the hierarchy reads
-    the Base Color, the weight and the means, the splatting the Base Color and the means (not
-    the weight), and the line says so.
+    a linked Radius, Scale and Roughness read to their mean (`read_means`); the hierarchy and
+    the splatting (per vertex) read the Base Color, the weight and the means, and the line
+    says so.
     Where the faces of other materials were exported to scatter
     (`export.export_scene(others_scatter=True)`), their vertices take their own albedo and the
     previewed ones the Base Color. Nothing otherwise."""
@@ -315,10 +315,7 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
         if out.colours is not None and not blended:
             out.materials = representatives(principled_inputs(mat), out.colours, previewed)
         if linked(mat, "Subsurface Weight"):
-            if method == "splat":
-                lines.append("Subsurface Weight: not followed by the splatting yet, the socket's value shown "
-                             "(PRT and the hierarchy follow it)")
-            elif mat.translucent.profile_name() != "cycles":
+            if mat.translucent.profile_name() != "cycles":
                 lines.append("Subsurface Weight: per vertex with Cycles' profile only, the socket's value shown")
             else:
                 grey, line = for_export(mat, info, socket="Subsurface Weight")

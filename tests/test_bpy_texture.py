@@ -184,12 +184,13 @@ def test_a_texture_edit_is_read_again_by_itself(addon, monkeypatch):
     assert len(bakes) == 2 and not np.array_equal(read_preview(objs[0]), now)
 
 
-@pytest.mark.parametrize("method", ["PRT", "HIERARCHY"])
+@pytest.mark.parametrize("method", ["PRT", "HIERARCHY", "SPLAT"])
 def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon, method):
     # The Subsurface Weight from a checker (1 on one square, 0.1 on the other) under a uniform
     # Base Color: where it is low the diffuse lobe beside the walk takes over. Read by Cycles per
-    # vertex and split per vertex (`Prt.radiance(subsurface_weight=...)`, the hierarchy's
-    # `radiance(subsurface_weight=...)`), against Cycles' bake of the same material.
+    # vertex and split per vertex (`Prt.radiance(subsurface_weight=...)`, the hierarchy's and
+    # the splatting's `radiance(subsurface_weight=...)`), against Cycles' bake of the same
+    # material.
     import bpy
     import translucent
     from addon import export, session

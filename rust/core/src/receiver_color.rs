@@ -275,6 +275,18 @@ impl ReceiverColors {
         })
     }
 
+    /// The material vertex `v` scatters as, its own weight included where the lobes are split
+    /// per vertex (the profile's point mass then holds its diffuse lobe): the ground truth of
+    /// its B with every part, where `medium_at` is its medium summed whole.
+    pub fn own_medium_at(&self, v: usize) -> Result<Material> {
+        Material::from_principled(&PrincipledInputs {
+            base_color: self.colors[v].map(f64::from),
+            subsurface_weight: (self.lobes.as_ref())
+                .map_or(self.media[0].subsurface_weight, |l| f64::from(l.weights[v])),
+            ..self.media[0]
+        })
+    }
+
     /// The Material of each medium summed, in `media`' order.
     pub fn materials(&self) -> Result<Vec<Material>> {
         self.media.iter().map(Material::from_principled).collect()

@@ -283,9 +283,12 @@ impl PySplat {
     /// Radiosity B per vertex, (N, 3) float32. `base_color`: an (N, 3) Principled Base Color
     /// per vertex for a material made by `Material.from_principled`: `media` media splatted
     /// and blended around each vertex's colour (`receiver_color`), the estimate taken against
-    /// each estimate receiver's own medium. Releases the GIL; `progress(fraction)` as for every
+    /// each estimate receiver's own medium. `subsurface_weight`: an (N,) Principled Subsurface
+    /// Weight per vertex in [0, 1] (Cycles' profile): the media splatted whole and each
+    /// vertex's lobes split by its weight. Releases the GIL; `progress(fraction)` as for every
     /// long call (False cancels).
-    #[pyo3(signature = (material, progress = None, base_color = None, media = 2))]
+    #[pyo3(signature = (material, progress = None, base_color = None, media = 2,
+        subsurface_weight = None))]
     fn radiosity<'py>(
         &self,
         py: Python<'py>,
@@ -293,9 +296,10 @@ impl PySplat {
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
         base_color: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
+        subsurface_weight: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
-        let colored = crate::material::colored(&material, base_color, media, None)?;
+        let colored = crate::material::colored(&material, base_color, media, subsurface_weight)?;
         let e = run(py, progress, |tick| {
             let s = self.read();
             match &colored {
@@ -312,9 +316,11 @@ impl PySplat {
     }
 
     /// Radiance toward the point `eye`, L = W(w_o) V B / pi, (N, 3) float32; without `eye`,
-    /// along each vertex normal (what a Cycles bake records). `base_color` and `media` as
-    /// `radiosity`.
-    #[pyo3(signature = (material, eye = None, progress = None, base_color = None, media = 2))]
+    /// along each vertex normal (what a Cycles bake records). `base_color`, `media` and
+    /// `subsurface_weight` as `radiosity`.
+    #[pyo3(signature = (material, eye = None, progress = None, base_color = None, media = 2,
+        subsurface_weight = None))]
+    #[allow(clippy::too_many_arguments)]
     fn radiance<'py>(
         &self,
         py: Python<'py>,
@@ -323,10 +329,11 @@ impl PySplat {
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
         base_color: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
+        subsurface_weight: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = material.inner;
         let eye = crate::convert::eye(eye)?;
-        let colored = crate::material::colored(&material, base_color, media, None)?;
+        let colored = crate::material::colored(&material, base_color, media, subsurface_weight)?;
         let e = run(py, progress, |tick| {
             let s = self.read();
             match &colored {

@@ -23,6 +23,8 @@ use std::time::Instant;
 
 /// Each medium with its splatted B at the vertices (half-space, before any layer).
 type Splatted = Vec<(Resolved, Vec<[f32; 3]>)>;
+/// RGB light per vertex.
+type Lights = Vec<[f32; 3]>;
 
 impl Splatting {
     /// Radiosity B per vertex with each vertex's own Base Color (`colors`, built for this
@@ -52,8 +54,9 @@ impl Splatting {
             last = Some(e);
         }
         let mut e = last.ok_or_else(|| Error::InvalidArgument("no media to splat".into()))?;
-        let layers = self.media_layers(&media, Some(&half))?;
-        let blended_half = colors.blend(&half.iter().map(|(_, b)| b.clone()).collect::<Vec<_>>());
+        let layers = self.media_layers(&media, Some(&half), colors)?;
+        let mut blended_half =
+            colors.blend(&half.iter().map(|(_, b)| b.clone()).collect::<Vec<_>>());
         let sums: Vec<Vec<[f32; 3]>> = (half.into_iter().zip(&layers))
             .map(|((_, mut b), layer)| {
                 if let Some((added, _)) = layer {
@@ -63,6 +66,13 @@ impl Splatting {
             })
             .collect();
         e.values = colors.blend(&sums);
+        if let Some(lobes) = &colors.lobes {
+            // Each vertex's diffuse lobe: its Base Color times its irradiance, plus the own
+            // light in the preview (the estimate's ground truth has none: the half-space B).
+            let (direct, light) = self.lobe_light(&media[0], lobes.sent)?;
+            lobes.apply(&mut blended_half, &colors.colors, &direct);
+            lobes.apply(&mut e.values, &colors.colors, &light);
+        }
         if let Some((_, report)) = layers.into_iter().flatten().last() {
             Self::with_terms(&mut e, report);
         }
@@ -83,7 +93,14 @@ impl Splatting {
         let start = Instant::now();
         let media = self.media_of(colors)?;
         let k = media.len() as f32 + 1.0;
-        let layers = self.media_layers(&media, None)?;
+        if colors.lobes.is_some() {
+            return Err(Error::InvalidArgument(
+                "subsurface_weight per vertex is not followed by the splatting's image yet: \
+                 the splatting at the vertices (radiosity, radiance) follows it"
+                    .into(),
+            ));
+        }
+        let layers = self.media_layers(&media, None, colors)?;
         let mut renders = Vec::with_capacity(media.len());
         for (j, (m, layer)) in media.iter().zip(&layers).enumerate() {
             let share = |f: f32| progress.is_none_or(|p| p((j as f32 + f) / k));
@@ -185,6 +202,7 @@ impl Splatting {
         &self,
         media: &[Resolved],
         half: Option<&Splatted>,
+        colors: &ReceiverColors,
     ) -> Result<Vec<Option<Layer>>> {
         let Some(terms) = &self.terms else {
             return Ok(vec![None; media.len()]);
@@ -217,9 +235,44 @@ impl Splatting {
             .enumerate()
             .map(|(j, m)| {
                 let b = half.get(j).map(|(_, b)| b.as_slice());
-                self.layer(&m.material, b, half, None)
+                self.layer(
+                    &m.material,
+                    b,
+                    half,
+                    colors.lobes.as_ref().map(|l| l.sent),
+                    None,
+                )
             })
             .collect()
+    }
+
+    /// The light each vertex's diffuse lobe takes (`receiver_color::Lobes`): the irradiance
+    /// at the vertices (`medium`'s Fresnel index, as its point mass takes it), and that plus,
+    /// with the walks, the object's own light from a surface sending `sent` on.
+    fn lobe_light(&self, medium: &Resolved, sent: [f64; 3]) -> Result<(Lights, Lights)> {
+        let mesh = &self.scene.mesh;
+        let settings = crate::irradiance::IrradianceSettings {
+            eta: medium.irradiance_eta(),
+            ..Default::default()
+        };
+        let (direct, _) = crate::irradiance::irradiance(
+            &self.scene,
+            &self.scene.tracer(),
+            mesh.positions(),
+            mesh.normals(),
+            &settings,
+        )?;
+        let own = (self.terms.as_ref()).and_then(|t| {
+            let t = t.lock().unwrap_or_else(|e| e.into_inner());
+            t.own_irradiance(sent)
+        });
+        let light = match own {
+            Some(own) => (direct.iter().zip(&own))
+                .map(|(d, o)| std::array::from_fn(|c| d[c] + o[c]))
+                .collect(),
+            None => direct.clone(),
+        };
+        Ok((direct, light))
     }
 
     /// `e`'s error estimate: `values` (B per vertex, read at the estimate's vertices) against
@@ -244,10 +297,11 @@ impl Splatting {
         }
         let t = Instant::now();
         // Vertices of one colour share one ground truth call.
-        let mut groups: BTreeMap<[u32; 3], Vec<usize>> = BTreeMap::new();
+        let mut groups: BTreeMap<[u32; 4], Vec<usize>> = BTreeMap::new();
         for (i, &v) in at.iter().enumerate() {
-            let key = colors.colors[v as usize].map(f32::to_bits);
-            groups.entry(key).or_default().push(i);
+            let [r, g, b] = colors.colors[v as usize].map(f32::to_bits);
+            let w = (colors.lobes.as_ref()).map_or(0, |l| l.weights[v as usize].to_bits());
+            groups.entry([r, g, b, w]).or_default().push(i);
         }
         let tracer = self.scene.tracer();
         let links: Vec<_> = (0..self.scene.lights.len())
@@ -256,7 +310,7 @@ impl Splatting {
         let mut truth = vec![[0.0f32; 3]; at.len()];
         let mut level = 0;
         for picks in groups.values() {
-            let medium = colors.medium_at(at[picks[0]] as usize)?;
+            let medium = colors.own_medium_at(at[picks[0]] as usize)?;
             let resolved = Resolved::new(self.profile, &medium)?;
             let rcv: Vec<u32> = picks.iter().map(|&i| at[i]).collect();
             let sources = (

@@ -880,12 +880,14 @@ impl Splatting {
     /// vertices for `material`, when the caller has it. None without the walks.
     /// `beside`: other media with their splatted B (a textured Base Color's, `colored`): the
     /// walks are walked again where they do not cover one, and walk those beside the
-    /// representative (`Terms::update`).
+    /// representative (`Terms::update`). `sent`: what the surface sends on to its own light
+    /// where its vertices' lobes differ (`receiver_color::Lobes::sent`).
     fn layer(
         &self,
         material: &Material,
         halfspace: Option<&[[f32; 3]]>,
         beside: &[(Resolved, Vec<[f32; 3]>)],
+        sent: Option<[f64; 3]>,
         progress: Option<&ProgressFn>,
     ) -> Result<Option<Layer>> {
         let Some(terms) = &self.terms else {
@@ -956,7 +958,7 @@ impl Splatting {
         let mut added = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];
         let mut error = [0.0; 3];
         // A layer of its own (added to B at each vertex or pixel): signed, floored with B.
-        t.add_to(&mut added, &resolved, &mut error, true, None)?;
+        t.add_to(&mut added, &resolved, &mut error, true, sent)?;
         Ok(Some((added, t.report.clone())))
     }
 
@@ -983,7 +985,7 @@ impl Splatting {
             self.reuse.as_ref(),
             progress,
         )?;
-        if let Some((added, report)) = self.layer(material, Some(&e.values), &[], None)? {
+        if let Some((added, report)) = self.layer(material, Some(&e.values), &[], None, None)? {
             add_layer(&mut e.values, &added);
             Self::with_terms(&mut e, report);
             e.seconds = start.elapsed().as_secs_f64();
@@ -1001,7 +1003,7 @@ impl Splatting {
     ) -> Result<Render> {
         let start = Instant::now();
         let resolved = Resolved::new(self.profile, material)?;
-        let layer = self.layer(material, None, &[], None)?;
+        let layer = self.layer(material, None, &[], None, None)?;
         let mut r = render_with_layer(
             &self.scene,
             &resolved,

@@ -485,12 +485,15 @@ class Splat:
         progress: Progress | None = None,
         base_color: npt.ArrayLike | None = None,
         media: int = 2,
+        subsurface_weight: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
         """(N, 3) radiosity B per vertex; Cancelled when `progress` returns False. `base_color`:
         (N, 3) Principled Base Color per vertex for a `Material.from_principled` material, as
         `Hierarchy.radiosity`: `media` media (1-16) splatted and blended around each vertex's
         colour; the estimate is read against each estimate receiver's own medium. `render`
-        takes them too."""
+        takes them too. `subsurface_weight`: (N,) Subsurface Weight per vertex in [0, 1]
+        (Cycles' profile), as `Hierarchy.radiosity`: the media splatted at weight 1 and each
+        vertex's lobes split by its weight (`render` does not take it yet)."""
     def radiance(
         self,
         material: Material,
@@ -498,9 +501,10 @@ class Splat:
         progress: Progress | None = None,
         base_color: npt.ArrayLike | None = None,
         media: int = 2,
+        subsurface_weight: npt.ArrayLike | None = None,
     ) -> npt.NDArray[np.float32]:
-        """(N, 3) radiance toward `eye` (scene units) or along each normal (None); `base_color`
-        and `media` as `radiosity`."""
+        """(N, 3) radiance toward `eye` (scene units) or along each normal (None); `base_color`,
+        `media` and `subsurface_weight` as `radiosity`."""
     def render(
         self,
         material: Material,
