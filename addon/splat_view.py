@@ -193,7 +193,7 @@ class RenderJob(jobs.Job):
             radiance = np.zeros((h, w, 3), np.float32)
             mask = np.zeros((h, w), np.int32)
             objects, reports = [], {}
-            for k, (name, scene, names, profile, material, colours) in enumerate(self.parts):
+            for k, (name, scene, names, profile, material, textured) in enumerate(self.parts):
                 splat = _splat_for(name, scene, names, profile, self.settings)
                 span = (k / len(self.parts), (k + 1) / len(self.parts))
 
@@ -201,7 +201,7 @@ class RenderJob(jobs.Job):
                     self.progress = span[0] + (span[1] - span[0]) * f
                     return not self.cancel
 
-                textured = {} if colours is None else {"base_color": colours}  # media blended per pixel
+                # A Base Color per vertex: media blended per pixel; a weight: lobes split per corner.
                 img, m = splat.render(material, eye=self.view.eye, target=self.view.target, up=self.view.up,
                                       fov=self.view.fov, size=self.view.size, progress=tick, **textured)
                 seen = m > 0
@@ -216,34 +216,46 @@ class RenderJob(jobs.Job):
             self.error = e
 
 
-# Per material: the Base Color read per exported vertex for the image, and what it was read for
-# (the node tree upstream of it and the exported positions), so a moved light or a new view
-# renders again without a bake.
+# Per material: the Base Color and Subsurface Weight read per exported vertex for the image,
+# and what they were read for (the node tree upstream of them, the exported positions and the
+# profile), so a moved light or a new view renders again without a bake.
 _COLOURS: dict[str, tuple] = {}
 
 
-def _base_colours(mat: bpy.types.Material, info, scene) -> np.ndarray | None:
-    """The Base Color per exported vertex where a link drives it (`textures.for_export`, baked by
-    Cycles; read again only when the node tree or the geometry changed), else None; None too
-    where it cannot be read (the note then names it as not followed)."""
+def _per_vertex(mat: bpy.types.Material, info, scene) -> dict:
+    """`Splat.render`'s per-vertex arguments: the Base Color (`base_color`) and, with Cycles'
+    profile, the Subsurface Weight (`subsurface_weight`) per exported vertex where a link drives
+    them (`textures.for_export`, baked by Cycles; read again only when the node tree, the
+    geometry or the profile changed); an input that cannot be read is left out (the note then
+    names it as not followed)."""
     import hashlib
 
     from . import textures
 
-    if not textures.linked(mat, "Base Color"):
+    wanted = [k for k, socket, ok in (("base_color", "Base Color", True),
+                                      ("subsurface_weight", "Subsurface Weight",
+                                       mat.translucent.profile_name() == "cycles"))
+              if ok and textures.linked(mat, socket)]
+    if not wanted:
         _COLOURS.pop(mat.name, None)
-        return None
+        return {}
     positions = np.ascontiguousarray(np.asarray(scene.positions, np.float32))
-    key = (textures.tree_key(mat), hashlib.blake2b(positions.tobytes(), digest_size=16).hexdigest())
+    key = (textures.tree_key(mat), hashlib.blake2b(positions.tobytes(), digest_size=16).hexdigest(), tuple(wanted))
     kept = _COLOURS.get(mat.name)
     if kept is not None and kept[0] == key:
         return kept[1]
-    try:
-        colours, _ = textures.for_export(mat, info)
-    except ValueError:
-        return None
-    _COLOURS[mat.name] = (key, colours)
-    return colours
+    out = {}
+    for k in wanted:
+        try:
+            if k == "base_color":
+                out[k], _ = textures.for_export(mat, info)
+            else:
+                grey, _ = textures.for_export(mat, info, socket="Subsurface Weight")
+                out[k] = np.clip(grey[:, 0], 0.0, 1.0).astype(np.float32)
+        except ValueError:
+            continue
+    _COLOURS[mat.name] = (key, out)
+    return out
 
 
 def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | None = None) -> RenderJob:
@@ -260,16 +272,17 @@ def prepare(bl_scene: bpy.types.Scene, view: View, materials=None, key: tuple | 
             continue
         scene, info = export.export_scene(objects, bl_scene=bl_scene, material=mat)
         s = mat.translucent
-        colours = _base_colours(mat, info, scene) if s.source == "PRINCIPLED" else None
-        parts.append((mat.name, scene, [r.name for r in info.objects], s.profile_name(), s.material(), colours))
+        textured = _per_vertex(mat, info, scene) if s.source == "PRINCIPLED" else {}
+        parts.append((mat.name, scene, [r.name for r in info.objects], s.profile_name(), s.material(), textured))
         connected = principled.connected_inputs(mat) if s.source == "PRINCIPLED" else []
-        if colours is not None:
-            connected = [c for c in connected if not c.startswith("Base Color (")]
+        followed = {"base_color": "Base Color (", "subsurface_weight": "Subsurface Weight ("}
+        connected = [c for c in connected if not any(c.startswith(followed[k]) for k in textured)]
         if connected:
             # Said, not shown silently: the image takes the sockets' own values everywhere.
             notes[mat.name] = {"what": "linked inputs: " + ", ".join(connected),
                                "why": "not followed by the splatting image yet: the socket's own value is "
-                                      "used everywhere (a linked Base Color is followed)"}
+                                      "used everywhere (a linked Base Color and, with Cycles' profile, "
+                                      "Subsurface Weight are followed)"}
     if not parts:
         raise ValueError("no mesh object uses a previewed material")
     settings = bl_scene.translucent_splat

@@ -231,6 +231,25 @@ def test_the_image_follows_a_textured_base_colour_and_names_what_it_does_not(add
     said = [x for x in report["skipped"] if x["what"].startswith("linked inputs")]
     assert len(said) == 1 and "Roughness (Noise Texture)" in said[0]["what"], report["skipped"]
     assert "textures not followed in Checked" in splat_view.STATE["message"]
+    # The checker on the Subsurface Weight instead (0 on one square, 1 on the other; the
+    # Roughness link taken off): followed, not named, and every pixel lies between the images
+    # of weights 0 and 1 typed in.
+    mat.node_tree.links.remove(p.inputs["Roughness"].links[0])
+    mat.node_tree.links.new(checker.outputs["Fac"], p.inputs["Subsurface Weight"])
+    assert bpy.ops.translucent.render_splatting(width=32, height=24) == {"FINISHED"}
+    report = splat_view.STATE["last"].reports[mat.name]
+    assert not [x for x in report["skipped"] if x["what"].startswith("linked inputs")], report["skipped"]
+    weighted = splat_view.STATE["last"].radiance[seen].copy()
+    mat.node_tree.links.remove(p.inputs["Subsurface Weight"].links[0])
+    uniform = []
+    for w in (0.0, 1.0):
+        p.inputs["Subsurface Weight"].default_value = w
+        assert bpy.ops.translucent.render_splatting(width=32, height=24) == {"FINISHED"}
+        uniform.append(splat_view.STATE["last"].radiance[seen].copy())
+    lo, hi = np.minimum(*uniform), np.maximum(*uniform)
+    tol = 0.01 * weighted.max()
+    assert np.all((weighted >= lo - tol) & (weighted <= hi + tol))
+    assert np.abs(uniform[0] - uniform[1]).max() > 5 * tol, "the two weights must differ here"
 
 
 def test_the_splats_drawn_on_the_gpu_give_the_cpus_image(addon):

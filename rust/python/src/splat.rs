@@ -354,9 +354,10 @@ impl PySplat {
     /// height). Returns ((H, W, 3) float32 radiance, row 0 the top; (H, W) int32 mask: the
     /// object seen plus 1, 0 where the pixel sees no previewed object). `base_color` and
     /// `media` as `radiosity` (each pixel blends the media with its triangle's corners'
-    /// weights). Releases the GIL; `progress(fraction)` as for every long call (False cancels).
+    /// weights); `subsurface_weight` too (each corner's diffuse lobe through its exit weight
+    /// toward the eye). Releases the GIL; `progress(fraction)` as for every long call (False cancels).
     #[pyo3(signature = (material, eye, target, up = None, fov = DEFAULT_FOV, size = None, progress = None,
-        base_color = None, media = 2))]
+        base_color = None, media = 2, subsurface_weight = None))]
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn render<'py>(
         &self,
@@ -370,9 +371,10 @@ impl PySplat {
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
         base_color: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = crate::convert::int)] media: i64,
+        subsurface_weight: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<i32>>)> {
         let m = material.inner;
-        let colored = crate::material::colored(&material, base_color, media, None)?;
+        let colored = crate::material::colored(&material, base_color, media, subsurface_weight)?;
         let eye = vec3("eye", eye)?;
         let target = vec3("target", target)?;
         let up = match up.filter(|u| !u.is_none()) {

@@ -14,9 +14,11 @@ use super::{
 };
 use crate::error::{Error, Result};
 use crate::evaluation::Skipped;
+use crate::optics::principled::PrincipledInputs;
+use crate::optics::Material;
 use crate::profiles::Resolved;
 use crate::progress::ProgressFn;
-use crate::receiver_color::ReceiverColors;
+use crate::receiver_color::{Lobes, ReceiverColors};
 use glam::Vec3;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -25,6 +27,8 @@ use std::time::Instant;
 type Splatted = Vec<(Resolved, Vec<[f32; 3]>)>;
 /// RGB light per vertex.
 type Lights = Vec<[f32; 3]>;
+/// `Splatting::image_lobes`.
+type ImageLobes<'a> = (&'a Lobes, (Lights, Lights), Lights, Resolved);
 
 impl Splatting {
     /// Radiosity B per vertex with each vertex's own Base Color (`colors`, built for this
@@ -93,13 +97,6 @@ impl Splatting {
         let start = Instant::now();
         let media = self.media_of(colors)?;
         let k = media.len() as f32 + 1.0;
-        if colors.lobes.is_some() {
-            return Err(Error::InvalidArgument(
-                "subsurface_weight per vertex is not followed by the splatting's image yet: \
-                 the splatting at the vertices (radiosity, radiance) follows it"
-                    .into(),
-            ));
-        }
         let layers = self.media_layers(&media, None, colors)?;
         let mut renders = Vec::with_capacity(media.len());
         for (j, (m, layer)) in media.iter().zip(&layers).enumerate() {
@@ -123,19 +120,50 @@ impl Splatting {
         let tris = self.scene.mesh.triangles();
         let first = &renders[0];
         let mut values = first.evaluation.values.clone();
-        for h in &first.hits {
+        // With a weight per vertex, each corner's weight and colour interpolated at the hit and
+        // its diffuse lobe added there (`Lobes`): below a times the irradiance at the hit (as
+        // a uniform render's point mass takes it) and the own light interpolated from the
+        // corners, through that lobe's exit weight toward the eye.
+        let eye = camera.eye();
+        let lobes = match &colors.lobes {
+            Some(l) => Some(self.image_lobes(l, &media[0], &colors.media[0], &first.hits)?),
+            None => None,
+        };
+        for (i, h) in first.hits.iter().enumerate() {
             let p = h.pixel as usize;
             let [u, v] = h.uv;
             let corners = tris[h.triangle as usize];
+            let bary = [1.0 - u - v, u, v];
+            let diffuse: Option<[f64; 3]> = lobes.as_ref().map(|(l, lights, at_hits, lobe)| {
+                let to_eye = (eye - h.position).normalize_or_zero();
+                let k = lobe.exit_weights(f64::from(h.normal.dot(to_eye)));
+                std::array::from_fn(|c| {
+                    let (mut albedo, mut own) = (0.0, 0.0);
+                    for (&w, &vertex) in bary.iter().zip(&corners) {
+                        let vx = vertex as usize;
+                        let share = f64::from(w) * (1.0 - f64::from(l.weights[vx]));
+                        albedo += share * l.below * f64::from(colors.colors[vx][c]);
+                        own += f64::from(w) * f64::from(lights.1[vx][c] - lights.0[vx][c]);
+                    }
+                    albedo * (f64::from(at_hits[i][c]) + own) * k[c] / std::f64::consts::PI
+                })
+            });
             values[p] = std::array::from_fn(|c| {
                 let at = |m: usize| f64::from(renders[m].evaluation.values[p][c]);
-                let x: f64 = ([1.0 - u - v, u, v].iter().zip(&corners))
-                    .map(|(&w, &vertex)| f64::from(w) * colors.blends[vertex as usize][c].apply(at))
-                    .sum();
+                let x: f64 = (bary.iter().zip(&corners))
+                    .map(|(&w, &vertex)| {
+                        let vx = vertex as usize;
+                        let whole = lobes.as_ref().map_or(1.0, |(l, ..)| l.weights[vx]);
+                        f64::from(w) * f64::from(whole) * colors.blends[vx][c].apply(at)
+                    })
+                    .sum::<f64>()
+                    + diffuse.map_or(0.0, |d| d[c]);
                 x.max(0.0) as f32
             });
         }
-        // B at the estimate's vertices, blended as the vertices' own (the others unread).
+        // B at the estimate's vertices, blended as the vertices' own (the others unread); with
+        // a weight per vertex, its diffuse lobe under the direct light (the ground truth has no
+        // own light).
         let mut at_vertices = vec![[0.0f32; 3]; self.scene.mesh.vertex_count()];
         for (i, &v) in receivers(at_vertices.len(), self.settings.estimate_receivers)
             .iter()
@@ -143,6 +171,9 @@ impl Splatting {
         {
             let sums: Vec<[f64; 3]> = renders.iter().map(|r| r.at_vertices[i]).collect();
             at_vertices[v as usize] = colors.blend_at(v as usize, &sums).map(|x| x as f32);
+        }
+        if let Some((l, (direct, _), ..)) = &lobes {
+            l.apply(&mut at_vertices, &colors.colors, direct);
         }
         let mut out = renders.swap_remove(0);
         out.evaluation.values = values;
@@ -273,6 +304,38 @@ impl Splatting {
             None => direct.clone(),
         };
         Ok((direct, light))
+    }
+
+    /// What the image's diffuse lobes read (`render_colored`): the lobes, the light at the
+    /// vertices (direct, and with the own light: `lobe_light`), the irradiance at each hit, and
+    /// the diffuse lobe's material (weight 0) for its exit weight.
+    fn image_lobes<'a>(
+        &self,
+        lobes: &'a Lobes,
+        medium: &Resolved,
+        inputs: &PrincipledInputs,
+        hits: &[super::camera::PixelHit],
+    ) -> Result<ImageLobes<'a>> {
+        let lights = self.lobe_light(medium, lobes.sent)?;
+        let settings = crate::irradiance::IrradianceSettings {
+            eta: medium.irradiance_eta(),
+            ..Default::default()
+        };
+        let points: Vec<Vec3> = hits.iter().map(|h| h.position).collect();
+        let normals: Vec<Vec3> = hits.iter().map(|h| h.normal).collect();
+        let (at_hits, _) = crate::irradiance::irradiance(
+            &self.scene,
+            &self.scene.tracer(),
+            &points,
+            &normals,
+            &settings,
+        )?;
+        let lobe = PrincipledInputs {
+            subsurface_weight: 0.0,
+            ..*inputs
+        };
+        let lobe = Resolved::new(self.profile, &Material::from_principled(&lobe)?)?;
+        Ok((lobes, lights, at_hits, lobe))
     }
 
     /// `e`'s error estimate: `values` (B per vertex, read at the estimate's vertices) against

@@ -493,7 +493,7 @@ class Splat:
         colour; the estimate is read against each estimate receiver's own medium. `render`
         takes them too. `subsurface_weight`: (N,) Subsurface Weight per vertex in [0, 1]
         (Cycles' profile), as `Hierarchy.radiosity`: the media splatted at weight 1 and each
-        vertex's lobes split by its weight (`render` does not take it yet)."""
+        vertex's lobes split by its weight."""
     def radiance(
         self,
         material: Material,
@@ -516,15 +516,16 @@ class Splat:
         progress: Progress | None = None,
         base_color: npt.ArrayLike | None = None,
         media: int = 2,
+        subsurface_weight: npt.ArrayLike | None = None,
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]:
         """The camera's image: a pinhole at `eye` looking at `target` (scene units), `up` the
         image's up (default +Z), `fov` [rad] across the larger side of `size` = (width, height)
         (default (800, 600); fov's default is Blender's 50 mm lens on its 36 mm sensor). Returns
         the (H, W, 3) radiance toward the eye, row 0 the top (0 off the previewed objects and
         where the rest of the scene stands in front), and an (H, W) mask: the object seen plus
-        1, 0 for none. `base_color` and `media` as `radiosity`: each pixel
+        1, 0 for none. `base_color`, `media` and `subsurface_weight` as `radiosity`: each pixel
         blends the media's radiance with its triangle's corners' weights interpolated at the
-        hit. ValueError naming eye, target, up, fov, size, base_color or media; Cancelled when
+        hit (a corner's diffuse lobe through its exit weight toward the eye). ValueError naming eye, target, up, fov, size, base_color or media; Cancelled when
         `progress` returns False."""
     def update(
         self,
