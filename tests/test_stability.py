@@ -370,3 +370,32 @@ def test_the_stored_operators_relit_stay_finite_non_negative_and_gain_no_energy(
     assert all(math.isfinite(x) and x >= 0 for x in prt.last_eval["error_estimate"])
     rad = prt.radiance(m)
     assert np.all(np.isfinite(rad)) and np.all(rad >= 0)
+
+
+@settings(max_examples=12, deadline=None, derandomize=True)
+@given(colour=st.tuples(*[st.sampled_from([0.0, 1e-4, 0.5, 1.0, 3.0])] * 3),
+       scale=st.sampled_from([1e-5, 1e-3, 0.05, 10.0]), metallic=st.sampled_from([0.0, 0.5, 1.0]),
+       weights=st.sampled_from(["zeros", "ones", "random", "edges"]))
+def test_a_weight_and_colour_per_vertex_in_the_hierarchy_and_the_splatting_stay_bounded(colour, scale, metallic, weights):
+    """A Subsurface Weight and a Base Color per vertex (issue 30 point 2) in the methods that
+    blend media, at stiff inputs: black and over-saturated colours, radii from far below to
+    far above the sphere's size, a metallic layer that leaves nothing below, weights all 0, all
+    1, random and 0/1 alternating. B finite, >= 0 and at most the light that arrives (a slab
+    sends on at most what enters; 10 % for the splats' and the blend's error)."""
+    pos, tri = sphere(6, 0.02)
+    n = len(pos)
+    scene = translucent.Scene(pos, tri)
+    scene.add_sun((0.3, 0.2, -1.0), irradiance=1.0)
+    m = translucent.Material.from_principled(0.5, (1.0, 0.5, 0.25), scale, metallic=metallic)
+    rng = np.random.default_rng(7)
+    w = {"zeros": np.zeros(n), "ones": np.ones(n), "random": rng.random(n),
+         "edges": (np.arange(n) % 2).astype(float)}[weights].astype(np.float32)
+    colours = np.tile(np.asarray(colour, np.float32), (n, 1))
+    colours[::3] = 0.3  # two colours at least: two media
+    for method in (translucent.Hierarchy(scene, m, profile="cycles", estimate_receivers=4),
+                   translucent.Splat(scene, profile="cycles", estimate_receivers=4)):
+        b = method.radiosity(m, base_color=colours, subsurface_weight=w)
+        assert np.all(np.isfinite(b)) and np.all(b >= 0), b
+        assert b.max() <= 1.1, b.max()
+        estimate = method.last_eval["error_estimate"]
+        assert estimate is None or all(math.isfinite(x) and x >= 0 for x in estimate), estimate
