@@ -177,17 +177,24 @@ def test_the_splatting_walks_every_medium(lit):
     assert terms["walks"]["media"] >= 2 and terms["walks_indirect"]["media"] == terms["walks"]["media"]
 
 
-def test_the_splatting_image_blends_the_media_per_pixel():
-    # Two balls, one Base Color each (each ball its own medium, so nothing crosses between
-    # them): two media hold exactly the two colours channel by channel, and every pixel of a
-    # ball is that ball's colour's own uniform render, rendered apart here. (A channel may come
-    # from the other medium's render, whose splats are sized for all its channels: 1e-4 apart.)
+def _two_balls():
+    """Two 2 cm balls 6 cm apart under a sun, each its own object: the Scene and each vertex's
+    object."""
     p1, t1 = sphere(12, 0.02)
     p = np.concatenate([p1 - [0.03, 0, 0], p1 + [0.03, 0, 0]]).astype(np.float32)
     t = np.concatenate([t1, t1 + len(p1)])
     objects = np.repeat([0, 1], len(p1))
     s = translucent.Scene(p, t, objects=objects)
     s.add_sun((0.3, 0.5, -0.8), irradiance=2.0)
+    return s, objects
+
+
+def test_the_splatting_image_blends_the_media_per_pixel():
+    # Two balls, one Base Color each (each ball its own medium, so nothing crosses between
+    # them): two media hold exactly the two colours channel by channel, and every pixel of a
+    # ball is that ball's colour's own uniform render, rendered apart here. (A channel may come
+    # from the other medium's render, whose splats are sized for all its channels: 1e-4 apart.)
+    s, objects = _two_balls()
     a, b = (0.85, 0.45, 0.3), (0.25, 0.4, 0.7)
     colours = np.where(objects[:, None] == 0, a, b).astype(np.float32)
     sp = translucent.Splat(s, profile="dipole", estimate_receivers=4)
@@ -295,12 +302,7 @@ def test_the_splatting_image_follows_a_subsurface_weight_per_vertex():
     uniform render of a material of that ball's weight, whose diffuse lobe is the profile's
     point mass, lit at the pixel's own point as the weighted image lights its diffuse lobe.
     (Interpolated from the corners instead, the light was 1.8 % low on these coarse balls.)"""
-    p1, t1 = sphere(12, 0.02)
-    p = np.concatenate([p1 - [0.03, 0, 0], p1 + [0.03, 0, 0]]).astype(np.float32)
-    t = np.concatenate([t1, t1 + len(p1)])
-    objects = np.repeat([0, 1], len(p1))
-    s = translucent.Scene(p, t, objects=objects)
-    s.add_sun((0.3, 0.5, -0.8), irradiance=2.0)
+    s, objects = _two_balls()
     weights = np.where(objects == 0, 0.1, 0.9).astype(np.float32)
     sp = translucent.Splat(s, profile="cycles", estimate_receivers=4)
     view = dict(eye=(0.0, -0.25, 0.05), target=(0.0, 0.0, 0.0), size=(48, 24))

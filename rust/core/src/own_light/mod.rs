@@ -42,24 +42,6 @@ pub struct Bounce {
 }
 
 impl Bounce {
-    /// Adds the own light for `material` to `radiosity` (per vertex, B of the direct light):
-    /// (R_total + point mass) E_ind scaled per channel by how much more or less light the
-    /// material sends out than the source did, and with `walks` what walks make of E_ind beyond
-    /// that; adds to `error` the walked part's noise, relative to the indirect light (`share`
-    /// of B: `share`).
-    pub fn add_to(
-        &self,
-        radiosity: &mut [[f32; 3]],
-        material: &Resolved,
-        walks: bool,
-        share: f64,
-        error: &mut [f64; 3],
-        signed: bool,
-    ) {
-        let ratio = self.ratio(material.sent_on(1.0));
-        self.add_scaled(radiosity, material, ratio, walks, share, error, signed);
-    }
-
     /// Per channel, how much more or less light a surface sending `sent` on (its slab albedo
     /// seen along the normal, `Resolved::sent_on`, averaged over the vertices where they
     /// differ) sends out than the source did: what E_ind is scaled by.
@@ -73,9 +55,12 @@ impl Bounce {
         })
     }
 
-    /// `add_to` with the indirect light scaled by `ratio` (`Bounce::ratio`) rather than by what
-    /// `material` alone sends on: a surface whose vertices send on different media (another
-    /// material's faces beside the previewed ones) lights the receiver by their mean.
+    /// Adds the own light for `material` to `radiosity` (per vertex, B of the direct light):
+    /// (R_total + point mass) E_ind scaled per channel by `ratio` (`Bounce::ratio`: what the
+    /// surface sends on over what the source did: `material`'s own, or the vertices' mean where
+    /// they send on different media, another material's faces or a weight per vertex), and
+    /// with `walks` what walks make of E_ind beyond that; adds to `error` the walked part's
+    /// noise, relative to the indirect light (`share` of B: `share`).
     #[allow(clippy::too_many_arguments)]
     pub fn add_scaled(
         &self,
