@@ -281,6 +281,7 @@ impl PyHierarchy {
         d.set_item("seconds_estimate", r.seconds_estimate)?;
         d.set_item("seconds", r.seconds)?;
         d.set_item("error_estimate", r.error_estimate.map(|x| x.to_vec()))?;
+        d.set_item("irradiance_noise", r.irradiance_noise.to_vec())?;
         match &r.terms {
             Some(t) => d.set_item("terms", crate::evaluation::terms_dict(py, t)?)?,
             None => d.set_item("terms", py.None())?,

@@ -125,6 +125,36 @@ fn decays(lookup: &[LookupProfile; 3]) -> [f64; 3] {
 }
 
 /// B plus sparse corrections ΔB per vertex (`ring`, `edges`), kept non-negative.
+/// The profile integrated over `face` around `x` (`r`: to its centroid), per channel: what a
+/// unit of the face's irradiance adds to B at `x`. Near the face (within three of its
+/// widths, where the profile's peak lies on it) a midpoint rule on 64 sub-triangles; beyond,
+/// its centroid's value times its area.
+fn face_weight(face: &Triangle, x: glam::DVec3, r: f64, rgb: &LookupRgb) -> [f64; 3] {
+    if r >= 3.0 * face.diam {
+        return rgb.value(r).map(|p| p * face.area);
+    }
+    const N: usize = 8;
+    let [a, b, c] = face.corners;
+    let (u, v) = ((b - a) / N as f64, (c - a) / N as f64);
+    let mut sum = [0.0f64; 3];
+    let mut add = |m: glam::DVec3| {
+        let p = rgb.value((m - x).length());
+        for k in 0..3 {
+            sum[k] += p[k];
+        }
+    };
+    for i in 0..N {
+        for j in 0..N - i {
+            let o = a + u * i as f64 + v * j as f64;
+            add(o + (u + v) / 3.0);
+            if i + j + 1 < N {
+                add(o + (u + v) * (2.0 / 3.0));
+            }
+        }
+    }
+    sum.map(|s| s * face.area / (N * N) as f64)
+}
+
 fn add_corrections(out: &mut [[f32; 3]], delta: Vec<(u32, [f64; 3])>) {
     for (v, d) in delta {
         let o = &mut out[v as usize];
@@ -982,10 +1012,103 @@ impl Hierarchy {
             );
         }
         report.seconds_push += t.elapsed().as_secs_f64();
+        // The sampled irradiance's own noise (the bounce off the rest of the scene, area
+        // lights, a traced world), carried through the profile to the estimate's receivers.
+        if let Some(err) = report.error_estimate.as_mut() {
+            let t = Instant::now();
+            let noise = self.irradiance_noise(&out);
+            report.irradiance_noise = noise;
+            for c in 0..3 {
+                err[c] += noise[c];
+            }
+            report.seconds_estimate += t.elapsed().as_secs_f64();
+        }
         report.seconds = start.elapsed().as_secs_f64();
         tick(progress, 1.0)?;
         self.report = report;
         Ok(out)
+    }
+
+    /// What the sampled irradiance's noise leaves in B (`b` per vertex), as a relative RMS per
+    /// channel at `estimate_receivers` vertices spread over the mesh: each face's standard error
+    /// (`PerSource::sampling_error`, its sub-points taken as independent) carried to the
+    /// receiver by the profile over the face's area, Var B(x) = sum_f (R(|x - c_f|) A_f
+    /// sigma_f)^2, and the point mass's share of the vertex's own error. Zero where nothing is
+    /// sampled (suns, points and spots are exact up to their shadows).
+    fn irradiance_noise(&self, b: &[[f32; 3]]) -> [f64; 3] {
+        let Some((_, lookup, rgb)) = &self.profiles else {
+            return [0.0; 3];
+        };
+        let sub = self.face_sources.sampling_error();
+        if sub.iter().all(|e| e.iter().all(|x| *x == 0.0)) {
+            return [0.0; 3];
+        }
+        // Per face: its sub-points' errors, each standing for its share of the face.
+        let mut next = sub.iter();
+        let faces: Vec<[f64; 3]> = (self.split.iter())
+            .map(|&four| {
+                let k = if four { 4 } else { 1 };
+                let mut var = [0.0f64; 3];
+                for _ in 0..k {
+                    let e = next.next().copied().unwrap_or([0.0; 3]);
+                    for c in 0..3 {
+                        var[c] += (f64::from(e[c]) / k as f64).powi(2);
+                    }
+                }
+                var.map(f64::sqrt)
+            })
+            .collect();
+        let vertex_error = self.vertex_sources.sampling_error();
+        let masses: [f64; 3] = match &self.profiles {
+            Some((_, p, _)) => std::array::from_fn(|c| p[c].point_mass()),
+            None => [0.0; 3],
+        };
+        let n = b.len();
+        let k = self.settings.estimate_receivers.min(n);
+        if k == 0 {
+            return [0.0; 3];
+        }
+        let step = n as f64 / k as f64;
+        let picks: Vec<usize> = (0..k).map(|i| (i as f64 * step) as usize).collect();
+        let positions = self.scene.mesh.positions();
+        let areas = self.scene.mesh.vertex_areas();
+        let object = |v: usize| self.scene.mesh.object_of_vertex(v);
+        let support = lookup.iter().map(|p| p.support()).fold(0.0, f64::max);
+        let per_pick: Vec<(f64, [f64; 3], [f64; 3])> = picks
+            .par_iter()
+            .map(|&v| {
+                let x = positions[v].as_dvec3();
+                let mut var = [0.0f64; 3];
+                for (f, face) in self.faces.iter().enumerate() {
+                    let r = (face.centroid - x).length();
+                    if r - face.diam >= support
+                        || self.scene.mesh.object_of_triangle(f) != object(v)
+                    {
+                        continue;
+                    }
+                    let w = face_weight(face, x, r, rgb);
+                    for c in 0..3 {
+                        var[c] += (w[c] * faces[f][c]).powi(2);
+                    }
+                }
+                if let Some(e) = vertex_error.get(v) {
+                    for c in 0..3 {
+                        var[c] += (masses[c] * f64::from(e[c])).powi(2);
+                    }
+                }
+                (f64::from(areas[v]), var, b[v].map(f64::from))
+            })
+            .collect();
+        std::array::from_fn(|c| {
+            let (num, den) = per_pick.iter().fold((0.0, 0.0), |(n, d), (a, var, bv)| {
+                (n + a * var[c], d + a * bv[c] * bv[c])
+            });
+            if den > 0.0 {
+                (num / den).sqrt()
+            } else {
+                0.0
+            }
+        })
     }
 
     /// B at the rim's vertices (every vertex with `Receivers::Vertices`), each refined from the

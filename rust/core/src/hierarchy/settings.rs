@@ -134,8 +134,13 @@ pub struct HierarchyReport {
     pub seconds: f64,
     /// Area-weighted relative RMS per channel between the receivers' radiosity and the same
     /// recomputed with ε/4 on `estimate_receivers` of them (vertices or faces); None when `estimate_receivers` is 0
-    /// (no estimate computed, never a made-up zero). With the walks on, their noise added.
+    /// (no estimate computed, never a made-up zero). The sampled irradiance's noise added
+    /// (`irradiance_noise`), and with the walks on, theirs.
     pub error_estimate: Option<[f64; 3]>,
+    /// What the sampled irradiance's noise (the bounce off the rest of the scene, area lights,
+    /// a traced world) leaves in B at the estimate's receivers, relative RMS per channel; 0
+    /// where nothing is sampled or no estimate is computed.
+    pub irradiance_noise: [f64; 3],
     /// The walks' term and the own light, when on (`HierarchySettings::terms`).
     pub terms: Option<crate::surface_terms::TermReport>,
 }

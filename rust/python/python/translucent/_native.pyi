@@ -676,8 +676,8 @@ class Hierarchy:
         """The last evaluation: links, far_links, near_links, links_per_face, split_faces, edge_faces
         (split faces resolved finer along a shadow's edge), clusters, faces,
         depth, oracle_tests, relinked, rays, seconds per phase (build, refit, irradiance, pull,
-        links, push, estimate) and in all, error_estimate per channel (the walks' noise
-        added), terms (None with walks off; else walks, walks_indirect, own_light_rays,
+        links, push, estimate) and in all, error_estimate per channel (the sampled irradiance's
+        noise, irradiance_noise, and the walks' added), terms (None with walks off; else walks, walks_indirect, own_light_rays,
         own_light_share, carried_pose, seconds)."""
 
 @overload
