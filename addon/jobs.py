@@ -156,10 +156,10 @@ class EditJob(Job):
     supersedable = True
     label = "Evaluating the edit in the background"
 
-    def __init__(self, hierarchy, material, key, base_color=None):
+    def __init__(self, hierarchy, material, key):
         super().__init__(None, [material])
         self._hierarchy, self._material = hierarchy, material
-        self.key, self.base_color = key, base_color
+        self.key = key
         self.colors = self.last_eval = self.report = None
 
     def _run(self, scene, materials, kwargs):

@@ -247,11 +247,8 @@ def _per_vertex(mat: bpy.types.Material, info, scene) -> dict:
     out = {}
     for k in wanted:
         try:
-            if k == "base_color":
-                out[k], _ = textures.for_export(mat, info)
-            else:
-                grey, _ = textures.for_export(mat, info, socket="Subsurface Weight")
-                out[k] = np.clip(grey[:, 0], 0.0, 1.0).astype(np.float32)
+            read = textures.for_export if k == "base_color" else textures.weights_for_export
+            out[k], _ = read(mat, info)
         except ValueError:
             continue
     _COLOURS[mat.name] = (key, out)

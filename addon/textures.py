@@ -161,6 +161,14 @@ def for_export(mat: bpy.types.Material, info, depsgraph=None, socket: str = "Bas
                      f"in {1000 * seconds:.0f} ms")
 
 
+def weights_for_export(mat: bpy.types.Material, info) -> tuple[np.ndarray, str]:
+    """The Subsurface Weight per exported vertex (`for_export`: its link converted to a value as
+    Blender converts it for the Principled input, saturated to [0, 1] as Cycles does), (N,)
+    float32, and the panel's line about it."""
+    grey, line = for_export(mat, info, socket="Subsurface Weight")
+    return np.clip(grey[:, 0], 0.0, 1.0).astype(np.float32), line
+
+
 @dataclass
 class Reading:
     """What `read` found: the Base Color per exported vertex and the Subsurface Weight (each
@@ -318,8 +326,7 @@ def read(mat: bpy.types.Material, info, method: str) -> Reading:
             if mat.translucent.profile_name() != "cycles":
                 lines.append("Subsurface Weight: per vertex with Cycles' profile only, the socket's value shown")
             else:
-                grey, line = for_export(mat, info, socket="Subsurface Weight")
-                out.weights = np.clip(grey[:, 0], 0.0, 1.0).astype(np.float32)
+                out.weights, line = weights_for_export(mat, info)
                 lines.append(line)
     except ValueError as e:
         return Reading(message=f"{names} not read per vertex ({e}): the socket's value shown")

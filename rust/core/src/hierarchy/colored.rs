@@ -43,23 +43,19 @@ impl Hierarchy {
         if self.terms.is_some() {
             self.walk_media = media.clone(); // the walks cover every medium (`add_terms`)
         }
-        self.own_sent = colors.lobes.as_ref().map(|l| l.sent);
-        let summed = (|| -> Result<()> {
-            for (j, material) in media.iter().enumerate() {
-                let share = |f: f32| progress.is_none_or(|p| p((j as f32 + f) / k as f32));
-                let e = self.radiosity_with_progress(material, Some(&share))?;
-                error = match (error, e.error_estimate) {
-                    (Some(a), Some(b)) => Some(std::array::from_fn(|c| a[c].max(b[c]))),
-                    _ => None,
-                };
-                sums.push(e.values.clone());
-                lookups.push(self.lookups_of(material)?);
-                last = Some(e);
-            }
-            Ok(())
-        })();
-        self.own_sent = None;
-        summed?;
+        // With a weight per vertex the own light is sent by the vertices' mean of both lobes.
+        let sent = colors.lobes.as_ref().map(|l| l.sent);
+        for (j, material) in media.iter().enumerate() {
+            let share = |f: f32| progress.is_none_or(|p| p((j as f32 + f) / k as f32));
+            let e = self.radiosity_sending(material, sent, Some(&share))?;
+            error = match (error, e.error_estimate) {
+                (Some(a), Some(b)) => Some(std::array::from_fn(|c| a[c].max(b[c]))),
+                _ => None,
+            };
+            sums.push(e.values.clone());
+            lookups.push(self.lookups_of(material)?);
+            last = Some(e);
+        }
         let mut e = last.ok_or_else(|| Error::InvalidArgument("no media to sum".into()))?;
         e.values = colors.blend(&sums);
         if let Some(lobes) = &colors.lobes {
@@ -118,13 +114,10 @@ impl Hierarchy {
         colors: &ReceiverColors,
         lookups: &[([LookupProfile; 3], LookupRgb)],
     ) -> Result<[f64; 3]> {
-        let n = self.scene.mesh.vertex_count();
-        let k = self.settings.estimate_receivers.min(n);
-        if k == 0 {
+        let picks = self.estimate_vertices();
+        if picks.is_empty() {
             return Ok([0.0; 3]);
         }
-        let step = n as f64 / k as f64;
-        let picks: Vec<usize> = (0..k).map(|i| (i as f64 * step) as usize).collect();
         let positions = self.scene.mesh.positions();
         let areas = self.scene.mesh.vertex_areas();
         let pairs: Vec<(f64, [f64; 3], [f64; 3])> = picks

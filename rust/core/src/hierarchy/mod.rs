@@ -108,9 +108,6 @@ pub struct Hierarchy {
     /// Media the walks must cover beside the representative (a textured Base Color's media,
     /// `colored`): walked too where its lengths do not reach theirs.
     walk_media: Vec<Material>,
-    /// What the surface sends on to its own light while a Subsurface Weight per vertex is
-    /// evaluated (`receiver_color::Lobes::sent`); None: each material's own.
-    own_sent: Option<[f64; 3]>,
 }
 
 /// Each channel's decay length (infinite where nothing diffuses).
@@ -125,6 +122,14 @@ fn decays(lookup: &[LookupProfile; 3]) -> [f64; 3] {
 }
 
 /// B plus sparse corrections ΔB per vertex (`ring`, `edges`), kept non-negative.
+/// `k` of `n` indices (all where `k` >= `n`) spread evenly through 0..n: the receivers an
+/// estimate reads.
+fn spread(n: usize, k: usize) -> Vec<usize> {
+    let k = k.min(n);
+    let step = n as f64 / k.max(1) as f64;
+    (0..k).map(|i| (i as f64 * step) as usize).collect()
+}
+
 /// The profile integrated over `face` around `x` (`r`: to its centroid), per channel: what a
 /// unit of the face's irradiance adds to B at `x`. Near the face (within three of its
 /// widths, where the profile's peak lies on it) a midpoint rule on 64 sub-triangles; beyond,
@@ -322,7 +327,6 @@ impl Hierarchy {
             terms: settings.terms.clone().map(terms::Terms::new),
             retrace: false,
             walk_media: Vec::new(),
-            own_sent: None,
             settings,
         })
     }
@@ -654,6 +658,18 @@ impl Hierarchy {
         material: &Material,
         progress: Option<&ProgressFn>,
     ) -> Result<Evaluation> {
+        self.radiosity_sending(material, None, progress)
+    }
+
+    /// `radiosity_with_progress` with the object's own light sent by `sent` (what the surface
+    /// sends on where its vertices' lobes differ, `receiver_color::Lobes::sent`); None: by
+    /// what `material` sends on.
+    fn radiosity_sending(
+        &mut self,
+        material: &Material,
+        sent: Option<[f64; 3]>,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Evaluation> {
         let needs_terms = self
             .terms
             .as_ref()
@@ -666,7 +682,7 @@ impl Hierarchy {
         let mut values = self.radiosity_values(material, progress.map(|_| &direct as _))?;
         if self.terms.is_some() {
             let rest = stage(progress, 0.2, 1.0);
-            self.add_terms(material, &mut values, progress.map(|_| &rest as _))?;
+            self.add_terms(material, sent, &mut values, progress.map(|_| &rest as _))?;
         }
         Ok(Evaluation {
             values,
@@ -755,9 +771,11 @@ impl Hierarchy {
     /// Adds the walks' term and the own light for `material` to `values` (B per vertex), and
     /// their noise to the error estimate; carries (or walks, the first time or after
     /// `retrace_terms`) them to the current light and shape first, for the representative.
+    /// `sent`: as `radiosity_sending`.
     fn add_terms(
         &mut self,
         material: &Material,
+        sent: Option<[f64; 3]>,
         values: &mut [[f32; 3]],
         progress: Option<&ProgressFn>,
     ) -> Result<()> {
@@ -803,7 +821,7 @@ impl Hierarchy {
         let resolved = crate::profiles::Resolved::new(ProfileKind::Cycles, material)?;
         let terms = self.terms.as_ref().expect("checked above");
         let mut error = self.report.error_estimate.unwrap_or([0.0; 3]);
-        terms.add_to(values, &resolved, &mut error, false, self.own_sent)?;
+        terms.add_to(values, &resolved, &mut error, false, sent)?;
         if self.report.error_estimate.is_some() {
             self.report.error_estimate = Some(error);
         }
@@ -1029,12 +1047,20 @@ impl Hierarchy {
         Ok(out)
     }
 
+    /// The `estimate_receivers` vertices an estimate at the vertices reads (`spread`).
+    fn estimate_vertices(&self) -> Vec<usize> {
+        spread(
+            self.scene.mesh.vertex_count(),
+            self.settings.estimate_receivers,
+        )
+    }
+
     /// What the sampled irradiance's noise leaves in B (`b` per vertex), as a relative RMS per
-    /// channel at `estimate_receivers` vertices spread over the mesh: each face's standard error
+    /// channel at the estimate's vertices (`estimate_vertices`): each face's standard error
     /// (`PerSource::sampling_error`, its sub-points taken as independent) carried to the
-    /// receiver by the profile over the face's area, Var B(x) = sum_f (R(|x - c_f|) A_f
-    /// sigma_f)^2, and the point mass's share of the vertex's own error. Zero where nothing is
-    /// sampled (suns, points and spots are exact up to their shadows).
+    /// receiver by the profile over the face (`face_weight`), Var B(x) = sum_f (int_f
+    /// R(|x - y|) dy sigma_f)^2, and the point mass's share of the vertex's own error. Zero
+    /// where nothing is sampled (suns, points and spots are exact up to their shadows).
     fn irradiance_noise(&self, b: &[[f32; 3]]) -> [f64; 3] {
         let Some((_, lookup, rgb)) = &self.profiles else {
             return [0.0; 3];
@@ -1059,17 +1085,11 @@ impl Hierarchy {
             })
             .collect();
         let vertex_error = self.vertex_sources.sampling_error();
-        let masses: [f64; 3] = match &self.profiles {
-            Some((_, p, _)) => std::array::from_fn(|c| p[c].point_mass()),
-            None => [0.0; 3],
-        };
-        let n = b.len();
-        let k = self.settings.estimate_receivers.min(n);
-        if k == 0 {
+        let masses: [f64; 3] = std::array::from_fn(|c| lookup[c].point_mass());
+        let picks = self.estimate_vertices();
+        if picks.is_empty() {
             return [0.0; 3];
         }
-        let step = n as f64 / k as f64;
-        let picks: Vec<usize> = (0..k).map(|i| (i as f64 * step) as usize).collect();
         let positions = self.scene.mesh.positions();
         let areas = self.scene.mesh.vertex_areas();
         let object = |v: usize| self.scene.mesh.object_of_vertex(v);
@@ -1186,13 +1206,11 @@ impl Hierarchy {
     /// over the mesh refined again with ε/4, their area-weighted relative RMS against `b` (B
     /// at `self.rim`, which is then every vertex).
     fn estimate_at_vertices(&self, b: &[[f64; 3]]) -> Option<[f64; 3]> {
-        let k = self.settings.estimate_receivers.min(self.rim.len());
+        let picks = spread(self.rim.len(), self.settings.estimate_receivers);
         let (_, lookup, rgb) = self.profiles.as_ref()?;
-        if k == 0 {
+        if picks.is_empty() {
             return None;
         }
-        let step = self.rim.len() as f64 / k as f64;
-        let picks: Vec<usize> = (0..k).map(|i| (i as f64 * step) as usize).collect();
         let ctx = self.context(lookup, rgb, true, 0.25);
         let positions = self.scene.mesh.positions();
         let areas = self.scene.mesh.vertex_areas();

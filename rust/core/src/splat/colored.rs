@@ -73,8 +73,11 @@ impl Splatting {
         if let Some(lobes) = &colors.lobes {
             // Each vertex's diffuse lobe: its Base Color times its irradiance, plus the own
             // light in the preview (the estimate's ground truth has none: the half-space B).
-            let (direct, light) = self.lobe_light(&media[0], lobes.sent)?;
+            let (direct, own) = self.lobe_light(&media[0], lobes.sent)?;
             lobes.apply(&mut blended_half, &colors.colors, &direct);
+            let light: Lights = (direct.iter().zip(&own))
+                .map(|(d, o)| std::array::from_fn(|c| d[c] + o[c]))
+                .collect();
             lobes.apply(&mut e.values, &colors.colors, &light);
         }
         if let Some((_, report)) = layers.into_iter().flatten().last() {
@@ -143,7 +146,7 @@ impl Splatting {
                         let vx = vertex as usize;
                         let share = f64::from(w) * (1.0 - f64::from(l.weights[vx]));
                         albedo += share * l.below * f64::from(colors.colors[vx][c]);
-                        own += f64::from(w) * f64::from(lights.1[vx][c] - lights.0[vx][c]);
+                        own += f64::from(w) * f64::from(lights.1[vx][c]);
                     }
                     albedo * (f64::from(at_hits[i][c]) + own) * k[c] / std::f64::consts::PI
                 })
@@ -277,38 +280,40 @@ impl Splatting {
             .collect()
     }
 
-    /// The light each vertex's diffuse lobe takes (`receiver_color::Lobes`): the irradiance
-    /// at the vertices (`medium`'s Fresnel index, as its point mass takes it), and that plus,
-    /// with the walks, the object's own light from a surface sending `sent` on.
+    /// The light each vertex's diffuse lobe takes (`receiver_color::Lobes`): the irradiance at
+    /// the vertices (`irradiance_at`), and the object's own light there from a surface sending
+    /// `sent` on (zero without the walks).
     fn lobe_light(&self, medium: &Resolved, sent: [f64; 3]) -> Result<(Lights, Lights)> {
         let mesh = &self.scene.mesh;
+        let direct = self.irradiance_at(medium, mesh.positions(), mesh.normals())?;
+        let own = (self.terms.as_ref())
+            .and_then(|t| {
+                let t = t.lock().unwrap_or_else(|e| e.into_inner());
+                t.own_irradiance(sent)
+            })
+            .unwrap_or_else(|| vec![[0.0; 3]; direct.len()]);
+        Ok((direct, own))
+    }
+
+    /// The irradiance at `points` (their shading `normals`) from this splatting's scene, with
+    /// `medium`'s Fresnel index, as its point mass takes it.
+    fn irradiance_at(
+        &self,
+        medium: &Resolved,
+        points: &[Vec3],
+        normals: &[Vec3],
+    ) -> Result<Lights> {
         let settings = crate::irradiance::IrradianceSettings {
             eta: medium.irradiance_eta(),
             ..Default::default()
         };
-        let (direct, _) = crate::irradiance::irradiance(
-            &self.scene,
-            &self.scene.tracer(),
-            mesh.positions(),
-            mesh.normals(),
-            &settings,
-        )?;
-        let own = (self.terms.as_ref()).and_then(|t| {
-            let t = t.lock().unwrap_or_else(|e| e.into_inner());
-            t.own_irradiance(sent)
-        });
-        let light = match own {
-            Some(own) => (direct.iter().zip(&own))
-                .map(|(d, o)| std::array::from_fn(|c| d[c] + o[c]))
-                .collect(),
-            None => direct.clone(),
-        };
-        Ok((direct, light))
+        let tracer = self.scene.tracer();
+        Ok(crate::irradiance::irradiance(&self.scene, &tracer, points, normals, &settings)?.0)
     }
 
     /// What the image's diffuse lobes read (`render_colored`): the lobes, the light at the
-    /// vertices (direct, and with the own light: `lobe_light`), the irradiance at each hit, and
-    /// the diffuse lobe's material (weight 0) for its exit weight.
+    /// vertices (`lobe_light`: direct, own), the irradiance at each hit, and the diffuse lobe's
+    /// material (weight 0) for its exit weight.
     fn image_lobes<'a>(
         &self,
         lobes: &'a Lobes,
@@ -317,19 +322,9 @@ impl Splatting {
         hits: &[super::camera::PixelHit],
     ) -> Result<ImageLobes<'a>> {
         let lights = self.lobe_light(medium, lobes.sent)?;
-        let settings = crate::irradiance::IrradianceSettings {
-            eta: medium.irradiance_eta(),
-            ..Default::default()
-        };
         let points: Vec<Vec3> = hits.iter().map(|h| h.position).collect();
         let normals: Vec<Vec3> = hits.iter().map(|h| h.normal).collect();
-        let (at_hits, _) = crate::irradiance::irradiance(
-            &self.scene,
-            &self.scene.tracer(),
-            &points,
-            &normals,
-            &settings,
-        )?;
+        let at_hits = self.irradiance_at(medium, &points, &normals)?;
         let lobe = PrincipledInputs {
             subsurface_weight: 0.0,
             ..*inputs
