@@ -208,8 +208,13 @@ class RelightJob(Job):
         try:
             try:
                 r = self._previous.update(lights=scene, progress=self._tick)
+                # One light's power or colour alone: its own rows added (summed once, then kept).
+                layer = ""
+                if r.get("rows_from_layer"):
+                    layer = (f", the light's own rows summed in {r['seconds_layer']:.2f} s" if r["seconds_layer"] > 0
+                             else ", the light's own rows reused")
                 self.stage_message = (f"relit: {r['seconds']:.2f} s, {r['walks_traced']} walks traced, "
-                                      f"{r['rays'] + r['own_light_rays']:,} rays")
+                                      f"{r['rays'] + r['own_light_rays']:,} rays{layer}")
                 self.result = self._previous
             except ValueError as e:
                 self.result = translucent.Prt(scene, materials, progress=self._tick, **kwargs)

@@ -91,6 +91,7 @@ def main() -> int:
         kept[profile] = (prt, statistics.median(times))
     first_preview(scene, marble, kept["cycles"][0], args)
     relight(p, t, marble, kept, args)
+    power_drag(p, t, marble, kept, args)
     pose(p, t, marble, kept["cycles"][0], args)
     floor_bounce(p, t, marble, args)
 
@@ -189,12 +190,12 @@ def first_preview(scene, marble, full, args) -> None:
     )
 
 
-def moved_scene(positions, triangles, turn: float, across: float) -> translucent.Scene:
+def moved_scene(positions, triangles, turn: float, across: float, power: float = 1.0) -> translucent.Scene:
     """The benchmark lighting with the sun turned by `turn` radians about the vertical and the
-    point light moved by `across` diagonals along x."""
+    point light moved by `across` diagonals along x, its power times `power`."""
     scene = translucent.Scene(positions, triangles)
     diag = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
-    scene.add_point_light(((0.6 + across) * diag, -1.0 * diag, 1.2 * diag), power=110.0 * diag**2)
+    scene.add_point_light(((0.6 + across) * diag, -1.0 * diag, 1.2 * diag), power=power * 110.0 * diag**2)
     c, s = np.cos(turn), np.sin(turn)
     scene.add_sun(direction=(0.5 * c - 0.6 * s, 0.5 * s + 0.6 * c, -0.62), irradiance=2.0)
     return scene
@@ -229,6 +230,30 @@ def relight(positions, triangles, marble, kept, args) -> None:
             f"against a fresh precompute: rel. RMS {', '.join(f'{100 * x:.2f}' for x in between['rms'])} % "
             f"(estimates: updated {', '.join(f'{x:.2f}' for x in est)} %, fresh "
             f"{', '.join(f'{x:.2f}' for x in fresh_est)} %)"
+        )
+
+
+def power_drag(positions, triangles, marble, kept, args) -> None:
+    """The point light's power dragged, the sun as it was (one source's emission alone,
+    `light_layer`): the first update sums that light's own rows, the next ones add them
+    scaled; median of the later ones, and the last against a fresh precompute under it."""
+    powers = [1.0 + 0.25 * (k + 1) for k in range(max(args.runs, 2) + 1)]
+    for profile, (prt, _) in kept.items():
+        prt.update(lights=moved_scene(positions, triangles, 0.0, 0.0))
+        reports = [prt.update(lights=moved_scene(positions, triangles, 0.0, 0.0, power=w)) for w in powers]
+        first, later = reports[0], reports[1:]
+        last = moved_scene(positions, triangles, 0.0, 0.0, power=powers[-1])
+        fresh = translucent.Prt(last, marble, coefficients=32, profile=profile, single_scattering=False)
+        between = translucent.relative_error(prt.radiance(marble), fresh.radiance(marble), last.vertex_areas)
+        r = later[len(later) // 2]
+        print(
+            f"update(lights=...), bunny, marble, {profile}: the point light's power alone dragged (x1.25 to "
+            f"x{powers[-1]:.2f}, the sun unchanged): the first update {first['seconds']:.2f} s (its layer's rows "
+            f"{first['seconds_layer']:.2f} s), then median {statistics.median(x['seconds'] for x in later):.3f} s over "
+            f"{len(later)} (rays {r['rays']}, transport {r['seconds_transport']:.3f} s, walks' term "
+            f"{r['seconds_walks']:.3f} s, the object's own light {r['seconds_own_light']:.3f} s, "
+            f"rows from the layer: {all(x['rows_from_layer'] for x in reports)}); against a fresh precompute: "
+            f"rel. RMS {', '.join(f'{100 * x:.2f}' for x in between['rms'])} %"
         )
 
 

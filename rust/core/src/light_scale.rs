@@ -57,6 +57,45 @@ pub fn common_scale(
     Some(k.map(|x| x.unwrap_or(1.0)))
 }
 
+/// Which source of a scene: its light at this place in `lights`, or its world.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Which {
+    Light(usize),
+    World,
+}
+
+/// Whether the new lights are the old ones with exactly one source's emission scaled (one
+/// light, or the world), every other light and the world unchanged: that source and the
+/// factor per channel k (new = k old for it, `common_scale`). None where nothing changed,
+/// more than one source changed, or anything but an emission did.
+pub fn one_source_scaled(
+    old_lights: &[Light],
+    old_world: &World,
+    new_lights: &[Light],
+    new_world: &World,
+) -> Option<(Which, [f32; 3])> {
+    if old_lights.len() != new_lights.len() {
+        return None;
+    }
+    let mut changed = (0..old_lights.len())
+        .filter(|&i| old_lights[i] != new_lights[i])
+        .map(Which::Light)
+        .chain((old_world != new_world).then_some(Which::World));
+    let (Some(which), None) = (changed.next(), changed.next()) else {
+        return None;
+    };
+    let k = match which {
+        Which::Light(i) => common_scale(
+            std::slice::from_ref(&old_lights[i]),
+            &World::Black,
+            std::slice::from_ref(&new_lights[i]),
+            &World::Black,
+        ),
+        Which::World => common_scale(&[], old_world, &[], new_world),
+    }?;
+    Some((which, k))
+}
+
 /// The two emissions when `a` and `b` are the same light but for it.
 fn same_but_emission(a: &Light, b: &Light) -> Option<([f32; 3], [f32; 3])> {
     use Light::*;
@@ -165,5 +204,30 @@ mod tests {
         assert_eq!(common_scale(&old, &w, &old[..1], &w), None);
         assert_eq!(common_scale(&old, &w, &old, &World::Black), None);
         assert_eq!(common_scale(&old, &w, &old, &w), Some([1.0; 3]));
+    }
+
+    #[test]
+    fn one_source_scaled_names_the_one_light_or_world_that_changed_its_emission_only() {
+        let old = [key([5.0; 3], 0.0), sun([2.0, 2.0, 0.0])];
+        let w = World::Uniform([0.1; 3]);
+        let brighter_sun = [key([5.0; 3], 0.0), sun([3.0, 1.0, 0.0])];
+        assert_eq!(
+            one_source_scaled(&old, &w, &brighter_sun, &w),
+            Some((Which::Light(1), [1.5, 0.5, 1.0]))
+        );
+        let dim_world = World::Uniform([0.05, 0.1, 0.2]);
+        assert_eq!(
+            one_source_scaled(&old, &w, &old, &dim_world),
+            Some((Which::World, [0.5, 1.0, 2.0]))
+        );
+        // Nothing changed, two sources changed, a light moved, light where there was none,
+        // another count: not one source's rescale.
+        assert_eq!(one_source_scaled(&old, &w, &old, &w), None);
+        assert_eq!(one_source_scaled(&old, &w, &brighter_sun, &dim_world), None);
+        let moved = [key([5.0; 3], 0.2), sun([2.0, 2.0, 0.0])];
+        assert_eq!(one_source_scaled(&old, &w, &moved, &w), None);
+        let blue_sun = [key([5.0; 3], 0.0), sun([2.0, 2.0, 1.0])];
+        assert_eq!(one_source_scaled(&old, &w, &blue_sun, &w), None);
+        assert_eq!(one_source_scaled(&old, &w, &old[..1], &w), None);
     }
 }

@@ -575,7 +575,7 @@ pub struct PerSource {
 /// A light with its light and shadow linking (`Scene::linking_of`; None: unlinked), or the
 /// world.
 #[derive(Debug, Clone, PartialEq)]
-enum Source {
+pub(crate) enum Source {
     Light(Light, Option<Linking>),
     World(World),
 }
@@ -616,7 +616,7 @@ impl Source {
 
     /// The factor per channel that takes this source's emission to `other`'s when the two are
     /// the same light (or world) but for it; None otherwise.
-    fn scale_to(&self, other: &Source) -> Option<[f32; 3]> {
+    pub(crate) fn scale_to(&self, other: &Source) -> Option<[f32; 3]> {
         use crate::light_scale::common_scale;
         match (self, other) {
             (Source::Light(a, x), Source::Light(b, y)) if x == y => common_scale(
@@ -632,6 +632,24 @@ impl Source {
 }
 
 impl PerSource {
+    /// The values the last `evaluate` kept for `source` alone, read with `settings` at
+    /// `points` points; None where it was not among them (another light, linking, emission or
+    /// setting).
+    pub(crate) fn kept(
+        &self,
+        source: &Source,
+        settings: &IrradianceSettings,
+        points: usize,
+    ) -> Option<&[[f32; 3]]> {
+        if self.settings.as_ref() != Some(settings) {
+            return None;
+        }
+        self.parts
+            .iter()
+            .find(|(s, v)| s == source && v.values.len() == points)
+            .map(|(_, v)| v.values.as_slice())
+    }
+
     /// Forgets every light's values (the points moved).
     pub fn clear(&mut self) {
         self.parts.clear();

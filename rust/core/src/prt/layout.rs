@@ -80,6 +80,69 @@ impl Transport {
         })
     }
 
+    /// This transport plus `k` times `other` per channel (the same vertices and basis): the
+    /// rows of a light whose one source changed its emission, B being linear in the light.
+    /// One stored channel is kept where both store one and their irradiance colours stay in
+    /// proportion; three otherwise.
+    pub fn plus_scaled(&self, other: &Transport, k: [f32; 3]) -> Transport {
+        assert!(
+            self.vertices == other.vertices && self.stride == other.stride,
+            "plus_scaled: transports of other vertices or another basis"
+        );
+        // Each channel's colour factor: the stored one where one channel serves all three.
+        let colour = |t: &Transport, c: usize| if t.channels == 1 { t.scale[c] } else { 1.0 };
+        let b: [f32; 3] = std::array::from_fn(|c| k[c] * colour(other, c));
+        let single = (self.channels == 1 && other.channels == 1)
+            .then(|| {
+                // other's colour lambda times this one's in every channel.
+                let big = (0..3).max_by(|&i, &j| self.scale[i].total_cmp(&self.scale[j]))?;
+                let lambda = b[big] / self.scale[big];
+                (0..3)
+                    .all(|c| (b[c] - lambda * self.scale[c]).abs() <= 1e-6 * b[c].abs().max(1e-30))
+                    .then_some(lambda)
+            })
+            .flatten();
+        if let Some(lambda) = single.filter(|l| l.is_finite()) {
+            let values = (self.values.iter().zip(&other.values))
+                .map(|(x, y)| x + lambda * y)
+                .collect();
+            return Transport {
+                values,
+                vertices: self.vertices,
+                channels: 1,
+                stride: self.stride,
+                scale: self.scale,
+            };
+        }
+        let (stride, blocks) = (self.stride, self.vertices.div_ceil(LANES));
+        let per_block = 3 * stride * LANES;
+        let mut values = vec![0f32; blocks * per_block];
+        let a: [f32; 3] = std::array::from_fn(|c| colour(self, c));
+        values
+            .par_chunks_mut(per_block)
+            .enumerate()
+            .for_each(|(block, out)| {
+                for c in 0..3 {
+                    for (t, w, dst) in [(self, a[c], 0usize), (other, b[c], 1)] {
+                        let src = if t.channels == 1 { 0 } else { c };
+                        let from = (block * t.channels + src) * stride * LANES;
+                        let row = &t.values[from..from + stride * LANES];
+                        let to = &mut out[c * stride * LANES..(c + 1) * stride * LANES];
+                        for (o, x) in to.iter_mut().zip(row) {
+                            *o = if dst == 0 { w * x } else { *o + w * x };
+                        }
+                    }
+                }
+            });
+        Transport {
+            values,
+            vertices: self.vertices,
+            channels: 3,
+            stride,
+            scale: [1.0; 3],
+        }
+    }
+
     pub fn bytes(&self) -> usize {
         self.values.len() * std::mem::size_of::<f32>()
     }
@@ -387,5 +450,47 @@ mod tests {
         let c = vec![1.0f32, 1.0, 1.0];
         let out = t.dot(&[c.clone(), c.clone(), c]);
         assert_eq!(out[0], [6.0, 3.0, 1.5]);
+    }
+
+    #[test]
+    fn plus_scaled_is_the_sum_of_the_two_dot_products() {
+        // 37 vertices (a partial last block), 4 coefficients; one or three stored channels,
+        // colours in proportion or not: dot(T + k U) = dot(T) + k dot(U) per channel.
+        let (v, stride) = (37usize, 4usize);
+        let rows = |channels: usize, seed: f32| -> Vec<f32> {
+            (0..v * channels * stride)
+                .map(|i| 1.0 + ((i as f32 * 0.37 + seed).sin()).abs())
+                .collect()
+        };
+        let coeffs = [
+            vec![0.3f32, 0.2, 0.1, 0.05],
+            vec![0.1, 0.4, 0.2, 0.1],
+            vec![0.5, 0.1, 0.3, 0.2],
+        ];
+        // (channels and colour of T, the same of U, k, channels of the sum)
+        type Case = (usize, [f32; 3], usize, [f32; 3], [f32; 3], usize);
+        let cases: [Case; 4] = [
+            (1, [1.0, 0.5, 0.25], 1, [2.0, 1.0, 0.5], [0.5, 0.5, 0.5], 1),
+            (1, [1.0, 0.5, 0.25], 1, [1.0, 1.0, 1.0], [-0.2, 0.5, 1.5], 3),
+            (3, [1.0; 3], 1, [1.0, 0.8, 0.6], [0.7, 0.7, 0.7], 3),
+            (1, [0.9, 0.9, 0.9], 3, [1.0; 3], [-0.5, 0.25, 2.0], 3),
+        ];
+        for (i, (ca, sa, cb, sb, k, channels)) in cases.into_iter().enumerate() {
+            let t = Transport::from_rows(&rows(ca, 0.1), v, ca, stride, sa);
+            let u = Transport::from_rows(&rows(cb, 2.3), v, cb, stride, sb);
+            let sum = t.plus_scaled(&u, k);
+            assert_eq!(sum.channels(), channels, "case {i}");
+            let (bt, bu, bs) = (t.dot(&coeffs), u.dot(&coeffs), sum.dot(&coeffs));
+            for vi in 0..v {
+                for c in 0..3 {
+                    let expect = (bt[vi][c] + k[c] * bu[vi][c]).max(0.0);
+                    assert!(
+                        (bs[vi][c] - expect).abs() <= 1e-5 * expect.abs().max(1.0),
+                        "case {i} vertex {vi} channel {c}: {} against {expect}",
+                        bs[vi][c]
+                    );
+                }
+            }
+        }
     }
 }

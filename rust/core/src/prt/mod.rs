@@ -15,7 +15,7 @@
 //! Rooms: `settings` (what to precompute and the report of what was done), `precompute` (the
 //! steps in order), `knots` (basis knots and the error estimate), `rows` (one vertex's
 //! transport row and the far field), `relight` and `pose` (a new light or shape for the same
-//! transport),
+//! transport), `light_layer` (one source's rows, for a change of its emission alone),
 //! `evaluate` (an edit: fit and dot product), `textured` (an edit with a Base Color per
 //! vertex: a table of media), `backend` (CPU or GPU), `layout` and `tree`.
 
@@ -29,6 +29,7 @@ pub mod gpu;
 mod irradiance_noise;
 mod knots;
 mod layout;
+mod light_layer;
 mod pose;
 mod precompute;
 mod relight;
@@ -116,6 +117,10 @@ pub struct Prt {
     /// The last textured edit's Base Color and its picks among the nodes (`color_picks`),
     /// shared with the transports relit or posed from this one.
     color_cache: color_picks::SharedColorCache,
+    /// The lights, world and linking `relit_scene` or `precompute_in_scene` lit it with (None
+    /// from a callback's light): an update changing one source's emission alone reads its
+    /// rows from that source's layer (`light_layer`).
+    lit_by: Option<std::sync::Arc<light_layer::Lighting>>,
 }
 
 impl Prt {

@@ -156,6 +156,7 @@ impl Prt {
             representatives: representatives.to_vec(),
             light_scale: [1.0; 3],
             kept_irradiance: Default::default(),
+            lit_by: None,
             tree_shape: Some(std::sync::Arc::new(shape)),
             color_cache: Default::default(),
         };

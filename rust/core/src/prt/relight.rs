@@ -5,6 +5,7 @@
 //! the new light, `walks::relight`) and the object's own light (cast again from the new B)
 //! are redone. A pose of the mesh goes the same way (`pose`).
 
+use super::light_layer::{LayeredRows, Lighting, SourceLayer};
 use super::precompute::{transport_under, SampledLight};
 use super::{Density, IrradianceFn, ProgressFn, Prt};
 use crate::error::{Error, Result};
@@ -27,8 +28,11 @@ use std::time::Instant;
 /// light under an unchanged world, casts the rays of what changed only.
 #[derive(Debug, Default)]
 pub struct KeptIrradiance {
-    samples: PerSource,
-    vertices: PerSource,
+    pub(super) samples: PerSource,
+    pub(super) vertices: PerSource,
+    /// The rows of the sources whose emission alone changed in an update (`light_layer`),
+    /// the latest last.
+    pub(super) layers: Vec<std::sync::Arc<SourceLayer>>,
 }
 
 /// What a relight did and cost.
@@ -55,6 +59,11 @@ pub struct RelightReport {
     pub dropped: Vec<&'static str>,
     /// A pose (`reposed_scene`): the mesh moved, the walks and own light carried.
     pub posed: bool,
+    /// One source's emission alone changed: the rows are the old ones plus that source's
+    /// layer scaled (`light_layer`), no sample summed but where the layer was summed now.
+    pub rows_from_layer: bool,
+    /// Seconds summing that layer's rows in this update (0 where it was kept).
+    pub seconds_layer: f64,
 }
 
 impl Prt {
@@ -103,7 +112,7 @@ impl Prt {
         let spacing = self.spacing;
         let sampled =
             |samples: Vec<SurfaceSample>| SampledLight::lit(mesh, spacing, samples, irradiance);
-        self.relit_with(mesh, irradiance, &sampled, progress, false)
+        self.relit_with(mesh, irradiance, &sampled, progress, false, None)
     }
 
     /// `relit` with the samples' and vertices' irradiance from `sampled`.
@@ -114,6 +123,7 @@ impl Prt {
         sampled: &dyn Fn(Vec<SurfaceSample>) -> Result<SampledLight>,
         progress: Option<&ProgressFn>,
         pose: bool,
+        rows: Option<LayeredRows>,
     ) -> Result<(Prt, RelightReport)> {
         let mut next = Prt {
             fitter: self.fitter.clone(),
@@ -140,6 +150,7 @@ impl Prt {
             kept_irradiance: self.kept_irradiance.clone(),
             tree_shape: self.tree_shape.clone(),
             color_cache: self.color_cache.clone(),
+            lit_by: None,
         };
         if pose {
             next.tree_shape = None; // the samples move: the tree is split anew
@@ -148,7 +159,7 @@ impl Prt {
             next.samples = mesh.surface_samples(self.spacing)?;
             next.report.carried_pose = true;
         }
-        let mut out = next.relight_steps(mesh, irradiance, sampled, progress)?;
+        let mut out = next.relight_steps(mesh, irradiance, sampled, progress, rows)?;
         out.posed = pose;
         if self.gpu.is_some() {
             out.dropped.push("the GPU copy of the transport");
@@ -210,11 +221,22 @@ impl Prt {
         } else {
             self.kept_irradiance.clone()
         };
+        // One source's emission alone changed: its rows' layer, not every sample summed.
+        let rows = if pose {
+            None
+        } else {
+            self.layered_rows(scene, settings, &|f| match ask(0.2 * f) {
+                true => Ok(()),
+                false => Err(Error::Cancelled),
+            })?
+        };
         let spacing = self.spacing;
         let sample = kept_sampler(scene, tracer, settings, &kept, &merge, &ask, true);
         let sampled = |samples: Vec<SurfaceSample>| sample(samples, spacing);
-        let (mut next, mut out) = self.relit_with(mesh, &irradiance, &sampled, progress, pose)?;
+        let (mut next, mut out) =
+            self.relit_with(mesh, &irradiance, &sampled, progress, pose, rows)?;
         next.kept_irradiance = kept.clone();
+        next.lit_by = Some(std::sync::Arc::new(Lighting::of(scene)));
         let report = lighting.lock().unwrap_or_else(|e| e.into_inner()).clone();
         out.irradiance_rays = report.rays;
         next.report.last_relight = Some(out.clone());
@@ -227,6 +249,7 @@ impl Prt {
         irradiance: &IrradianceFn,
         sampled: &dyn Fn(Vec<SurfaceSample>) -> Result<SampledLight>,
         progress: Option<&ProgressFn>,
+        rows: Option<LayeredRows>,
     ) -> Result<RelightReport> {
         let start = Instant::now();
         if mesh.triangles() != self.triangles.as_slice() {
@@ -262,28 +285,34 @@ impl Prt {
         out.seconds_irradiance = start.elapsed().as_secs_f64();
         tick(0.2)?;
         let t = Instant::now();
-        let mut report = self.report.clone();
-        let settings = self.settings.clone();
-        let (transport, shape) = transport_under(
-            mesh,
-            &lit,
-            None,
-            self.fitter.basis(),
-            &settings,
-            &mut report,
-            self.tree_shape.as_deref(),
-            &|f| tick(0.2 + 0.5 * f),
-        )?;
-        self.transport = transport;
-        self.tree_shape = Some(std::sync::Arc::new(shape));
-        out.seconds_transport = t.elapsed().as_secs_f64();
-        self.report = report;
+        if let Some(rows) = rows {
+            self.transport = rows.apply(&self.transport);
+            out.rows_from_layer = true;
+            out.seconds_layer = rows.seconds_layer;
+        } else {
+            let mut report = self.report.clone();
+            let settings = self.settings.clone();
+            let (transport, shape) = transport_under(
+                mesh,
+                &lit,
+                None,
+                self.fitter.basis(),
+                &settings,
+                &mut report,
+                self.tree_shape.as_deref(),
+                &|f| tick(0.2 + 0.5 * f),
+            )?;
+            self.transport = transport;
+            self.tree_shape = Some(std::sync::Arc::new(shape));
+            self.report = report;
+        }
+        out.seconds_transport = t.elapsed().as_secs_f64() + out.seconds_layer;
         self.irradiance_noise = lit.irradiance_noise(mesh, &resolved[0]);
         self.add_samples_noise(mesh, &mut lit, &resolved[0], &|_| tick(0.7))?;
         self.vertex_irradiance = lit.vertex_irradiance;
         self.samples = lit.samples;
         self.carry_terms(mesh, &resolved[0], irradiance, true, progress, &mut out)?;
-        out.seconds = start.elapsed().as_secs_f64();
+        out.seconds = start.elapsed().as_secs_f64() + out.seconds_layer;
         tick(1.0)?;
         Ok(out)
     }
@@ -523,6 +552,7 @@ impl Prt {
             progress,
         )?;
         prt.kept_irradiance = kept.clone();
+        prt.lit_by = Some(std::sync::Arc::new(Lighting::of(scene)));
         prt.report.world_unshadowed = unshadowed.world_unshadowed && !scene.world.is_black();
         let report = lighting.lock().unwrap_or_else(|e| e.into_inner()).clone();
         Ok((prt, report))

@@ -401,8 +401,12 @@ class Prt:
         `first_preview` is refused for a light-only update). The old transport answers
         edits until the new one replaces it, and a cancel keeps it. When every light's (and
         the world's) emission only changed by one factor per channel, a rescale: no ray, and
-        `rescaled` gives the factor (else None). Returns seconds (and per stage), rays,
-        own_light_rays, walks_traced, rescaled, posed. ValueError names a bad argument (normals
+        `rescaled` gives the factor (else None). When one light's (or the world's) emission
+        alone changed, the transport rows are the old ones plus that source's own rows scaled
+        (`rows_from_layer` True): summed once, at the first such change
+        (`seconds_layer`), and kept for the next. Returns seconds (and per stage), rays,
+        own_light_rays, walks_traced, rescaled, rows_from_layer, seconds_layer, posed.
+        ValueError names a bad argument (normals
         without positions, another vertex count or topology)."""
     @property
     def report(self) -> dict[str, float | int | bool | list[float]]:
