@@ -208,11 +208,11 @@ class RelightJob(Job):
         try:
             try:
                 r = self._previous.update(lights=scene, progress=self._tick)
-                # One light's power or colour alone: its own rows added (summed once, then kept).
+                # One light's power or colour alone: its own layer added (relit once, then kept).
                 layer = ""
-                if r.get("rows_from_layer"):
-                    layer = (f", the light's own rows summed in {r['seconds_layer']:.2f} s" if r["seconds_layer"] > 0
-                             else ", the light's own rows reused")
+                if r.get("from_layer"):
+                    layer = (f", the light's layer relit in {r['seconds_layer']:.2f} s" if r["seconds_layer"] > 0
+                             else ", the light's layer rescaled")
                 self.stage_message = (f"relit: {r['seconds']:.2f} s, {r['walks_traced']} walks traced, "
                                       f"{r['rays'] + r['own_light_rays']:,} rays{layer}")
                 self.result = self._previous

@@ -235,12 +235,18 @@ def relight(positions, triangles, marble, kept, args) -> None:
 
 def power_drag(positions, triangles, marble, kept, args) -> None:
     """The point light's power dragged, the sun as it was (one source's emission alone,
-    `light_layer`): the first update sums that light's own rows, the next ones add them
-    scaled; median of the later ones, and the last against a fresh precompute under it."""
+    `light_layer`): the first update relights the transport under that light alone (its
+    layer), the next ones add it scaled; median of the later ones, and the last against a
+    fresh precompute under it."""
     powers = [1.0 + 0.25 * (k + 1) for k in range(max(args.runs, 2) + 1)]
     for profile, (prt, _) in kept.items():
         prt.update(lights=moved_scene(positions, triangles, 0.0, 0.0))
-        reports = [prt.update(lights=moved_scene(positions, triangles, 0.0, 0.0, power=w)) for w in powers]
+        reports, walls = [], []
+        for w in powers:
+            lit = moved_scene(positions, triangles, 0.0, 0.0, power=w)
+            t0 = time.perf_counter()
+            reports.append(prt.update(lights=lit))
+            walls.append(time.perf_counter() - t0)
         first, later = reports[0], reports[1:]
         last = moved_scene(positions, triangles, 0.0, 0.0, power=powers[-1])
         fresh = translucent.Prt(last, marble, coefficients=32, profile=profile, single_scattering=False)
@@ -248,11 +254,11 @@ def power_drag(positions, triangles, marble, kept, args) -> None:
         r = later[len(later) // 2]
         print(
             f"update(lights=...), bunny, marble, {profile}: the point light's power alone dragged (x1.25 to "
-            f"x{powers[-1]:.2f}, the sun unchanged): the first update {first['seconds']:.2f} s (its layer's rows "
+            f"x{powers[-1]:.2f}, the sun unchanged): the first update {first['seconds']:.2f} s (its layer relit in "
             f"{first['seconds_layer']:.2f} s), then median {statistics.median(x['seconds'] for x in later):.3f} s over "
-            f"{len(later)} (rays {r['rays']}, transport {r['seconds_transport']:.3f} s, walks' term "
+            f"{len(later)} ({statistics.median(walls[1:]):.3f} s the whole call from Python; rays {r['rays']}, transport {r['seconds_transport']:.3f} s, walks' term "
             f"{r['seconds_walks']:.3f} s, the object's own light {r['seconds_own_light']:.3f} s, "
-            f"rows from the layer: {all(x['rows_from_layer'] for x in reports)}); against a fresh precompute: "
+            f"from the layer: {all(x['from_layer'] for x in reports)}); against a fresh precompute: "
             f"rel. RMS {', '.join(f'{100 * x:.2f}' for x in between['rms'])} %"
         )
 

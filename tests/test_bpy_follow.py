@@ -178,9 +178,9 @@ def test_a_moved_light_refreshes_the_preview_and_the_panel_says_why_meanwhile(ad
     assert session.SESSIONS[mat.name].changed == "light Key changed"
     follow.follow_now()
     np.testing.assert_allclose(read_preview(obj), 2.0 * fresh, rtol=1e-4, atol=1e-7)
-    # A second light, then the first one's power alone: the rows are the old ones plus the key
-    # light's own (`light_layer`), summed at the first such change and kept for the next; the
-    # preview is what Precompute shows for the scene then.
+    # A second light, then the first one's power alone: the transport is the old one plus the
+    # key light's own layer (`light_layer`), relit at the first such change and kept for the
+    # next; the preview is what Precompute shows for the scene then.
     key_light(bpy, location=(0.15, 0.0, 0.1), energy=3.0)
     bpy.context.view_layer.update()
     follow.follow_now()
@@ -189,7 +189,7 @@ def test_a_moved_light_refreshes_the_preview_and_the_panel_says_why_meanwhile(ad
         bpy.context.view_layer.update()
         follow.follow_now()
         message = session.SESSIONS[mat.name].follow_message
-        assert "the light's own rows" in message and ("summed" in message) == summed, message
+        assert "the light's layer" in message and ("relit in" in message) == summed, message
     relit_like_a_precompute(bpy, session, mat, obj)
     assert mesh_hash(obj.data) == user_mesh
 

@@ -200,7 +200,7 @@ def test_one_lights_power_among_several_is_a_rescale_of_its_own_layer():
         changed = scene(**kw)
         r = prt.update(lights=changed)
         assert r["rays"] == 0 and r["rescaled"] is None, r  # not every light by one factor
-        assert r["rows_from_layer"] and (r["seconds_layer"] > 0) == summed, (kw, r)
+        assert r["from_layer"] and (r["seconds_layer"] > 0) == summed, (kw, r)
         fresh = translucent.Prt(changed, marble, profile="dipole", backend="cpu", world_samples=16)
         np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=5e-4, atol=1e-9)
     # Light where there was none (the point light back on): every row summed. The layers
@@ -212,6 +212,39 @@ def test_one_lights_power_among_several_is_a_rescale_of_its_own_layer():
     ):
         changed = scene(**kw)
         r = prt.update(lights=changed)
-        assert r["rows_from_layer"] == layered and (r["seconds_layer"] > 0) == summed, (kw, r)
+        assert r["from_layer"] == layered and (r["seconds_layer"] > 0) == summed, (kw, r)
         fresh = translucent.Prt(changed, marble, profile="dipole", backend="cpu", world_samples=16)
         np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=5e-4, atol=1e-9)
+
+
+def test_one_lights_power_with_the_walks_adds_its_layer_within_the_stated_noise():
+    """Cycles' profile with the walks and the object's own light: the sun's power alone
+    changed twice (its layer relit once, then reused) against the same precompute relit in full
+    to the same lights (the point light moved away and back: every walk replayed under the new
+    light). The layered sum carries each layer's own control variate fit, so the two differ by
+    the walks' noise, which the layered transport states (its bound s_old + |k - 1| s_layer)."""
+    def scene(sun, point=(0.0, 0.03, 0.01)):
+        s = translucent.Scene(*sphere(16, 0.01))
+        s.add_sun((0.0, 1.0, -0.2), sun)
+        s.add_point_light(point, 0.5)
+        return s
+
+    def precompute():
+        return translucent.Prt(scene(2.0), SKIN, backend="cpu", walk_rays=1_000_000)
+
+    layered, full = precompute(), precompute()
+    for sun, summed in ((3.0, True), (1.2, False)):
+        r = layered.update(lights=scene(sun))
+        assert r["from_layer"] and (r["seconds_layer"] > 0) == summed, r
+        # Relit under the sun alone, the layer casts its shadow edges' rays once; then none.
+        assert (r["rays"] == 0) != summed and r["walks_traced"] == 0 and r["own_light_rays"] == 0, r
+    full.update(lights=scene(2.0, point=(0.03, 0.0, 0.01)))
+    r = full.update(lights=scene(1.2))
+    assert not r["from_layer"], r
+    a, b = layered.radiance(SKIN), full.radiance(SKIN)
+    stated = np.asarray(layered.last_eval["error_estimate"])
+    assert np.all(layered.report["walks"]["noise"]) and np.all(np.isfinite(stated))
+    between = np.asarray(translucent.relative_error(a, b, scene(1.2).vertex_areas)["rms"])
+    assert np.all(between <= stated), (between, stated)
+    # And it is a different estimate from the same walks, not the same one by accident.
+    assert np.any(between > 1e-6), between

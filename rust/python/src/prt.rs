@@ -659,9 +659,9 @@ impl PyPrt {
     /// is chosen again. Releases the GIL; `progress` as for the constructor. Returns
     /// {"seconds", "seconds_irradiance", "seconds_transport", "seconds_walks",
     /// "seconds_own_light", "seconds_single_scattering", "rays" (the irradiance's),
-    /// "own_light_rays", "walks_traced", "rescaled", "rows_from_layer", "seconds_layer",
-    /// "posed"}: one light's (or the world's) emission alone changed, the rows are the old
-    /// ones plus that source's own, summed at the first such change and kept.
+    /// "own_light_rays", "walks_traced", "rescaled", "from_layer", "seconds_layer",
+    /// "posed"}: one light's (or the world's) emission alone changed, the transport is the old
+    /// one plus that source's own layer, relit at the first such change and kept.
     #[pyo3(signature = (lights = None, positions = None, normals = None, first_preview = None, progress = None))]
     fn update<'py>(
         &self,
@@ -768,7 +768,7 @@ impl PyPrt {
             d.set_item("own_light_rays", 0)?;
             d.set_item("walks_traced", 0)?;
             d.set_item("rescaled", k.to_vec())?;
-            d.set_item("rows_from_layer", false)?;
+            d.set_item("from_layer", false)?;
             d.set_item("seconds_layer", 0.0)?;
             d.set_item("posed", false)?;
             return Ok(d);
@@ -993,7 +993,7 @@ fn relit_dict<'py>(
     d.set_item("own_light_rays", report.own_light_rays)?;
     d.set_item("walks_traced", report.walks_traced)?;
     d.set_item("rescaled", py.None())?;
-    d.set_item("rows_from_layer", report.rows_from_layer)?;
+    d.set_item("from_layer", report.from_layer)?;
     d.set_item("seconds_layer", report.seconds_layer)?;
     d.set_item("posed", report.posed)?;
     Ok(d)

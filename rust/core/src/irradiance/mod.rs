@@ -632,22 +632,28 @@ impl Source {
 }
 
 impl PerSource {
-    /// The values the last `evaluate` kept for `source` alone, read with `settings` at
-    /// `points` points; None where it was not among them (another light, linking, emission or
-    /// setting).
-    pub(crate) fn kept(
-        &self,
-        source: &Source,
-        settings: &IrradianceSettings,
-        points: usize,
-    ) -> Option<&[[f32; 3]]> {
-        if self.settings.as_ref() != Some(settings) {
-            return None;
-        }
-        self.parts
-            .iter()
-            .find(|(s, v)| s == source && v.values.len() == points)
-            .map(|(_, v)| v.values.as_slice())
+    /// What the last `evaluate` kept for `source` alone (at `points` points), as a `PerSource`
+    /// of that source only: its values and errors scaled where the kept ones are the same
+    /// light (or world) at another emission. None where it was not among them.
+    pub(crate) fn only(&self, source: &Source, points: usize) -> Option<PerSource> {
+        let (k, v) = self.parts.iter().find_map(|(s, v)| {
+            (v.values.len() == points)
+                .then(|| s.scale_to(source))
+                .flatten()
+                .map(|k| (k, v))
+        })?;
+        let scale = |x: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| x[c] * k[c]) };
+        Some(PerSource {
+            settings: self.settings.clone(),
+            parts: vec![(
+                source.clone(),
+                Estimated {
+                    values: v.values.iter().map(scale).collect(),
+                    sampling_error: v.sampling_error.iter().map(scale).collect(),
+                },
+            )],
+            points,
+        })
     }
 
     /// Forgets every light's values (the points moved).

@@ -1,37 +1,44 @@
-//! One light's own share of the transport rows, kept for an update that changes that light's
-//! power or colour alone (issue 29, point 2: "a light's power or colour alone is a rescale of
-//! its own layer").
+//! One light's own layer of the transport, kept for an update that changes that light's power
+//! or colour alone (issue 29, point 2: "a light's power or colour alone is a rescale of its own
+//! layer (no ray)").
 //!
-//! The rows (Xu 2007 eq. 10) sum the samples' irradiance under the profile's basis, so they are
-//! linear in the light: with one source (a light, or the world) changed by k per channel and
-//! every other as it was, T_new = T_old + (k − 1) T_source, T_source the rows of that source
-//! alone. Its irradiance is already kept source by source (`irradiance::PerSource`), so the
-//! first such update sums that source's rows once (what a full update costs) and keeps them
-//! (with the irradiance: a new rest of the scene or a pose drops both); every later change of
-//! that source's emission adds them scaled, summing no sample. A layer holds while its source
-//! stands where it stood, whatever the other lights did meanwhile. The far
-//! field's clusters stand for their samples by two pseudo-samples placed by the cluster's own
-//! weights (`rows::transport_row`), so a sum of rows differs from the rows of a summed light by
-//! the far field's remainder, within its bound (`FarField::distance_bound`) like either of them.
+//! Everything a transport holds is linear in the light: the rows (Xu 2007 eq. 10), the
+//! vertices' irradiance and its noise, the walks' term (D, the walks' score minus the
+//! half-space B, for a fixed control variate coefficient) and the object's own light (cast from
+//! B). With one source (a light, or the world) scaled by k per channel and every other as it
+//! was, the new transport is the old one plus (k − 1) times that source's layer: the same
+//! transport relit under that source alone (`Prt::relit_with`, its irradiance taken from what
+//! is kept source by source: no ray but the shadow edges' points). The first such update
+//! relights that layer once (what a full update costs) and keeps it beside the irradiance;
+//! every later change of that source's emission adds it scaled: no ray, no sample summed, no
+//! walk read. A layer holds while its source stands where it stood, whatever the other lights
+//! did meanwhile; a new rest of the scene or a pose drops it with the irradiance.
 //!
-//! Everything else an update does (the irradiance at the vertices, its noise, the walks' term
-//! read at their kept exits, the object's own light) is done as for any new light
-//! (`relight::relight_steps`): those are cheap beside the rows.
+//! Where the sum is not bit for bit what a relight would give:
+//! - a far cluster's two pseudo-samples are placed by the cluster's own weights
+//!   (`rows::transport_row`), so the sum of two lights' rows differs from the rows of their sum
+//!   by the far field's remainder, within its bound like either;
+//! - each walk term fitted its own control variate coefficient, so the sum is another valid
+//!   estimate from the same walks, not the replay's; its stated noise bounds the correlated
+//!   sum per vertex, s_old + |k − 1| s_layer (`WalkTerm::plus_scaled`).
 
-use super::layout::Transport;
-use super::precompute::{transport_under, SampledLight};
-use super::Prt;
-use crate::error::Result;
-use crate::irradiance::{Density, IrradianceSettings, Source};
+use super::irradiance_noise::IrradianceNoise;
+use super::relight::{KeptIrradiance, RelightReport};
+use super::{ProgressFn, Prt};
+use crate::error::{Error, Result};
+use crate::irradiance::{IrradianceReport, IrradianceSettings, Source};
 use crate::light_scale::{one_source_scaled, Which};
 use crate::lights::{Light, World};
 use crate::mesh::Mesh;
+use crate::own_light::{self, Bounce};
+use crate::profiles::Resolved;
+use crate::raytrace::Tracer;
 use crate::scene::{Linking, Scene};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-/// Layers kept at most: one per light an artist drags the power of in turn (each the size of
-/// the transport at one to three channels).
+/// Layers kept at most: one per light an artist drags the power of in turn (each about the
+/// size of the transport and its walk and own-light terms).
 const KEPT_LAYERS: usize = 8;
 
 /// The lights, world and linking a transport was lit with (`Prt::relit_scene`,
@@ -53,46 +60,30 @@ impl Lighting {
     }
 }
 
-/// The rows of one source alone at the emission they were summed under, and the settings its
-/// irradiance was read with.
+/// The transport relit under one source alone, at the emission it was relit with, and the
+/// irradiance settings that light was read with.
 #[derive(Debug)]
 pub(super) struct SourceLayer {
     source: Source,
     settings: IrradianceSettings,
-    transport: Transport,
-}
-
-/// How an update's rows are had without summing the samples: the old rows plus `factor` times
-/// `layer`'s.
-pub(super) struct LayeredRows {
-    pub(super) layer: Arc<SourceLayer>,
-    pub(super) factor: [f32; 3],
-    /// Seconds spent summing the layer's rows now (0 where it was kept).
-    pub(super) seconds_layer: f64,
-}
-
-impl LayeredRows {
-    /// The new rows.
-    pub(super) fn apply(&self, old: &Transport) -> Transport {
-        old.plus_scaled(&self.layer.transport, self.factor)
-    }
+    prt: Prt,
 }
 
 impl Prt {
     /// Where `scene`'s lights are the ones this transport was lit with but for one source's
-    /// emission (same mesh, same rest of the scene, same linking, no rescale pending), the rows
-    /// the update needs as this transport's plus that source's layer scaled: the layer kept
-    /// from an earlier update, or summed now from the irradiance kept for that source (and kept
-    /// for the next). None where anything else changed or that source's irradiance was not
-    /// kept: the update sums every row.
-    pub(super) fn layered_rows(
+    /// emission (the same mesh, rest of the scene and linking, no rescale pending): this
+    /// transport plus that source's layer scaled, with what it did and cost. The layer is the
+    /// one kept from an earlier update, or relit now under that source alone from its kept
+    /// irradiance (and kept for the next). None where anything else changed, that source's
+    /// irradiance was not kept, or the terms cannot be added (walks without records): the
+    /// caller relights in full. `settings`: PRT's own (`relight::at_vertices`).
+    pub(super) fn layered(
         &self,
         scene: &Scene,
+        tracer: &Tracer,
         settings: &IrradianceSettings,
-        tick: &dyn Fn(f32) -> Result<()>,
-    ) -> Result<Option<LayeredRows>> {
-        let dense = &settings.for_density(Density::Dense);
-        let receivers = &settings.for_density(Density::Receivers);
+        progress: Option<&ProgressFn>,
+    ) -> Result<Option<(Prt, RelightReport, IrradianceReport)>> {
         let Some(old) = self.lit_by.as_deref() else {
             return Ok(None);
         };
@@ -108,6 +99,7 @@ impl Prt {
             Which::Light(i) => Source::Light(old.lights[i].clone(), scene.linking_of(i)),
             Which::World => Source::World(old.world.clone()),
         };
+        let start = Instant::now();
         let kept_layer = {
             let kept = self
                 .kept_irradiance
@@ -115,84 +107,209 @@ impl Prt {
                 .unwrap_or_else(|e| e.into_inner());
             // This source's layer at any emission: old = m layer.
             (kept.layers.iter().rev())
-                .filter(|l| l.settings == *dense)
+                .filter(|l| l.settings == *settings)
                 .find_map(|l| l.source.scale_to(&source).map(|m| (l.clone(), m)))
         };
-        if let Some((layer, m)) = kept_layer {
-            let factor = std::array::from_fn(|c| (k[c] - 1.0) * m[c]);
-            return Ok(Some(LayeredRows {
-                layer,
-                factor,
-                seconds_layer: 0.0,
-            }));
+        let (layer, m, lighting, seconds_layer) = match kept_layer {
+            Some((layer, m)) => (layer, m, IrradianceReport::default(), 0.0),
+            None => {
+                let Some((layer, lighting)) =
+                    self.source_layer(scene, tracer, which, &source, settings, progress)?
+                else {
+                    return Ok(None);
+                };
+                (layer, [1.0; 3], lighting, start.elapsed().as_secs_f64())
+            }
+        };
+        let f: [f32; 3] = std::array::from_fn(|c| (k[c] - 1.0) * m[c]);
+        let t = Instant::now();
+        let Some(mut next) = self.plus_layer(&scene.mesh, &layer.prt, f)? else {
+            return Ok(None);
+        };
+        next.lit_by = Some(Arc::new(Lighting::of(scene)));
+        let mut out = RelightReport {
+            seconds: start.elapsed().as_secs_f64(),
+            seconds_transport: t.elapsed().as_secs_f64(),
+            irradiance_rays: lighting.rays,
+            from_layer: true,
+            seconds_layer,
+            ..Default::default()
+        };
+        // Both hold the old light, as after any relight: attach them again.
+        if self.gpu.is_some() {
+            out.dropped.push("the GPU copy of the transport");
         }
-        let start = Instant::now();
-        let mesh = &scene.mesh;
-        let (at_samples, at_vertices) = {
+        if self.single.is_some() {
+            out.dropped.push("single scattering");
+        }
+        next.report.last_relight = Some(out.clone());
+        Ok(Some((next, out, lighting)))
+    }
+
+    /// This transport relit under `source` alone (the `which` of `scene`, at the emission this
+    /// transport was lit with), its irradiance read from what is kept for that source, and
+    /// kept. None where that source's irradiance was not kept.
+    fn source_layer(
+        &self,
+        scene: &Scene,
+        tracer: &Tracer,
+        which: Which,
+        source: &Source,
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<Option<(Arc<SourceLayer>, IrradianceReport)>> {
+        let alone_kept = {
             let kept = self
                 .kept_irradiance
                 .lock()
                 .unwrap_or_else(|e| e.into_inner());
-            let samples = kept.samples.kept(&source, dense, self.samples.len());
-            let vertices = kept.vertices.kept(&source, receivers, mesh.vertex_count());
-            match (samples, vertices) {
-                (Some(s), Some(v)) => (s.to_vec(), v.to_vec()),
+            match (
+                kept.samples.only(source, self.samples.len()),
+                kept.vertices.only(source, self.positions.len()),
+            ) {
+                (Some(samples), Some(vertices)) => KeptIrradiance {
+                    samples,
+                    vertices,
+                    layers: Vec::new(),
+                },
                 _ => return Ok(None),
             }
         };
-        let layer = self.source_layer(mesh, source, dense, at_samples, at_vertices, tick)?;
-        {
-            let mut kept = self
-                .kept_irradiance
-                .lock()
-                .unwrap_or_else(|e| e.into_inner());
-            // One layer a source (another of its emissions replaced), the oldest dropped
-            // beyond `KEPT_LAYERS`.
-            kept.layers
-                .retain(|l| l.source.scale_to(&layer.source).is_none() || l.settings != *dense);
-            kept.layers.push(layer.clone());
-            let extra = kept.layers.len().saturating_sub(KEPT_LAYERS);
-            kept.layers.drain(..extra);
+        let mut alone = Scene::new(scene.mesh.clone());
+        alone.occluders = scene.occluders.clone();
+        match (which, source) {
+            (Which::Light(_), Source::Light(light, linking)) => {
+                alone.lights = vec![light.clone()];
+                alone.linking = vec![linking.clone()];
+            }
+            (_, Source::World(world)) => alone.world = world.clone(),
+            _ => return Ok(None),
         }
-        Ok(Some(LayeredRows {
-            layer,
-            factor: k.map(|x| x - 1.0),
-            seconds_layer: start.elapsed().as_secs_f64(),
-        }))
+        let kept = Arc::new(Mutex::new(alone_kept));
+        let (mut prt, _, lighting) =
+            self.lit_with_kept(&alone, tracer, settings, progress, false, kept)?;
+        // Never relit itself: its samples and kept irradiance are not needed.
+        prt.samples = Vec::new();
+        prt.kept_irradiance = Default::default();
+        let layer = Arc::new(SourceLayer {
+            source: source.clone(),
+            settings: settings.clone(),
+            prt,
+        });
+        let mut kept = self
+            .kept_irradiance
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        // One layer a source (another of its emissions replaced), the oldest dropped beyond
+        // `KEPT_LAYERS`.
+        kept.layers
+            .retain(|l| l.source.scale_to(&layer.source).is_none() || l.settings != *settings);
+        kept.layers.push(layer.clone());
+        let extra = kept.layers.len().saturating_sub(KEPT_LAYERS);
+        kept.layers.drain(..extra);
+        Ok(Some((layer, lighting)))
     }
 
-    /// The rows of `source` alone from its irradiance at the samples and vertices.
-    fn source_layer(
-        &self,
-        mesh: &Mesh,
-        source: Source,
-        dense: &IrradianceSettings,
-        at_samples: Vec<[f32; 3]>,
-        at_vertices: Vec<[f32; 3]>,
-        tick: &dyn Fn(f32) -> Result<()>,
-    ) -> Result<Arc<SourceLayer>> {
-        let lit = SampledLight::from_values(
-            mesh,
-            self.spacing,
-            self.samples.clone(),
-            at_samples,
-            at_vertices,
-        )?;
-        let mut scratch = self.report.clone();
-        let (transport, _) = transport_under(
-            mesh,
-            &lit,
-            None,
-            self.fitter.basis(),
-            &self.settings,
-            &mut scratch,
-            self.tree_shape.as_deref(),
-            tick,
-        )?;
-        Ok(Arc::new(SourceLayer {
-            source,
-            settings: dense.clone(),
-            transport,
-        }))
+    /// This transport plus `f` times `layer` per channel, every part that depends on the light
+    /// added (`light_layer`'s header); None where the walk terms cannot be added.
+    fn plus_layer(&self, mesh: &Mesh, layer: &Prt, f: [f32; 3]) -> Result<Option<Prt>> {
+        let rep = Resolved::new(self.profile, &self.representatives[0])?;
+        let mut next = self.successor();
+        next.kept_irradiance = self.kept_irradiance.clone();
+        next.transport = self.transport.plus_scaled(&layer.transport, f);
+        next.vertex_irradiance = plus(&self.vertex_irradiance, &layer.vertex_irradiance, f);
+        next.irradiance_noise = noise_plus(&self.irradiance_noise, &layer.irradiance_noise, f);
+        next.bounce = None;
+        if let (Some(w), Some(lw)) = (&self.walks, &layer.walks) {
+            let halfspace = next.radiosity_of(&rep, false, false)?.values;
+            let beside: Vec<Vec<[f32; 3]>> = (w.beside_media().iter())
+                .map(|m| next.radiosity_of(m, false, false).map(|e| e.values))
+                .collect::<Result<_>>()?;
+            match w.plus_scaled(lw, f, mesh, &rep, &halfspace, &beside) {
+                Ok(sum) => {
+                    next.report.walks = Some(sum.report.clone());
+                    next.walks = Some(sum);
+                }
+                Err(Error::InvalidArgument(_)) => return Ok(None),
+                Err(e) => return Err(e),
+            }
+        } else if self.walks.is_some() != layer.walks.is_some() {
+            return Ok(None);
+        }
+        match (&self.bounce, &layer.bounce) {
+            (Some(b), Some(lb)) => {
+                // B before the own light, as `cast_own_light` measures its share against.
+                let direct = next.radiosity_of(&rep, true, true)?.values;
+                let irradiance = plus(&b.irradiance, &lb.irradiance, f);
+                let receiving = rep.totals();
+                let walked = match (&b.walked, &lb.walked) {
+                    (Some(w), Some(lw)) => {
+                        let local: Vec<[f32; 3]> = (irradiance.iter())
+                            .map(|e| std::array::from_fn(|c| receiving[c] as f32 * e[c]))
+                            .collect();
+                        match w.plus_scaled(lw, f, mesh, &rep, &local, &[]) {
+                            Ok(sum) => Some(sum),
+                            Err(Error::InvalidArgument(_)) => return Ok(None),
+                            Err(e) => return Err(e),
+                        }
+                    }
+                    (None, None) => None,
+                    _ => return Ok(None),
+                };
+                next.report.interreflection_share =
+                    own_light::share(&irradiance, &direct, mesh.vertex_areas(), &receiving);
+                next.report.walks_indirect = walked.as_ref().map(|w| w.report.clone());
+                next.bounce = Some(Bounce {
+                    irradiance,
+                    source_albedo: b.source_albedo,
+                    walked,
+                    gather: b.gather.clone(),
+                });
+            }
+            (None, None) => {}
+            _ => return Ok(None),
+        }
+        next.lit_by = None;
+        Ok(Some(next))
+    }
+}
+
+/// a + f b per vertex and channel.
+fn plus(a: &[[f32; 3]], b: &[[f32; 3]], f: [f32; 3]) -> Vec<[f32; 3]> {
+    (a.iter().zip(b))
+        .map(|(x, y)| std::array::from_fn(|c| x[c] + f[c] * y[c]))
+        .collect()
+}
+
+/// The irradiance's noise draw under the summed light. Each draw is its standard errors times
+/// the same fixed signs (`irradiance_noise`), and the standard errors are kept as the sum of
+/// the sources' (`PerSource::sampling_error`), so the sum's draw is the draws' sum; a part one
+/// side lacks (no sampling error there) is zero.
+fn noise_plus(
+    a: &Option<IrradianceNoise>,
+    b: &Option<IrradianceNoise>,
+    f: [f32; 3],
+) -> Option<IrradianceNoise> {
+    let part = |x: Option<&Vec<[f32; 3]>>, y: Option<&Vec<[f32; 3]>>| match (x, y) {
+        (Some(x), Some(y)) => Some(plus(x, y, f)),
+        (Some(x), None) => Some(x.clone()),
+        (None, Some(y)) => Some(plus(&vec![[0.0; 3]; y.len()], y, f)),
+        (None, None) => None,
+    };
+    match (a, b) {
+        (None, None) => None,
+        (Some(a), None) => Some(a.clone()),
+        (None, Some(b)) => Some(IrradianceNoise {
+            draw: plus(&vec![[0.0; 3]; b.draw.len()], &b.draw, f),
+            samples: part(None, b.samples.as_ref()),
+            walks: part(None, b.walks.as_ref()),
+            ..b.clone()
+        }),
+        (Some(a), Some(b)) => Some(IrradianceNoise {
+            draw: plus(&a.draw, &b.draw, f),
+            samples: part(a.samples.as_ref(), b.samples.as_ref()),
+            walks: part(a.walks.as_ref(), b.walks.as_ref()),
+            ..a.clone()
+        }),
     }
 }

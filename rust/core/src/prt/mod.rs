@@ -15,7 +15,7 @@
 //! Rooms: `settings` (what to precompute and the report of what was done), `precompute` (the
 //! steps in order), `knots` (basis knots and the error estimate), `rows` (one vertex's
 //! transport row and the far field), `relight` and `pose` (a new light or shape for the same
-//! transport), `light_layer` (one source's rows, for a change of its emission alone),
+//! transport), `light_layer` (one source's layer, for a change of its emission alone),
 //! `evaluate` (an edit: fit and dot product), `textured` (an edit with a Base Color per
 //! vertex: a table of media), `backend` (CPU or GPU), `layout` and `tree`.
 

@@ -5,7 +5,7 @@
 //! the new light, `walks::relight`) and the object's own light (cast again from the new B)
 //! are redone. A pose of the mesh goes the same way (`pose`).
 
-use super::light_layer::{LayeredRows, Lighting, SourceLayer};
+use super::light_layer::{Lighting, SourceLayer};
 use super::precompute::{transport_under, SampledLight};
 use super::{Density, IrradianceFn, ProgressFn, Prt};
 use crate::error::{Error, Result};
@@ -30,7 +30,7 @@ use std::time::Instant;
 pub struct KeptIrradiance {
     pub(super) samples: PerSource,
     pub(super) vertices: PerSource,
-    /// The rows of the sources whose emission alone changed in an update (`light_layer`),
+    /// The layers of the sources whose emission alone changed in an update (`light_layer`),
     /// the latest last.
     pub(super) layers: Vec<std::sync::Arc<SourceLayer>>,
 }
@@ -59,10 +59,11 @@ pub struct RelightReport {
     pub dropped: Vec<&'static str>,
     /// A pose (`reposed_scene`): the mesh moved, the walks and own light carried.
     pub posed: bool,
-    /// One source's emission alone changed: the rows are the old ones plus that source's
-    /// layer scaled (`light_layer`), no sample summed but where the layer was summed now.
-    pub rows_from_layer: bool,
-    /// Seconds summing that layer's rows in this update (0 where it was kept).
+    /// One source's emission alone changed: the transport is the old one plus that source's
+    /// layer scaled (`light_layer`): no ray, no sample summed, no walk read, but where the
+    /// layer was relit now.
+    pub from_layer: bool,
+    /// Seconds relighting that layer in this update (0 where it was kept).
     pub seconds_layer: f64,
 }
 
@@ -112,7 +113,7 @@ impl Prt {
         let spacing = self.spacing;
         let sampled =
             |samples: Vec<SurfaceSample>| SampledLight::lit(mesh, spacing, samples, irradiance);
-        self.relit_with(mesh, irradiance, &sampled, progress, false, None)
+        self.relit_with(mesh, irradiance, &sampled, progress, false)
     }
 
     /// `relit` with the samples' and vertices' irradiance from `sampled`.
@@ -123,9 +124,32 @@ impl Prt {
         sampled: &dyn Fn(Vec<SurfaceSample>) -> Result<SampledLight>,
         progress: Option<&ProgressFn>,
         pose: bool,
-        rows: Option<LayeredRows>,
     ) -> Result<(Prt, RelightReport)> {
-        let mut next = Prt {
+        let mut next = self.successor();
+        if pose {
+            next.tree_shape = None; // the samples move: the tree is split anew
+            next.positions = mesh.positions().to_vec();
+            next.normals = mesh.normals().to_vec();
+            next.samples = mesh.surface_samples(self.spacing)?;
+            next.report.carried_pose = true;
+        }
+        let mut out = next.relight_steps(mesh, irradiance, sampled, progress)?;
+        out.posed = pose;
+        if self.gpu.is_some() {
+            out.dropped.push("the GPU copy of the transport");
+        }
+        if self.single.is_some() {
+            out.dropped.push("single scattering");
+        }
+        next.report.last_relight = Some(out.clone());
+        Ok((next, out))
+    }
+
+    /// A copy of this transport for an update to fill in: what depends on the light is
+    /// replaced by the caller. The GPU copy and single scattering are not carried, and the
+    /// light it was lit with is unknown until the caller sets it.
+    pub(super) fn successor(&self) -> Prt {
+        Prt {
             fitter: self.fitter.clone(),
             transport: self.transport.clone(),
             gpu: None,
@@ -151,24 +175,7 @@ impl Prt {
             tree_shape: self.tree_shape.clone(),
             color_cache: self.color_cache.clone(),
             lit_by: None,
-        };
-        if pose {
-            next.tree_shape = None; // the samples move: the tree is split anew
-            next.positions = mesh.positions().to_vec();
-            next.normals = mesh.normals().to_vec();
-            next.samples = mesh.surface_samples(self.spacing)?;
-            next.report.carried_pose = true;
         }
-        let mut out = next.relight_steps(mesh, irradiance, sampled, progress, rows)?;
-        out.posed = pose;
-        if self.gpu.is_some() {
-            out.dropped.push("the GPU copy of the transport");
-        }
-        if self.single.is_some() {
-            out.dropped.push("single scattering");
-        }
-        next.report.last_relight = Some(out.clone());
-        Ok((next, out))
     }
 
     /// Drops the irradiance kept source by source: the next `relit_scene` casts every light's
@@ -204,7 +211,32 @@ impl Prt {
         progress: Option<&ProgressFn>,
         pose: bool,
     ) -> Result<(Prt, RelightReport, IrradianceReport)> {
-        let settings = &at_vertices(settings);
+        // One source's emission alone changed: this transport plus that source's layer.
+        if !pose {
+            if let Some(done) = self.layered(scene, tracer, &at_vertices(settings), progress)? {
+                return Ok(done);
+            }
+        }
+        // A pose moves every sample and vertex: nothing kept holds, the posed transport keeps
+        // its own from here.
+        let kept = if pose {
+            std::sync::Arc::new(Mutex::new(KeptIrradiance::default()))
+        } else {
+            self.kept_irradiance.clone()
+        };
+        self.lit_with_kept(scene, tracer, &at_vertices(settings), progress, pose, kept)
+    }
+
+    /// `lit_in_scene` (`settings` PRT's own, `at_vertices`) with the irradiance kept in `kept`.
+    pub(super) fn lit_with_kept(
+        &self,
+        scene: &Scene,
+        tracer: &Tracer,
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+        pose: bool,
+        kept: std::sync::Arc<Mutex<KeptIrradiance>>,
+    ) -> Result<(Prt, RelightReport, IrradianceReport)> {
         let mesh = &scene.mesh;
         let ask = cancel_only(progress);
         let lighting = Mutex::new(IrradianceReport::default());
@@ -214,27 +246,10 @@ impl Prt {
         };
         // Elsewhere (the shadow edges' points, a walk term traced anew): every source at once.
         let irradiance = scene_irradiance(scene, tracer, settings, &merge, &ask);
-        // A pose moves every sample and vertex: nothing kept holds, the posed transport keeps
-        // its own from here.
-        let kept = if pose {
-            std::sync::Arc::new(Mutex::new(KeptIrradiance::default()))
-        } else {
-            self.kept_irradiance.clone()
-        };
-        // One source's emission alone changed: its rows' layer, not every sample summed.
-        let rows = if pose {
-            None
-        } else {
-            self.layered_rows(scene, settings, &|f| match ask(0.2 * f) {
-                true => Ok(()),
-                false => Err(Error::Cancelled),
-            })?
-        };
         let spacing = self.spacing;
         let sample = kept_sampler(scene, tracer, settings, &kept, &merge, &ask, true);
         let sampled = |samples: Vec<SurfaceSample>| sample(samples, spacing);
-        let (mut next, mut out) =
-            self.relit_with(mesh, &irradiance, &sampled, progress, pose, rows)?;
+        let (mut next, mut out) = self.relit_with(mesh, &irradiance, &sampled, progress, pose)?;
         next.kept_irradiance = kept.clone();
         next.lit_by = Some(std::sync::Arc::new(Lighting::of(scene)));
         let report = lighting.lock().unwrap_or_else(|e| e.into_inner()).clone();
@@ -249,7 +264,6 @@ impl Prt {
         irradiance: &IrradianceFn,
         sampled: &dyn Fn(Vec<SurfaceSample>) -> Result<SampledLight>,
         progress: Option<&ProgressFn>,
-        rows: Option<LayeredRows>,
     ) -> Result<RelightReport> {
         let start = Instant::now();
         if mesh.triangles() != self.triangles.as_slice() {
@@ -285,34 +299,28 @@ impl Prt {
         out.seconds_irradiance = start.elapsed().as_secs_f64();
         tick(0.2)?;
         let t = Instant::now();
-        if let Some(rows) = rows {
-            self.transport = rows.apply(&self.transport);
-            out.rows_from_layer = true;
-            out.seconds_layer = rows.seconds_layer;
-        } else {
-            let mut report = self.report.clone();
-            let settings = self.settings.clone();
-            let (transport, shape) = transport_under(
-                mesh,
-                &lit,
-                None,
-                self.fitter.basis(),
-                &settings,
-                &mut report,
-                self.tree_shape.as_deref(),
-                &|f| tick(0.2 + 0.5 * f),
-            )?;
-            self.transport = transport;
-            self.tree_shape = Some(std::sync::Arc::new(shape));
-            self.report = report;
-        }
-        out.seconds_transport = t.elapsed().as_secs_f64() + out.seconds_layer;
+        let mut report = self.report.clone();
+        let settings = self.settings.clone();
+        let (transport, shape) = transport_under(
+            mesh,
+            &lit,
+            None,
+            self.fitter.basis(),
+            &settings,
+            &mut report,
+            self.tree_shape.as_deref(),
+            &|f| tick(0.2 + 0.5 * f),
+        )?;
+        self.transport = transport;
+        self.tree_shape = Some(std::sync::Arc::new(shape));
+        out.seconds_transport = t.elapsed().as_secs_f64();
+        self.report = report;
         self.irradiance_noise = lit.irradiance_noise(mesh, &resolved[0]);
         self.add_samples_noise(mesh, &mut lit, &resolved[0], &|_| tick(0.7))?;
         self.vertex_irradiance = lit.vertex_irradiance;
         self.samples = lit.samples;
         self.carry_terms(mesh, &resolved[0], irradiance, true, progress, &mut out)?;
-        out.seconds = start.elapsed().as_secs_f64() + out.seconds_layer;
+        out.seconds = start.elapsed().as_secs_f64();
         tick(1.0)?;
         Ok(out)
     }

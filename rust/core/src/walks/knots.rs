@@ -160,6 +160,7 @@ mod tests {
             lengths: sorted,
             beside: Vec::new(),
             noise: [0.0; 3],
+            std_error: Vec::new(),
             report: Default::default(),
             layout: None,
         }

@@ -2,6 +2,7 @@
 //! and the walk term: what those walks add to PRT's half-space profile, carried to every vertex.
 
 mod allocation;
+mod combine;
 mod grid;
 mod knots;
 mod media;

@@ -7,7 +7,7 @@ use super::grid::Grid;
 use super::operator::ReceiverRecord;
 use super::passes::{smooth, KERNEL_SPACINGS};
 use super::radiosity::{relit_radiosity, ExitLight, MeshWalkResult};
-use super::term::{lengths_and_albedos, noise_and_share, per_albedo, Diff, WalkTerm};
+use super::term::{lengths_and_albedos, noise_and_share, per_albedo, std_errors, Diff, WalkTerm};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::profiles::Resolved;
@@ -151,6 +151,7 @@ impl WalkTerm {
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let (_, albedo) = lengths_and_albedos(&material.profiles);
         self.per_albedo = per_albedo(&smoothed, &albedo);
+        self.std_error = std_errors(&smoothed);
         self.noise = noise;
         self.report.noise = noise;
         self.report.share = share;

@@ -180,6 +180,9 @@ pub struct WalkTerm {
     pub(super) beside: Vec<(Resolved, WalkTerm)>,
     /// Relative noise per channel (added to the error estimate).
     pub(super) noise: [f64; 3],
+    /// The standard error of D per vertex after the kernel average (this medium's channels;
+    /// empty where not kept): what a sum of terms (`plus_scaled`) states its noise from.
+    pub(super) std_error: Vec<[f32; 3]>,
     pub report: WalkTermReport,
     /// What a new light needs (`relight`), when the walks kept their records.
     pub(super) layout: Option<std::sync::Arc<Layout>>,
@@ -253,6 +256,7 @@ impl WalkTerm {
         let smoothed = passes.smooth(&main, &diff, &grid, &own_weight, &sharp, &refined);
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let per_albedo = per_albedo(&smoothed, &albedo);
+        let std_error = std_errors(&smoothed);
         let layout = match (Kept::of(&main.walked, &main.walks), settings.record) {
             (Some(main_kept), true) => Some(std::sync::Arc::new(Layout {
                 candidates: main.candidates.clone(),
@@ -277,6 +281,7 @@ impl WalkTerm {
             lengths: sorted,
             beside: Vec::new(),
             noise,
+            std_error,
             report: WalkTermReport {
                 walked_vertices: main.walked.len(),
                 skipped_flat: main.candidates.len() - main.walked.len(),
@@ -421,6 +426,13 @@ impl WalkTerm {
     pub fn noise(&self) -> [f64; 3] {
         self.noise
     }
+}
+
+/// The standard error of D per vertex and channel (the square root of its variance).
+pub(super) fn std_errors(smoothed: &[Diff]) -> Vec<[f32; 3]> {
+    (smoothed.iter())
+        .map(|(_, var)| var.map(|x| x.max(0.0).sqrt()))
+        .collect()
 }
 
 /// D / A per vertex and channel (0 where A is 0).

@@ -402,10 +402,10 @@ class Prt:
         edits until the new one replaces it, and a cancel keeps it. When every light's (and
         the world's) emission only changed by one factor per channel, a rescale: no ray, and
         `rescaled` gives the factor (else None). When one light's (or the world's) emission
-        alone changed, the transport rows are the old ones plus that source's own rows scaled
-        (`rows_from_layer` True): summed once, at the first such change
-        (`seconds_layer`), and kept for the next. Returns seconds (and per stage), rays,
-        own_light_rays, walks_traced, rescaled, rows_from_layer, seconds_layer, posed.
+        alone changed, the transport is the old one plus that source's own layer scaled
+        (`from_layer` True): relit under that source alone once, at the first such change
+        (`seconds_layer`), and kept; a later change casts no ray. Returns seconds (and per stage), rays,
+        own_light_rays, walks_traced, rescaled, from_layer, seconds_layer, posed.
         ValueError names a bad argument (normals
         without positions, another vertex count or topology)."""
     @property
