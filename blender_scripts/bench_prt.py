@@ -258,7 +258,7 @@ def power_drag(positions, triangles, marble, kept, args) -> None:
             f"{first['seconds_layer']:.2f} s), then median {statistics.median(x['seconds'] for x in later):.3f} s over "
             f"{len(later)} ({statistics.median(walls[1:]):.3f} s the whole call from Python; rays {r['rays']}, transport {r['seconds_transport']:.3f} s, walks' term "
             f"{r['seconds_walks']:.3f} s, the object's own light {r['seconds_own_light']:.3f} s, "
-            f"from the layer: {all(x['from_layer'] for x in reports)}); against a fresh precompute: "
+            f"from the layer: {all(x['from_layer'] for x in reports)}; the layer kept: {r['layer_bytes'] / 1e6:.1f} MB); against a fresh precompute: "
             f"rel. RMS {', '.join(f'{100 * x:.2f}' for x in between['rms'])} %"
         )
 

@@ -200,7 +200,7 @@ def test_one_lights_power_among_several_is_a_rescale_of_its_own_layer():
         changed = scene(**kw)
         r = prt.update(lights=changed)
         assert r["rays"] == 0 and r["rescaled"] is None, r  # not every light by one factor
-        assert r["from_layer"] and (r["seconds_layer"] > 0) == summed, (kw, r)
+        assert r["from_layer"] and (r["seconds_layer"] > 0) == summed and r["layer_bytes"] > 0, (kw, r)
         fresh = translucent.Prt(changed, marble, profile="dipole", backend="cpu", world_samples=16)
         np.testing.assert_allclose(prt.radiosity(marble), fresh.radiosity(marble), rtol=5e-4, atol=1e-9)
     # Light where there was none (the point light back on): every row summed. The layers

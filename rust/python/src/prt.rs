@@ -660,8 +660,9 @@ impl PyPrt {
     /// {"seconds", "seconds_irradiance", "seconds_transport", "seconds_walks",
     /// "seconds_own_light", "seconds_single_scattering", "rays" (the irradiance's),
     /// "own_light_rays", "walks_traced", "rescaled", "from_layer", "seconds_layer",
-    /// "posed"}: one light's (or the world's) emission alone changed, the transport is the old
-    /// one plus that source's own layer, relit at the first such change and kept.
+    /// "layer_bytes", "posed"}: one light's (or the world's) emission alone changed, the
+    /// transport is the old one plus that source's own layer, relit at the first such change
+    /// and kept.
     #[pyo3(signature = (lights = None, positions = None, normals = None, first_preview = None, progress = None))]
     fn update<'py>(
         &self,
@@ -770,6 +771,7 @@ impl PyPrt {
             d.set_item("rescaled", k.to_vec())?;
             d.set_item("from_layer", false)?;
             d.set_item("seconds_layer", 0.0)?;
+            d.set_item("layer_bytes", 0)?;
             d.set_item("posed", false)?;
             return Ok(d);
         }
@@ -995,6 +997,7 @@ fn relit_dict<'py>(
     d.set_item("rescaled", py.None())?;
     d.set_item("from_layer", report.from_layer)?;
     d.set_item("seconds_layer", report.seconds_layer)?;
+    d.set_item("layer_bytes", report.layer_bytes)?;
     d.set_item("posed", report.posed)?;
     Ok(d)
 }

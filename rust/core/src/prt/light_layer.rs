@@ -127,12 +127,20 @@ impl Prt {
             return Ok(None);
         };
         next.lit_by = Some(Arc::new(Lighting::of(scene)));
+        let layer_bytes = {
+            let kept = self
+                .kept_irradiance
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            kept.layers.iter().map(|l| l.prt.light_bytes()).sum()
+        };
         let mut out = RelightReport {
             seconds: start.elapsed().as_secs_f64(),
             seconds_transport: t.elapsed().as_secs_f64(),
             irradiance_rays: lighting.rays,
             from_layer: true,
             seconds_layer,
+            layer_bytes,
             ..Default::default()
         };
         // Both hold the old light, as after any relight: attach them again.
@@ -271,6 +279,27 @@ impl Prt {
         }
         next.lit_by = None;
         Ok(Some(next))
+    }
+}
+
+impl Prt {
+    /// Bytes of what depends on the light (the rows, the vertices' irradiance, its noise draw,
+    /// the walk terms' D and standard errors and the own light's irradiance): what a layer
+    /// keeps beside the records it shares with the transport it came from.
+    pub(super) fn light_bytes(&self) -> usize {
+        let v = std::mem::size_of::<[f32; 3]>();
+        let noise = self.irradiance_noise.as_ref().map_or(0, |n| {
+            n.draw.len()
+                + n.samples.as_ref().map_or(0, Vec::len)
+                + n.walks.as_ref().map_or(0, Vec::len)
+        });
+        let bounce = self.bounce.as_ref().map_or(0, |b| {
+            b.irradiance.len() * v + b.walked.as_ref().map_or(0, |w| w.light_bytes())
+        });
+        self.transport.bytes()
+            + (self.vertex_irradiance.len() + noise) * v
+            + self.walks.as_ref().map_or(0, |w| w.light_bytes())
+            + bounce
     }
 }
 

@@ -65,6 +65,8 @@ pub struct RelightReport {
     pub from_layer: bool,
     /// Seconds relighting that layer in this update (0 where it was kept).
     pub seconds_layer: f64,
+    /// Bytes the kept layers hold (`from_layer` updates; 0 otherwise).
+    pub layer_bytes: usize,
 }
 
 impl Prt {

@@ -13,6 +13,17 @@ use crate::mesh::Mesh;
 use crate::profiles::Resolved;
 
 impl WalkTerm {
+    /// Bytes of what depends on the light (D / A and its standard error per vertex, for this
+    /// medium and those beside it): what a sum or a layer holds beside the shared records.
+    pub fn light_bytes(&self) -> usize {
+        let own = (self.per_albedo.len() + self.std_error.len()) * std::mem::size_of::<[f32; 3]>();
+        own + self
+            .beside
+            .iter()
+            .map(|(_, t)| t.light_bytes())
+            .sum::<usize>()
+    }
+
     /// This term plus `f` times `other` per channel, `other` the same walks read under another
     /// light (`relight`: the same vertices, media and layout); `halfspace` the half-space B
     /// under the summed light for `material` (what the noise is relative to) and

@@ -405,7 +405,8 @@ class Prt:
         alone changed, the transport is the old one plus that source's own layer scaled
         (`from_layer` True): relit under that source alone once, at the first such change
         (`seconds_layer`), and kept; a later change casts no ray. Returns seconds (and per stage), rays,
-        own_light_rays, walks_traced, rescaled, from_layer, seconds_layer, posed.
+        own_light_rays, walks_traced, rescaled, from_layer, seconds_layer, layer_bytes (what
+        the kept layers hold), posed.
         ValueError names a bad argument (normals
         without positions, another vertex count or topology)."""
     @property
