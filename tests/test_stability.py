@@ -353,7 +353,8 @@ def test_the_stored_operators_relit_stay_finite_non_negative_and_gain_no_energy(
     entered with and the own light returns at most what left, so B <= (1 + 10 %) (E_sun + pi
     L_world) at every vertex (the 10 % for the walks' noise). Where the mean free path is far
     below the sphere's size the walks skip every vertex as flat (the half-space is exact there):
-    the cases of mean free path near the sphere's keep their walks' exits (3.6-6.5 MB here)."""
+    the cases of mean free path near the sphere's keep their walks' exits (3.6-6.5 MB here).
+    The same bounds where one source's emission alone changes (its layer added, issue 29)."""
     m = translucent.Material(sa, ss, g=0.0, eta=1.4)
     pos, tri = sphere(6, scale)
     scene = translucent.Scene(pos, tri)
@@ -370,6 +371,19 @@ def test_the_stored_operators_relit_stay_finite_non_negative_and_gain_no_energy(
     assert all(math.isfinite(x) and x >= 0 for x in prt.last_eval["error_estimate"])
     rad = prt.radiance(m)
     assert np.all(np.isfinite(rad)) and np.all(rad >= 0)
+    # One source's emission alone (the world's, then the sun's off), from its layer
+    # (`light_layer`), then the world dimmed to nearly nothing (the layer would take away all
+    # but 1e-7 of the light: relit in full, `CANCELLATION`): the same bounds under each light.
+    for sun, world, layered in ((2.0, 3.0, True), (0.0, 3.0, True), (0.0, 1e-6, False)):
+        lit = translucent.Scene(pos, tri)
+        lit.add_sun((math.cos(turn), math.sin(turn), -0.3), irradiance=sun)
+        lit.set_world(color=(world, world, world))
+        r = prt.update(lights=lit)
+        assert r["from_layer"] == layered and r["walks_traced"] == 0, (sun, world, r)
+        b = prt.radiosity(m)
+        assert np.all(np.isfinite(b)) and np.all(b >= 0), b
+        assert np.all(b <= 1.1 * (sun + math.pi * world)), (sun, world, b.max())
+        assert all(math.isfinite(x) and x >= 0 for x in prt.last_eval["error_estimate"])
 
 
 @settings(max_examples=12, deadline=None, derandomize=True)
