@@ -116,7 +116,7 @@ impl Prt {
             Some((layer, m)) => (layer, m, IrradianceReport::default(), 0.0),
             None => {
                 let Some((layer, lighting)) =
-                    self.source_layer(scene, tracer, which, &source, settings, progress)?
+                    self.source_layer(scene, tracer, &source, settings, progress)?
                 else {
                     return Ok(None);
                 };
@@ -159,14 +159,13 @@ impl Prt {
         Ok(Some((next, out, lighting)))
     }
 
-    /// This transport relit under `source` alone (the `which` of `scene`, at the emission this
-    /// transport was lit with), its irradiance read from what is kept for that source, and
-    /// kept. None where that source's irradiance was not kept.
+    /// This transport relit under `source` alone (a light or the world of `scene`, at the
+    /// emission this transport was lit with), its irradiance read from what is kept for that
+    /// source, and kept. None where that source's irradiance was not kept.
     fn source_layer(
         &self,
         scene: &Scene,
         tracer: &Tracer,
-        which: Which,
         source: &Source,
         settings: &IrradianceSettings,
         progress: Option<&ProgressFn>,
@@ -190,13 +189,12 @@ impl Prt {
         };
         let mut alone = Scene::new(scene.mesh.clone());
         alone.occluders = scene.occluders.clone();
-        match (which, source) {
-            (Which::Light(_), Source::Light(light, linking)) => {
+        match source {
+            Source::Light(light, linking) => {
                 alone.lights = vec![light.clone()];
                 alone.linking = vec![linking.clone()];
             }
-            (_, Source::World(world)) => alone.world = world.clone(),
-            _ => return Ok(None),
+            Source::World(world) => alone.world = world.clone(),
         }
         let kept = Arc::new(Mutex::new(alone_kept));
         let (mut prt, _, lighting) =
