@@ -85,15 +85,26 @@ pub fn one_source_scaled(
         return None;
     };
     let k = match which {
-        Which::Light(i) => common_scale(
-            std::slice::from_ref(&old_lights[i]),
-            &World::Black,
-            std::slice::from_ref(&new_lights[i]),
-            &World::Black,
-        ),
-        Which::World => common_scale(&[], old_world, &[], new_world),
+        Which::Light(i) => light_scale(&old_lights[i], &new_lights[i]),
+        Which::World => world_scale(old_world, new_world),
     }?;
     Some((which, k))
+}
+
+/// `common_scale` of one light alone: the factor per channel from `old`'s emission to `new`'s
+/// when they are the same light but for it.
+pub fn light_scale(old: &Light, new: &Light) -> Option<[f32; 3]> {
+    common_scale(
+        std::slice::from_ref(old),
+        &World::Black,
+        std::slice::from_ref(new),
+        &World::Black,
+    )
+}
+
+/// `common_scale` of a world alone.
+pub fn world_scale(old: &World, new: &World) -> Option<[f32; 3]> {
+    common_scale(&[], old, &[], new)
 }
 
 /// The two emissions when `a` and `b` are the same light but for it.

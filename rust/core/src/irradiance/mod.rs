@@ -617,15 +617,10 @@ impl Source {
     /// The factor per channel that takes this source's emission to `other`'s when the two are
     /// the same light (or world) but for it; None otherwise.
     pub(crate) fn scale_to(&self, other: &Source) -> Option<[f32; 3]> {
-        use crate::light_scale::common_scale;
+        use crate::light_scale::{light_scale, world_scale};
         match (self, other) {
-            (Source::Light(a, x), Source::Light(b, y)) if x == y => common_scale(
-                std::slice::from_ref(a),
-                &World::Black,
-                std::slice::from_ref(b),
-                &World::Black,
-            ),
-            (Source::World(a), Source::World(b)) => common_scale(&[], a, &[], b),
+            (Source::Light(a, x), Source::Light(b, y)) if x == y => light_scale(a, b),
+            (Source::World(a), Source::World(b)) => world_scale(a, b),
             _ => None,
         }
     }

@@ -197,6 +197,15 @@ pub fn cast(
     })
 }
 
+/// What `medium` makes of the indirect irradiance where it arrives, (R_total + point mass) E_ind
+/// per vertex: the half-space answer the walked term of the own light is taken against.
+pub fn local_conversion(medium: &Resolved, indirect: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    let receiving = medium.totals();
+    (indirect.iter())
+        .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
+        .collect()
+}
+
 /// What walks through the mesh make of the indirect irradiance `indirect` beyond its local
 /// conversion (R_total + point mass) E_ind: the indirect light enters through the real
 /// geometry too (what falls on the front of an ear comes out at its back). On
@@ -221,11 +230,7 @@ pub fn walked_term(
         edges: &crate::shadow_edges::ShadowEdges::none(),
     };
     let one = |medium: &Resolved, before: Option<WalkTerm>| -> Result<WalkTerm> {
-        let receiving = medium.totals();
-        let local: Vec<[f32; 3]> = indirect
-            .iter()
-            .map(|e| std::array::from_fn(|c| (receiving[c] as f32) * e[c]))
-            .collect();
+        let local = local_conversion(medium, indirect);
         match before {
             Some(mut term) => {
                 term.relight(mesh, medium, &lit, &local)?;

@@ -123,13 +123,13 @@ impl Transport {
             .enumerate()
             .for_each(|(block, out)| {
                 for c in 0..3 {
-                    for (t, w, dst) in [(self, a[c], 0usize), (other, b[c], 1)] {
+                    for (t, w) in [(self, a[c]), (other, b[c])] {
                         let src = if t.channels == 1 { 0 } else { c };
                         let from = (block * t.channels + src) * stride * LANES;
                         let row = &t.values[from..from + stride * LANES];
                         let to = &mut out[c * stride * LANES..(c + 1) * stride * LANES];
                         for (o, x) in to.iter_mut().zip(row) {
-                            *o = if dst == 0 { w * x } else { *o + w * x };
+                            *o += w * x;
                         }
                     }
                 }

@@ -36,6 +36,7 @@ use crate::own_light::{self, Bounce};
 use crate::profiles::Resolved;
 use crate::raytrace::Tracer;
 use crate::scene::{Linking, Scene};
+use crate::walks::WalkTerm;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -226,7 +227,6 @@ impl Prt {
     fn plus_layer(&self, mesh: &Mesh, layer: &Prt, f: [f32; 3]) -> Result<Option<Prt>> {
         let rep = Resolved::new(self.profile, &self.representatives[0])?;
         let mut next = self.successor();
-        next.kept_irradiance = self.kept_irradiance.clone();
         next.transport = self.transport.plus_scaled(&layer.transport, f);
         next.vertex_irradiance = plus(&self.vertex_irradiance, &layer.vertex_irradiance, f);
         next.irradiance_noise = noise_plus(&self.irradiance_noise, &layer.irradiance_noise, f);
@@ -236,14 +236,11 @@ impl Prt {
             let beside: Vec<Vec<[f32; 3]>> = (w.beside_media().iter())
                 .map(|m| next.radiosity_of(m, false, false).map(|e| e.values))
                 .collect::<Result<_>>()?;
-            match w.plus_scaled(lw, f, mesh, &rep, &halfspace, &beside) {
-                Ok(sum) => {
-                    next.report.walks = Some(sum.report.clone());
-                    next.walks = Some(sum);
-                }
-                Err(Error::InvalidArgument(_)) => return Ok(None),
-                Err(e) => return Err(e),
-            }
+            let Some(sum) = addable(w.plus_scaled(lw, f, mesh, &rep, &halfspace, &beside))? else {
+                return Ok(None);
+            };
+            next.report.walks = Some(sum.report.clone());
+            next.walks = Some(sum);
         } else if self.walks.is_some() != layer.walks.is_some() {
             return Ok(None);
         }
@@ -252,23 +249,20 @@ impl Prt {
                 // B before the own light, as `cast_own_light` measures its share against.
                 let direct = next.radiosity_of(&rep, true, true)?.values;
                 let irradiance = plus(&b.irradiance, &lb.irradiance, f);
-                let receiving = rep.totals();
                 let walked = match (&b.walked, &lb.walked) {
                     (Some(w), Some(lw)) => {
-                        let local: Vec<[f32; 3]> = (irradiance.iter())
-                            .map(|e| std::array::from_fn(|c| receiving[c] as f32 * e[c]))
-                            .collect();
-                        match w.plus_scaled(lw, f, mesh, &rep, &local, &[]) {
-                            Ok(sum) => Some(sum),
-                            Err(Error::InvalidArgument(_)) => return Ok(None),
-                            Err(e) => return Err(e),
-                        }
+                        let local = own_light::local_conversion(&rep, &irradiance);
+                        let Some(sum) = addable(w.plus_scaled(lw, f, mesh, &rep, &local, &[]))?
+                        else {
+                            return Ok(None);
+                        };
+                        Some(sum)
                     }
                     (None, None) => None,
                     _ => return Ok(None),
                 };
                 next.report.interreflection_share =
-                    own_light::share(&irradiance, &direct, mesh.vertex_areas(), &receiving);
+                    own_light::share(&irradiance, &direct, mesh.vertex_areas(), &rep.totals());
                 next.report.walks_indirect = walked.as_ref().map(|w| w.report.clone());
                 next.bounce = Some(Bounce {
                     irradiance,
@@ -280,7 +274,6 @@ impl Prt {
             (None, None) => {}
             _ => return Ok(None),
         }
-        next.lit_by = None;
         Ok(Some(next))
     }
 }
@@ -327,6 +320,16 @@ fn cancels(old: &[[f32; 3]], layer: &[[f32; 3]], f: [f32; 3]) -> bool {
     })
 }
 
+/// A walk term summed (`WalkTerm::plus_scaled`), or None where the two cannot be added (not
+/// the same walks, no standard errors kept): the update then relights in full.
+fn addable(sum: Result<WalkTerm>) -> Result<Option<WalkTerm>> {
+    match sum {
+        Ok(t) => Ok(Some(t)),
+        Err(Error::InvalidArgument(_)) => Ok(None),
+        Err(e) => Err(e),
+    }
+}
+
 /// a + f b per vertex and channel.
 fn plus(a: &[[f32; 3]], b: &[[f32; 3]], f: [f32; 3]) -> Vec<[f32; 3]> {
     (a.iter().zip(b))
@@ -349,20 +352,17 @@ fn noise_plus(
         (None, Some(y)) => Some(plus(&vec![[0.0; 3]; y.len()], y, f)),
         (None, None) => None,
     };
-    match (a, b) {
-        (None, None) => None,
-        (Some(a), None) => Some(a.clone()),
-        (None, Some(b)) => Some(IrradianceNoise {
-            draw: plus(&vec![[0.0; 3]; b.draw.len()], &b.draw, f),
-            samples: part(None, b.samples.as_ref()),
-            walks: part(None, b.walks.as_ref()),
-            ..b.clone()
-        }),
-        (Some(a), Some(b)) => Some(IrradianceNoise {
-            draw: plus(&a.draw, &b.draw, f),
-            samples: part(a.samples.as_ref(), b.samples.as_ref()),
-            walks: part(a.walks.as_ref(), b.walks.as_ref()),
-            ..a.clone()
-        }),
-    }
+    let (a, b) = (a.as_ref(), b.as_ref());
+    Some(IrradianceNoise {
+        draw: part(a.map(|n| &n.draw), b.map(|n| &n.draw))?,
+        samples: part(
+            a.and_then(|n| n.samples.as_ref()),
+            b.and_then(|n| n.samples.as_ref()),
+        ),
+        walks: part(
+            a.and_then(|n| n.walks.as_ref()),
+            b.and_then(|n| n.walks.as_ref()),
+        ),
+        ..a.or(b)?.clone()
+    })
 }

@@ -213,9 +213,10 @@ impl Prt {
         progress: Option<&ProgressFn>,
         pose: bool,
     ) -> Result<(Prt, RelightReport, IrradianceReport)> {
+        let settings = &at_vertices(settings);
         // One source's emission alone changed: this transport plus that source's layer.
         if !pose {
-            if let Some(done) = self.layered(scene, tracer, &at_vertices(settings), progress)? {
+            if let Some(done) = self.layered(scene, tracer, settings, progress)? {
                 return Ok(done);
             }
         }
@@ -226,7 +227,7 @@ impl Prt {
         } else {
             self.kept_irradiance.clone()
         };
-        self.lit_with_kept(scene, tracer, &at_vertices(settings), progress, pose, kept)
+        self.lit_with_kept(scene, tracer, settings, progress, pose, kept)
     }
 
     /// `lit_in_scene` (`settings` PRT's own, `at_vertices`) with the irradiance kept in `kept`.
