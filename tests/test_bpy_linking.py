@@ -107,11 +107,12 @@ def test_a_light_linked_away_from_the_ball_reaches_it_by_the_floor_alone(addon):
 
 def test_the_splatting_follows_light_and_shadow_linking(addon):
     # The same scene splatted (Shah 2009): Rim left out of the ball's receivers puts no sample
-    # on it in its light view (what reaches the ball then is the floor's bounce alone, read by
-    # no light view: nothing here, the dipole having no point mass); Rim on the ball alone, its
-    # light view alone. The splatting is linear in the light, so the two add up to the preview
-    # with Rim plus the one without. (Shadow linking in the light views: `splat::tests::method`
-    # against the sun-lit plane's closed form.)
+    # on it in its light view, and reaches the ball by the floor's bounce alone (gathered at
+    # the peeled crossings, light by light); Rim on the ball alone, its light view alone (the
+    # floor unlit by it). The splatting is linear in the light, so the two add up to the
+    # preview with Rim plus the one without. What the floor sends back is PRT's bounce on the
+    # whole. (Shadow linking in the light views: `splat::tests::method` against the sun-lit
+    # plane's closed form.)
     import bpy
 
     from addon import panel, session
@@ -129,10 +130,16 @@ def test_the_splatting_follows_light_and_shadow_linking(addon):
     rim.light_linking.receiver_collection = _linking(bpy, "Rim on the ball", [(obj, "INCLUDE")])
     on_ball = _preview(bpy, mat, obj)
     np.testing.assert_allclose(off_ball + on_ball, with_rim + without_rim, rtol=1e-3, atol=1e-7)
-    assert np.abs(off_ball - without_rim).max() < 1e-2 * np.abs(with_rim - without_rim).max()
     sess = session.SESSIONS[mat.name]
     assert sess.method == "splat" and sess.info.linking == []
     assert not any("linking" in line for line, _ in panel.status_lines(mat))
+    mat.translucent.method = "PRT"
+    rim.light_linking.receiver_collection = _linking(bpy, "Rim off the ball (PRT)", [(obj, "EXCLUDE")])
+    by_floor = _preview(bpy, mat, obj).sum(0)
+    rim.hide_render = True
+    bounce = by_floor - _preview(bpy, mat, obj).sum(0)
+    ratio = (off_ball - without_rim).sum(0) / bounce
+    assert np.all(bounce > 0) and np.all(np.abs(ratio - 1) < 0.1), ratio
 
 
 def test_linking_follows_each_previewed_object(addon):

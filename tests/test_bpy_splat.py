@@ -86,8 +86,11 @@ def test_two_touching_objects_exchange_no_light_and_the_render_is_saved(addon, t
         assert last.mask[row, col] == ids[obj.name], (obj.name, row, col)
     lit_a = last.radiance[last.mask == ids[a.name]]
     dark_b = last.radiance[last.mask == ids[b.name]]
-    assert len(dark_b) > 50 and np.all(dark_b == 0.0)
     assert lit_a[:, 0].max() > 0.01
+    # Nothing crosses under the surface. What Jade's grazed top sends back off its surface (the
+    # rest of the scene's bounce, Cycles' indirect light) is at round-off level: 1e-12 of
+    # Jade's 0.01 measured.
+    assert len(dark_b) > 50 and np.all(dark_b <= 1e-6 * lit_a.max())
     # The image's pixels are the radiance, rows bottom-up, alpha where an object is seen.
     px = np.empty(64 * 48 * 4, np.float32)
     image.pixels.foreach_get(px)

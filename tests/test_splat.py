@@ -301,3 +301,55 @@ def test_a_walks_term_that_takes_light_away_is_kept_in_the_splattings_layer():
     assert np.all(taken < 0), taken  # the walks take light away on the lit face
     err = max(translucent.relative_error(b, b_prt, w)["rms"])
     assert err < 0.03, err
+
+
+def test_the_rest_of_the_scenes_bounce_is_splatted_from_every_side():
+    # A 2 cm sphere on a floor of albedo 0.5 under a sun: the floor sends back about a third of
+    # its light. The peeled crossings gather that bounce (the sun's own light is splatted from
+    # its view), so the splatting meets the ground truth, whose irradiance has the same bounce;
+    # with the floor black it is the sun alone, 38 % below (measured), and nothing is peeled.
+    p, t = sphere(16, 0.02)
+    m = translucent.Material.from_principled(0.5, (1.0, 0.5, 0.25), 0.02)
+    floor = np.array([[-1, -1, -0.02], [1, -1, -0.02], [1, 1, -0.02], [-1, 1, -0.02]], np.float32)
+
+    def on_floor(albedo, light):
+        s = translucent.Scene(p, t)
+        light(s)
+        s.add_occluder(floor, np.array([[0, 1, 2], [0, 2, 3]]), name="floor", albedo=albedo)
+        return s
+
+    def sun(s):
+        s.add_sun((0.2, 0.1, -1.0), irradiance=2.0)
+
+    idx = list(range(0, len(p), 16))
+    s = on_floor(0.5, sun)
+    w = s.vertex_areas[idx, 0]
+    truth = translucent.reference_radiosity(s, m, receivers=idx, world_samples=128, rel_tol=1e-2, profile="dipole")
+    splat = translucent.Splat(s, profile="dipole", peel_grid=512)
+    err = translucent.relative_error(splat.radiosity(m)[idx], truth, w)["rms"]
+    assert max(err) < 0.035, err
+    peel = splat.report["peel"]
+    assert peel["bounce"] and not peel["world"] and peel["lights"] == [] and peel["samples"] > 0, peel
+    assert "the light the rest of the scene sends back" not in {x["what"] for x in splat.last_eval["skipped"]}
+    est = splat.last_eval["error_estimate"]
+    assert all(0.5 * r <= e <= 2 * r or max(e, r) < 0.005 for e, r in zip(est, err)), (est, err)
+    black = translucent.Splat(on_floor(0.0, sun), profile="dipole", peel_grid=512)
+    below = translucent.relative_error(black.radiosity(m)[idx], truth, w)["rms"]
+    assert min(below) > 0.25 and black.report["peel"] is None, below
+
+    # A wide spot aimed at the floor beside the sphere, reaching it by the bounce alone: peeled
+    # for it (it was skipped as unreachable), its light arriving as the ground truth's does on
+    # the whole (the receivers' mean: each one is a noisy bounce of a small patch of floor).
+    def spot(s):
+        s.add_spot_light((0.15, 0.0, 0.03), (0.0, 0.0, -1.0), power=20.0, spot_size=2.0)
+
+    s = on_floor(0.5, spot)
+    splat = translucent.Splat(s, profile="dipole", peel_grid=512)
+    b = splat.radiosity(m)[idx]
+    truth = translucent.reference_radiosity(s, m, receivers=idx, world_samples=512, profile="dipole")
+    ratio = b.mean(axis=0) / truth.mean(axis=0)
+    assert np.all(np.abs(ratio - 1) < 0.15), ratio
+    (peeled,) = splat.report["peel"]["lights"]
+    assert peeled["light"] == 0 and "bounce alone" in peeled["why"], peeled
+    black = translucent.Splat(on_floor(0.0, spot), profile="dipole", peel_grid=512)
+    assert np.all(black.radiosity(m) == 0) and "light 0 (spot)" in {x["what"] for x in black.last_eval["skipped"]}

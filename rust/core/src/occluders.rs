@@ -594,6 +594,48 @@ mod tests {
     }
 
     #[test]
+    fn bounce_only_leaves_out_the_sources_own_light_and_keeps_what_the_floor_sends_back() {
+        // `wall_over_floor` under a sun tilted toward the wall's face: the sun lights the wall
+        // at cos 0.6 (E = 1.2) and the floor at cos 0.8, and the lit floor before the wall
+        // sends it rho x 1.6 / 2 (half the floor's radiosity, as above). `bounce_only` (the
+        // splatting's light views: their own light is splatted) gives that bounce alone, and
+        // the full estimate less it is the sun's closed form at every vertex.
+        let albedo = [0.5f32, 0.25, 0.75];
+        let mut scene = wall_over_floor(albedo);
+        scene.lights = vec![Light::sun(Vec3::new(-0.6, 0.0, -0.8), [2.0; 3]).unwrap()];
+        let full = IrradianceSettings::default();
+        let only = IrradianceSettings {
+            bounce_only: true,
+            ..full.clone()
+        };
+        let mesh = &scene.mesh;
+        let tracer = scene.tracer();
+        let at = |s: &IrradianceSettings| {
+            irradiance(&scene, &tracer, mesh.positions(), mesh.normals(), s).unwrap()
+        };
+        let ((e, r_full), (b, r_only)) = (at(&full), at(&only));
+        for c in 0..3 {
+            let mean = b.iter().map(|x| f64::from(x[c])).sum::<f64>() / b.len() as f64;
+            let expect = f64::from(albedo[c]) * 1.6 / 2.0;
+            assert!(
+                (mean - expect).abs() <= 0.02 * expect,
+                "{c}: {mean} vs {expect}"
+            );
+        }
+        for (x, y) in e.iter().zip(&b) {
+            for c in 0..3 {
+                assert!((x[c] - y[c] - 1.2).abs() < 1e-4, "{x:?} - {y:?}");
+            }
+        }
+        // Its rays: the bounce's alone, one fewer direct ray a vertex.
+        assert_eq!(r_full.rays - r_only.rays, mesh.vertex_count() as u64);
+        // Nothing sends light back: nothing at all, no ray.
+        let bare = Tracer::new(mesh);
+        let (z, r) = irradiance(&scene, &bare, mesh.positions(), mesh.normals(), &only).unwrap();
+        assert!(z.iter().all(|x| *x == [0.0; 3]) && r.rays == 0);
+    }
+
+    #[test]
     fn a_spot_on_the_floor_beside_the_wall_lights_it_by_the_bounce_alone() {
         // `wall_over_floor` under a spot 4 above the floor at x = 3, straight down, 40 degrees
         // wide (blend 0): its cone reaches the floor (a disc of radius 4 tan 20 degrees about

@@ -146,6 +146,7 @@ fn report_dict<'py>(py: Python<'py>, r: &SplatReport) -> PyResult<Bound<'py, PyD
             }
             d.set_item("lights", peeled)?;
             d.set_item("world", p.world)?;
+            d.set_item("bounce", p.bounce)?;
             d.set_item("grid", p.counts.grid)?;
             d.set_item("grid_capped", p.sizes.capped)?;
             d.set_item("rays", p.counts.rays)?;

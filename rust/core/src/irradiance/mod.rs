@@ -45,6 +45,10 @@ pub struct IrradianceSettings {
     /// BOUNCE_DIVISOR` times this (1: as many as the world's rays give; dense points always
     /// take 1). PRT's vertices take more (`prt::VERTEX_BOUNCE_FACTOR`).
     pub vertex_bounce_factor: u32,
+    /// Only what the rest of the scene sends back: the lights' and the world's own light at
+    /// the points is taken another way (the splatting's light views), so it is neither cast
+    /// nor added; the bounce of every source is (0 where nothing sends light back).
+    pub bounce_only: bool,
 }
 
 impl Default for IrradianceSettings {
@@ -56,6 +60,7 @@ impl Default for IrradianceSettings {
             seed: 0,
             world_unshadowed: false,
             vertex_bounce_factor: 1,
+            bounce_only: false,
         }
     }
 }
@@ -274,7 +279,11 @@ fn estimate_sources(
     }
     let (reaching, counts) = lights_at_work(lights, world, bounds, tracer.bounce_bounds());
     let world = (!world.is_black()).then_some(world);
-    let rays = asked_rays(reaching.direct, world.is_some(), points.len(), settings)?;
+    let (direct, traced_world) = match settings.bounce_only {
+        true => (0, false),
+        false => (reaching.direct, world.is_some()),
+    };
+    let rays = asked_rays(direct, traced_world, points.len(), settings)?;
     let ticker = Ticker::new(progress, rays as u64);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
     let world_sh = world.filter(|_| settings.world_unshadowed).map(|w| {
@@ -289,7 +298,7 @@ fn estimate_sources(
     // Points in chunks, one tick per chunk for the lights (a tick per point read the clock
     // for every point: 0.2 s of the bunny's 2 M samples); the world ticks per row of its grid.
     const CHUNK: usize = 256;
-    let light_ticks = reaching.direct as u64 * u64::from(settings.area_samples.max(1));
+    let light_ticks = direct as u64 * u64::from(settings.area_samples.max(1));
     let results: Vec<Point> = points
         .par_chunks(CHUNK)
         .zip(normals.par_chunks(CHUNK))
@@ -365,13 +374,20 @@ fn estimate_point(
     // are independent.
     let mut variance = [0.0f64; 3];
     // Light linking: lights that do not light the mesh here reach it by the bounce alone.
-    let lit = reaching.direct == 0 || tracer.lights_point(p, n);
-    for l in reaching.lights[..reaching.direct].iter().filter(|_| lit) {
+    let direct = if settings.bounce_only {
+        0
+    } else {
+        reaching.direct
+    };
+    let lit = direct == 0 || tracer.lights_point(p, n);
+    for l in reaching.lights[..direct].iter().filter(|_| lit) {
         let (e, v) = est.light(l, settings.area_samples.max(1));
         add(&mut sum, e);
         add(&mut variance, v);
     }
-    if let Some(coefficients) = world_sh {
+    if settings.bounce_only {
+        // The world's own light is taken another way too.
+    } else if let Some(coefficients) = world_sh {
         let mut y = [0.0f64; 9];
         sh::real_sh(2, n.as_dvec3().normalize(), &mut y);
         let e: [f32; 3] = std::array::from_fn(|c| {

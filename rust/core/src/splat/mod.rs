@@ -136,6 +136,9 @@ pub struct PeelReport {
     pub lights: Vec<(usize, String)>,
     /// Whether the world lit them.
     pub world: bool,
+    /// Whether the rest of the scene's bounce lit them: every source's light sent back off the
+    /// occluders (`Occluders::bouncing`), the light views' included.
+    pub bounce: bool,
     pub sizes: Sizes,
     pub counts: PeelCounts,
     pub seconds: f64,
@@ -227,7 +230,8 @@ struct Plan {
     skipped: Vec<Skipped>,
 }
 
-fn plan(scene: &Scene, sphere: &BoundingSphere) -> Plan {
+/// `bounce`: the box of the rest of the scene that sends light back, where some does.
+fn plan(scene: &Scene, sphere: &BoundingSphere, bounce: Option<(Vec3, Vec3)>) -> Plan {
     let mut skipped = vec![
         Skipped::new(
             "walks through the mesh",
@@ -238,12 +242,6 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> Plan {
             "the splatting gathers the direct light only",
         ),
     ];
-    if scene.occluders.bouncing().is_some() {
-        skipped.push(Skipped::new(
-            "the light the rest of the scene sends back",
-            "not yet supported by the splatting: occluders only cast shadows here",
-        ));
-    }
     let (lo, hi) = scene.mesh.bounds();
     let mut views = Vec::new();
     let mut peeled = Vec::new();
@@ -252,7 +250,14 @@ fn plan(scene: &Scene, sphere: &BoundingSphere) -> Plan {
         if light.is_black() {
             skipped.push(Skipped::new(what, "it emits nothing"));
         } else if !light.can_reach(lo, hi) {
-            skipped.push(Skipped::new(what, "it cannot reach the mesh"));
+            if bounce.is_some_and(|(blo, bhi)| light.can_reach(blo, bhi)) {
+                peeled.push((
+                    k,
+                    "it reaches the mesh by the rest of the scene's bounce alone".to_string(),
+                ));
+            } else {
+                skipped.push(Skipped::new(what, "it cannot reach the mesh"));
+            }
         } else {
             match View::for_light(light, sphere) {
                 Ok(view) => views.push((k, view)),
@@ -312,11 +317,14 @@ fn sources(
     tick(progress, from)?;
     let mesh = &scene.mesh;
     let sphere = BoundingSphere::of(mesh);
+    // The rest of the scene's bounce (every occluder with its albedo) rides on the tracer: the
+    // peeled crossings gather it, as the world's light, for every source.
+    let mesh_tracer = Tracer::new(mesh).with_bounce(scene.occluders.bouncing());
     let Plan {
         views,
         peeled,
         mut skipped,
-    } = plan(scene, &sphere);
+    } = plan(scene, &sphere, mesh_tracer.bounce_bounds());
     let order: Vec<usize> = (views.iter().map(|(k, _)| *k))
         .chain(peeled.iter().map(|(k, _)| *k))
         .collect();
@@ -325,8 +333,10 @@ fn sources(
     let world = scene.world.clone();
     // The rest of the scene that can shadow the mesh from the lights splatted and the world.
     let (kept, _) = (scene.occluders).relevant(mesh.bounds(), &used, &world);
-    let mesh_tracer = Tracer::new(mesh);
     let tracer = mesh_tracer.with_occluders(&kept);
+    // The light views' own light is splatted from their views; what they send back off the
+    // rest of the scene reaches the mesh from every side, so the peeled crossings gather it.
+    let views_bounce = tracer.bounces() && !views.is_empty();
     let mut report = SplatReport {
         eps: settings.eps,
         r_max: spreads.map(|s| s.map_or(0.0, |s| s.r_max)),
@@ -339,7 +349,7 @@ fn sources(
         .collect::<Result<_>>()?;
     let rays: u64 = planned.iter().map(|s| u64::from(s.grid).pow(2)).sum();
     // The peeled views take the rest of the stage, if there are any.
-    let peel_from = if peeled.is_empty() && world.is_black() {
+    let peel_from = if peeled.is_empty() && world.is_black() && !views_bounce {
         to
     } else {
         from + 0.5 * (to - from)
@@ -403,6 +413,7 @@ fn sources(
             &sphere,
             sizes.grid,
             ((&used[views.len()..], &links[views.len()..]), &world),
+            views_bounce.then_some((&used[..views.len()], &links[..views.len()])),
             &irradiance,
             progress,
             (peel_from, to),
@@ -414,6 +425,7 @@ fn sources(
         report.peel = Some(PeelReport {
             lights: peeled,
             world: !world.is_black(),
+            bounce: tracer.bounces(),
             sizes,
             counts,
             seconds: t_peel.elapsed().as_secs_f64(),

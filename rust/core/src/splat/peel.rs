@@ -26,6 +26,13 @@
 //! grey world they left B 10.6 % too bright, 16 % from the ground truth where the shadowed
 //! estimate is 2.2 %; `docs/splat.md`). The crossings are dense points summed many at a time (`Density::Dense`: 8 world
 //! rays each at the defaults).
+//!
+//! Where the rest of the scene sends light back (a floor, a wall: `Occluders::bouncing`), the
+//! crossings also gather that bounce, of every source: the peeled ones with their own light,
+//! the lights seen through a view of their own by the bounce alone
+//! (`IrradianceSettings::bounce_only`, light by light), since their direct light is splatted
+//! from that view.
+//! The bounce reaches the mesh from every side, as the world's light does.
 
 use super::light_view::{BoundingSphere, LightSample, View};
 use crate::error::Result;
@@ -201,6 +208,7 @@ pub fn peeled_samples(
     sphere: &BoundingSphere,
     n: u32,
     (lights, world): (LinkedLights<'_>, &World),
+    bounce_of: Option<LinkedLights<'_>>,
     irradiance: &IrradianceSettings,
     progress: Option<&ProgressFn>,
     (from, to): (f32, f32),
@@ -213,18 +221,53 @@ pub fn peeled_samples(
     let (crossings, mut counts) = crossings(mesh, mesh_tracer, sphere, n, &ticker)?;
     let points: Vec<Vec3> = crossings.iter().map(|c| c.position).collect();
     let normals: Vec<Vec3> = crossings.iter().map(|c| c.shading).collect();
-    let lit = |f: f32| progress.is_none_or(|p| p(mid + (to - mid) * f.clamp(0.0, 1.0)));
-    let (e, report) = irradiance_of_linked_sources(
+    // With the light views' bounce to gather, the sources' estimate takes the first half.
+    let split = if bounce_of.is_some() { 0.5 } else { 1.0 };
+    let lit = |f: f32| progress.is_none_or(|p| p(mid + (to - mid) * split * f.clamp(0.0, 1.0)));
+    let dense = irradiance.for_density(Density::Dense);
+    let (mut e, report) = irradiance_of_linked_sources(
         mesh.bounds(),
         lights,
         world,
         shadows,
         &points,
         &normals,
-        &irradiance.for_density(Density::Dense),
+        &dense,
         Some(&lit),
     )?;
     counts.irradiance_rays = report.rays;
+    if let Some((viewed, links)) = bounce_of {
+        // What the lights seen through their own views send back off the rest of the scene:
+        // their direct light is splatted from those views, so only the bounce is gathered.
+        // Light by light, as PRT keeps its sources (`PerSource`): each light's bounce is then
+        // the same whatever other lights the scene holds, and the splatting stays linear in
+        // them.
+        let only = IrradianceSettings {
+            bounce_only: true,
+            ..dense
+        };
+        let step = (to - mid) * (1.0 - split) / viewed.len().max(1) as f32;
+        for (k, (light, link)) in viewed.iter().zip(links).enumerate() {
+            let at = mid + (to - mid) * split + step * k as f32;
+            let bounced = |f: f32| progress.is_none_or(|p| p(at + step * f.clamp(0.0, 1.0)));
+            let (b, report) = irradiance_of_linked_sources(
+                mesh.bounds(),
+                (std::slice::from_ref(light), std::slice::from_ref(link)),
+                &World::Black,
+                shadows,
+                &points,
+                &normals,
+                &only,
+                Some(&bounced),
+            )?;
+            counts.irradiance_rays += report.rays;
+            for (x, y) in e.iter_mut().zip(&b) {
+                for c in 0..3 {
+                    x[c] += y[c];
+                }
+            }
+        }
+    }
     let mut samples = Vec::with_capacity(crossings.len());
     for (c, e) in crossings.iter().zip(e) {
         if e.iter().all(|x| *x <= 0.0) {

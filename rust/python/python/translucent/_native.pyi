@@ -440,7 +440,8 @@ class Splat:
     """Image-space splatting (Shah et al. 2009) over a copy of `scene`, nothing precomputed:
     every evaluation splats each sun, point or spot light's view (ray casts on the CPU), peels
     the whole surface for the world, area lights and point lights inside the mesh's bounding
-    sphere (Shah's §Environment Lighting: three axis views, every layer), and gathers the
+    sphere (Shah's §Environment Lighting: three axis views, every layer) and for the light the
+    rest of the scene sends back (every source's bounce), and gathers the
     splats within r_max (eq. 4) at the vertices of their own object. `eps` is eqs. 4-5's
     threshold in (0, 1); `max_grid` the largest light-view side in [1, 4096] (eq. 5's grid is
     cut to it, the cut reported); `peel_grid` each peeled view's side in [1, 4096] (at most
@@ -567,8 +568,9 @@ class Splat:
         reuse on: "kept", "dropped", "stretched", "covered", "added", "fresh"; else None), and "gpu" (a
         render drawn on a GPU: "adapter", "software", "target", the "groups" and "splats" drawn,
         "culled", "seconds_upload", "seconds_draw", "seconds_readback"; None on the CPU), and
-        "peel" (where the world, an area light or a point light inside the bounding sphere
-        lights the mesh: "lights" [{"light", "why"}], "world", "grid", "grid_capped", "rays",
+        "peel" (where the world, an area light, a point light inside the bounding sphere or
+        the rest of the scene's bounce lights the mesh: "lights" [{"light", "why"}], "world",
+        "bounce", "grid", "grid_capped", "rays",
         "crossings", "layers", "cut", "samples", "unlit", "irradiance_rays", "seconds"; else
         None), and "estimate" (the error estimate's "receivers", "level", "seconds"; None with
         `estimate_receivers` 0); None before the first."""

@@ -182,6 +182,7 @@ fn unshadowed_peel(mesh: &Mesh) -> (Vec<LightSample>, PeelCounts) {
         &BoundingSphere::of(mesh),
         DEFAULT_PEEL_GRID,
         ((&[], &[]), &world),
+        None,
         &IrradianceSettings::default(),
         None,
         (0.0, 1.0),
