@@ -185,9 +185,10 @@ fn lit(mesh: Mesh, light: Vec3) -> Scene {
 #[test]
 fn radiosity_matches_the_ground_truth_on_a_lumpy_sphere() {
     // 10 mm radius, marble and ketchup in mm: the near field spans a few faces, the far field
-    // the whole shell; a point light casts a terminator.
+    // the whole shell; a point light casts a terminator. Every 27th vertex a receiver (43):
+    // the ground truth at every 9th took the test 203 s of CI's time, 84 s at these.
     let mesh = lumpy_sphere(10.0, 24, 48, 0.15);
-    let receivers: Vec<u32> = (0..mesh.vertex_count() as u32).step_by(9).collect();
+    let receivers: Vec<u32> = (0..mesh.vertex_count() as u32).step_by(27).collect();
     let weights: Vec<f32> = receivers
         .iter()
         .map(|&v| mesh.vertex_areas()[v as usize])
