@@ -221,6 +221,47 @@ pub fn irradiance_of_linked_sources(
     Ok((sum, IrradianceReport { rays, ..counts }))
 }
 
+/// What `lights` send back off the rest of the scene alone (`IrradianceSettings::bounce_only`:
+/// a caller that takes their direct light another way, the splatting's light views), light by
+/// light as `PerSource` keeps them, so that each light's bounce is the same whatever other
+/// lights are asked for and the sum stays linear in them; and the rays cast. `progress` runs
+/// over all of them.
+#[allow(clippy::too_many_arguments)]
+pub fn bounce_light_by_light(
+    bounds: (Vec3, Vec3),
+    (lights, links): LinkedLights<'_>,
+    tracer: &Tracer,
+    points: &[Vec3],
+    normals: &[Vec3],
+    settings: &IrradianceSettings,
+    progress: Option<&ProgressFn>,
+) -> Result<(Vec<[f32; 3]>, u64)> {
+    let only = IrradianceSettings {
+        bounce_only: true,
+        ..settings.clone()
+    };
+    let mut sum = vec![[0.0f32; 3]; points.len()];
+    let mut rays = 0;
+    let share = 1.0 / lights.len().max(1) as f32;
+    for (k, (light, link)) in lights.iter().zip(links).enumerate() {
+        let at = k as f32 * share;
+        let part = |f: f32| progress.is_none_or(|p| p(at + share * f.clamp(0.0, 1.0)));
+        let (v, r) = irradiance_of_linked_sources(
+            bounds,
+            (std::slice::from_ref(light), std::slice::from_ref(link)),
+            &World::Black,
+            tracer,
+            points,
+            normals,
+            &only,
+            Some(&part),
+        )?;
+        rays += r.rays;
+        sum.par_iter_mut().zip(&v).for_each(|(s, x)| add(s, *x));
+    }
+    Ok((sum, rays))
+}
+
 /// `irradiance` from `lights` and `world` (not the scene's own list: a caller that lights
 /// some of a scene's sources another way, the splatting's peeled samples), for a mesh whose
 /// box is `bounds`; `progress` as `irradiance_with_progress`.
@@ -277,28 +318,30 @@ fn estimate_sources(
             settings.eta
         )));
     }
-    let (reaching, counts) = lights_at_work(lights, world, bounds, tracer.bounce_bounds());
+    let (mut reaching, counts) = lights_at_work(lights, world, bounds, tracer.bounce_bounds());
+    if settings.bounce_only {
+        reaching.direct = 0; // every light at work is gathered by its bounce alone
+    }
     let world = (!world.is_black()).then_some(world);
-    let (direct, traced_world) = match settings.bounce_only {
-        true => (0, false),
-        false => (reaching.direct, world.is_some()),
-    };
-    let rays = asked_rays(direct, traced_world, points.len(), settings)?;
+    let world_direct = world.is_some() && !settings.bounce_only;
+    let rays = asked_rays(reaching.direct, world_direct, points.len(), settings)?;
     let ticker = Ticker::new(progress, rays as u64);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
-    let world_sh = world.filter(|_| settings.world_unshadowed).map(|w| {
-        let l = sh::project(2, 32, &|d| w.radiance(d.as_vec3()).map(f64::from));
-        let eta = settings.eta;
-        let a = sh::zonal_factors(2, &|t| fresnel_transmittance(eta, t) * t);
-        l.iter()
-            .enumerate()
-            .map(|(c, v)| v.map(|x| x * a[sh::degree(c)]))
-            .collect::<Vec<[f64; 3]>>()
-    });
+    let world_sh = world
+        .filter(|_| world_direct && settings.world_unshadowed)
+        .map(|w| {
+            let l = sh::project(2, 32, &|d| w.radiance(d.as_vec3()).map(f64::from));
+            let eta = settings.eta;
+            let a = sh::zonal_factors(2, &|t| fresnel_transmittance(eta, t) * t);
+            l.iter()
+                .enumerate()
+                .map(|(c, v)| v.map(|x| x * a[sh::degree(c)]))
+                .collect::<Vec<[f64; 3]>>()
+        });
     // Points in chunks, one tick per chunk for the lights (a tick per point read the clock
     // for every point: 0.2 s of the bunny's 2 M samples); the world ticks per row of its grid.
     const CHUNK: usize = 256;
-    let light_ticks = direct as u64 * u64::from(settings.area_samples.max(1));
+    let light_ticks = reaching.direct as u64 * u64::from(settings.area_samples.max(1));
     let results: Vec<Point> = points
         .par_chunks(CHUNK)
         .zip(normals.par_chunks(CHUNK))
@@ -374,20 +417,13 @@ fn estimate_point(
     // are independent.
     let mut variance = [0.0f64; 3];
     // Light linking: lights that do not light the mesh here reach it by the bounce alone.
-    let direct = if settings.bounce_only {
-        0
-    } else {
-        reaching.direct
-    };
-    let lit = direct == 0 || tracer.lights_point(p, n);
-    for l in reaching.lights[..direct].iter().filter(|_| lit) {
+    let lit = reaching.direct == 0 || tracer.lights_point(p, n);
+    for l in reaching.lights[..reaching.direct].iter().filter(|_| lit) {
         let (e, v) = est.light(l, settings.area_samples.max(1));
         add(&mut sum, e);
         add(&mut variance, v);
     }
-    if settings.bounce_only {
-        // The world's own light is taken another way too.
-    } else if let Some(coefficients) = world_sh {
+    if let Some(coefficients) = world_sh {
         let mut y = [0.0f64; 9];
         sh::real_sh(2, n.as_dvec3().normalize(), &mut y);
         let e: [f32; 3] = std::array::from_fn(|c| {
@@ -399,7 +435,7 @@ fn estimate_point(
                 .max(0.0) as f32
         });
         add(&mut sum, e);
-    } else if let Some(w) = world {
+    } else if let Some(w) = world.filter(|_| !settings.bounce_only) {
         let (e, v) = est.world(w, settings.world_samples.max(1));
         add(&mut sum, e);
         add(&mut variance, v);

@@ -30,13 +30,14 @@
 //! Where the rest of the scene sends light back (a floor, a wall: `Occluders::bouncing`), the
 //! crossings also gather that bounce, of every source: the peeled ones with their own light,
 //! the lights seen through a view of their own by the bounce alone
-//! (`IrradianceSettings::bounce_only`, light by light), since their direct light is splatted
-//! from that view.
+//! (`irradiance::bounce_light_by_light`), since their direct light is splatted from that view.
 //! The bounce reaches the mesh from every side, as the world's light does.
 
 use super::light_view::{BoundingSphere, LightSample, View};
 use crate::error::Result;
-use crate::irradiance::{irradiance_of_linked_sources, Density, IrradianceSettings, LinkedLights};
+use crate::irradiance::{
+    bounce_light_by_light, irradiance_of_linked_sources, Density, IrradianceSettings, LinkedLights,
+};
 use crate::lights::World;
 use crate::mesh::{hit_surface, Mesh};
 use crate::progress::{ProgressFn, Ticker};
@@ -236,35 +237,24 @@ pub fn peeled_samples(
         Some(&lit),
     )?;
     counts.irradiance_rays = report.rays;
-    if let Some((viewed, links)) = bounce_of {
+    if let Some(viewed) = bounce_of {
         // What the lights seen through their own views send back off the rest of the scene:
         // their direct light is splatted from those views, so only the bounce is gathered.
-        // Light by light, as PRT keeps its sources (`PerSource`): each light's bounce is then
-        // the same whatever other lights the scene holds, and the splatting stays linear in
-        // them.
-        let only = IrradianceSettings {
-            bounce_only: true,
-            ..dense
-        };
-        let step = (to - mid) * (1.0 - split) / viewed.len().max(1) as f32;
-        for (k, (light, link)) in viewed.iter().zip(links).enumerate() {
-            let at = mid + (to - mid) * split + step * k as f32;
-            let bounced = |f: f32| progress.is_none_or(|p| p(at + step * f.clamp(0.0, 1.0)));
-            let (b, report) = irradiance_of_linked_sources(
-                mesh.bounds(),
-                (std::slice::from_ref(light), std::slice::from_ref(link)),
-                &World::Black,
-                shadows,
-                &points,
-                &normals,
-                &only,
-                Some(&bounced),
-            )?;
-            counts.irradiance_rays += report.rays;
-            for (x, y) in e.iter_mut().zip(&b) {
-                for c in 0..3 {
-                    x[c] += y[c];
-                }
+        let at = mid + (to - mid) * split;
+        let bounced = |f: f32| progress.is_none_or(|p| p(at + (to - at) * f.clamp(0.0, 1.0)));
+        let (b, rays) = bounce_light_by_light(
+            mesh.bounds(),
+            viewed,
+            shadows,
+            &points,
+            &normals,
+            &dense,
+            Some(&bounced),
+        )?;
+        counts.irradiance_rays += rays;
+        for (x, y) in e.iter_mut().zip(&b) {
+            for c in 0..3 {
+                x[c] += y[c];
             }
         }
     }
