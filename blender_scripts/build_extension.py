@@ -19,9 +19,11 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 
 def build_wheel(out: pathlib.Path) -> pathlib.Path:
     out.mkdir(parents=True, exist_ok=True)
+    # The interpreter `make build` (maturin develop) builds for: PyO3 rebuilds itself and the
+    # binding crate whenever PYO3_PYTHON changes, so another one costs a minute each way.
     subprocess.run(
         [sys.executable, "-m", "maturin", "build", "--release", "--quiet", "--out", str(out),
-         "--manifest-path", str(REPO / "rust" / "python" / "Cargo.toml")],
+         "--interpreter", sys.executable, "--manifest-path", str(REPO / "rust" / "python" / "Cargo.toml")],
         check=True, cwd=REPO,
     )
     wheels = sorted(out.glob("translucent-*.whl"), key=lambda p: p.stat().st_mtime)

@@ -16,7 +16,9 @@ pytestmark = pytest.mark.bpy
 
 def _scene(bpy):
     """A 4 cm marble sphere (PRT, 8 coefficients) under the point light Key, a second point light
-    Rim behind it, and a floor below it (an occluder)."""
+    Rim behind it, and a floor below it (an occluder). The medium is read at 250 mm per unit (a
+    1 cm ball of marble): these tests check what lights it and what adds up, not the medium's
+    scale, and the precompute's samples fall with the square of it (2.0 M -> 0.12 M)."""
     mat = bpy.data.materials.new("Wax")
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.04, segments=16, ring_count=8)
     obj = bpy.context.active_object
@@ -30,6 +32,7 @@ def _scene(bpy):
     s = mat.translucent
     s.enabled = True
     s.preset = "MARBLE"
+    s.mm_per_unit = 250.0
     s.coefficients = 8
     s.method = "PRT"
     return mat, obj, rim

@@ -29,7 +29,12 @@ fn against_ground_truth(
     receivers: &[u32],
     seed: u64,
 ) -> (ErrorStats, ReferenceResult) {
-    let mesh = &scene.mesh;
+    let truth = ground_truth(scene, r, receivers, seed);
+    (error_at(scene, values, receivers, &truth), truth)
+}
+
+/// The ground truth of `against_ground_truth` alone, to hold `values` of several runs against.
+fn ground_truth(scene: &Scene, r: &Resolved, receivers: &[u32], seed: u64) -> ReferenceResult {
     let tracer = scene.tracer();
     let s = IrradianceSettings {
         eta: r.irradiance_eta(),
@@ -44,11 +49,19 @@ fn against_ground_truth(
         profile: r.kind,
         ..Default::default()
     };
-    let truth = reference_radiosity(mesh, &r.material, &irr, Some(receivers), &rs, None).unwrap();
+    reference_radiosity(&scene.mesh, &r.material, &irr, Some(receivers), &rs, None).unwrap()
+}
+
+/// `values` at `receivers` against `truth` (computed at the same receivers), area-weighted.
+fn error_at(
+    scene: &Scene,
+    values: &[[f32; 3]],
+    receivers: &[u32],
+    truth: &ReferenceResult,
+) -> ErrorStats {
     let got: Vec<[f32; 3]> = receivers.iter().map(|&v| values[v as usize]).collect();
     let weights: Vec<f32> = (receivers.iter())
-        .map(|&v| mesh.vertex_areas()[v as usize])
+        .map(|&v| scene.mesh.vertex_areas()[v as usize])
         .collect();
-    let err = relative_error(&got, &truth.radiosity, &weights).unwrap();
-    (err, truth)
+    relative_error(&got, &truth.radiosity, &weights).unwrap()
 }
