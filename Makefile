@@ -46,7 +46,7 @@ test-rust:
 	cargo test --workspace --exclude translucent-python -q
 
 test-python: build
-	$(PY) -m pytest -q --durations=25 tests
+	$(PY) -m pytest -q --durations=40 tests
 
 test: lint test-rust test-python
 
