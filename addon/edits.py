@@ -54,9 +54,11 @@ def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting,
     if getattr(job, "colors", None) is not None:
         # The splatting's or the hierarchy's evaluation, made on the worker.
         session.evaluated, session.report = (job.key, job.colors, job.last_eval), job.report
+    jobs.stop_layers(material.name)
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
+    jobs.prepare_layers(session, getattr(job, "scene", None))
     return session
 
 

@@ -94,6 +94,8 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
         return lines
     if sess.follow_message:
         lines.append((sess.follow_message, "INFO"))
+    if sess.layers is not None and sess.layers.message:
+        lines.append((sess.layers.message, "INFO" if sess.layers.done else "TIME"))
     if sess.method_message:
         lines.append((sess.method_message, "INFO"))
     if sess.edit_message:

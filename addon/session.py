@@ -52,6 +52,9 @@ class Session:
     members_changed: str = ""
     # Occluders moved, deformed, added or removed since ("occluder Box changed"; "" when none).
     occluders_changed: str = ""
+    # The lights' layers being made on a worker thread after a PRT precompute or update
+    # (`jobs.LayersPrep`; None headless or for the other methods).
+    layers: object = None
     # What following the scene is doing ("refreshing: light Key changed", ...).
     follow_message: str = ""
     # The viewport's eye point the preview is drawn toward (world space), when the transport

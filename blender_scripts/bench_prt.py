@@ -190,14 +190,16 @@ def first_preview(scene, marble, full, args) -> None:
     )
 
 
-def moved_scene(positions, triangles, turn: float, across: float, power: float = 1.0) -> translucent.Scene:
+def moved_scene(positions, triangles, turn: float, across: float, power: float = 1.0,
+                sun: float = 2.0) -> translucent.Scene:
     """The benchmark lighting with the sun turned by `turn` radians about the vertical and the
-    point light moved by `across` diagonals along x, its power times `power`."""
+    point light moved by `across` diagonals along x, its power times `power`; the sun's
+    irradiance `sun` [W/m^2]."""
     scene = translucent.Scene(positions, triangles)
     diag = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
     scene.add_point_light(((0.6 + across) * diag, -1.0 * diag, 1.2 * diag), power=power * 110.0 * diag**2)
     c, s = np.cos(turn), np.sin(turn)
-    scene.add_sun(direction=(0.5 * c - 0.6 * s, 0.5 * s + 0.6 * c, -0.62), irradiance=2.0)
+    scene.add_sun(direction=(0.5 * c - 0.6 * s, 0.5 * s + 0.6 * c, -0.62), irradiance=sun)
     return scene
 
 
@@ -260,6 +262,21 @@ def power_drag(positions, triangles, marble, kept, args) -> None:
             f"{r['seconds_walks']:.3f} s, the object's own light {r['seconds_own_light']:.3f} s, "
             f"from the layer: {all(x['from_layer'] for x in reports)}; the layer kept: {r['layer_bytes'] / 1e6:.1f} MB); against a fresh precompute: "
             f"rel. RMS {', '.join(f'{100 * x:.2f}' for x in between['rms'])} %"
+        )
+        # Prepared ahead, as the add-on does in the background after a precompute: the sun's
+        # layer relit now (the point light's is kept), so the sun's first change adds it.
+        prep = prt.prepare_layers(lights=last)
+        times, walls = [], []
+        for k, sun in enumerate((2.5, 3.0, 3.5)[: max(args.runs, 2)]):
+            t0 = time.perf_counter()
+            u = prt.update(lights=moved_scene(positions, triangles, 0.0, 0.0, power=powers[-1], sun=sun))
+            walls.append(time.perf_counter() - t0)
+            times.append(u["seconds"])
+            assert u["from_layer"] and u["seconds_layer"] == 0.0, u
+        print(
+            f"  prepare_layers ahead ({profile}): {prep['built']} layer(s) relit in {prep['seconds']:.2f} s "
+            f"({prep['kept']} kept, {prep['layer_bytes'] / 1e6:.1f} MB in all); then the sun's power changed: the first "
+            f"update {times[0]:.3f} s ({walls[0]:.3f} s the whole call from Python), every one from its layer"
         )
 
 

@@ -15,6 +15,7 @@ to it within the walks' stated noise)."""
 
 import ast
 import pathlib
+import time
 
 import numpy as np
 import pytest
@@ -753,3 +754,73 @@ def test_a_floors_colour_edit_relights_what_it_sends_back(addon):
     dark = relit_like_a_precompute(bpy, session, mat, obj)
     assert dark[under].sum() < 0.2 * lit_floor[under].sum()
     assert np.all(dark[under][seen].sum(axis=1) < 0.2 * lit_floor[under][seen].sum(axis=1))
+
+
+def test_with_a_ui_the_lights_layers_are_made_after_a_refresh_so_the_first_power_drag_casts_no_ray(
+        addon, monkeypatch):
+    """With a UI, once a PRT transport is shown, each light's own layer is made on a worker
+    thread (`jobs.LayersPrep`, `Prt.prepare_layers`): the first drag of one light's power
+    among several then adds its layer ("the light's layer rescaled": no ray) instead of
+    relighting the transport under that light first. The preview is what Precompute gives for
+    the changed light (the dipole: nothing else depends on it; 1e-3). A new job stops the
+    making; headless, none is made."""
+    import bpy
+
+    from addon import follow, jobs, panel, session
+
+    mat, obj, light = lit_sphere(bpy)
+    mat.translucent.profile = "DIPOLE"
+    rim = key_light(bpy, location=(0.0, 0.15, 0.05), energy=8.0)
+    rim.name = "Rim"
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    assert session.SESSIONS[mat.name].layers is None  # headless: none made
+    timers = []
+    monkeypatch.setattr(jobs, "headless", lambda: False)
+    monkeypatch.setattr(bpy.app.timers, "register", lambda fn, first_interval=0.0, persistent=False: timers.append(fn))
+    monkeypatch.setattr(bpy.app.timers, "is_registered", lambda fn: fn in timers)
+
+    def refresh():
+        bpy.context.view_layer.update()
+        follow.follow_now()
+        session.JOBS[mat.name]._thread.join(timeout=120)
+        poll = next(fn for fn in timers if fn.__name__ == "poll")
+        timers.remove(poll)
+        assert poll() is None, "the job is done"
+        return session.SESSIONS[mat.name]
+
+    light.location.x += 0.05  # a move: the transport relit, then its layers made
+    sess = refresh()
+    assert sess.follow_message.startswith("relit:"), sess.follow_message
+    assert isinstance(sess.layers, jobs.LayersPrep)
+    sess.layers._thread.join(timeout=120)
+    assert sess.layers.message.startswith("lights' layers ready: 2"), sess.layers.message
+    assert sess.layers.message in [t for t, _ in panel.status_lines(mat)]
+    rim.data.energy = 12.0  # the first change of Rim's power
+    sess = refresh()
+    assert "the light's layer rescaled" in sess.follow_message, sess.follow_message
+    assert " 0 rays" in sess.follow_message, sess.follow_message
+    dragged = read_preview(obj).copy()
+    monkeypatch.setattr(jobs, "headless", lambda: True)
+    assert bpy.ops.translucent.precompute(material_name=mat.name) == {"FINISHED"}
+    np.testing.assert_allclose(dragged, read_preview(obj), rtol=1e-3, atol=1e-6 * dragged.max())
+    monkeypatch.setattr(jobs, "headless", lambda: False)
+
+    class Slow:  # a transport whose layers take long: goes on until told to stop
+        def prepare_layers(self, scene, progress):
+            while progress(0.5):
+                time.sleep(0.01)
+            raise translucent.Cancelled("stopped")
+
+    class Broken:
+        def prepare_layers(self, scene, progress):
+            raise ValueError("lights: not the lights this transport was lit with")
+
+    broken = jobs.LayersPrep(Broken(), None)
+    broken._thread.join(timeout=10)
+    assert broken.message == ("the lights' layers were not prepared: lights: not the lights this transport was "
+                              "lit with"), broken.message
+    session.SESSIONS[mat.name].layers = slow = jobs.LayersPrep(Slow(), None)
+    assert not slow.done
+    light.location.x -= 0.05  # another job on the material: the making is stopped first
+    refresh()
+    assert slow.done and slow.message == "", slow.message

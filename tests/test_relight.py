@@ -242,3 +242,48 @@ def test_one_lights_power_with_the_walks_adds_its_layer_within_the_stated_noise(
     assert np.all(between <= stated), (between, stated)
     # And it is a different estimate from the same walks, not the same one by accident.
     assert np.any(between > 1e-6), between
+
+
+def test_layers_prepared_ahead_make_the_first_power_change_a_rescale():
+    """`prepare_layers` relights each source's layer at once (what the add-on does in the
+    background after a precompute), so the first change of a light's power or colour is as
+    quick as the later ones: no ray, no layer relit then. Each update still gives what a fresh
+    precompute under its lights gives (the dipole: within 1e-4, as in the test above). A lone
+    light needs no layer (its change rescales everything), a black light gets none, other
+    lights than the transport's are refused naming `lights`, and a cancel stops it."""
+    marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
+    p, t = sphere(16, 0.01)
+
+    def scene(power, sun=2.0, black=False, lone=False):
+        s = translucent.Scene(p, t)
+        s.add_sun((0.0, 1.0, -0.2), sun)
+        if not lone:
+            s.add_point_light((0.03, 0.0, 0.01), power)
+        if black:
+            s.add_point_light((0.0, 0.03, 0.01), 0.0)
+        return s
+
+    def precompute(s):
+        return translucent.Prt(s, marble, profile="dipole", backend="cpu")
+
+    prt = precompute(scene(0.5, black=True))
+    with pytest.raises(translucent.Cancelled):
+        prt.prepare_layers(scene(0.5, black=True), progress=lambda f: False)
+    with pytest.raises(ValueError, match="lights"):
+        prt.prepare_layers(scene(0.9, black=True))
+    ticks = []
+    r = prt.prepare_layers(scene(0.5, black=True), progress=lambda f: ticks.append(f) or True)
+    assert r["built"] == 2 and r["kept"] == 0 and r["rays"] >= 0 and r["layer_bytes"] > 0, r
+    assert r["skipped"] == [("light 2", "black: no layer scales from it")], r
+    assert ticks and 0.0 <= min(ticks) and max(ticks) <= 1.0, ticks
+    assert prt.prepare_layers(scene(0.5, black=True))["kept"] == 2  # made once
+    for kw in (dict(power=0.8), dict(power=0.8, sun=3.0), dict(power=1.6, sun=3.0)):
+        changed = scene(black=True, **kw)
+        u = prt.update(lights=changed)
+        assert u["from_layer"] and u["seconds_layer"] == 0.0 and u["rays"] == 0, (kw, u)
+        np.testing.assert_allclose(prt.radiosity(marble), precompute(changed).radiosity(marble),
+                                   rtol=1e-4, atol=1e-9)
+    lone = precompute(scene(0.0, lone=True))
+    r = lone.prepare_layers(scene(0.0, lone=True))
+    assert r["built"] == 0 and r["skipped"] == [
+        ("light 0", "the only source: a change of it rescales the whole transport")], r

@@ -790,6 +790,39 @@ impl PyPrt {
         )
     }
 
+    /// Each light's (and the world's) own layer made now, so that the first change of one
+    /// light's power or colour alone is as quick as every later one: the layer added, no ray
+    /// (`update`'s "from_layer"). The add-on calls it in the background after a precompute.
+    /// `lights`: the Scene this Prt was last lit with (its precompute or last `update`); others
+    /// are a ValueError naming `lights`. A lone source needs no layer (a change of it rescales
+    /// the whole transport); black ones, and those beyond the 8 kept, get none, each named in
+    /// "skipped". Releases the GIL; `progress` as for the constructor. Returns {"built",
+    /// "kept" (made earlier), "skipped" ([(source, why)]), "rays", "seconds", "layer_bytes"}.
+    #[pyo3(signature = (lights, progress = None))]
+    fn prepare_layers<'py>(
+        &self,
+        py: Python<'py>,
+        lights: PyRef<'_, PyScene>,
+        #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let tracer = lights.tracer();
+        let scene = &lights.scene;
+        let (lock, irradiance) = (&self.inner, &self.irradiance);
+        let r = run(py, progress, |tick| {
+            // Waits out a swap (an update's last step) rather than calling the Prt busy.
+            let inner = lock.read().unwrap_or_else(|e| e.into_inner());
+            inner.prepare_layers(scene, &tracer, irradiance, Some(tick))
+        })?;
+        let d = PyDict::new(py);
+        d.set_item("built", r.built)?;
+        d.set_item("kept", r.kept)?;
+        d.set_item("skipped", r.skipped)?;
+        d.set_item("rays", r.rays)?;
+        d.set_item("seconds", r.seconds)?;
+        d.set_item("layer_bytes", r.layer_bytes)?;
+        Ok(d)
+    }
+
     /// What the precompute did, skipped, and how long each step took.
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {

@@ -278,6 +278,136 @@ impl Prt {
     }
 }
 
+/// What `Prt::prepare_layers` did and cost.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LayersReport {
+    /// Sources whose layer was relit now.
+    pub built: usize,
+    /// Sources whose layer was kept already (an earlier update or call made it).
+    pub kept: usize,
+    /// Sources given no layer ("light 2", "the world"), and why.
+    pub skipped: Vec<(String, &'static str)>,
+    /// Shadow rays cast (the shadow edges' points; the rest is read from the kept irradiance).
+    pub rays: u64,
+    pub seconds: f64,
+    /// Bytes the kept layers hold.
+    pub layer_bytes: usize,
+}
+
+impl Prt {
+    /// Each source of `scene` (its lights, then its world) given its own layer now, so that
+    /// the first change of its power or colour alone adds that layer scaled (`layered`: no
+    /// ray), as every later change does: what the add-on does in the background after a
+    /// precompute, before the artist drags a light (issue 29, point 2). `scene` must hold the
+    /// lights, world and linking this transport was lit with. A source needs no layer where it
+    /// is the only one (a change of it rescales the whole transport) or black (no layer scales
+    /// from nothing); at most `KEPT_LAYERS` are kept, the first sources first. After a rescale
+    /// of the whole transport none is made (the next relight lays them afresh). `settings`:
+    /// PRT's own (`relight::at_vertices`), as `relit_scene` takes them. `progress` shares the
+    /// bar between the sources; false cancels (`Error::Cancelled`). Errors: `scene`'s lights
+    /// are not this transport's (`InvalidArgument`, naming `lights`).
+    pub fn prepare_layers(
+        &self,
+        scene: &Scene,
+        tracer: &Tracer,
+        settings: &IrradianceSettings,
+        progress: Option<&ProgressFn>,
+    ) -> Result<LayersReport> {
+        let start = Instant::now();
+        let settings = &super::relight::at_vertices(settings);
+        let mut report = LayersReport::default();
+        let mut sources: Vec<(String, Source)> = Vec::new();
+        for (i, light) in scene.lights.iter().enumerate() {
+            if light.is_black() {
+                report
+                    .skipped
+                    .push((format!("light {i}"), "black: no layer scales from it"));
+            } else {
+                sources.push((
+                    format!("light {i}"),
+                    Source::Light(light.clone(), scene.linking_of(i)),
+                ));
+            }
+        }
+        if !scene.world.is_black() {
+            sources.push(("the world".into(), Source::World(scene.world.clone())));
+        }
+        let skip_all = |report: &mut LayersReport, sources: Vec<(String, Source)>, why| {
+            (report.skipped).extend(sources.into_iter().map(|(name, _)| (name, why)));
+        };
+        if self.light_scale != [1.0; 3] {
+            skip_all(
+                &mut report,
+                sources,
+                "the whole transport was rescaled since it was lit: the next relight lays the layers",
+            );
+            return Ok(report);
+        }
+        match self.lit_by.as_deref() {
+            Some(old) if *old == Lighting::of(scene) => {}
+            Some(_) => {
+                return Err(Error::InvalidArgument(
+                    "lights: not the lights, world and linking this transport was lit with: \
+                     update(lights=...) first"
+                        .into(),
+                ))
+            }
+            None => {
+                skip_all(
+                    &mut report,
+                    sources,
+                    "this transport keeps no lighting to layer",
+                );
+                return Ok(report);
+            }
+        }
+        if sources.len() < 2 {
+            let why = "the only source: a change of it rescales the whole transport";
+            skip_all(&mut report, sources, why);
+            return Ok(report);
+        }
+        if sources.len() > KEPT_LAYERS {
+            let beyond = sources.split_off(KEPT_LAYERS);
+            skip_all(&mut report, beyond, "beyond the layers kept (8)");
+        }
+        let n = sources.len() as f32;
+        for (k, (name, source)) in sources.iter().enumerate() {
+            let kept = {
+                let kept = self
+                    .kept_irradiance
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner());
+                (kept.layers.iter())
+                    .any(|l| l.settings == *settings && l.source.scale_to(source).is_some())
+            };
+            if kept {
+                report.kept += 1;
+                continue;
+            }
+            // This source's share of the bar; NaN (asking only whether to go on) passes as is.
+            let (lo, hi) = (k as f32 / n, (k + 1) as f32 / n);
+            let share = move |f: f32| progress.is_none_or(|p| p(lo + (hi - lo) * f));
+            match self.source_layer(scene, tracer, source, settings, Some(&share))? {
+                Some((_, lighting)) => {
+                    report.built += 1;
+                    report.rays += lighting.rays;
+                }
+                None => (report.skipped)
+                    .push((name.clone(), "its irradiance was not kept source by source")),
+            }
+        }
+        report.layer_bytes = {
+            let kept = self
+                .kept_irradiance
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            kept.layers.iter().map(|l| l.prt.light_bytes()).sum()
+        };
+        report.seconds = start.elapsed().as_secs_f64();
+        Ok(report)
+    }
+}
+
 impl Prt {
     /// Bytes of what depends on the light (the rows, the vertices' irradiance, its noise draw,
     /// the walk terms' D and standard errors and the own light's irradiance): what a layer

@@ -56,6 +56,7 @@ pub use crate::own_light::{INDIRECT_WALK_SHARE, INTERREFLECTION_BOUNCES};
 pub use backend::Backend;
 pub use evaluate::{Coefficients, Evaluation, PrtDetails, REFRESH_FACTOR, REFRESH_FLOOR};
 pub use knots::BASIS_SIZES;
+pub use light_layer::LayersReport;
 pub use relight::{RelightReport, VERTEX_BOUNCE_FACTOR};
 pub use request::{
     irradiance_eta, path_settings, PrtRequest, FIRST_PREVIEW_FAR_FIELD,

@@ -409,6 +409,16 @@ class Prt:
         the kept layers hold), posed.
         ValueError names a bad argument (normals
         without positions, another vertex count or topology)."""
+    def prepare_layers(self, lights: Scene, progress: Progress | None = None) -> dict[str, Any]:
+        """Each light's (and the world's) own layer made now, so that the first change of one
+        source's power or colour alone is as quick as every later one (`update`'s
+        `from_layer` with `seconds_layer` 0: no ray; 0.08 s instead of 2 s on the 10 cm
+        bunny). The add-on calls it on a worker thread after a precompute. `lights`: the Scene
+        this Prt was last lit with (ValueError naming `lights` otherwise). A lone source needs
+        none (its change rescales everything); black sources, and those beyond the 8 kept,
+        get none. Releases the GIL; `progress` as for the constructor (False cancels:
+        `Cancelled`). Returns built, kept (made before), skipped ([(source, why)]), rays,
+        seconds, layer_bytes."""
     @property
     def report(self) -> dict[str, float | int | bool | list[float]]:
         """What the precompute did and left out: samples, support_radius [unit], knots,
