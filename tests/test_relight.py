@@ -249,8 +249,9 @@ def test_layers_prepared_ahead_make_the_first_power_change_a_rescale():
     background after a precompute), so the first change of a light's power or colour is as
     quick as the later ones: no ray, no layer relit then. Each update still gives what a fresh
     precompute under its lights gives (the dipole: within 1e-4, as in the test above). A lone
-    light needs no layer (its change rescales everything), a black light gets none, other
-    lights than the transport's are refused naming `lights`, and a cancel stops it."""
+    light needs no layer (its change rescales everything), a black light gets none, nor do
+    lights beyond the eight kept; other lights than the transport's are refused naming
+    `lights`, and a cancel stops it."""
     marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
     p, t = sphere(16, 0.01)
 
@@ -283,6 +284,13 @@ def test_layers_prepared_ahead_make_the_first_power_change_a_rescale():
         assert u["from_layer"] and u["seconds_layer"] == 0.0 and u["rays"] == 0, (kw, u)
         np.testing.assert_allclose(prt.radiosity(marble), precompute(changed).radiosity(marble),
                                    rtol=1e-4, atol=1e-9)
+    # Ten lights: layers for the first eight, the last two named (the kept layers' bound).
+    many = translucent.Scene(p, t)
+    for k in range(10):
+        a = 2 * math.pi * k / 10
+        many.add_point_light((0.03 * math.cos(a), 0.03 * math.sin(a), 0.01), 0.1)
+    r = precompute(many).prepare_layers(many)
+    assert r["built"] == 8 and r["skipped"] == [(f"light {k}", "beyond the layers kept (8)") for k in (8, 9)], r
     lone = precompute(scene(0.0, lone=True))
     r = lone.prepare_layers(scene(0.0, lone=True))
     assert r["built"] == 0 and r["skipped"] == [
