@@ -249,8 +249,8 @@ def test_layers_prepared_ahead_make_the_first_power_change_a_rescale():
     background after a precompute), so the first change of a light's power or colour is as
     quick as the later ones: no ray, no layer relit then. Each update still gives what a fresh
     precompute under its lights gives (the dipole: within 1e-4, as in the test above). A lone
-    light needs no layer (its change rescales everything), a black light gets none, nor do
-    lights beyond the eight kept; other lights than the transport's are refused naming
+    light needs no layer (its change rescales everything), a black light gets none, nor do a
+    light that reaches nothing and lights beyond the eight kept; other lights than the transport's are refused naming
     `lights`, and a cancel stops it."""
     marble = translucent.Material.preset("marble", mm_per_unit=1000.0)
     p, t = sphere(16, 0.01)
@@ -291,6 +291,12 @@ def test_layers_prepared_ahead_make_the_first_power_change_a_rescale():
         many.add_point_light((0.03 * math.cos(a), 0.03 * math.sin(a), 0.01), 0.1)
     r = precompute(many).prepare_layers(many)
     assert r["built"] == 8 and r["skipped"] == [(f"light {k}", "beyond the layers kept (8)") for k in (8, 9)], r
+    # A spot aimed away from everything gets none, and is said to reach nothing.
+    away = scene(0.5)
+    away.add_spot_light((0.0, 0.0, 0.05), (0.0, 0.0, 1.0), power=5.0, spot_size=0.5)
+    r = precompute(away).prepare_layers(away)
+    assert r["built"] == 2 and r["skipped"] == [
+        ("light 2", "it reaches neither the mesh nor what sends light back: nothing to layer")], r
     lone = precompute(scene(0.0, lone=True))
     r = lone.prepare_layers(scene(0.0, lone=True))
     assert r["built"] == 0 and r["skipped"] == [

@@ -795,8 +795,8 @@ impl PyPrt {
     /// (`update`'s "from_layer"). The add-on calls it in the background after a precompute.
     /// `lights`: the Scene this Prt was last lit with (its precompute or last `update`); others
     /// are a ValueError naming `lights`. A lone source needs no layer (a change of it rescales
-    /// the whole transport); black ones, and those beyond the 8 kept, get none, each named in
-    /// "skipped". Releases the GIL; `progress` as for the constructor. Returns {"built",
+    /// the whole transport); black ones, lights reaching nothing that matters, and those beyond
+    /// the 8 kept get none, each named in "skipped". Releases the GIL; `progress` as for the constructor. Returns {"built",
     /// "kept" (made earlier), "skipped" ([(source, why)]), "rays", "seconds", "layer_bytes"}.
     #[pyo3(signature = (lights, progress = None))]
     fn prepare_layers<'py>(

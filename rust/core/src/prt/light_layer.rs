@@ -300,8 +300,9 @@ impl Prt {
     /// ray), as every later change does: what the add-on does in the background after a
     /// precompute, before the artist drags a light (issue 29, point 2). `scene` must hold the
     /// lights, world and linking this transport was lit with. A source needs no layer where it
-    /// is the only one (a change of it rescales the whole transport) or black (no layer scales
-    /// from nothing); at most `KEPT_LAYERS` are kept, the first sources first. After a rescale
+    /// is the only one (a change of it rescales the whole transport), black (no layer scales
+    /// from nothing) or reaching neither the mesh nor the rest of the scene's bounce (nothing
+    /// to layer); at most `KEPT_LAYERS` are kept, the first sources first. After a rescale
     /// of the whole transport none is made (the next relight lays them afresh). `settings`:
     /// PRT's own (`relight::at_vertices`), as `relit_scene` takes them. `progress` shares the
     /// bar between the sources; false cancels (`Error::Cancelled`). Errors: `scene`'s lights
@@ -317,11 +318,17 @@ impl Prt {
         let settings = &super::relight::at_vertices(settings);
         let mut report = LayersReport::default();
         let mut sources: Vec<(String, Source)> = Vec::new();
+        let (lo, hi) = scene.mesh.bounds();
+        let bounce = tracer.bounce_bounds();
+        let (mut black, mut unreached) = (Vec::new(), Vec::new());
         for (i, light) in scene.lights.iter().enumerate() {
             if light.is_black() {
-                report
-                    .skipped
-                    .push((format!("light {i}"), "black: no layer scales from it"));
+                black.push(format!("light {i}"));
+            } else if !light.can_reach(lo, hi)
+                && !bounce.is_some_and(|(blo, bhi)| light.can_reach(blo, bhi))
+            {
+                // Still a source of its own: a change of another is no common rescale.
+                unreached.push(format!("light {i}"));
             } else {
                 sources.push((
                     format!("light {i}"),
@@ -332,6 +339,18 @@ impl Prt {
         if !scene.world.is_black() {
             sources.push(("the world".into(), Source::World(scene.world.clone())));
         }
+        let emitting = sources.len() + unreached.len();
+        (report.skipped).extend(
+            black
+                .into_iter()
+                .map(|n| (n, "black: no layer scales from it")),
+        );
+        (report.skipped).extend(unreached.into_iter().map(|n| {
+            (
+                n,
+                "it reaches neither the mesh nor what sends light back: nothing to layer",
+            )
+        }));
         let skip_all = |report: &mut LayersReport, sources: Vec<(String, Source)>, why| {
             (report.skipped).extend(sources.into_iter().map(|(name, _)| (name, why)));
         };
@@ -361,7 +380,7 @@ impl Prt {
                 return Ok(report);
             }
         }
-        if sources.len() < 2 {
+        if emitting < 2 {
             let why = "the only source: a change of it rescales the whole transport";
             skip_all(&mut report, sources, why);
             return Ok(report);

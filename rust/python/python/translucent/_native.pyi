@@ -415,8 +415,8 @@ class Prt:
         `from_layer` with `seconds_layer` 0: no ray; 0.08 s instead of 2 s on the 10 cm
         bunny). The add-on calls it on a worker thread after a precompute. `lights`: the Scene
         this Prt was last lit with (ValueError naming `lights` otherwise). A lone source needs
-        none (its change rescales everything); black sources, and those beyond the 8 kept,
-        get none. Releases the GIL; `progress` as for the constructor (False cancels:
+        none (its change rescales everything); black sources, lights that reach neither the
+        mesh nor anything that sends light back, and those beyond the 8 kept get none. Releases the GIL; `progress` as for the constructor (False cancels:
         `Cancelled`). Returns built, kept (made before), skipped ([(source, why)]), rays,
         seconds, layer_bytes."""
     @property
