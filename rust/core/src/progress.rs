@@ -104,6 +104,16 @@ pub fn cancel_only<'a>(progress: Option<&'a ProgressFn<'a>>) -> impl Fn(f32) -> 
     move |_| progress.is_none_or(|p| p(f32::NAN))
 }
 
+/// `progress` called at its fractions `from..to` for one stage of a longer call (a NaN, which
+/// only asks whether to go on, stays NaN).
+pub fn stage<'a>(
+    progress: Option<&'a ProgressFn<'a>>,
+    from: f32,
+    to: f32,
+) -> impl Fn(f32) -> bool + Sync + 'a {
+    move |f| progress.is_none_or(|p| p(from + (to - from) * f))
+}
+
 /// The callback that holds the bar at `at` while asking whether to stop: a stage after the
 /// last tick of a longer call (an estimate, a point mass) that has no share of its own.
 pub fn held_at<'a>(

@@ -41,7 +41,7 @@ use crate::occluders::Occluders;
 use crate::optics::Material;
 use crate::profiles::table::{walk_table_with_progress, TableKey};
 use crate::profiles::{LookupProfile, LookupRgb, ProfileKind, RadialProfile, Resolved};
-use crate::progress::{cancel_only, ProgressFn, Ticker};
+use crate::progress::{cancel_only, stage, ProgressFn, Ticker};
 use crate::raytrace::Tracer;
 use crate::scene::Scene;
 use crate::surface_integral::{EdgeRule, Triangle};
@@ -165,16 +165,6 @@ fn add_corrections(out: &mut [[f32; 3]], delta: Vec<(u32, [f64; 3])>) {
         let o = &mut out[v as usize];
         (0..3).for_each(|c| o[c] = (f64::from(o[c]) + d[c]).max(0.0) as f32);
     }
-}
-
-/// `progress` called at its fractions `from..to` for one stage of a longer call (a NaN, which
-/// only asks whether to go on, stays NaN).
-fn stage<'a>(
-    progress: Option<&'a ProgressFn<'a>>,
-    from: f32,
-    to: f32,
-) -> impl Fn(f32) -> bool + Sync + 'a {
-    move |f| progress.is_none_or(|p| p(from + (to - from) * f))
 }
 
 /// Calls `progress` with `f` (not throttled: for a few stage boundaries); false is

@@ -567,7 +567,7 @@ pub fn check_request(scene: &Scene, points: usize, settings: &IrradianceSettings
 /// those that cannot but reach `bounce` (the box of the rest of the scene's triangles that send
 /// light back: lit by the bounce alone); and the report's counts of lights used, skipped,
 /// unreached and bounce-only and of the world (no rays yet).
-fn lights_at_work<'a>(
+pub(crate) fn lights_at_work<'a>(
     lights: &'a [Light],
     world: &World,
     (lo, hi): (Vec3, Vec3),
@@ -605,9 +605,9 @@ fn lights_at_work<'a>(
 
 /// The lights at work (`lights_at_work`), with their places in the list given: the first
 /// `direct` reach the mesh, the rest light it by the bounce alone.
-struct Reaching<'a> {
+pub(crate) struct Reaching<'a> {
     lights: Vec<&'a Light>,
-    places: Vec<usize>,
+    pub(crate) places: Vec<usize>,
     direct: usize,
 }
 

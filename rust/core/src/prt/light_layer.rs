@@ -28,7 +28,7 @@ use super::irradiance_noise::IrradianceNoise;
 use super::relight::{KeptIrradiance, RelightReport};
 use super::{ProgressFn, Prt};
 use crate::error::{Error, Result};
-use crate::irradiance::{IrradianceReport, IrradianceSettings, Source};
+use crate::irradiance::{lights_at_work, IrradianceReport, IrradianceSettings, Source};
 use crate::light_scale::{one_source_scaled, Which};
 use crate::lights::{Light, World};
 use crate::mesh::Mesh;
@@ -103,17 +103,7 @@ impl Prt {
             Which::World => Source::World(old.world.clone()),
         };
         let start = Instant::now();
-        let kept_layer = {
-            let kept = self
-                .kept_irradiance
-                .lock()
-                .unwrap_or_else(|e| e.into_inner());
-            // This source's layer at any emission: old = m layer.
-            (kept.layers.iter().rev())
-                .filter(|l| l.settings == *settings)
-                .find_map(|l| l.source.scale_to(&source).map(|m| (l.clone(), m)))
-        };
-        let (layer, m, lighting, seconds_layer) = match kept_layer {
+        let (layer, m, lighting, seconds_layer) = match self.kept_layer(&source, settings) {
             Some((layer, m)) => (layer, m, IrradianceReport::default(), 0.0),
             None => {
                 let Some((layer, lighting)) =
@@ -133,13 +123,7 @@ impl Prt {
             return Ok(None);
         };
         next.lit_by = Some(Arc::new(Lighting::of(scene)));
-        let layer_bytes = {
-            let kept = self
-                .kept_irradiance
-                .lock()
-                .unwrap_or_else(|e| e.into_inner());
-            kept.layers.iter().map(|l| l.prt.light_bytes()).sum()
-        };
+        let layer_bytes = self.kept_layer_bytes();
         let mut out = RelightReport {
             seconds: start.elapsed().as_secs_f64(),
             seconds_transport: t.elapsed().as_secs_f64(),
@@ -158,6 +142,31 @@ impl Prt {
         }
         next.report.last_relight = Some(out.clone());
         Ok(Some((next, out, lighting)))
+    }
+
+    /// `source`'s kept layer (read with `settings`) at any emission, and m with its emission
+    /// now = m times the layer's; None where none is kept.
+    fn kept_layer(
+        &self,
+        source: &Source,
+        settings: &IrradianceSettings,
+    ) -> Option<(Arc<SourceLayer>, [f32; 3])> {
+        let kept = self
+            .kept_irradiance
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        (kept.layers.iter().rev())
+            .filter(|l| l.settings == *settings)
+            .find_map(|l| l.source.scale_to(source).map(|m| (l.clone(), m)))
+    }
+
+    /// Bytes the kept layers hold.
+    fn kept_layer_bytes(&self) -> usize {
+        let kept = self
+            .kept_irradiance
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        kept.layers.iter().map(|l| l.prt.light_bytes()).sum()
     }
 
     /// This transport relit under `source` alone (a light or the world of `scene`, at the
@@ -318,15 +327,18 @@ impl Prt {
         let settings = &super::relight::at_vertices(settings);
         let mut report = LayersReport::default();
         let mut sources: Vec<(String, Source)> = Vec::new();
-        let (lo, hi) = scene.mesh.bounds();
-        let bounce = tracer.bounce_bounds();
+        // The lights the irradiance itself would cast rays for: the mesh's or the bounce's.
+        let (at_work, _) = lights_at_work(
+            &scene.lights,
+            &scene.world,
+            scene.mesh.bounds(),
+            tracer.bounce_bounds(),
+        );
         let (mut black, mut unreached) = (Vec::new(), Vec::new());
         for (i, light) in scene.lights.iter().enumerate() {
             if light.is_black() {
                 black.push(format!("light {i}"));
-            } else if !light.can_reach(lo, hi)
-                && !bounce.is_some_and(|(blo, bhi)| light.can_reach(blo, bhi))
-            {
+            } else if !at_work.places.contains(&i) {
                 // Still a source of its own: a change of another is no common rescale.
                 unreached.push(format!("light {i}"));
             } else {
@@ -391,21 +403,11 @@ impl Prt {
         }
         let n = sources.len() as f32;
         for (k, (name, source)) in sources.iter().enumerate() {
-            let kept = {
-                let kept = self
-                    .kept_irradiance
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner());
-                (kept.layers.iter())
-                    .any(|l| l.settings == *settings && l.source.scale_to(source).is_some())
-            };
-            if kept {
+            if self.kept_layer(source, settings).is_some() {
                 report.kept += 1;
                 continue;
             }
-            // This source's share of the bar; NaN (asking only whether to go on) passes as is.
-            let (lo, hi) = (k as f32 / n, (k + 1) as f32 / n);
-            let share = move |f: f32| progress.is_none_or(|p| p(lo + (hi - lo) * f));
+            let share = crate::progress::stage(progress, k as f32 / n, (k + 1) as f32 / n);
             match self.source_layer(scene, tracer, source, settings, Some(&share))? {
                 Some((_, lighting)) => {
                     report.built += 1;
@@ -415,13 +417,7 @@ impl Prt {
                     .push((name.clone(), "its irradiance was not kept source by source")),
             }
         }
-        report.layer_bytes = {
-            let kept = self
-                .kept_irradiance
-                .lock()
-                .unwrap_or_else(|e| e.into_inner());
-            kept.layers.iter().map(|l| l.prt.light_bytes()).sum()
-        };
+        report.layer_bytes = self.kept_layer_bytes();
         report.seconds = start.elapsed().as_secs_f64();
         Ok(report)
     }
