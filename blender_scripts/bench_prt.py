@@ -267,7 +267,7 @@ def power_drag(positions, triangles, marble, kept, args) -> None:
         # layer relit now (the point light's is kept), so the sun's first change adds it.
         prep = prt.prepare_layers(lights=last)
         times, walls = [], []
-        for k, sun in enumerate((2.5, 3.0, 3.5)[: max(args.runs, 2)]):
+        for sun in (2.5, 3.0, 3.5)[: max(args.runs, 2)]:
             t0 = time.perf_counter()
             u = prt.update(lights=moved_scene(positions, triangles, 0.0, 0.0, power=powers[-1], sun=sun))
             walls.append(time.perf_counter() - t0)
