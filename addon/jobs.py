@@ -20,7 +20,7 @@ class Job:
     """A precompute on a worker thread that never touches bpy; the operator polls it.
 
     With `first_preview`, a first preview (`Prt(first_preview=True)`: no walks, fewer samples,
-    a cheap own light; 0.75 s on the 10 cm bunny of a 15-20 s precompute) is built first and kept
+    a cheap own light; 0.8 s on the 10 cm bunny of a 15-20 s precompute) is built first and kept
     as `first` (with `first_seconds` since the start) for the operator to show while the full
     precompute runs; it is only worth it where the walks run (Cycles' profile)."""
 

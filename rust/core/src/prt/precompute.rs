@@ -395,7 +395,7 @@ pub(super) fn transport_under(
     report.seconds_tree = t_tree.elapsed().as_secs_f64();
     let disc = ReceiverDisc::new(mesh, &tree, lit.spacing);
     let t_transport = Instant::now();
-    let far = FarField::new(settings.far_field);
+    let far = FarField::new(settings.far_field, settings.first_preview);
     report.far_field_distance_bound = far.distance_bound();
     let (transport, counters) = transport_rows(
         mesh,

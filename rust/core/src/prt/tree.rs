@@ -63,6 +63,19 @@ impl Moments {
         self.c[5] += child.c[5] + s.y * e.z + s.z * e.y + w * e.y * e.z;
     }
 
+    /// The moments of several weightings of the same points (channels) summed.
+    pub fn sum(parts: &[Moments]) -> Moments {
+        let mut total = Moments::default();
+        for m in parts {
+            total.w += m.w;
+            total.s += m.s;
+            for (t, c) in total.c.iter_mut().zip(m.c) {
+                *t += c;
+            }
+        }
+        total
+    }
+
     pub fn trace(&self) -> f64 {
         self.c[0] + self.c[1] + self.c[2]
     }

@@ -272,7 +272,7 @@ class Prt:
         `first_preview`: a picture to show while the full precompute runs: the half-space
         profile and the object's own light on 16 rays a vertex (as `interreflection` says; no
         walks, no single scattering unless asked) on at most 150,000 samples
-        (`report["first_preview"]`); about 0.75 s for the 10 cm bunny (6.5 % from the full
+        (`report["first_preview"]`); about 0.8 s for the 10 cm bunny (6.5 % from the full
         preview there) where the full precompute takes 15-20 s. Asking for walks with it
         raises ValueError.
         `profile`: "cycles" (Cycles' random walk with the Principled layers: what a Cycles
