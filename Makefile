@@ -57,6 +57,7 @@ bench: build
 	$(PY) blender_scripts/bench_hierarchy.py
 	$(PY) blender_scripts/bench_hierarchy.py --receivers vertices
 	$(PY) blender_scripts/bench_splat.py
+	$(PY) blender_scripts/precompute_vs_cycles.py
 	$(PY) blender_scripts/flicker_splat.py
 
 # The installable Blender extension (zip with the native wheel) in dist/.
