@@ -41,10 +41,6 @@ from blender_scripts.lib.machine import describe as machine  # noqa: E402
 from blender_scripts.lib.metrics import rel  # noqa: E402
 
 
-# The ladder's sampling seed (the reference takes Cycles' default, 0).
-LADDER_SEED = 1
-
-
 def cycles_time_at(error: float, ladder: list[tuple[int, float, float]]) -> tuple[float, str]:
     """Cycles' bake time at `error`, from rungs (spp, seconds, error) in rising spp: log-log
     interpolation between the two rungs that bracket it. Beyond the ladder, the nearest rung's
@@ -101,10 +97,7 @@ def main(argv=None) -> int:
             ref, ref_s = cr.bake_vertices(bake_obj, m, args.spp)
             ladder = []
             for spp in args.ladder:
-                # Another seed than the reference's: with the same one a bake's samples are the
-                # reference's first ones (and under adaptive sampling a point that converged early
-                # gets the same value in both), which would hide part of the rung's noise.
-                values, seconds = cr.bake_vertices(bake_obj, m, spp, seed=LADDER_SEED)
+                values, seconds = cr.bake_vertices(bake_obj, m, spp, seed=cr.LADDER_SEED)
                 ladder.append((spp, seconds, rel(values, ref, w)))
             rungs = ", ".join(f"{spp} spp {s:.1f} s {100 * e:.2f} %" for spp, s, e in ladder)
             print(f"  {name}: Cycles {rungs} (reference {ref_s:.0f} s; bake times from when they were made)",

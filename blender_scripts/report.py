@@ -234,13 +234,12 @@ def splat_rows(scene, material, name, truth, receivers, weights, cycles=None, pr
 
 def cycles_rows(obj, material, name, spp_list, reference_spp, receivers, weights):
     """Cycles vertex bakes at each sample count against the high-sample bake, on another
-    sampling seed than it (with the same seed a bake's samples are the reference's first ones,
-    and under adaptive sampling a point that converged early takes the same value in both)."""
+    sampling seed than it (`LADDER_SEED`)."""
     ref, ref_s = cr.bake_vertices(obj, material, reference_spp)
     label = f"Cycles {reference_spp} spp"
     rows = []
     for spp in spp_list:
-        values, seconds = cr.bake_vertices(obj, material, spp, seed=1)
+        values, seconds = cr.bake_vertices(obj, material, spp, seed=cr.LADDER_SEED)
         rms, mx = worst(translucent.relative_error(values[receivers], ref[receivers], weights))
         rows.append(Row("Cycles random walk (bake)", f"{spp} spp", name, label, rms, mx, seconds, 0.0,
                         notes="vertex bake, diffuse passes"))

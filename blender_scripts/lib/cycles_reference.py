@@ -35,6 +35,12 @@ from blender_scripts.lib.figures import write_png
 REPO = pathlib.Path(__file__).resolve().parents[2]
 CACHE = REPO / "out" / "cache" / "cycles"
 
+# The sampling seed of bakes compared with a reference bake (which takes Cycles' default, 0).
+# With the reference's own seed a bake's samples are the reference's first ones, and under
+# adaptive sampling a point that converged early takes the same value in both: the cheaper
+# bake would look less noisy than it is.
+LADDER_SEED = 1
+
 
 def _scene_digest(objects) -> str:
     # The key covers vertex positions, transforms, lights, camera and world, not the faces: a
