@@ -42,10 +42,10 @@ pub struct PrtRequest {
     /// object's own light (`FIRST_PREVIEW_OWN_LIGHT_RAYS` rays a vertex), no walks, on at most
     /// `FIRST_PREVIEW_SAMPLES` samples, far clusters accepted from `FIRST_PREVIEW_FAR_FIELD`
     /// on (and placed once for every channel, `rows::FarField`), the support from
-    /// `FIRST_PREVIEW_TOLERANCE`. On the 10 cm bunny that is 0.8 s where the full precompute takes 15-20 s, and 6.5 %
-    /// from the full preview (docs/benchmarks.md): what the walks add. Fewer samples do not
-    /// pay: at 70,000 the spacing nears the profile's length, the far field gives way and the
-    /// transport took 5 s.
+    /// `FIRST_PREVIEW_TOLERANCE`. On the 10 cm bunny that is 0.8 s where the full precompute
+    /// takes 15-20 s, and 6.5 % from the full preview (docs/benchmarks.md): what the walks add.
+    /// Fewer samples do not pay: at 70,000 the spacing nears the profile's length, the far field
+    /// gives way and the transport took 5 s.
     pub first_preview: bool,
     /// The random streams' seed: the walks' and (through the caller's irradiance settings) the
     /// irradiance's. Two seeds give two independent previews: their difference measures the
