@@ -15,7 +15,6 @@
 use crate::error::{Error, Result};
 use crate::mesh::{interpolated_normal, Mesh};
 use glam::Vec3;
-use std::collections::HashMap;
 
 /// Sub-triangles per edge of a refined triangle.
 pub const LEVEL: usize = 4;
@@ -27,14 +26,20 @@ pub const FLOOR: f32 = 0.05;
 /// The irradiance at points with their shading normals.
 pub type PointIrradiance<'a> = dyn Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync + 'a;
 
+/// `ShadowEdges::index` of a triangle without a grid.
+const UNREFINED: u32 = u32::MAX;
+
 /// Grid points of one refined triangle: (i, j) with i + j <= LEVEL.
 const POINTS: usize = (LEVEL + 1) * (LEVEL + 2) / 2;
 
 /// The refined triangles and their grids' irradiance.
 #[derive(Debug, Clone, Default)]
 pub struct ShadowEdges {
-    /// Triangle index -> offset of its grid in `values`.
-    index: HashMap<u32, usize>,
+    /// Per triangle, the offset of its grid in `values` (`UNREFINED` where it has none): a
+    /// dense table, read once per walk exit (a hashed lookup took a third of a relit walk
+    /// term's time).
+    index: Vec<u32>,
+    refined: usize,
     values: Vec<[f32; 3]>,
 }
 
@@ -95,21 +100,26 @@ impl ShadowEdges {
             values[base + at(LEVEL, 0)] = irradiance[tri[1] as usize];
             values[base + at(0, LEVEL)] = irradiance[tri[2] as usize];
         }
-        let index = refined
-            .iter()
-            .enumerate()
-            .map(|(k, &t)| (t, k * POINTS))
-            .collect();
-        Ok(Self { index, values })
+        let mut index = vec![UNREFINED; mesh.triangles().len()];
+        for (k, &t) in refined.iter().enumerate() {
+            index[t as usize] = u32::try_from(k * POINTS).map_err(|_| {
+                Error::InvalidArgument(format!("{} refined triangles: too many", refined.len()))
+            })?;
+        }
+        Ok(Self {
+            index,
+            refined: refined.len(),
+            values,
+        })
     }
 
     /// Triangles refined.
     pub fn len(&self) -> usize {
-        self.index.len()
+        self.refined
     }
 
     pub fn is_empty(&self) -> bool {
-        self.index.is_empty()
+        self.refined == 0
     }
 
     /// Points evaluated (for the report).
@@ -120,20 +130,38 @@ impl ShadowEdges {
     /// The irradiance in channel `c` at barycentric `w` (weights of the corners 0, 1, 2) of
     /// `triangle`, linear on its sub-triangle; None where the triangle is not refined.
     pub fn value(&self, triangle: u32, w: [f32; 3], c: usize) -> Option<f32> {
-        let &base = self.index.get(&triangle)?;
+        self.grid_of(triangle).map(|base| self.value_on(base, w, c))
+    }
+
+    /// Where `triangle`'s grid starts, None where it is not refined (for a caller that keeps
+    /// it beside its own per-triangle data: `value_on`).
+    #[inline]
+    pub fn grid_of(&self, triangle: u32) -> Option<u32> {
+        match self.index.get(triangle as usize) {
+            Some(&base) if base != UNREFINED => Some(base),
+            _ => None,
+        }
+    }
+
+    /// `value` on the grid starting at `base` (`grid_of`).
+    pub fn value_on(&self, base: u32, w: [f32; 3], c: usize) -> f32 {
+        let base = base as usize;
         let level = LEVEL as f32;
         let (x, y) = (w[1].clamp(0.0, 1.0) * level, w[2].clamp(0.0, 1.0) * level);
         let i = (x.floor() as usize).min(LEVEL - 1);
         let j = (y.floor() as usize).min(LEVEL - 1 - i);
         let (fi, fj) = ((x - i as f32).max(0.0), (y - j as f32).max(0.0));
         let v = |a: usize, b: usize| self.values[base + at(a, b)][c];
-        Some(if fi + fj <= 1.0 || i + j + 2 > LEVEL {
+        if fi + fj <= 1.0 || i + j + 2 > LEVEL {
             (1.0 - fi - fj).max(0.0) * v(i, j) + fi * v(i + 1, j) + fj * v(i, j + 1)
         } else {
             let (gi, gj) = (1.0 - fi, 1.0 - fj);
             (1.0 - gi - gj).max(0.0) * v(i + 1, j + 1) + gi * v(i, j + 1) + gj * v(i + 1, j)
-        })
+        }
     }
+
+    /// The grid offsets: `UNREFINED` where none.
+    pub const UNREFINED: u32 = UNREFINED;
 }
 
 /// Grid point (i, j), i toward corner 1 and j toward corner 2, in row order.

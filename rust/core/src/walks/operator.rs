@@ -17,6 +17,7 @@ use super::radiosity::ExitLight;
 use super::twin::controlled_mean;
 use crate::mesh::Mesh;
 use crate::optics::CHANNELS;
+use crate::shadow_edges::ShadowEdges;
 use glam::Vec3;
 
 /// Where one flight left the mesh and the share of the walk's weight that left there.
@@ -70,14 +71,14 @@ pub(crate) struct PassRecord {
 
 impl PassRecord {
     /// The pass's mean and standard error under `light` (`twin`'s estimator, replayed).
-    fn estimate(&self, mesh: &Mesh, light: &ExitLight, e: f64, g: Vec3, c: usize) -> (f64, f64) {
+    fn estimate(&self, light: &CornerLight, e: f64, g: Vec3, c: usize) -> (f64, f64) {
         let mut sums = [0f64; 5];
         let mut from = 0usize;
         for w in &self.walks {
             let to = w.exits_end as usize;
             let x: f64 = self.exits[from..to]
                 .iter()
-                .map(|x| f64::from(x.weight) * exit_irradiance(mesh, light, x, c))
+                .map(|x| f64::from(x.weight) * light.at(x, c))
                 .sum();
             from = to;
             let y =
@@ -140,9 +141,8 @@ impl ReceiverRecord {
     /// `gradients` its tangent gradients, `twin::tangent_gradients`), and its standard error.
     pub(crate) fn radiosity(
         &self,
-        mesh: &Mesh,
         v: u32,
-        light: &ExitLight,
+        light: &CornerLight,
         gradients: &[[[f32; 3]; 3]],
     ) -> ([f32; 3], [f32; 3]) {
         let e = light.vertices[v as usize];
@@ -152,7 +152,7 @@ impl ReceiverRecord {
             let g = Vec3::from_array(std::array::from_fn(|k| gradients[v as usize][k][c]));
             let (mut mean, mut var) = (0f64, 0f64);
             for p in &self.passes[c] {
-                let (m, s) = p.estimate(mesh, light, f64::from(e[c]), g, c);
+                let (m, s) = p.estimate(light, f64::from(e[c]), g, c);
                 let share = f64::from(p.share);
                 mean += share * m;
                 var += (share * s).powi(2);
@@ -165,16 +165,55 @@ impl ReceiverRecord {
     }
 }
 
-/// The irradiance at an exit, read as the walker reads it (`Walker::exit`): from the shadow
-/// edges' finer grid on a triangle a shadow's edge crosses, else interpolated from the corners.
-fn exit_irradiance(mesh: &Mesh, light: &ExitLight, x: &ExitRecord, c: usize) -> f64 {
-    let w = x.barycentric();
-    if let Some(e) = light.edges.value(x.triangle, w, c) {
-        return f64::from(e);
+/// The light as the exits read it, laid out for reading: each triangle's corners' irradiance
+/// per channel and where its shadow-edge grid starts, in one entry (one load an exit instead
+/// of the triangle, three vertices and a lookup).
+pub(crate) struct CornerLight<'a> {
+    vertices: &'a [[f32; 3]],
+    edges: &'a ShadowEdges,
+    triangles: Vec<Corners>,
+}
+
+struct Corners {
+    /// Per channel, the corners' irradiance.
+    e: [[f32; 3]; CHANNELS],
+    /// `ShadowEdges::grid_of`, or `ShadowEdges::UNREFINED`.
+    grid: u32,
+}
+
+impl<'a> CornerLight<'a> {
+    pub(crate) fn new(mesh: &Mesh, light: &ExitLight<'a>) -> Self {
+        let v = light.vertices;
+        let triangles = mesh
+            .triangles()
+            .iter()
+            .enumerate()
+            .map(|(t, tri)| Corners {
+                e: std::array::from_fn(|c| tri.map(|i| v[i as usize][c])),
+                grid: light
+                    .edges
+                    .grid_of(t as u32)
+                    .unwrap_or(ShadowEdges::UNREFINED),
+            })
+            .collect();
+        Self {
+            vertices: v,
+            edges: light.edges,
+            triangles,
+        }
     }
-    let tri = mesh.triangles()[x.triangle as usize];
-    tri.iter()
-        .zip(w)
-        .map(|(&i, w)| f64::from(w) * f64::from(light.vertices[i as usize][c]))
-        .sum()
+
+    /// The irradiance at an exit, read as the walker reads it (`Walker::exit`): from the
+    /// shadow edges' finer grid on a triangle a shadow's edge crosses, else interpolated from
+    /// the corners.
+    #[inline]
+    fn at(&self, x: &ExitRecord, c: usize) -> f64 {
+        let w = x.barycentric();
+        let t = &self.triangles[x.triangle as usize];
+        if t.grid != ShadowEdges::UNREFINED {
+            return f64::from(self.edges.value_on(t.grid, w, c));
+        }
+        let e = t.e[c];
+        f64::from(w[0] * e[0] + w[1] * e[1] + w[2] * e[2])
+    }
 }

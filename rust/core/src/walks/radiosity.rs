@@ -17,7 +17,7 @@
 //! by about a mean free path in one direction, which a radial table never sees: measured on a
 //! half-lit plane, `tests/walks.rs`. Plain pseudo-random numbers have no such bias.)
 
-use super::operator::ReceiverRecord;
+use super::operator::{CornerLight, ReceiverRecord};
 use super::twin::tangent_gradients;
 use super::walker::{media, placements, Walker};
 use crate::bake_points::BakePoints;
@@ -264,10 +264,11 @@ pub fn relit_radiosity(
         )));
     }
     let gradients = tangent_gradients(mesh, light.vertices);
+    let corners = CornerLight::new(mesh, light);
     Ok(records
         .par_iter()
         .zip(receivers.par_iter())
-        .map(|(r, &v)| r.radiosity(mesh, v, light, &gradients))
+        .map(|(r, &v)| r.radiosity(v, &corners, &gradients))
         .unzip())
 }
 
