@@ -301,3 +301,43 @@ def test_layers_prepared_ahead_make_the_first_power_change_a_rescale():
     r = lone.prepare_layers(scene(0.0, lone=True))
     assert r["built"] == 0 and r["skipped"] == [
         ("light 0", "the only source: a change of it rescales the whole transport")], r
+
+
+def test_a_hierarchy_carrying_the_precomputes_walks_follows_a_moved_light_as_close_to_cycles_walk():
+    """The light-drag path: `Hierarchy(walks_from=prt)` takes the precompute's walks' term and
+    own light (no walk traced, no own-light ray) and follows a moved light with
+    `update(lights=...)`; judged against the walk reference under the moved light, beside the
+    relit PRT's own distance from it (direct light with direct light)."""
+    first = ball_scene((0.0, 1.0, -0.2))
+    prt = translucent.Prt(first, SKIN, backend="cpu", walk_rays=3_000_000)
+    h = translucent.Hierarchy(first, SKIN, mode="render", walks_from=prt)
+    terms = h.report["terms"]
+    # The precompute's walks, carried: the same walks and rays, none walked here.
+    assert terms["walks"]["walks"] == prt.report["walks"]["walks"] and terms["own_light_rays"] == 0
+    assert not any("walks" in s["what"] for s in h.last_eval["skipped"])
+    new = ball_scene((0.0, -1.0, -0.2), point=(0.0, -0.03, -0.01))
+    h.update(lights=new)
+    prt.update(lights=new)
+    receivers = list(range(0, new.vertex_count, 7))
+    truth = translucent.reference_radiance(new, SKIN, walks=512, receivers=receivers, tunnel=True)
+    k = translucent.layer_weight(SKIN.roughness, 1.0, SKIN.eta) / math.pi
+    w = new.vertex_areas[receivers]
+    # Both with the own light, as `test_pose` compares the hierarchy with PRT.
+    dragged = max(translucent.relative_error(h.radiosity(SKIN)[receivers] * k, truth, w)["rms"])
+    relit = max(translucent.relative_error(prt.radiosity(SKIN)[receivers] * k, truth, w)["rms"])
+    assert h.report["terms"]["walks"]["walks"] == prt.report["walks"]["walks"]
+    assert dragged <= relit + 0.01, f"dragged {dragged:.4f}, relit PRT {relit:.4f}"
+    assert dragged < 0.08
+
+
+def test_a_hierarchy_refuses_walks_from_a_precompute_without_walks_or_of_another_shape():
+    first = ball_scene((0.0, 1.0, -0.2))
+    dipole = translucent.Prt(first, SKIN, backend="cpu", profile="dipole")
+    with pytest.raises(ValueError, match="walks_from"):
+        translucent.Hierarchy(first, SKIN, walks_from=dipole)
+    prt = translucent.Prt(first, SKIN, backend="cpu", walk_rays=300_000)
+    p, t = sphere(16, 0.01)
+    other = translucent.Scene((p * 1.1).astype(np.float32), t)
+    other.add_sun((0.0, 1.0, -0.2), 2.0)
+    with pytest.raises(ValueError, match="another mesh or shape"):
+        translucent.Hierarchy(other, SKIN, walks_from=prt)

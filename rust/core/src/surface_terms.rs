@@ -74,7 +74,35 @@ pub struct Lit<'a> {
     pub halfspace: &'a [[f32; 3]],
 }
 
+/// Terms walked by another method (a PRT precompute's, `Prt::walked_terms`) for `material`:
+/// handed to a method that sums the half-space profile, they are carried to its light and
+/// half-space B at its next evaluation (`Terms::carried`) instead of walked again. The walk
+/// records and the own light's rays are shared, not copied.
+#[derive(Debug, Clone)]
+pub struct Walked {
+    pub material: Material,
+    pub walks: WalkTerm,
+    pub bounce: Option<Bounce>,
+    /// The vertices they were walked on: a method on another shape of the mesh refuses them.
+    pub positions: Vec<Vec3>,
+}
+
 impl Terms {
+    /// Terms walked elsewhere, carried (not walked) at the next evaluation: the walks read
+    /// under the new light against the new method's own half-space B, the own light gathered
+    /// over the kept rays. Walked anew later only where `Terms::update` would walk anyway (a
+    /// medium the walks do not cover, a retrace).
+    pub fn carried(settings: TermSettings, walked: Walked) -> Terms {
+        Terms {
+            settings,
+            rep: Some(walked.material),
+            walks: Some(walked.walks),
+            bounce: walked.bounce,
+            current: false,
+            report: TermReport::default(),
+        }
+    }
+
     pub fn new(settings: TermSettings) -> Terms {
         Terms {
             settings,

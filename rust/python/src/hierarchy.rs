@@ -53,7 +53,7 @@ impl PyHierarchy {
     #[pyo3(signature = (scene, material, profile = "cycles", eps = (0.005, 0.5),
         mode = "on_the_fly", world_samples = 64, area_samples = 16, estimate_receivers = 32,
         world_shadows = false, walks = false, walk_rays = None, receivers = "vertices",
-        progress = None))]
+        progress = None, walks_from = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -70,11 +70,25 @@ impl PyHierarchy {
         #[pyo3(from_py_with = crate::convert::opt_int)] walk_rays: Option<i64>,
         receivers: &str,
         #[pyo3(from_py_with = crate::convert::callback)] progress: Option<Py<PyAny>>,
+        walks_from: Option<PyRef<'_, crate::prt::PyPrt>>,
     ) -> PyResult<Self> {
         let model = crate::material::profile_kind(profile)?;
         let receivers = Receivers::parse(receivers).map_err(crate::convert::to_py)?;
-        let terms =
-            crate::convert::term_settings(walks, walk_rays, scene.scene.mesh.vertex_count())?;
+        // The terms a precompute walked, carried here instead of walked again: walks on.
+        let walked = match &walks_from {
+            Some(prt) => Some(prt.walked_terms().ok_or_else(|| {
+                pyo3::exceptions::PyValueError::new_err(
+                    "walks_from: that Prt has no walks to carry (the dipole, walks=0 or a \
+                     first preview)",
+                )
+            })?),
+            None => None,
+        };
+        let terms = crate::convert::term_settings(
+            walks || walked.is_some(),
+            walk_rays,
+            scene.scene.mesh.vertex_count(),
+        )?;
         let mode = Mode::parse(mode).map_err(crate::convert::to_py)?;
         let settings = HierarchySettings {
             eps_receiver: eps.0,
@@ -97,6 +111,9 @@ impl PyHierarchy {
             let build = |f: f32| tick(0.5 * f);
             let first = |f: f32| tick(0.5 + 0.5 * f);
             let mut h = Hierarchy::new_with_progress(core_scene, settings, Some(&build))?;
+            if let Some(w) = walked {
+                h.adopt_terms(w)?;
+            }
             let e = h.radiosity_with_progress(&m, Some(&first))?;
             Ok((h, e))
         })?;

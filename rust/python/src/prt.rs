@@ -63,6 +63,14 @@ fn held<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl PyPrt {
+    /// The walks' term and own light for a hierarchy to carry (`Hierarchy(walks_from=...)`).
+    pub(crate) fn walked_terms(&self) -> Option<translucent_core::surface_terms::Walked> {
+        self.inner
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .walked_terms()
+    }
+
     /// `update` for a pose: `given` the posed positions (and normals) of the held mesh, under
     /// `lights`' lights or the held ones; else `lights` is a Scene of the posed mesh.
     fn pose<'py>(

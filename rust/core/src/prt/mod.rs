@@ -156,4 +156,18 @@ impl Prt {
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
     }
+
+    /// What the walks through the mesh and the object's own light found, for another method
+    /// to carry to its own light and half-space B (`Hierarchy::adopt_terms`: a light dragged,
+    /// followed by the hierarchy without a walk traced). The records are shared, not copied.
+    /// None without walks (the dipole, `walks = 0`) or where they kept no records.
+    pub fn walked_terms(&self) -> Option<crate::surface_terms::Walked> {
+        let walks = self.walks.clone().filter(WalkTerm::relightable)?;
+        Some(crate::surface_terms::Walked {
+            material: *self.representatives.first()?,
+            walks,
+            bounce: self.bounce.clone(),
+            positions: self.positions.clone(),
+        })
+    }
 }

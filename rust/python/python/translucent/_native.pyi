@@ -611,6 +611,7 @@ class Hierarchy:
         walk_rays: int | None = None,
         receivers: Literal["vertices", "faces"] = "vertices",
         progress: Progress | None = None,
+        walks_from: Prt | None = None,
     ) -> None:
         """Builds the hierarchy and evaluates `material` once. `receivers`: "vertices" gathers
         B at every vertex, each refined from the root (within 2 % of the ground truth on coarse
@@ -620,7 +621,13 @@ class Hierarchy:
         the walks' geometry term and the object's own light as PRT has them (the shared
         `walks` and `own_light` kernels), walked at this first evaluation for `material`
         (`walk_rays` in all, default as PRT's) and carried to a new light or pose without a
-        walk traced (`retrace_walks` walks the pose); off, the half-space profile alone. `world_shadows`: False lights
+        walk traced (`retrace_walks` walks the pose); off, the half-space profile alone.
+        `walks_from`: a `Prt` (Cycles' profile, walks on) precomputed on this same mesh and
+        shape, whose walks' term and own light are carried here instead of walked (walks on;
+        the records shared, not copied): the hierarchy is up in well under a second where its
+        own walks take as long as the precompute's, so a light dragged over a PRT preview is
+        followed at the hierarchy's pace (`update(lights=...)`); ValueError when that Prt has
+        no walks or another shape. `world_shadows`: False lights
         by the world's nine spherical-harmonic coefficients, unshadowed (Mertens 2003 §5.3,
         no rays); True traces `world_samples` shadowed rays per point. `eps` = (ε₁, ε₂) [sr]: the
         receiver's and the emitter's solid-angle thresholds of the refinement oracle.
