@@ -8,7 +8,7 @@ import threading
 import bpy
 import numpy as np
 
-from . import bake, export, jobs, textures, viewport, writeback
+from . import bake, drag, export, jobs, textures, viewport, writeback
 from .principled import principled_key, show_medium
 from .session import JOBS, PREPARING, SESSIONS, Session, objects_with, params, view_dependent
 
@@ -55,10 +55,12 @@ def finish(material: bpy.types.Material, job: jobs.Job, objects, info, lighting,
         # The splatting's or the hierarchy's evaluation, made on the worker.
         session.evaluated, session.report = (job.key, job.colors, job.last_eval), job.report
     jobs.stop_layers(material.name)
+    old = SESSIONS.get(material.name)
     SESSIONS[material.name] = session
     edit(material)
     viewport.show([o for o in (bpy.data.objects.get(n) for n in objects) if o is not None])
     jobs.prepare_layers(session, getattr(job, "scene", None))
+    drag.prepare(session, getattr(job, "scene", None), material, old)
     return session
 
 
@@ -238,6 +240,14 @@ def edit(material: bpy.types.Material) -> None:
     s.last_error = None if estimate is None else list(estimate)
     s.last_seconds = s.last_eval["seconds"]
     s.refresh_advised = bool(s.last_eval["refresh_advised"])
+    write_preview(s, colors)
+    if s.refresh_advised:
+        refresh(material)
+
+
+def write_preview(s: Session, colors) -> None:
+    """Every previewed object's preview attribute written from `colors` (per exported vertex),
+    and what could not be written kept for the panel (`not_shown`)."""
     s.not_shown = []
     users: dict[str, list[str]] = {}  # mesh name -> the objects written into it, in order
     for name, values in writeback.per_object(colors, s.info).items():
@@ -262,8 +272,6 @@ def edit(material: bpy.types.Material) -> None:
             # Linked duplicates (Alt+D): one mesh, one attribute, the last object's light in it.
             s.not_shown.append(f"{len(names)} objects share the mesh {mesh}: it shows {names[-1]}'s preview "
                                "(Object > Relations > Make Single User to see each)")
-    if s.refresh_advised:
-        refresh(material)
 
 
 def _prepare_tables(material: bpy.types.Material, m) -> bool:

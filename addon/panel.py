@@ -96,6 +96,8 @@ def status_lines(mat: bpy.types.Material) -> list[tuple[str, str]]:
         lines.append((sess.follow_message, "INFO"))
     if sess.layers is not None and sess.layers.message:
         lines.append((sess.layers.message, "INFO" if sess.layers.done else "TIME"))
+    if sess.drag is not None and sess.drag.message:
+        lines.append((sess.drag.message, "INFO" if sess.drag.ready else "TIME"))
     if sess.method_message:
         lines.append((sess.method_message, "INFO"))
     if sess.edit_message:

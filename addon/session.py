@@ -55,6 +55,9 @@ class Session:
     # The lights' layers being made on a worker thread after a PRT precompute or update
     # (`jobs.LayersPrep`; None headless or for the other methods).
     layers: object = None
+    # The hierarchy a dragged light is followed with, built beside a PRT transport with walks
+    # (`drag.DragPrep`; None headless, for the other methods and the dipole).
+    drag: object = None
     # What following the scene is doing ("refreshing: light Key changed", ...).
     follow_message: str = ""
     # The viewport's eye point the preview is drawn toward (world space), when the transport

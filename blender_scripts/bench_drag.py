@@ -4,8 +4,11 @@ scene following with a UI's worker thread (headless Blender; the timers are run 
 key light is moved (the transport relit), then the sun's power is set three times: each time
 from the change to the preview written (export, `Prt.update`, write-back). With the lights'
 layers made in the background after the relight (`jobs.LayersPrep`, what the add-on does) and
-without (`--no-layers`: the first change relights the sun's layer). Prints the machine;
-timings live here, never in tests.
+without (`--no-layers`: the first change relights the sun's layer). Then the key light dragged
+(issue 29, point 5): each step from the change to the preview written by the drag's hierarchy
+(`drag`: the precompute's walks carried), median of the steps, and PRT's relight once it is still;
+the last dragged preview against that relight. Prints the machine; timings live here, never in
+tests.
 
 Run: `make bench` (or .venv/bin/python blender_scripts/bench_drag.py [--profile DIPOLE] [--no-layers]).
 """
@@ -14,14 +17,18 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import time
+
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import bpy  # noqa: E402
 
 import addon  # noqa: E402
-from addon import follow, jobs, session  # noqa: E402
+from addon import drag, follow, jobs, session  # noqa: E402
+from addon.writeback import ATTRIBUTE  # noqa: E402
 from blender_scripts.lib import models  # noqa: E402
 from blender_scripts.lib.machine import describe as machine  # noqa: E402
 
@@ -85,6 +92,40 @@ def main() -> int:
               f"({session.SESSIONS[mat.name].follow_message})")
         if session.SESSIONS[mat.name].layers is not None:
             session.SESSIONS[mat.name].layers._thread.join()
+    prep = session.SESSIONS[mat.name].drag
+    if prep is None:
+        print("key light dragged: no drag hierarchy (the dipole, or no walks): PRT relights at each step")
+        return 0
+    prep._thread.join()
+    print(f"key light dragged: {prep.message}")
+
+    def preview() -> np.ndarray:
+        a = mesh.attributes[ATTRIBUTE]
+        out = np.empty(len(a.data) * 4, np.float32)
+        a.data.foreach_get("color", out)
+        return out.reshape(-1, 4)[:, :3].copy()
+
+    steps = []
+    for _ in range(5):
+        key.location.x -= 0.01
+        t0 = time.perf_counter()
+        bpy.context.view_layer.update()
+        follow.follow_now(dragging={mat.name})
+        job = session.JOBS[mat.name]
+        assert isinstance(job, drag.DragJob), type(job)
+        job._thread.join(timeout=600)
+        poll = next(fn for fn in timers if fn.__name__ == "poll")
+        timers.remove(poll)
+        assert poll() is None
+        steps.append(time.perf_counter() - t0)
+    dragged = preview()
+    print(f"  drag steps: median {statistics.median(steps):.3f} s from the change to the preview written "
+          f"({', '.join(f'{x:.3f}' for x in steps)}; {session.SESSIONS[mat.name].follow_message})")
+    took = refresh()
+    relit = preview()
+    rel = np.sqrt(np.mean((dragged - relit) ** 2, axis=0) / np.mean(relit**2, axis=0))
+    print(f"  still: PRT relit in {took:.2f} s ({session.SESSIONS[mat.name].follow_message}); the last dragged "
+          f"preview {', '.join(f'{100 * x:.2f}' for x in rel)} % from it (RMS over the vertices)")
     return 0
 
 
