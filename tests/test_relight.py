@@ -339,5 +339,5 @@ def test_a_hierarchy_refuses_walks_from_a_precompute_without_walks_or_of_another
     p, t = sphere(16, 0.01)
     other = translucent.Scene((p * 1.1).astype(np.float32), t)
     other.add_sun((0.0, 1.0, -0.2), 2.0)
-    with pytest.raises(ValueError, match="another mesh or shape"):
+    with pytest.raises(ValueError, match="walks_from: that Prt was precomputed on another mesh or shape"):
         translucent.Hierarchy(other, SKIN, walks_from=prt)

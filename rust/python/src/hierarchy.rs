@@ -84,6 +84,16 @@ impl PyHierarchy {
             })?),
             None => None,
         };
+        if let Some(w) = &walked {
+            if w.positions != scene.scene.mesh.positions() {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "walks_from: that Prt was precomputed on another mesh or shape ({} \
+                     vertices) than this scene's ({} vertices)",
+                    w.positions.len(),
+                    scene.scene.mesh.vertex_count()
+                )));
+            }
+        }
         let terms = crate::convert::term_settings(
             walks || walked.is_some(),
             walk_rays,
