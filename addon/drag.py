@@ -19,7 +19,7 @@ import time
 import bpy
 
 from . import export, jobs
-from .session import SESSIONS
+from .session import SESSIONS, params
 
 
 class DragPrep:
@@ -28,10 +28,15 @@ class DragPrep:
     gathers over them). `message`: what the panel says of it; `stop()` ends it at its next
     progress call."""
 
-    def __init__(self, prt, scene, material):
+    def __init__(self, prt, scene, material, key=None):
         self.hierarchy = None
         self.objects: list = []  # (name, vertex count) of the export it was built for
+        # What it was built for (`session.params` and the texture's key): after an edit it is
+        # built again rather than evaluated for another material in a drag step (its links
+        # summed again, or walks for media the carried ones do not cover: seconds).
+        self.key = key
         self.message = "preparing the light drag"
+        self.scene = scene
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, args=(prt, scene, material), daemon=True)
         self._thread.start()
@@ -70,12 +75,14 @@ def prepare(session, scene, material: bpy.types.Material, old=None) -> None:
     if session.profile != "cycles" or not report.get("walks"):
         return
     counts = [(r.name, r.count) for r in session.info.objects]
-    if old is not None and old.drag is not None and old.drag.objects == counts and not old.drag._stop.is_set():
-        session.drag = old.drag
+    key = (params(material.translucent), session.texture_key)
+    kept = old.drag if old is not None else None
+    if kept is not None and kept.objects == counts and kept.key == key and not kept._stop.is_set():
+        session.drag = kept
         return
-    if old is not None and old.drag is not None:
-        old.drag.stop()
-    prep = session.drag = DragPrep(session.transport, scene, material.translucent.material())
+    if kept is not None:
+        kept.stop()
+    prep = session.drag = DragPrep(session.transport, scene, material.translucent.material(), key)
     prep.objects = counts
 
     def drag_ready():  # the panel's line drawn again once it is
@@ -119,6 +126,12 @@ def follow(mat: bpy.types.Material, s, settled) -> bool:
     path does not apply (PRT relights instead)."""
     prep = s.drag
     if prep is None or not prep.ready or s.deformed or s.members_changed or s.occluders_changed:
+        return False
+    if prep.key != (params(mat.translucent), s.texture_key):
+        # The material was edited since: built again for it in the background; PRT relights
+        # this step.
+        s.drag = None
+        prepare(s, getattr(prep, "scene", None), mat)
         return False
     objects = [o for o in (bpy.data.objects.get(n) for n in s.objects) if o is not None]
     if len(objects) != len(s.objects):

@@ -894,4 +894,18 @@ def test_with_a_ui_a_dragged_light_is_followed_by_the_hierarchy_with_the_walks_t
     # 0.4-0.6 % here (1.2-1.3 % from a fresh precompute on the 10 cm bunny), where the move
     # itself changed the preview by 18 %.
     assert np.all(rel < 0.03) and np.all(moved > 5.0 * rel), (rel, moved)
+    # After an edit the drag's hierarchy is not evaluated for another material in a drag step:
+    # that step PRT builds its transport again (relit, or precomputed for a medium it was not
+    # chosen for), and the drag's hierarchy is built again for the edited material.
+    mat.translucent.sigma_a = (0.02, 0.03, 0.05)
+    light.location.x += 0.02
+    bpy.context.view_layer.update()
+    clock[0] += follow.LIGHT_INTERVAL_S + 0.001
+    follow.follow_tick()
+    run_job(jobs.Job)
+    assert session.SESSIONS[mat.name].last_eval["method"] == "prt"
+    rebuilt = session.SESSIONS[mat.name].drag
+    assert rebuilt is not prep and rebuilt.key[0] == session.params(mat.translucent)
+    rebuilt._thread.join(timeout=120)
+    assert rebuilt.ready, rebuilt.message
     assert mesh_hash(obj.data) == user_mesh
