@@ -43,10 +43,9 @@ impl ExitRecord {
 
     /// The barycentric coordinates, summing to 1.
     fn barycentric(&self) -> [f32; 3] {
-        let (a, b) = (
-            f32::from(self.w[0]) / 65535.0,
-            f32::from(self.w[1]) / 65535.0,
-        );
+        // A multiply, not a division: the relight reads millions of exits.
+        const STEP: f32 = 1.0 / 65535.0;
+        let (a, b) = (f32::from(self.w[0]) * STEP, f32::from(self.w[1]) * STEP);
         [a, b, (1.0 - a - b).max(0.0)]
     }
 }
