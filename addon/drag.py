@@ -147,8 +147,8 @@ def follow(mat: bpy.types.Material, s, settled) -> bool:
     def done(material):
         from . import edits
 
-        if SESSIONS.get(name) is not s:
-            return  # a new transport came in meanwhile: it is shown
+        if SESSIONS.get(name) is not s or not material.translucent.enabled:
+            return  # a new transport came in meanwhile (it is shown), or the preview is off
         edits.write_preview(s, job.colors)
         s.last_eval = job.last_eval
         estimate = job.last_eval["error_estimate"]
