@@ -17,6 +17,7 @@ import threading
 import time
 
 import bpy
+import numpy as np
 
 from . import export, jobs
 from .session import SESSIONS, params
@@ -31,6 +32,8 @@ class DragPrep:
     def __init__(self, prt, scene, material, key=None):
         self.hierarchy = None
         self.objects: list = []  # (name, vertex count) of the export it was built for
+        self.occluders: dict = {}  # and that export's `occluder_keys` and positions
+        self.positions = None
         # What it was built for (`session.params` and the texture's key): after an edit it is
         # built again rather than evaluated for another material in a drag step (its links
         # summed again, or walks for media the carried ones do not cover: seconds).
@@ -77,13 +80,18 @@ def prepare(session, scene, material: bpy.types.Material, old=None) -> None:
     counts = [(r.name, r.count) for r in session.info.objects]
     key = (params(material.translucent), session.texture_key)
     kept = old.drag if old is not None else None
-    if kept is not None and kept.objects == counts and kept.key == key and not kept._stop.is_set():
+    # Kept for the same objects, material, shape and occluders (a pose or a moved prop since
+    # its build: built again, its walks and shadows are those of the transport now).
+    if (kept is not None and kept.objects == counts and kept.key == key and not kept._stop.is_set()
+            and kept.occluders == session.info.occluder_keys
+            and np.array_equal(kept.positions, session.info.positions)):
         session.drag = kept
         return
     if kept is not None:
         kept.stop()
     prep = session.drag = DragPrep(session.transport, scene, material.translucent.material(), key)
-    prep.objects = counts
+    prep.objects, prep.occluders = counts, dict(session.info.occluder_keys)
+    prep.positions = session.info.positions
 
     def drag_ready():  # the panel's line drawn again once it is
         if prep._thread.is_alive():

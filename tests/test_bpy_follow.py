@@ -909,3 +909,13 @@ def test_with_a_ui_a_dragged_light_is_followed_by_the_hierarchy_with_the_walks_t
     rebuilt._thread.join(timeout=120)
     assert rebuilt.ready, rebuilt.message
     assert mesh_hash(obj.data) == user_mesh
+    # A deformation since: the transport follows the pose and the drag's hierarchy is built
+    # again on it (the rest pose's would drag the rest pose's shape and walks).
+    obj.modifiers["Displace"].strength = 0.01
+    bpy.context.view_layer.update()
+    clock[0] += follow.DEBOUNCE_S + 0.01
+    follow.follow_tick()
+    run_job(jobs.Job)
+    posed = session.SESSIONS[mat.name]
+    assert posed.drag is not rebuilt and np.array_equal(posed.drag.positions, posed.info.positions)
+    posed.drag.stop()
