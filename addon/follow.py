@@ -11,7 +11,7 @@ previewed meshes was tagged besides (the add-on's own writes tag them), the chec
 LIGHT_INTERVAL_S after the first change noticed, still or not; if the meshes did not deform, it
 relights at once, and the next relight starts as soon as that one is done: the preview follows
 the drag at the relight's own pace (`Prt.update`: no walk traced). Over a PRT preview with the
-walks, a step is the drag's hierarchy instead (`drag`: the precompute's walks carried, 0.25-0.28 s
+walks, a step is the drag's hierarchy instead (`drag`: the precompute's walks carried, 0.25-0.35 s
 a step on the 10 cm bunny where PRT's relight takes 2.1 s), and PRT relights once the light has
 been still for DEBOUNCE_S (`settled`). A mesh that did deform sends the check back to waiting
 for the scene to be still."""

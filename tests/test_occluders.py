@@ -40,6 +40,25 @@ def test_a_blocker_shadows_the_irradiance_and_what_cannot_shadow_is_left_out():
     assert s.occluders["triangles_kept"] == 4 and s.occluders["objects_skipped"] == []
 
 
+
+def test_a_scene_without_its_lights_keeps_its_mesh_and_occluders():
+    """`Scene.without_lights` (the add-on's light drag): no light and no world, and the sun
+    added again is shadowed by the same blocker, as the closed form says (0 beneath, the
+    strength elsewhere)."""
+    p, t = plane(41, 2.0)
+    s = sunlit(p, t, square(0.5, 0.5, 0.3, 0.5))
+    s.set_world(color=(0.1, 0.1, 0.1))
+    bare = s.without_lights()
+    assert bare.light_count == 0 and bare.vertex_count == s.vertex_count
+    np.testing.assert_array_equal(bare.irradiance(), 0.0)
+    bare.add_sun((0.0, 0.0, -1.0), irradiance=2.0)
+    e = bare.irradiance()[:, 0]
+    inside = (p[:, 0] > 0.1) & (p[:, 0] < 0.9) & (p[:, 1] > 0.1) & (p[:, 1] < 0.9)
+    outside = (p[:, 0] < -0.1) | (p[:, 1] < -0.1) | (p[:, 0] > 1.1) | (p[:, 1] > 1.1)
+    assert inside.sum() > 50 and np.all(e[inside] == 0.0)
+    np.testing.assert_allclose(e[outside], 2.0, rtol=1e-5)
+    assert s.light_count == 1, "the original keeps its light"
+
 @pytest.mark.parametrize("bad, match", [
     (lambda p, t: (np.where(np.arange(12).reshape(4, 3) == 4, np.nan, p), t), "position"),
     (lambda p, t: (p, t + 3), "triangle"),

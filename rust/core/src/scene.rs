@@ -87,6 +87,19 @@ impl Scene {
         }
     }
 
+    /// A copy of the mesh and the occluders with no light, world or linking: for a caller
+    /// that adds the lights again while the rest of the scene stays as it was (the add-on's
+    /// light drag, which would otherwise export the meshes again for every step).
+    pub fn without_lights(&self) -> Scene {
+        Scene {
+            mesh: self.mesh.clone(),
+            lights: Vec::new(),
+            world: World::Black,
+            occluders: self.occluders.clone(),
+            linking: Vec::new(),
+        }
+    }
+
     /// Shadow linking for light `light` (its place in `lights`): only the occluders named in
     /// `blockers` cast its shadows (every occluder added under such a name), and of the mesh
     /// the objects `mesh` holds (`Mesh::with_objects`' indices; None: all). Errors name an

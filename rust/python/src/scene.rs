@@ -438,6 +438,22 @@ impl PyScene {
         self.scene.lights.len()
     }
 
+    /// A copy of this scene's mesh and occluders (other objects, their albedo) with no light,
+    /// world or linking, for a caller that adds the lights again (`Scene::without_lights`);
+    /// the mesh's BVH, where built, is shared.
+    fn without_lights(&self) -> Self {
+        let mesh_tracer = OnceLock::new();
+        if let Some(t) = self.mesh_tracer.get() {
+            let _ = mesh_tracer.set(Arc::clone(t));
+        }
+        Self {
+            scene: self.scene.without_lights(),
+            mesh_tracer,
+            tracer: OnceLock::new(),
+            lighting: Arc::new(AtomicU64::new(0)),
+        }
+    }
+
     /// A counter bumped by every change of lights or world (what `Prt.stale_reason` reads).
     #[getter]
     fn lighting_version(&self) -> u64 {

@@ -176,6 +176,9 @@ class Scene:
         stop at it; the walks and the object's own light never enter it. `albedo` (a float or
         RGB in [0, 1]) above 0 sends light back by one diffuse bounce. ValueError names what is
         wrong (NaN, an index out of range, an empty object)."""
+    def without_lights(self) -> Scene:
+        """A copy of this scene's mesh and occluders (other objects, their albedo) with no
+        light, world or linking, for adding the lights again while the rest stays as it was."""
     def link_shadows(self, light: int, blockers: Sequence[str], mesh: bool | Sequence[int] = True) -> None:
         """Shadow linking (Cycles' blocker collection) for light `light`, its place among the
         lights added (0 the first): only the occluders named in `blockers` cast its shadows, and
