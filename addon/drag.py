@@ -31,20 +31,29 @@ class DragPrep:
     gathers over them). `message`: what the panel says of it; `stop()` ends it at its next
     progress call."""
 
-    def __init__(self, prt, scene, material, key=None):
+    def __init__(self, session, scene, material: bpy.types.Material):
         self.hierarchy = None
-        self.objects: list = []  # (name, vertex count) of the export it was built for
-        self.occluders: dict = {}  # and that export's `occluder_keys` and positions
-        self.positions = None
-        # What it was built for (`session.params` and the texture's key): after an edit it is
-        # built again rather than evaluated for another material in a drag step (its links
-        # summed again, or walks for media the carried ones do not cover: seconds).
-        self.key = key
+        # What it was built for: the material (`key`: after an edit it is built again rather
+        # than evaluated for another material in a drag step, its links summed again or walks
+        # for media the carried ones do not cover: seconds) and the export (`fits`).
+        self.key = key_of(material, session)
+        self.info = session.info
         self.message = "preparing the light drag"
         self.scene = scene
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, args=(prt, scene, material), daemon=True)
+        self._thread = threading.Thread(target=self._run, args=(session.transport, scene,
+                                                                 material.translucent.material()), daemon=True)
         self._thread.start()
+
+    def fits(self, info) -> bool:
+        """Whether an export `info` has the objects, vertex counts, positions and occluders of
+        the one it was built for (a pose or a moved prop: built again, so that its walks and
+        shadows are those of the transport now)."""
+        def counts(i):
+            return [(r.name, r.count) for r in i.objects]
+
+        return (counts(info) == counts(self.info) and info.occluder_keys == self.info.occluder_keys
+                and np.array_equal(info.positions, self.info.positions))
 
     def _run(self, prt, scene, material):
         import translucent
@@ -71,29 +80,28 @@ class DragPrep:
         return not self._thread.is_alive() and self.hierarchy is not None
 
 
+def key_of(material: bpy.types.Material, session) -> tuple:
+    """The material a drag's hierarchy is evaluated for: `session.params` and the texture's key."""
+    return params(material.translucent), session.texture_key
+
+
 def prepare(session, scene, material: bpy.types.Material, old=None) -> None:
     """With a UI, the drag's hierarchy for the session's PRT transport (with walks): the old
-    session's where it was built for the same objects, else made in the background."""
+    session's where it was built for the same material and export (`DragPrep.fits`), else made
+    in the background."""
     if jobs.headless() or session.method != "prt" or scene is None or session.others is not None:
         return
     report = session.transport.report
     if session.profile != "cycles" or not report.get("walks"):
         return
-    counts = [(r.name, r.count) for r in session.info.objects]
-    key = (params(material.translucent), session.texture_key)
     kept = old.drag if old is not None else None
-    # Kept for the same objects, material, shape and occluders (a pose or a moved prop since
-    # its build: built again, its walks and shadows are those of the transport now).
-    if (kept is not None and kept.objects == counts and kept.key == key and not kept._stop.is_set()
-            and kept.occluders == session.info.occluder_keys
-            and np.array_equal(kept.positions, session.info.positions)):
+    if (kept is not None and not kept._stop.is_set() and kept.key == key_of(material, session)
+            and kept.fits(session.info)):
         session.drag = kept
         return
     if kept is not None:
         kept.stop()
-    prep = session.drag = DragPrep(session.transport, scene, material.translucent.material(), key)
-    prep.objects, prep.occluders = counts, dict(session.info.occluder_keys)
-    prep.positions = session.info.positions
+    prep = session.drag = DragPrep(session, scene, material)
 
     def drag_ready():  # the panel's line drawn again once it is
         if prep._thread.is_alive():
@@ -137,11 +145,11 @@ def follow(mat: bpy.types.Material, s, settled) -> bool:
     prep = s.drag
     if prep is None or not prep.ready or s.deformed or s.members_changed or s.occluders_changed:
         return False
-    if prep.key != (params(mat.translucent), s.texture_key):
+    if prep.key != key_of(mat, s):
         # The material was edited since: built again for it in the background; PRT relights
         # this step.
         s.drag = None
-        prepare(s, getattr(prep, "scene", None), mat)
+        prepare(s, prep.scene, mat)
         return False
     if any(bpy.data.objects.get(n) is None for n in s.objects):
         return False
@@ -158,7 +166,7 @@ def follow(mat: bpy.types.Material, s, settled) -> bool:
         if len(objects) != len(s.objects):
             return False
         scene, info = export.export_scene(objects, bl_scene=bl_scene, material=mat)
-        if [(r.name, r.count) for r in info.objects] != prep.objects:
+        if not prep.fits(info):
             return False
     per_vertex = {k: v for k, v in (("base_color", s.base_color), ("subsurface_weight", s.subsurface_weight))
                   if v is not None}

@@ -917,5 +917,5 @@ def test_with_a_ui_a_dragged_light_is_followed_by_the_hierarchy_with_the_walks_t
     follow.follow_tick()
     run_job(jobs.Job)
     posed = session.SESSIONS[mat.name]
-    assert posed.drag is not rebuilt and np.array_equal(posed.drag.positions, posed.info.positions)
+    assert posed.drag is not rebuilt and np.array_equal(posed.drag.info.positions, posed.info.positions)
     posed.drag.stop()

@@ -26,9 +26,6 @@ pub const FLOOR: f32 = 0.05;
 /// The irradiance at points with their shading normals.
 pub type PointIrradiance<'a> = dyn Fn(&[Vec3], &[Vec3]) -> Result<Vec<[f32; 3]>> + Sync + 'a;
 
-/// `ShadowEdges::index` of a triangle without a grid.
-const UNREFINED: u32 = u32::MAX;
-
 /// Grid points of one refined triangle: (i, j) with i + j <= LEVEL.
 const POINTS: usize = (LEVEL + 1) * (LEVEL + 2) / 2;
 
@@ -100,7 +97,7 @@ impl ShadowEdges {
             values[base + at(LEVEL, 0)] = irradiance[tri[1] as usize];
             values[base + at(0, LEVEL)] = irradiance[tri[2] as usize];
         }
-        let mut index = vec![UNREFINED; mesh.triangles().len()];
+        let mut index = vec![Self::UNREFINED; mesh.triangles().len()];
         for (k, &t) in refined.iter().enumerate() {
             index[t as usize] = u32::try_from(k * POINTS).map_err(|_| {
                 Error::InvalidArgument(format!("{} refined triangles: too many", refined.len()))
@@ -138,7 +135,7 @@ impl ShadowEdges {
     #[inline]
     pub fn grid_of(&self, triangle: u32) -> Option<u32> {
         match self.index.get(triangle as usize) {
-            Some(&base) if base != UNREFINED => Some(base),
+            Some(&base) if base != Self::UNREFINED => Some(base),
             _ => None,
         }
     }
@@ -160,8 +157,8 @@ impl ShadowEdges {
         }
     }
 
-    /// The grid offsets: `UNREFINED` where none.
-    pub const UNREFINED: u32 = UNREFINED;
+    /// The grid offset of a triangle without a grid (`index`, `grid_of`'s None).
+    pub const UNREFINED: u32 = u32::MAX;
 }
 
 /// Grid point (i, j), i toward corner 1 and j toward corner 2, in row order.

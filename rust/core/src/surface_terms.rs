@@ -87,6 +87,21 @@ pub struct Walked {
     pub positions: Vec<Vec3>,
 }
 
+impl Walked {
+    /// Errors unless `mesh` is the mesh and shape they were walked on.
+    pub fn check_mesh(&self, mesh: &Mesh) -> Result<()> {
+        if self.positions != mesh.positions() {
+            return Err(Error::InvalidArgument(format!(
+                "that Prt was precomputed on another mesh or shape ({} vertices) than this \
+                 scene's ({} vertices)",
+                self.positions.len(),
+                mesh.vertex_count()
+            )));
+        }
+        Ok(())
+    }
+}
+
 impl Terms {
     /// Terms walked elsewhere, carried (not walked) at the next evaluation: the walks read
     /// under the new light against the new method's own half-space B, the own light gathered

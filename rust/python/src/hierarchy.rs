@@ -85,14 +85,14 @@ impl PyHierarchy {
             None => None,
         };
         if let Some(w) = &walked {
-            if w.positions != scene.scene.mesh.positions() {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                    "walks_from: that Prt was precomputed on another mesh or shape ({} \
-                     vertices) than this scene's ({} vertices)",
-                    w.positions.len(),
-                    scene.scene.mesh.vertex_count()
-                )));
-            }
+            // Before the build: the error names the argument.
+            w.check_mesh(&scene.scene.mesh).map_err(|e| {
+                let why = match e {
+                    translucent_core::Error::InvalidArgument(m) => m,
+                    e => e.to_string(),
+                };
+                pyo3::exceptions::PyValueError::new_err(format!("walks_from: {why}"))
+            })?;
         }
         let terms = crate::convert::term_settings(
             walks || walked.is_some(),
