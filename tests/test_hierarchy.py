@@ -266,10 +266,13 @@ def test_an_evaluation_reports_progress_and_a_cancel_leaves_the_hierarchy_answer
 
 def test_the_estimate_states_the_noise_of_the_sampled_irradiance():
     """A floor of albedo 0.5 under the sphere sends back 30 % of its light by a sampled bounce
-    (`world_samples` rays a point). The hierarchy's estimate carries each face's sampling error
-    through the profile to its receivers (`report["irradiance_noise"]`): against
-    `reference_radiosity` with 16x the rays, the error it states follows the error measured,
-    and halves as the rays go 4x; with no sampled light it states none."""
+    (`world_samples` / 4 rays a vertex, averaged over its ring, the faces taking their
+    corners'). The hierarchy's estimate carries each vertex's sampling error and the ring
+    average's bias through the profile to its receivers (`report["irradiance_noise"]`):
+    against `reference_radiosity` with 1024 rays (itself 0.6 % from 4096), the error it
+    states follows the error measured and falls as the rays grow; at the default 64 the
+    preview is within 3 % (each face's own one or two rays left it 8.7 % off); with no sampled
+    light it states none."""
     p, t = sphere(16, 0.02)
     m = translucent.Material.from_principled(0.5, (1.0, 0.5, 0.25), 0.02)
     floor = np.array([[-1, -1, -0.02], [1, -1, -0.02], [1, 1, -0.02], [-1, 1, -0.02]], np.float32)
@@ -277,16 +280,17 @@ def test_the_estimate_states_the_noise_of_the_sampled_irradiance():
     s.add_sun((0.2, 0.1, -1.0), irradiance=2.0)
     s.add_occluder(floor, np.array([[0, 1, 2], [0, 2, 3]]), name="floor", albedo=0.5)
     receivers = np.arange(0, len(p), 4)
-    ref = translucent.reference_radiosity(s, m, receivers=receivers.tolist(), world_samples=256)
+    ref = translucent.reference_radiosity(s, m, receivers=receivers.tolist(), world_samples=1024)
     w = s.vertex_areas[receivers, 0]
-    stated = {}
-    for samples in (16, 64):
+    stated, measured = {}, {}
+    for samples in (4, 16, 64):
         h = translucent.Hierarchy(s, m, world_samples=samples)
-        err = rms(h.radiosity(m)[receivers], ref, w)
+        measured[samples] = err = rms(h.radiosity(m)[receivers], ref, w)
         stated[samples] = max(h.report["irradiance_noise"])
         estimate = max(h.last_eval["error_estimate"])
         assert 0.5 * err < estimate < 2.0 * err, (samples, err, estimate)
-    assert 1.6 < stated[16] / stated[64] < 2.5, stated
+    assert stated[4] > stated[16] > stated[64], stated
+    assert measured[64] < 0.03, measured
     alone = translucent.Scene(p, t)
     alone.add_sun((0.2, 0.1, -1.0), irradiance=2.0)
     h = translucent.Hierarchy(alone, m)

@@ -597,7 +597,7 @@ mod tests {
     fn bounce_only_leaves_out_the_sources_own_light_and_keeps_what_the_floor_sends_back() {
         // `wall_over_floor` under a sun tilted toward the wall's face: the sun lights the wall
         // at cos 0.6 (E = 1.2) and the floor at cos 0.8, and the lit floor before the wall
-        // sends it rho x 1.6 / 2 (half the floor's radiosity, as above). `bounce_only` (the
+        // sends it rho x 1.6 / 2 (half the floor's radiosity, as above). `BounceLight::Alone` (the
         // splatting's light views: their own light is splatted) gives that bounce alone, and
         // the full estimate less it is the sun's closed form at every vertex.
         let albedo = [0.5f32, 0.25, 0.75];
@@ -605,7 +605,7 @@ mod tests {
         scene.lights = vec![Light::sun(Vec3::new(-0.6, 0.0, -0.8), [2.0; 3]).unwrap()];
         let full = IrradianceSettings::default();
         let only = IrradianceSettings {
-            bounce_only: true,
+            bounce: crate::irradiance::BounceLight::Alone,
             ..full.clone()
         };
         let mesh = &scene.mesh;

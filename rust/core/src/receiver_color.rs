@@ -81,6 +81,35 @@ pub struct Lobes {
 impl Lobes {
     /// B = w B_medium + (1 - w) below a L per vertex: `b` holds each vertex's B of its medium at
     /// weight 1, `light` the light its diffuse lobe takes (irradiance plus the own light).
+    /// What the sampling error of the light the diffuse lobes take (`errors`, its standard
+    /// error per vertex) leaves in `b` (B after `apply`): the area-weighted relative RMS per
+    /// channel of (1 - w) below a sigma. A lobe reads its vertex's light alone, so its noise
+    /// does not average out under a profile.
+    pub fn noise(
+        &self,
+        colors: &[[f32; 3]],
+        errors: &[[f32; 3]],
+        b: &[[f32; 3]],
+        areas: &[f32],
+    ) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            let (mut num, mut den) = (0.0f64, 0.0f64);
+            for (v, bv) in b.iter().enumerate() {
+                let a = f64::from(areas.get(v).copied().unwrap_or(0.0));
+                let e = errors.get(v).map_or(0.0, |e| f64::from(e[c]));
+                let lobe =
+                    (1.0 - f64::from(self.weights[v])) * self.below * f64::from(colors[v][c]);
+                num += a * (lobe * e).powi(2);
+                den += a * f64::from(bv[c]).powi(2);
+            }
+            if den > 0.0 {
+                (num / den).sqrt()
+            } else {
+                0.0
+            }
+        })
+    }
+
     pub fn apply(&self, b: &mut [[f32; 3]], colors: &[[f32; 3]], light: &[[f32; 3]]) {
         for (v, bv) in b.iter_mut().enumerate() {
             let w = f64::from(self.weights[v]);

@@ -58,6 +58,7 @@ impl Hierarchy {
         }
         let mut e = last.ok_or_else(|| Error::InvalidArgument("no media to sum".into()))?;
         e.values = colors.blend(&sums);
+        let mut lobe_noise = [0.0f64; 3];
         if let Some(lobes) = &colors.lobes {
             // Each vertex's diffuse lobe: its Base Color times the light at it, the direct
             // irradiance and the own light (`receiver_color::Lobes`).
@@ -72,12 +73,14 @@ impl Hierarchy {
                 *l = std::array::from_fn(|c| l[c] + o[c]);
             }
             lobes.apply(&mut e.values, &colors.colors, &light);
+            let areas = self.scene.mesh.vertex_areas();
+            lobe_noise = lobes.noise(&colors.colors, &self.vertex_error, &e.values, areas);
         }
         if let Some(err) = error.as_mut() {
             let t = Instant::now();
             let missed = self.blend_error(colors, &lookups)?;
             for c in 0..3 {
-                err[c] += missed[c] + colors.table_error[c];
+                err[c] += missed[c] + colors.table_error[c] + lobe_noise[c];
             }
             self.report.seconds_estimate += t.elapsed().as_secs_f64();
         }

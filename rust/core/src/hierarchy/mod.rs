@@ -34,7 +34,7 @@ pub use settings::{HierarchyReport, HierarchySettings, Mode, Receivers};
 use crate::error::{Error, Result};
 use crate::evaluation::{Quantity, Skipped};
 use crate::irradiance::keyed::KeyedPerSource;
-use crate::irradiance::{Density, IrradianceSettings, PerSource};
+use crate::irradiance::{BounceLight, Density, IrradianceSettings, PerSource};
 use crate::lights::{Light, World};
 use crate::mesh::{interpolated_normal, Mesh};
 use crate::occluders::Occluders;
@@ -98,6 +98,15 @@ pub struct Hierarchy {
     face_sources: PerSource,
     vertex_sources: PerSource,
     vertex_irradiance: Option<(Vec<[f32; 3]>, f64)>,
+    /// The bounce at each vertex averaged over its ring (`Rings::spread`) and its standard
+    /// error: the faces' points take theirs from their corners' (`VERTEX_BOUNCE_FACTOR`);
+    /// empty where nothing sends light back.
+    vertex_bounce: Vec<([f32; 3], [f32; 3])>,
+    /// The standard error of `vertex_irradiance`'s sampled parts, per vertex.
+    vertex_error: Vec<[f32; 3]>,
+    /// How far averaging the bounce over the ring may have moved it, per vertex (`spread`'s
+    /// bias, estimated): carried to B beside the noise (`irradiance_noise`).
+    vertex_bounce_bias: Vec<[f32; 3]>,
     profiles: Option<(Material, [LookupProfile; 3], LookupRgb)>,
     geometry_changed: bool,
     report: HierarchyReport,
@@ -180,6 +189,17 @@ fn tick(progress: Option<&ProgressFn>, f: f32) -> Result<()> {
 /// light sampled at four points and its near links integrated per quarter: on coarse and
 /// held-out meshes the light changes across such a face as much as the profile does.
 const SPLIT_SHARE: f64 = 0.25;
+
+/// Bounce rays at a vertex, in `IrradianceSettings::vertex_bounce_factor` (64 at the default
+/// 64 world samples), a fixed count: the vertex's own light (Cycles' profile's point mass)
+/// and its faces' points read it, averaged over its ring (`Hierarchy::bounce_at`,
+/// `Rings::spread`). Suzanne (2,012 vertices, marble) and the 10 cm bunny over a floor, a
+/// moved light, against PRT's relight (2-core Xeon): 16 rays 4.7-5.1 / 2.1-2.5 % in 0.13 /
+/// 0.46 s, 64 rays 3.3-3.6 / 1.5-1.8 % in 0.14 / 0.83 s; 32 rays cast on up to 128 while
+/// noisy (`irradiance::BOUNCE_ADAPT`) 2.8-3.0 / 1.4-1.7 % in 0.15 / 1.22 s: the adaptation
+/// asks light by light, and at a vertex a light does not reach directly the bounce is all
+/// there is, so it went on at most of the bunny's vertices.
+pub const VERTEX_BOUNCE_FACTOR: u32 = 4;
 
 /// Barycentrics of the centroids of a face's four midpoint sub-triangles, in the order of
 /// `links::sub_triangles`: the middle one, then those at corners 0, 1 and 2.
@@ -311,6 +331,9 @@ impl Hierarchy {
             face_sources: PerSource::default(),
             vertex_sources: PerSource::default(),
             vertex_irradiance: None,
+            vertex_bounce: Vec::new(),
+            vertex_error: Vec::new(),
+            vertex_bounce_bias: Vec::new(),
             profiles: None,
             geometry_changed: false,
             report,
@@ -429,7 +452,26 @@ impl Hierarchy {
         }
     }
 
+    /// The irradiance's settings for points of `density`: vertices cast `VERTEX_BOUNCE_FACTOR`
+    /// times the bounce rays and keep the bounce apart, the faces' points leave it out and take
+    /// their corners' (`bounce_at`).
     fn irradiance_settings(&self, eta: f64, density: Density) -> IrradianceSettings {
+        let (bounce, vertex_bounce_factor) = match density {
+            Density::Receivers => (BounceLight::Kept, VERTEX_BOUNCE_FACTOR),
+            Density::Dense => (BounceLight::LeftOut, 1),
+        };
+        IrradianceSettings {
+            bounce,
+            vertex_bounce_factor,
+            bounce_target: f32::INFINITY, // a fixed count (`VERTEX_BOUNCE_FACTOR`)
+            ..self.walk_irradiance_settings(eta)
+        }
+        .for_density(density)
+    }
+
+    /// The irradiance's settings the walks' terms read their exits' light with (the bounce
+    /// added, as many rays as the world's give).
+    fn walk_irradiance_settings(&self, eta: f64) -> IrradianceSettings {
         IrradianceSettings {
             eta,
             world_samples: self.settings.world_samples,
@@ -438,7 +480,22 @@ impl Hierarchy {
             world_unshadowed: !self.settings.world_shadows,
             ..Default::default()
         }
-        .for_density(density)
+    }
+
+    /// The bounce off the rest of the scene at barycentrics `b` of face `f`, from its corners'
+    /// (`vertex_bounce`; zero where nothing sends light back). The bounce is smooth across a
+    /// face; one ray or two at each of the faces' points left B 8-9 % from PRT's on Suzanne
+    /// over a floor (marble, 2,012 vertices) where the corners' many rays are shared.
+    fn bounce_at(&self, f: usize, b: [f32; 3]) -> [f32; 3] {
+        if self.vertex_bounce.is_empty() {
+            return [0.0; 3];
+        }
+        let t = self.scene.mesh.triangles()[f];
+        std::array::from_fn(|c| {
+            (0..3)
+                .map(|k| b[k] * self.vertex_bounce[t[k] as usize].0[c])
+                .sum()
+        })
     }
 
     /// Irradiance within each face with the interpolated normals: a split face (`split`) at its
@@ -472,22 +529,36 @@ impl Hierarchy {
         let (values, r) =
             self.face_sources
                 .evaluate(&self.scene, &self.tracer, &points, &normals, &s)?;
+        // The bounce from the corners': the vertices' taken first where there is one.
+        let corner_rays = if self.tracer.bounces() {
+            self.sample_vertices(eta)?
+        } else {
+            0
+        };
         let mut next = values.iter();
-        self.face_sub = (self.split.iter())
-            .map(|&four| {
-                let mut e = [*next.next().unwrap_or(&[0.0; 3]); 4];
-                if four {
-                    (1..4).for_each(|k| e[k] = *next.next().unwrap_or(&[0.0; 3]));
+        let face_sub: Vec<[[f32; 3]; 4]> = (self.split.iter())
+            .enumerate()
+            .map(|(f, &four)| {
+                let k = if four { 4 } else { 1 };
+                let mut e = [[0.0f32; 3]; 4];
+                for (j, b) in SUB_POINTS[..k].iter().enumerate() {
+                    let direct = *next.next().unwrap_or(&[0.0; 3]);
+                    let bounce = self.bounce_at(f, *b);
+                    e[j] = std::array::from_fn(|c| direct[c] + bounce[c]);
+                }
+                if !four {
+                    e = [e[0]; 4];
                 }
                 e
             })
             .collect();
+        self.face_sub = face_sub;
         let mean = (self.face_sub.iter())
             .map(|e| std::array::from_fn(|c| e.iter().map(|v| v[c]).sum::<f32>() / 4.0))
             .collect();
         self.face_irradiance = Some((mean, eta));
         self.edge_light = None;
-        Ok(r.rays)
+        Ok(r.rays + corner_rays)
     }
 
     /// Whether split faces at vertex receivers are to be checked for a shadow's edge
@@ -554,7 +625,14 @@ impl Hierarchy {
                 ask,
             )?;
             rays.set(rays.get() + r.rays);
-            Ok(values)
+            // The bounce from the face's corners, as the face's points take it.
+            Ok((values.iter().zip(asked))
+                .map(|(e, &(f, at, _))| {
+                    let b = edges::barycentric(&faces[f as usize], at).map(|x| x as f32);
+                    let bounce = self.bounce_at(f as usize, b);
+                    std::array::from_fn(|c| e[c] + bounce[c])
+                })
+                .collect())
         };
         let refined =
             edges::EdgeLight::refine(&self.faces, which, &self.face_sub, &corner_light, &light_at);
@@ -588,6 +666,26 @@ impl Hierarchy {
             mesh.normals(),
             &s,
         )?;
+        self.vertex_bounce_bias.clear();
+        self.vertex_bounce = if self.tracer.bounces() {
+            // For the faces' points, each vertex's bounce averaged over its ring
+            // (`Rings::spread`); the vertex itself keeps its own rays' (its point mass and
+            // diffuse lobe read it alone, where the average's bias would not average out).
+            let raw = self.vertex_sources.bounce();
+            let triangles = mesh.triangles();
+            let spread = self.rings.spread(triangles, &self.faces, &raw);
+            // What the average moves a bounce that curves across the ring (a coarse sphere
+            // over a floor: 2 % of B): told by averaging the averaged bounce once more, whose
+            // change is the average's own, its noise mostly gone.
+            let twice = self.rings.spread(triangles, &self.faces, &spread);
+            self.vertex_bounce_bias = (spread.iter().zip(&twice))
+                .map(|(a, b)| std::array::from_fn(|c| (b.0[c] - a.0[c]).abs()))
+                .collect();
+            spread
+        } else {
+            Vec::new()
+        };
+        self.vertex_error = self.vertex_sources.sampling_error();
         self.vertex_irradiance = Some((values, eta));
         Ok(r.rays)
     }
@@ -815,7 +913,7 @@ impl Hierarchy {
             let lit = terms::Lit {
                 scene: &self.scene,
                 tracer: &self.tracer,
-                irradiance: self.irradiance_settings(eta, Density::Receivers),
+                irradiance: self.walk_irradiance_settings(eta),
                 vertices: &vertices,
                 halfspace: &halfspace,
             };
@@ -1066,14 +1164,21 @@ impl Hierarchy {
     /// channel at the estimate's vertices (`estimate_vertices`): each face's standard error
     /// (`PerSource::sampling_error`, its sub-points taken as independent) carried to the
     /// receiver by the profile over the face (`face_weight`), Var B(x) = sum_f (int_f
-    /// R(|x - y|) dy sigma_f)^2, and the point mass's share of the vertex's own error. Zero
+    /// R(|x - y|) dy sigma_f)^2, the bounce's error at each corner carried by its share of
+    /// its faces' weights (the faces take their bounce from their corners, `bounce_at`), and
+    /// the point mass's share of the vertex's own error. Zero
     /// where nothing is sampled (suns, points and spots are exact up to their shadows).
     fn irradiance_noise(&self, b: &[[f32; 3]]) -> [f64; 3] {
         let Some((_, lookup, rgb)) = &self.profiles else {
             return [0.0; 3];
         };
         let sub = self.face_sources.sampling_error();
-        if sub.iter().all(|e| e.iter().all(|x| *x == 0.0)) {
+        let zero = |e: &[f32; 3]| e.iter().all(|x| *x == 0.0);
+        let vertex_error: &[[f32; 3]] = match self.vertex_irradiance {
+            Some(_) => &self.vertex_error,
+            None => &[],
+        };
+        if sub.iter().all(zero) && vertex_error.iter().all(zero) {
             return [0.0; 3];
         }
         // Per face: its sub-points' errors, each standing for its share of the face.
@@ -1091,7 +1196,6 @@ impl Hierarchy {
                 var.map(f64::sqrt)
             })
             .collect();
-        let vertex_error = self.vertex_sources.sampling_error();
         let masses: [f64; 3] = std::array::from_fn(|c| lookup[c].point_mass());
         let picks = self.estimate_vertices();
         if picks.is_empty() {
@@ -1106,6 +1210,8 @@ impl Hierarchy {
             .map(|&v| {
                 let x = positions[v].as_dvec3();
                 let mut var = [0.0f64; 3];
+                // Each corner's share of the faces' bounce here (a third of each face's).
+                let mut corners: rustc_hash::FxHashMap<u32, [f64; 3]> = Default::default();
                 for (f, face) in self.faces.iter().enumerate() {
                     let r = (face.centroid - x).length();
                     if r - face.diam >= support
@@ -1117,7 +1223,26 @@ impl Hierarchy {
                     for c in 0..3 {
                         var[c] += (w[c] * faces[f][c]).powi(2);
                     }
+                    if !self.vertex_bounce.is_empty() {
+                        for &k in &self.scene.mesh.triangles()[f] {
+                            let share = corners.entry(k).or_default();
+                            (0..3).for_each(|c| share[c] += w[c] / 3.0);
+                        }
+                    }
                 }
+                // The corners' bounce is shared by their faces: each corner's error carried
+                // once, by its share of them all; the ring average's bias, the same way but
+                // added before squaring (it does not average out).
+                let mut bias = [0.0f64; 3];
+                for (k, share) in &corners {
+                    let e = self.vertex_bounce[*k as usize].1;
+                    let moved = self.vertex_bounce_bias[*k as usize];
+                    for c in 0..3 {
+                        var[c] += (share[c] * f64::from(e[c])).powi(2);
+                        bias[c] += share[c] * f64::from(moved[c]);
+                    }
+                }
+                (0..3).for_each(|c| var[c] += bias[c] * bias[c]);
                 if let Some(e) = vertex_error.get(v) {
                     for c in 0..3 {
                         var[c] += (masses[c] * f64::from(e[c])).powi(2);

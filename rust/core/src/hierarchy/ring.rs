@@ -71,6 +71,47 @@ impl Rings {
         &self.faces[self.first[v] as usize..self.first[v + 1] as usize]
     }
 
+    /// Per-vertex values with their standard errors (`values[v] = (value, error)`), each
+    /// averaged over its ring: every face around the vertex weighted by its area, standing
+    /// for its corners' mean. For the bounce off the rest of the scene, smooth across a
+    /// ring, whose few rays a vertex are noisy one by one: a ring of six faces shares seven
+    /// vertices' rays. The errors carried as independent: Var = sum_u (w_u sigma_u)^2, w_u
+    /// the share of vertex u in the average.
+    pub fn spread(
+        &self,
+        triangles: &[[u32; 3]],
+        faces: &[Triangle],
+        values: &[([f32; 3], [f32; 3])],
+    ) -> Vec<([f32; 3], [f32; 3])> {
+        (0..values.len())
+            .into_par_iter()
+            .map(|v| {
+                let ring = self.of(v);
+                let total: f64 = ring.iter().map(|&(f, _)| faces[f as usize].area).sum();
+                if ring.is_empty() || total <= 0.0 {
+                    return values[v];
+                }
+                let mut shares: Vec<(u32, f64)> = Vec::with_capacity(ring.len() * 3);
+                for &(f, _) in ring {
+                    let w = faces[f as usize].area / (3.0 * total);
+                    shares.extend(triangles[f as usize].iter().map(|&u| (u, w)));
+                }
+                shares.sort_unstable_by_key(|s| s.0);
+                let mut mean = [0.0f64; 3];
+                let mut var = [0.0f64; 3];
+                for group in shares.chunk_by(|a, b| a.0 == b.0) {
+                    let w: f64 = group.iter().map(|s| s.1).sum();
+                    let (x, e) = values[group[0].0 as usize];
+                    for c in 0..3 {
+                        mean[c] += w * f64::from(x[c]);
+                        var[c] += (w * f64::from(e[c])).powi(2);
+                    }
+                }
+                (mean.map(|m| m as f32), var.map(|x| x.sqrt() as f32))
+            })
+            .collect()
+    }
+
     /// The mean length of each vertex's edges (0 for a vertex on no face): geometry alone,
     /// kept until the mesh deforms.
     pub fn mean_edges(&self, faces: &[Triangle]) -> Vec<f64> {
@@ -171,5 +212,58 @@ impl Rings {
                 Some((v as u32, delta))
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    /// A flat n x n grid of unit squares, each split along the same diagonal.
+    fn grid(n: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+        let at = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+        let p = (0..=n)
+            .flat_map(|i| (0..=n).map(move |j| DVec3::new(i as f64, j as f64, 0.0)))
+            .collect();
+        let t = (0..n)
+            .flat_map(|i| (0..n).map(move |j| (i, j)))
+            .flat_map(|(i, j)| {
+                [
+                    [at(i, j), at(i + 1, j), at(i + 1, j + 1)],
+                    [at(i, j), at(i + 1, j + 1), at(i, j + 1)],
+                ]
+            })
+            .collect();
+        (p, t)
+    }
+
+    #[test]
+    fn the_ring_average_keeps_a_linear_field_inside_and_shrinks_independent_errors() {
+        let n = 6;
+        let (p, t) = grid(n);
+        let faces: Vec<Triangle> = (t.iter())
+            .map(|f| Triangle::new(p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]))
+            .collect();
+        let rings = Rings::new(p.len(), &t);
+        let field = |x: DVec3| (0.3 + 0.1 * x.x - 0.05 * x.y) as f32;
+        let values: Vec<([f32; 3], [f32; 3])> =
+            p.iter().map(|&x| ([field(x); 3], [1.0; 3])).collect();
+        let spread = rings.spread(&t, &faces, &values);
+        for (v, x) in p.iter().enumerate() {
+            let inside = (1..n).contains(&(x.x as usize)) && (1..n).contains(&(x.y as usize));
+            if inside {
+                // Every interior ring is point-symmetric about its vertex: a linear field's
+                // average there is its value.
+                assert!((spread[v].0[0] - field(*x)).abs() < 1e-6, "{v}");
+                // Six faces: the vertex 1/3, each of its six neighbours 1/9 (two faces), so the
+                // error (1/3)^2 + 6 (1/9)^2 = 5/27 of one vertex's variance.
+                assert!(
+                    (spread[v].1[0] - (5.0f32 / 27.0).sqrt()).abs() < 1e-5,
+                    "{v}"
+                );
+            }
+            assert!(spread[v].1[0] < 1.0, "{v}");
+        }
     }
 }

@@ -45,10 +45,28 @@ pub struct IrradianceSettings {
     /// BOUNCE_DIVISOR` times this (1: as many as the world's rays give; dense points always
     /// take 1). PRT's vertices take more (`prt::VERTEX_BOUNCE_FACTOR`).
     pub vertex_bounce_factor: u32,
-    /// Only what the rest of the scene sends back: the lights' and the world's own light at
-    /// the points is taken another way (the splatting's light views), so it is neither cast
-    /// nor added; the bounce of every source is (0 where nothing sends light back).
-    pub bounce_only: bool,
+    /// What of the light the rest of the scene sends back the estimate holds.
+    pub bounce: BounceLight,
+    /// A point asked for more bounce rays stops once the bounce's standard error is this
+    /// share of its irradiance (`BOUNCE_ADAPT`; `BOUNCE_TARGET` by default).
+    pub bounce_target: f32,
+}
+
+/// What of the light the rest of the scene sends back by one diffuse bounce an estimate holds
+/// (`IrradianceSettings::bounce`). Nothing is cast for it where nothing sends light back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BounceLight {
+    /// Added to each point's irradiance.
+    #[default]
+    Added,
+    /// Added, and kept apart too (`PerSource::bounce`): for a caller that spreads the bounce
+    /// found at some points over others (the hierarchy's faces take their corners').
+    Kept,
+    /// Only the bounce: the lights' and the world's own light at the points is taken another
+    /// way (the splatting's light views), so it is neither cast nor added.
+    Alone,
+    /// Left out: the caller takes it another way (the hierarchy's faces, from their corners').
+    LeftOut,
 }
 
 impl Default for IrradianceSettings {
@@ -60,7 +78,8 @@ impl Default for IrradianceSettings {
             seed: 0,
             world_unshadowed: false,
             vertex_bounce_factor: 1,
-            bounce_only: false,
+            bounce: BounceLight::Added,
+            bounce_target: BOUNCE_TARGET,
         }
     }
 }
@@ -221,7 +240,7 @@ pub fn irradiance_of_linked_sources(
     Ok((sum, IrradianceReport { rays, ..counts }))
 }
 
-/// What `lights` send back off the rest of the scene alone (`IrradianceSettings::bounce_only`:
+/// What `lights` send back off the rest of the scene alone (`BounceLight::Alone`:
 /// a caller that takes their direct light another way, the splatting's light views), light by
 /// light as `PerSource` keeps them, so that each light's bounce is the same whatever other
 /// lights are asked for and the sum stays linear in them; and the rays cast. `progress` runs
@@ -237,7 +256,7 @@ pub fn bounce_light_by_light(
     progress: Option<&ProgressFn>,
 ) -> Result<(Vec<[f32; 3]>, u64)> {
     let only = IrradianceSettings {
-        bounce_only: true,
+        bounce: BounceLight::Alone,
         ..settings.clone()
     };
     let mut sum = vec![[0.0f32; 3]; points.len()];
@@ -291,6 +310,24 @@ struct Estimated {
     /// points and the traced world's rays (`Strata`). 0 where nothing was sampled (suns, point
     /// and spot lights, the world by its coefficients).
     sampling_error: Vec<[f32; 3]>,
+    /// With `BounceLight::Kept`, the bounce's part of each value and its standard error;
+    /// empty otherwise.
+    bounce: Vec<([f32; 3], [f32; 3])>,
+}
+
+impl Estimated {
+    /// Every value, error and kept bounce times `k` per channel (the same source at another
+    /// emission).
+    fn scaled(mut self, k: [f32; 3]) -> Estimated {
+        let scale = |x: &mut [f32; 3]| *x = std::array::from_fn(|c| x[c] * k[c]);
+        self.values.par_iter_mut().for_each(scale);
+        self.sampling_error.par_iter_mut().for_each(scale);
+        self.bounce.par_iter_mut().for_each(|(v, e)| {
+            scale(v);
+            scale(e);
+        });
+        self
+    }
 }
 
 /// `irradiance_of_sources` with each point's sampling error (`Estimated`).
@@ -319,11 +356,12 @@ fn estimate_sources(
         )));
     }
     let (mut reaching, counts) = lights_at_work(lights, world, bounds, tracer.bounce_bounds());
-    if settings.bounce_only {
+    let alone = settings.bounce == BounceLight::Alone;
+    if alone {
         reaching.direct = 0; // every light at work is gathered by its bounce alone
     }
     let world = (!world.is_black()).then_some(world);
-    let world_direct = world.is_some() && !settings.bounce_only;
+    let world_direct = world.is_some() && !alone;
     let rays = asked_rays(reaching.direct, world_direct, points.len(), settings)?;
     let ticker = Ticker::new(progress, rays as u64);
     // Unshadowed: the world's nine coefficients convolved with the entering kernel F_t cos.
@@ -381,6 +419,11 @@ fn estimate_sources(
     let estimated = Estimated {
         values: results.iter().map(|r| r.value).collect(),
         sampling_error: results.iter().map(|r| r.sampling_error).collect(),
+        bounce: if settings.bounce == BounceLight::Kept {
+            results.iter().map(|r| r.bounce).collect()
+        } else {
+            Vec::new()
+        },
     };
     Ok((estimated, report))
 }
@@ -435,12 +478,16 @@ fn estimate_point(
                 .max(0.0) as f32
         });
         add(&mut sum, e);
-    } else if let Some(w) = world.filter(|_| !settings.bounce_only) {
+    } else if let Some(w) = world.filter(|_| settings.bounce != BounceLight::Alone) {
         let (e, v) = est.world(w, settings.world_samples.max(1));
         add(&mut sum, e);
         add(&mut variance, v);
     }
-    if tracer.bounces() && (!reaching.lights.is_empty() || world.is_some()) {
+    let mut bounce = ([0.0f32; 3], [0.0f32; 3]);
+    if settings.bounce != BounceLight::LeftOut
+        && tracer.bounces()
+        && (!reaching.lights.is_empty() || world.is_some())
+    {
         // A stream of its own: the lights' and the world's draws stay as they were. With no
         // source there is nothing to send back: no ray.
         let mut rng = Rng::new(settings.seed ^ BOUNCE_STREAM, i as u64);
@@ -453,13 +500,21 @@ fn estimate_point(
             rays
         };
         let direct = sum;
-        let (mean, error) = est.bounce(&reaching.lights, world, (rays, most), direct, &mut rng);
+        let (mean, error) = est.bounce(
+            &reaching.lights,
+            world,
+            (rays, most, settings.bounce_target),
+            direct,
+            &mut rng,
+        );
         add(&mut sum, mean);
         add(&mut variance, error.map(|e| f64::from(e) * f64::from(e)));
+        bounce = (mean, error);
     }
     Point {
         value: sum,
         sampling_error: variance.map(|v| v.sqrt() as f32),
+        bounce,
         rays: est.rays,
     }
 }
@@ -470,6 +525,8 @@ fn estimate_point(
 struct Point {
     value: [f32; 3],
     sampling_error: [f32; 3],
+    /// The bounce's part of `value` and its standard error.
+    bounce: ([f32; 3], [f32; 3]),
     rays: u64,
 }
 
@@ -534,7 +591,7 @@ impl Strata {
 /// batch of 128, 2.2-2.4 % with four at every vertex (+1.5 s; the 10 cm bunny on a floor +4.2 s).
 pub const BOUNCE_ADAPT: u32 = 4;
 /// The bounce's standard error, as a share of the point's irradiance, below which a point
-/// stops casting bounce rays (`BOUNCE_ADAPT`).
+/// stops casting bounce rays (`BOUNCE_ADAPT`), by default (`IrradianceSettings::bounce_target`).
 pub const BOUNCE_TARGET: f32 = 0.02;
 
 /// Seeds the bounce's random stream apart from the lights' and the world's.
@@ -689,16 +746,9 @@ impl PerSource {
                 .flatten()
                 .map(|k| (k, v))
         })?;
-        let scale = |x: &[f32; 3]| -> [f32; 3] { std::array::from_fn(|c| x[c] * k[c]) };
         Some(PerSource {
             settings: self.settings.clone(),
-            parts: vec![(
-                source.clone(),
-                Estimated {
-                    values: v.values.iter().map(scale).collect(),
-                    sampling_error: v.sampling_error.iter().map(scale).collect(),
-                },
-            )],
+            parts: vec![(source.clone(), v.clone().scaled(k))],
             points,
         })
     }
@@ -784,13 +834,7 @@ impl PerSource {
             };
             let values = match (kept, kept.is_none().then(rescaled).flatten(), on_mesh) {
                 (Some(i), _, _) => old.swap_remove(i).1,
-                (None, Some((i, k)), _) => {
-                    let mut v = old.swap_remove(i).1;
-                    let scale = |x: &mut [f32; 3]| *x = std::array::from_fn(|c| x[c] * k[c]);
-                    v.values.par_iter_mut().for_each(scale);
-                    v.sampling_error.par_iter_mut().for_each(scale);
-                    v
-                }
+                (None, Some((i, k)), _) => old.swap_remove(i).1.scaled(k),
                 (None, None, Some((light, triangles))) => {
                     let on = OnMesh {
                         mesh: &scene.mesh,
@@ -804,6 +848,7 @@ impl PerSource {
                     Estimated {
                         sampling_error: vec![[0.0; 3]; v.len()],
                         values: v,
+                        bounce: Vec::new(),
                     }
                 }
                 (None, None, None) => {
@@ -831,6 +876,24 @@ impl PerSource {
     /// are correlated; the sum of standard errors bounds the error of the sum.
     pub fn sampling_error(&self) -> Vec<[f32; 3]> {
         self.summed(|e| &e.sampling_error)
+    }
+
+    /// The bounce's part of the last `evaluate`'s irradiance and its standard error, per point
+    /// (the sources' added, as `sampling_error`); zero where `BounceLight::Kept` was not asked
+    /// or nothing sends light back.
+    pub fn bounce(&self) -> Vec<([f32; 3], [f32; 3])> {
+        let mut sum = vec![([0.0f32; 3], [0.0f32; 3]); self.points];
+        for (_, e) in self
+            .parts
+            .iter()
+            .filter(|(_, e)| e.bounce.len() == self.points)
+        {
+            sum.par_iter_mut().zip(&e.bounce).for_each(|(s, x)| {
+                add(&mut s.0, x.0);
+                add(&mut s.1, x.1);
+            });
+        }
+        sum
     }
 
     /// `of` of every source, added point by point.
@@ -973,13 +1036,13 @@ impl Estimator<'_> {
     /// (an area light at a random point), the world by one cosine-weighted ray.
     ///
     /// N: `batch` rays, then more batches of as many, up to `most` in all, while the mean's
-    /// standard error exceeds `BOUNCE_TARGET` of the point's irradiance (`direct` plus the
-    /// bounce) in some channel. Returns the mean and its standard error, per channel.
+    /// standard error exceeds `target` of the point's irradiance (`direct` plus the bounce)
+    /// in some channel. Returns the mean and its standard error, per channel.
     fn bounce(
         &mut self,
         lights: &[&Light],
         world: Option<&World>,
-        (batch, most): (u32, u32),
+        (batch, most, target): (u32, u32, f32),
         direct: [f32; 3],
         rng: &mut Rng,
     ) -> ([f32; 3], [f32; 3]) {
@@ -995,7 +1058,7 @@ impl Estimator<'_> {
             cast += batch;
             let noisy = (0..3).any(|c| {
                 let (mean, error) = mean_and_error(sum[c], squares[c], cast);
-                error > f64::from(BOUNCE_TARGET) * (f64::from(direct[c]) + mean)
+                error > f64::from(target) * (f64::from(direct[c]) + mean)
             });
             if !noisy {
                 break;

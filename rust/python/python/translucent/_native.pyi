@@ -630,7 +630,10 @@ class Hierarchy:
         the records shared, not copied): the hierarchy is up in well under a second where its
         own walks take as long as the precompute's, so a light dragged over a PRT preview is
         followed at the hierarchy's pace (`update(lights=...)`); ValueError when that Prt has
-        no walks or another shape. `world_shadows`: False lights
+        no walks or another shape. The light the rest of the scene sends back (occluders with an
+        albedo) is cast at the vertices, `world_samples` rays each, and each face takes its
+        corners' averaged over their rings; its noise and that average's bias are in the error
+        estimate. `world_shadows`: False lights
         by the world's nine spherical-harmonic coefficients, unshadowed (Mertens 2003 §5.3,
         no rays); True traces `world_samples` shadowed rays per point. `eps` = (ε₁, ε₂) [sr]: the
         receiver's and the emitter's solid-angle thresholds of the refinement oracle.
