@@ -54,6 +54,7 @@ bench: build
 	$(PY) blender_scripts/bench_prt.py
 	$(PY) blender_scripts/bench_drag.py
 	$(PY) blender_scripts/bench_drag.py --no-layers
+	$(PY) blender_scripts/bench_drag.py --floor
 	$(PY) blender_scripts/bench_hierarchy.py
 	$(PY) blender_scripts/bench_hierarchy.py --receivers vertices
 	$(PY) blender_scripts/bench_splat.py

@@ -7,10 +7,12 @@ layers made in the background after the relight (`jobs.LayersPrep`, what the add
 without (`--no-layers`: the first change relights the sun's layer). Then the key light dragged
 (issue 29, point 5): each step from the change to the preview written by the drag's hierarchy
 (`drag`: the precompute's walks carried), median of the steps, and PRT's relight once it is still;
-the last dragged preview against that relight. Prints the machine; timings live here, never in
-tests.
+the last dragged preview against that relight. `--floor`: a floor under the bunny and a box
+beside it, both sending light back (Blender's default grey), as an artist's scene has them.
+Prints the machine; timings live here, never in tests.
 
-Run: `make bench` (or .venv/bin/python blender_scripts/bench_drag.py [--profile DIPOLE] [--no-layers]).
+Run: `make bench` (or .venv/bin/python blender_scripts/bench_drag.py [--profile DIPOLE] [--no-layers]
+[--floor]).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--profile", default="CYCLES", choices=["CYCLES", "DIPOLE"])
     ap.add_argument("--no-layers", action="store_true", help="the add-on makes no layer ahead")
+    ap.add_argument("--floor", action="store_true", help="a floor under the bunny and a box beside it")
     args = ap.parse_args()
     print(f"machine: {machine()}")
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -46,6 +49,11 @@ def main() -> int:
     mesh.from_pydata(p.tolist(), [], t.tolist())
     obj = bpy.data.objects.new("Bunny", mesh)
     bpy.context.scene.collection.objects.link(obj)
+    if args.floor:
+        low = float(p[:, 2].min())
+        bpy.ops.mesh.primitive_plane_add(size=0.5, location=(0.0, 0.0, low))
+        bpy.ops.mesh.primitive_cube_add(size=0.03, location=(0.07, -0.05, low + 0.015))
+        print(f"a floor under the bunny (z = {low:.3f}) and a box beside it, Blender's default grey")
     mat = bpy.data.materials.new("Marble")
     obj.data.materials.append(mat)
     key = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
