@@ -826,20 +826,14 @@ def test_with_a_ui_the_lights_layers_are_made_after_a_refresh_so_the_first_power
     assert slow.done and slow.message == "", slow.message
 
 
-def test_with_a_ui_a_dragged_light_is_followed_by_the_hierarchy_with_the_walks_then_prt_relights(
-        addon, monkeypatch):
-    """Issue 29 point 5: with a UI, once a PRT preview with the walks is shown, a hierarchy is
-    built beside it from the precompute's walks (`drag.DragPrep`, `Hierarchy(walks_from=...)`);
-    a light being dragged is then followed by that hierarchy ("relit (dragging)", the PRT
-    transport untouched), and PRT relights once the light has been still for DEBOUNCE_S. The
-    dragged preview is judged against that PRT relight for the same light (another method's
-    transport, the same walks); the user's mesh is untouched."""
+def _as_with_a_ui(monkeypatch, mat):
+    """The add-on as with a window: jobs on worker threads, timers kept to be run by hand, the
+    scene follower's clock set by the test. Returns the clock ([seconds]) and `run_job(kind)`,
+    which waits for `mat`'s job (of that kind) and runs its poll."""
     import bpy
 
-    from addon import drag, follow, jobs, panel, session
+    from addon import follow, jobs, session
 
-    mat, obj, light = lit_sphere(bpy)
-    user_mesh = mesh_hash(obj.data)
     timers = []
     clock = [100.0]
     monkeypatch.setattr(follow, "_clock", lambda: clock[0])
@@ -854,6 +848,25 @@ def test_with_a_ui_a_dragged_light_is_followed_by_the_hierarchy_with_the_walks_t
         poll = next(fn for fn in timers if fn.__name__ == "poll")
         timers.remove(poll)
         assert poll() is None, "the job is done"
+
+    return clock, run_job
+
+
+def test_with_a_ui_a_dragged_light_is_followed_by_the_hierarchy_with_the_walks_then_prt_relights(
+        addon, monkeypatch):
+    """Issue 29 point 5: with a UI, once a PRT preview with the walks is shown, a hierarchy is
+    built beside it from the precompute's walks (`drag.DragPrep`, `Hierarchy(walks_from=...)`);
+    a light being dragged is then followed by that hierarchy ("relit (dragging)", the PRT
+    transport untouched), and PRT relights once the light has been still for DEBOUNCE_S. The
+    dragged preview is judged against that PRT relight for the same light (another method's
+    transport, the same walks); the user's mesh is untouched."""
+    import bpy
+
+    from addon import drag, follow, jobs, panel, session
+
+    mat, obj, light = lit_sphere(bpy)
+    user_mesh = mesh_hash(obj.data)
+    clock, run_job = _as_with_a_ui(monkeypatch, mat)
 
     # A move, then still: PRT relit, and the drag's hierarchy built beside it.
     light.location.x += 0.05
@@ -936,20 +949,7 @@ def test_with_a_ui_a_light_dragged_over_a_floor_keeps_the_floors_bounce(addon, m
     floor = bpy.context.active_object
     floor_mesh = mesh_hash(floor.data)
     mat, obj, light = lit_sphere(bpy)
-    timers = []
-    clock = [100.0]
-    monkeypatch.setattr(follow, "_clock", lambda: clock[0])
-    monkeypatch.setattr(jobs, "headless", lambda: False)
-    monkeypatch.setattr(bpy.app.timers, "register", lambda fn, first_interval=0.0, persistent=False: timers.append(fn))
-    monkeypatch.setattr(bpy.app.timers, "is_registered", lambda fn: fn in timers)
-
-    def run_job(kind):
-        job = session.JOBS[mat.name]
-        assert isinstance(job, kind), job
-        job._thread.join(timeout=120)
-        poll = next(fn for fn in timers if fn.__name__ == "poll")
-        timers.remove(poll)
-        assert poll() is None, "the job is done"
+    clock, run_job = _as_with_a_ui(monkeypatch, mat)
 
     light.location.x += 0.05
     bpy.context.view_layer.update()
