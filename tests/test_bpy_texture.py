@@ -74,7 +74,7 @@ def _against_cycles(bpy, s, objs, label: str):
     """The previews of `objs` against Cycles' 128-spp vertex bakes of the same scene (seed 0, a
     second seed for the bake's noise): within 6 % beyond the bake's noise and the preview's own
     estimate (the same spheres with a uniform Base Color: 7.8 % at 128 spp). The bakes and the
-    errors per object."""
+    errors per object, and the bake's noise."""
     import translucent
     from addon import export
     from blender_scripts.lib.cycles_reference import bake_diffuse_vertex_colors, use_cycles
@@ -93,7 +93,7 @@ def _against_cycles(bpy, s, objs, label: str):
           f"{100 * noise:.2f} %, estimate {100 * estimate:.2f} %")
     for e in errors:
         assert e <= 0.06 + 2 * noise + estimate, (errors, noise, estimate)
-    return bakes, errors
+    return bakes, errors, noise
 
 
 @pytest.mark.parametrize("source", ["checker", "image"])
@@ -111,7 +111,7 @@ def test_a_textured_base_colour_matches_a_cycles_bake_of_the_textured_material(a
     assert s.texture_message.startswith(f"Base Color from {label}: read by Cycles at 964 vertices")
     # The user's meshes, material, images and data-blocks as they were (the bake's copies gone).
     assert _user_data(bpy, mat, objs) == before
-    bakes, errors = _against_cycles(bpy, s, objs, source)
+    bakes, errors, _ = _against_cycles(bpy, s, objs, source)
 
     # The link removed: the preview follows by itself to the socket's own value, uniformly (what
     # it showed before issue 30), which is far from the textured bake.
@@ -142,7 +142,7 @@ def test_the_hierarchy_and_the_splatting_follow_a_textured_base_colour(addon, me
     assert s.texture_message.startswith("Base Color from Checker Texture: read by Cycles at 964 vertices")
     assert s.base_color is not None
     assert _user_data(bpy, mat, objs) == before
-    bakes, errors = _against_cycles(bpy, s, objs, f"{method.lower()}, checker")
+    bakes, errors, _ = _against_cycles(bpy, s, objs, f"{method.lower()}, checker")
     mat.node_tree.links.remove(mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0])
     bpy.context.view_layer.update()
     assert s.base_color is None
@@ -217,7 +217,7 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon, method):
     low, high = np.isclose(w, 0.1, atol=1e-3), np.isclose(w, 1.0, atol=1e-3)
     assert low.sum() > 200 and high.sum() > 200 and (low | high).mean() > 0.7, "both squares on the spheres"
     assert w.min() >= 0.1 - 1e-3 and w.max() <= 1.0
-    bakes, errors = _against_cycles(bpy, s, objs, f"{method.lower()}, weight")
+    bakes, errors, noise = _against_cycles(bpy, s, objs, f"{method.lower()}, weight")
 
     # The link removed: the socket's own weight, 0.5, everywhere again, farther from the bake.
     mat.node_tree.links.remove(p.inputs["Subsurface Weight"].links[0])
@@ -226,7 +226,13 @@ def test_a_textured_subsurface_weight_matches_a_cycles_bake(addon, method):
     uniform = [max(translucent.relative_error(read_preview(o), b, export.export_scene([o])[0].vertex_areas[:, 0])["rms"])
                for o, b in zip(objs, bakes)]
     print(f"the socket's value shown uniformly: {[f'{100 * e:.2f} %' for e in uniform]}")
-    assert min(uniform) > 1.5 * max(errors), (uniform, errors)
+    # Beyond the bake's own noise (in quadrature): the 128-spp bakes are not the same from run
+    # to run (their noise 3.5-4.0 %), which moved the raw ratio across 1.5 (7.28 against 5.05 %
+    # in one clean run, 7.45 against 4.21 % in the next).
+    def beyond(e):
+        return np.sqrt(max(e * e - noise * noise, 0.0))
+
+    assert min(map(beyond, uniform)) > 1.5 * max(map(beyond, errors)), (uniform, errors, noise)
 
 
 def _uniform_scene(bpy):
