@@ -74,7 +74,8 @@ impl Hierarchy {
             }
             lobes.apply(&mut e.values, &colors.colors, &light);
             let areas = self.scene.mesh.vertex_areas();
-            lobe_noise = lobes.noise(&colors.colors, &self.vertex_error, &e.values, areas);
+            let errors = self.vertex_sources.sampling_error();
+            lobe_noise = lobes.noise(&colors.colors, &errors, &e.values, areas);
         }
         if let Some(err) = error.as_mut() {
             let t = Instant::now();

@@ -102,8 +102,6 @@ pub struct Hierarchy {
     /// error: the faces' points take theirs from their corners' (`VERTEX_BOUNCE_FACTOR`);
     /// empty where nothing sends light back.
     vertex_bounce: Vec<([f32; 3], [f32; 3])>,
-    /// The standard error of `vertex_irradiance`'s sampled parts, per vertex.
-    vertex_error: Vec<[f32; 3]>,
     /// How far averaging the bounce over the ring may have moved it, per vertex (`spread`'s
     /// bias, estimated): carried to B beside the noise (`irradiance_noise`).
     vertex_bounce_bias: Vec<[f32; 3]>,
@@ -332,7 +330,6 @@ impl Hierarchy {
             vertex_sources: PerSource::default(),
             vertex_irradiance: None,
             vertex_bounce: Vec::new(),
-            vertex_error: Vec::new(),
             vertex_bounce_bias: Vec::new(),
             profiles: None,
             geometry_changed: false,
@@ -685,7 +682,6 @@ impl Hierarchy {
         } else {
             Vec::new()
         };
-        self.vertex_error = self.vertex_sources.sampling_error();
         self.vertex_irradiance = Some((values, eta));
         Ok(r.rays)
     }
@@ -1174,10 +1170,7 @@ impl Hierarchy {
         };
         let sub = self.face_sources.sampling_error();
         let zero = |e: &[f32; 3]| e.iter().all(|x| *x == 0.0);
-        let vertex_error: &[[f32; 3]] = match self.vertex_irradiance {
-            Some(_) => &self.vertex_error,
-            None => &[],
-        };
+        let vertex_error = self.vertex_sources.sampling_error();
         if sub.iter().all(zero) && vertex_error.iter().all(zero) {
             return [0.0; 3];
         }
