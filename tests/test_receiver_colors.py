@@ -269,7 +269,8 @@ def test_one_subsurface_weight_everywhere_is_the_uniform_material_of_that_weight
     for w in (0.0, 0.4, 0.9):
         uniform = h.radiosity(_weighted(0.6, w))
         per_vertex = h.radiosity(_weighted(0.6, 0.2), subsurface_weight=np.full(n, w))
-        np.testing.assert_allclose(per_vertex, uniform, rtol=3e-3, atol=1e-9)
+        # atol at float32's resolution of B ~ 0.5: the dark side's ~1e-7 are rounding, not light.
+        np.testing.assert_allclose(per_vertex, uniform, rtol=3e-3, atol=1e-6)
     w = np.linspace(0.0, 1.0, n).astype(np.float32)
     diffuse = half.radiosity(_mat(0.6), subsurface_weight=np.zeros(n))
     medium = half.radiosity(_mat(0.6), subsurface_weight=np.ones(n))

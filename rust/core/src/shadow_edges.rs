@@ -72,30 +72,37 @@ impl ShadowEdges {
             let p = tri.map(|i| mesh.positions()[i as usize]);
             let nv = tri.map(|i| mesh.normals()[i as usize]);
             let flat = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-            for (u, v) in grid() {
+            // The corners are not evaluated: they keep the vertices' own values (below).
+            for (u, v) in grid().filter(|&(u, v)| !corner(u, v)) {
                 points.push(p[0] + (p[1] - p[0]) * u + (p[2] - p[0]) * v);
                 normals.push(interpolated_normal(&nv, u, v, flat));
             }
         }
-        let mut values = if points.is_empty() {
+        let inner = if points.is_empty() {
             Vec::new()
         } else {
             evaluate(&points, &normals)?
         };
-        if values.len() != points.len() {
+        if inner.len() != points.len() {
             return Err(Error::InvalidArgument(format!(
                 "{} irradiance values for {} points",
-                values.len(),
+                inner.len(),
                 points.len()
             )));
         }
         // The corners keep the vertices' own values: the grid meets its unrefined neighbours.
-        for (k, &t) in refined.iter().enumerate() {
+        let mut values = Vec::with_capacity(refined.len() * POINTS);
+        let mut inner = inner.into_iter();
+        for &t in &refined {
             let tri = mesh.triangles()[t as usize];
-            let base = k * POINTS;
-            values[base + at(0, 0)] = irradiance[tri[0] as usize];
-            values[base + at(LEVEL, 0)] = irradiance[tri[1] as usize];
-            values[base + at(0, LEVEL)] = irradiance[tri[2] as usize];
+            for (u, v) in grid() {
+                values.push(match (u == 0.0, v == 0.0) {
+                    _ if !corner(u, v) => inner.next().unwrap_or_default(),
+                    (true, true) => irradiance[tri[0] as usize],
+                    (false, _) => irradiance[tri[1] as usize],
+                    (true, false) => irradiance[tri[2] as usize],
+                });
+            }
         }
         let mut index = vec![Self::UNREFINED; mesh.triangles().len()];
         for (k, &t) in refined.iter().enumerate() {
@@ -119,9 +126,9 @@ impl ShadowEdges {
         self.refined == 0
     }
 
-    /// Points evaluated (for the report).
+    /// Points evaluated (for the report): every grid point but the corners.
     pub fn points(&self) -> usize {
-        self.values.len()
+        self.refined * (POINTS - 3)
     }
 
     /// The irradiance in channel `c` at barycentric `w` (weights of the corners 0, 1, 2) of
@@ -167,6 +174,11 @@ fn at(i: usize, j: usize) -> usize {
     i * (LEVEL + 1) - i * i.saturating_sub(1) / 2 + j
 }
 
+/// Whether the grid point (u, v) is one of the triangle's corners.
+fn corner(u: f32, v: f32) -> bool {
+    (u == 0.0 || u == 1.0) && (v == 0.0 || v == 1.0) && u + v <= 1.0
+}
+
 /// The grid's barycentric (u, v) = (i, j) / LEVEL in the order of `at`.
 fn grid() -> impl Iterator<Item = (f32, f32)> {
     (0..=LEVEL).flat_map(|i| {
@@ -209,8 +221,22 @@ mod tests {
         let eval = |pts: &[Vec3], _: &[Vec3]| -> Result<Vec<[f32; 3]>> {
             Ok(pts.iter().map(|p| [lit(p); 3]).collect())
         };
-        let edges = ShadowEdges::new(&mesh, &corners, &eval).unwrap();
-        assert_eq!((edges.len(), edges.points()), (1, POINTS));
+        // The evaluator sees the grid's inner points alone: the corners keep the vertices'.
+        let asked = std::sync::atomic::AtomicUsize::new(0);
+        let counted = |pts: &[Vec3], n: &[Vec3]| -> Result<Vec<[f32; 3]>> {
+            asked.fetch_add(pts.len(), std::sync::atomic::Ordering::Relaxed);
+            eval(pts, n)
+        };
+        let edges = ShadowEdges::new(&mesh, &corners, &counted).unwrap();
+        assert_eq!((edges.len(), edges.points()), (1, POINTS - 3));
+        assert_eq!(asked.into_inner(), POINTS - 3);
+        for (w, corner) in [
+            ([1.0, 0.0, 0.0], 0),
+            ([0.0, 1.0, 0.0], 1),
+            ([0.0, 0.0, 1.0], 2),
+        ] {
+            assert_eq!(edges.value(0, w, 0), Some(corners[corner][0]));
+        }
         // An evaluator that answers for fewer points is an error, not a panic.
         let short = |_: &[Vec3], _: &[Vec3]| -> Result<Vec<[f32; 3]>> { Ok(vec![[0.0; 3]; 2]) };
         assert!(ShadowEdges::new(&mesh, &corners, &short).is_err());

@@ -72,19 +72,37 @@ impl Grid {
         class: &[bool],
         keep: impl Fn(usize) -> bool,
     ) -> KernelSums {
+        let mut sums = KernelSums::default();
+        self.weights(mesh, v, candidates, class, |i, w| {
+            if keep(i) {
+                sums.add(w, diff[i]);
+            }
+        });
+        sums
+    }
+
+    /// The kernel's weight at vertex v of each candidate it takes (by index): (1 - d^2/R^2)^2
+    /// times the cosine between the normals, for those within R, facing the same side and of
+    /// v's `class`.
+    pub(super) fn weights(
+        &self,
+        mesh: &Mesh,
+        v: u32,
+        candidates: &[u32],
+        class: &[bool],
+        mut f: impl FnMut(usize, f32),
+    ) {
         let (p, n) = (mesh.positions()[v as usize], mesh.normals()[v as usize]);
         let own = class[v as usize];
         let r2 = self.cell * self.cell;
-        let mut sums = KernelSums::default();
         self.visit(p, |i| {
             let u = candidates[i] as usize;
             let d2 = mesh.positions()[u].distance_squared(p);
             let cos = mesh.normals()[u].dot(n);
-            if d2 < r2 && cos > 0.0 && class[u] == own && keep(i) {
-                sums.add((1.0 - d2 / r2).powi(2) * cos, diff[i]);
+            if d2 < r2 && cos > 0.0 && class[u] == own {
+                f(i, (1.0 - d2 / r2).powi(2) * cos);
             }
         });
-        sums
     }
 }
 

@@ -11,6 +11,7 @@ mod passes;
 mod radiosity;
 mod relight;
 mod shrinkage;
+mod smoothing;
 mod term;
 mod twin;
 mod walker;

@@ -5,7 +5,7 @@ use super::allocation::{flat_vertices, more_where_noisy, spread_where};
 use super::grid::Grid;
 use super::radiosity::{walk_radiosity_lit, ExitLight, MeshWalkResult, MeshWalkSettings};
 use super::relight::Kept;
-use super::shrinkage;
+use super::smoothing::{Kernels, Smoothing};
 use super::term::{Diff, WalkTermSettings, FLAT_TOLERANCE};
 use crate::bake_points::sharp_vertices;
 use crate::error::Result;
@@ -433,88 +433,43 @@ impl<'a> Passes<'a> {
         Ok(refined)
     }
 
-    /// D and its variance at every vertex: a sharp vertex's own, near a flagged vertex the
-    /// fine spacing's kernel over every walked vertex, elsewhere `grid`'s over the candidates.
-    pub(super) fn smooth(
+    /// The smoothing's rows (`smoothing`): a sharp vertex's own D, near a flagged vertex the
+    /// fine spacing's kernel over every walked vertex, at a walked candidate its own D and its
+    /// neighbours' combined by `own_weight` (`shrinkage`), elsewhere `grid`'s over the
+    /// candidates.
+    pub(super) fn smoothing(
         &self,
         main: &Main,
-        diff: &[Diff],
         grid: &Grid,
         own_weight: &[[f32; 3]],
         sharp: &Sharp,
         refined: &Refined,
-    ) -> Vec<Diff> {
-        smooth(
-            self.mesh,
-            &self.embedded,
-            &main.candidates,
-            diff,
+    ) -> Smoothing {
+        let refined_vertices: Vec<u32> = refined.points.iter().map(|(v, _)| *v).collect();
+        let sharp_vertices: Vec<u32> = (sharp.list.iter().copied())
+            .filter(|&v| sharp.own[v as usize].is_some())
+            .collect();
+        Kernels {
+            mesh: self.mesh,
+            embedded: &self.embedded,
+            candidates: &main.candidates,
             grid,
             own_weight,
-            &sharp.own,
-            &refined.points,
-            &refined.near_flagged,
-            refined.fine_spacing,
-        )
+            refined: &refined_vertices,
+            sharp: &sharp_vertices,
+            near_flagged: &refined.near_flagged,
+            fine_spacing: refined.fine_spacing,
+        }
+        .smoothing()
     }
 }
 
-/// D and its variance at every vertex: a sharp vertex's own (`sharp_own`), near a flagged
-/// vertex (`near_flagged`) the `fine_spacing` kernel over every walked vertex (the candidates'
-/// `diff` and the `refined` points), at a walked candidate its own D and its neighbours'
-/// combined by `own_weight` (per candidate, `shrinkage`), elsewhere `grid`'s over the
-/// candidates. Linear in the walked vertices' D: the kernels' weights are the mesh's alone
-/// and `own_weight` is kept from the precompute.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn smooth(
-    mesh: &Mesh,
-    embedded: &[bool],
-    candidates: &[u32],
-    diff: &[Diff],
-    grid: &Grid,
-    own_weight: &[[f32; 3]],
-    sharp_own: &[Option<Diff>],
-    refined: &[(u32, Diff)],
-    near_flagged: &[bool],
-    fine_spacing: f32,
-) -> Vec<Diff> {
-    let (fine_points, fine_diff): (Vec<u32>, Vec<Diff>) = candidates
-        .iter()
-        .copied()
-        .zip(diff.iter().copied())
-        .chain(refined.iter().copied())
-        .unzip();
-    let fine_grid = Grid::new(mesh, &fine_points, KERNEL_SPACINGS * fine_spacing);
-    let mut candidate_of = vec![u32::MAX; mesh.vertex_count()];
-    for (i, &v) in candidates.iter().enumerate() {
-        candidate_of[v as usize] = i as u32;
-    }
-    (0..mesh.vertex_count())
-        .into_par_iter()
-        .map(|v| {
-            if let Some(d) = sharp_own[v] {
-                return d;
-            }
-            if near_flagged[v] {
-                let (d, var) =
-                    fine_grid.average(mesh, v as u32, &fine_points, &fine_diff, embedded);
-                if var != [0.0; 3] || d != [0.0; 3] {
-                    return (d, var);
-                }
-            }
-            let i = candidate_of[v] as usize;
-            match own_weight.get(i) {
-                Some(&w) if w != [0.0; 3] => {
-                    let near = shrinkage::Neighbours {
-                        mesh,
-                        grid,
-                        candidates,
-                        class: embedded,
-                    };
-                    near.combined(diff, i, w)
-                }
-                _ => grid.average(mesh, v as u32, candidates, diff, embedded),
-            }
-        })
+/// The smoothing's sources in its order: the candidates' D (`diff`), the refined vertices',
+/// the sharp vertices'.
+pub(super) fn sources(diff: &[Diff], refined: &[(u32, Diff)], sharp: &Sharp) -> Vec<Diff> {
+    let sharp_own = sharp.list.iter().filter_map(|&v| sharp.own[v as usize]);
+    (diff.iter().copied())
+        .chain(refined.iter().map(|(_, d)| *d))
+        .chain(sharp_own)
         .collect()
 }

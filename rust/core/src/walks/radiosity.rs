@@ -249,27 +249,51 @@ pub fn relit_radiosity(
     receivers: &[u32],
     light: &ExitLight,
 ) -> Result<Relit> {
-    check_irradiance(mesh, light.vertices)?;
-    if records.len() != receivers.len() {
-        return Err(Error::InvalidArgument(format!(
-            "{} records for {} receivers",
-            records.len(),
-            receivers.len()
-        )));
+    RelitLight::new(mesh, light)?.radiosity(mesh, records, receivers)
+}
+
+/// A new light as the recorded exits read it, checked and laid out once for every group of
+/// walked vertices relit under it (`relit_radiosity`).
+pub(crate) struct RelitLight<'a> {
+    gradients: Vec<[[f32; 3]; 3]>,
+    corners: CornerLight<'a>,
+}
+
+impl<'a> RelitLight<'a> {
+    pub(crate) fn new(mesh: &Mesh, light: &ExitLight<'a>) -> Result<Self> {
+        check_irradiance(mesh, light.vertices)?;
+        Ok(RelitLight {
+            gradients: tangent_gradients(mesh, light.vertices),
+            corners: CornerLight::new(mesh, light),
+        })
     }
-    let n = mesh.vertex_count();
-    if let Some(bad) = receivers.iter().find(|&&v| v as usize >= n) {
-        return Err(Error::InvalidArgument(format!(
-            "receiver index {bad} out of range for {n} vertices"
-        )));
+
+    /// `relit_radiosity` under this light.
+    pub(crate) fn radiosity(
+        &self,
+        mesh: &Mesh,
+        records: &[ReceiverRecord],
+        receivers: &[u32],
+    ) -> Result<Relit> {
+        if records.len() != receivers.len() {
+            return Err(Error::InvalidArgument(format!(
+                "{} records for {} receivers",
+                records.len(),
+                receivers.len()
+            )));
+        }
+        let n = mesh.vertex_count();
+        if let Some(bad) = receivers.iter().find(|&&v| v as usize >= n) {
+            return Err(Error::InvalidArgument(format!(
+                "receiver index {bad} out of range for {n} vertices"
+            )));
+        }
+        Ok(records
+            .par_iter()
+            .zip(receivers.par_iter())
+            .map(|(r, &v)| r.radiosity(v, &self.corners, &self.gradients))
+            .unzip())
     }
-    let gradients = tangent_gradients(mesh, light.vertices);
-    let corners = CornerLight::new(mesh, light);
-    Ok(records
-        .par_iter()
-        .zip(receivers.par_iter())
-        .map(|(r, &v)| r.radiosity(v, &corners, &gradients))
-        .unzip())
 }
 
 /// One finite irradiance >= 0 per vertex.

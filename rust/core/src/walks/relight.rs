@@ -3,10 +3,9 @@
 //! by the same kernels as at the precompute. No walk is traced; which vertices were walked,
 //! flagged and refined stays as the precompute's light chose it.
 
-use super::grid::Grid;
 use super::operator::ReceiverRecord;
-use super::passes::{smooth, KERNEL_SPACINGS};
-use super::radiosity::{relit_radiosity, ExitLight, MeshWalkResult};
+use super::radiosity::{ExitLight, MeshWalkResult, RelitLight};
+use super::smoothing::Smoothing;
 use super::term::{lengths_and_albedos, noise_and_share, per_albedo, std_errors, Diff, WalkTerm};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
@@ -39,8 +38,8 @@ impl Kept {
     }
 
     /// D and its variance at each vertex under `light`, against `halfspace`.
-    fn diffs(&self, mesh: &Mesh, light: &ExitLight, halfspace: &[[f32; 3]]) -> Result<Vec<Diff>> {
-        let (b, se) = relit_radiosity(mesh, &self.records, &self.vertices, light)?;
+    fn diffs(&self, mesh: &Mesh, light: &RelitLight, halfspace: &[[f32; 3]]) -> Result<Vec<Diff>> {
+        let (b, se) = light.radiosity(mesh, &self.records, &self.vertices)?;
         Ok(self
             .vertices
             .iter()
@@ -61,12 +60,9 @@ pub(super) struct Layout {
     pub(super) main: Kept,
     pub(super) sharp: Kept,
     pub(super) refined: Kept,
-    pub(super) near_flagged: Vec<bool>,
-    pub(super) fine_spacing: f32,
-    pub(super) spacing: f32,
-    pub(super) embedded: Vec<bool>,
-    /// Per candidate, the weight of its own walks (`shrinkage`), the precompute's.
-    pub(super) own_weight: Vec<[f32; 3]>,
+    /// The rows carrying D to every vertex (their kernels' weights the mesh's, the
+    /// shrinkage's the precompute's).
+    pub(super) smoothing: Smoothing,
 }
 
 impl Layout {
@@ -75,8 +71,7 @@ impl Layout {
             + self.sharp.bytes()
             + self.refined.bytes()
             + self.candidates.len() * 4
-            + self.own_weight.len() * 12
-            + 2 * self.near_flagged.len()
+            + self.smoothing.bytes()
     }
 }
 
@@ -103,51 +98,28 @@ impl WalkTerm {
             ));
         };
         let n = mesh.vertex_count();
-        if layout.near_flagged.len() != n || halfspace.len() != n {
+        if layout.smoothing.vertices() != n || halfspace.len() != n {
             return Err(Error::InvalidArgument(format!(
                 "the walk term was walked on {} vertices, not {n}",
-                layout.near_flagged.len()
+                layout.smoothing.vertices()
             )));
         }
-        let walked = layout.main.diffs(mesh, light, halfspace)?;
-        let mut diff = vec![([0f32; 3], [0f32; 3]); layout.candidates.len()];
+        // The light laid out once for the three groups of walked vertices.
+        let light = RelitLight::new(mesh, light)?;
+        let walked = layout.main.diffs(mesh, &light, halfspace)?;
+        let mut sources = vec![([0f32; 3], [0f32; 3]); layout.candidates.len()];
         let mut k = 0;
         for (i, &v) in layout.candidates.iter().enumerate() {
             // The walked vertices are the candidates in order, less the flat ones.
             if layout.main.vertices.get(k) == Some(&v) {
-                diff[i] = walked[k];
+                sources[i] = walked[k];
                 k += 1;
             }
         }
-        let mut sharp_own: Vec<Option<Diff>> = vec![None; n];
-        for (&v, d) in layout
-            .sharp
-            .vertices
-            .iter()
-            .zip(layout.sharp.diffs(mesh, light, halfspace)?)
-        {
-            sharp_own[v as usize] = Some(d);
-        }
-        let refined: Vec<(u32, Diff)> = layout
-            .refined
-            .vertices
-            .iter()
-            .copied()
-            .zip(layout.refined.diffs(mesh, light, halfspace)?)
-            .collect();
-        let grid = Grid::new(mesh, &layout.candidates, KERNEL_SPACINGS * layout.spacing);
-        let smoothed = smooth(
-            mesh,
-            &layout.embedded,
-            &layout.candidates,
-            &diff,
-            &grid,
-            &layout.own_weight,
-            &sharp_own,
-            &refined,
-            &layout.near_flagged,
-            layout.fine_spacing,
-        );
+        // Then the refined vertices' and the sharp ones' (`smoothing`'s order).
+        sources.extend(layout.refined.diffs(mesh, &light, halfspace)?);
+        sources.extend(layout.sharp.diffs(mesh, &light, halfspace)?);
+        let smoothed = layout.smoothing.apply(&sources);
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let (_, albedo) = lengths_and_albedos(&material.profiles);
         self.per_albedo = per_albedo(&smoothed, &albedo);

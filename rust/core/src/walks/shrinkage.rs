@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 /// Below this the leave-one-out average has no neighbour to speak for it: the vertex keeps
 /// its own D.
-const LONE: f32 = 1e-3;
+pub(super) const LONE: f32 = 1e-3;
 
 /// The radius over which D's variation t^2 is estimated, in kernel radii.
 const TAU_RADIUS: f32 = 2.0;
@@ -114,7 +114,9 @@ impl Neighbours<'_> {
     }
 
     /// D at candidate `i`: its own walks weighted by `w`, its neighbours' leave-one-out
-    /// average by 1 - w; its own D where it has no neighbour.
+    /// average by 1 - w; its own D where it has no neighbour. (What `smoothing`'s rows give,
+    /// taken directly: the tests' reference.)
+    #[cfg(test)]
     pub(super) fn combined(&self, diff: &[Diff], i: usize, w: [f32; 3]) -> Diff {
         let (d, s2) = diff[i];
         let Some((a, a2)) = self.others(diff, i) else {

@@ -36,7 +36,7 @@
 //! D = 0 without walks: there the half-space table is the walk.
 
 use super::grid::Grid;
-use super::passes::{Passes, KERNEL_SPACINGS};
+use super::passes::{sources, Passes, KERNEL_SPACINGS};
 use super::radiosity::{ExitLight, MeshWalkSettings};
 use super::relight::{Kept, Layout};
 use super::shrinkage;
@@ -253,7 +253,8 @@ impl WalkTerm {
         } else {
             Vec::new()
         };
-        let smoothed = passes.smooth(&main, &diff, &grid, &own_weight, &sharp, &refined);
+        let smoothing = passes.smoothing(&main, &grid, &own_weight, &sharp, &refined);
+        let smoothed = smoothing.apply(&sources(&diff, &refined.points, &sharp));
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let per_albedo = per_albedo(&smoothed, &albedo);
         let std_error = std_errors(&smoothed);
@@ -263,11 +264,7 @@ impl WalkTerm {
                 main: main_kept,
                 sharp: sharp.kept.clone().unwrap_or_default(),
                 refined: refined.kept.clone().unwrap_or_default(),
-                near_flagged: refined.near_flagged.clone(),
-                fine_spacing: refined.fine_spacing,
-                spacing: main.spacing,
-                embedded: passes.embedded.clone(),
-                own_weight,
+                smoothing,
             })),
             _ => None,
         };
