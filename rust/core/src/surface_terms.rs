@@ -173,14 +173,7 @@ impl Terms {
         // (as PRT's pose preview does: the shadow edges are a third of the carrying's time);
         // walked, or carried to a new light, from a finer grid where a shadow's edge crosses.
         let edges = if fresh || !self.report.carried_pose {
-            let t = Instant::now();
-            let e = ShadowEdges::new(mesh, lit.vertices, &irradiance)?;
-            eprintln!(
-                "TEMPSE {} refined {:.4} s",
-                e.len(),
-                t.elapsed().as_secs_f64()
-            );
-            e
+            ShadowEdges::new(mesh, lit.vertices, &irradiance)?
         } else {
             ShadowEdges::none()
         };
