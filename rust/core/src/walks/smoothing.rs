@@ -257,24 +257,14 @@ impl Smoothing {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::test_meshes;
     use crate::walks::shrinkage::Neighbours;
-    use glam::Vec3;
 
     /// An n x n grid of vertices at unit spacing on a gently curved sheet, facing about +z.
     fn sheet(n: u32) -> Mesh {
-        let p = (0..n * n)
-            .map(|i| {
-                let (x, y) = ((i % n) as f32, (i / n) as f32);
-                Vec3::new(x, y, 0.02 * (x * x + y * y))
-            })
-            .collect();
-        let mut t = Vec::new();
-        for y in 0..n - 1 {
-            for x in 0..n - 1 {
-                let a = y * n + x;
-                t.push([a, a + 1, a + n + 1]);
-                t.push([a, a + n + 1, a + n]);
-            }
+        let (mut p, t) = test_meshes::plane_parts(n as usize, (n - 1) as f32);
+        for x in &mut p {
+            x.z = 0.02 * (x.x * x.x + x.y * x.y);
         }
         Mesh::new(p, t, None).unwrap()
     }
