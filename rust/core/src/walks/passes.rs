@@ -90,8 +90,8 @@ pub(super) struct Main {
 pub(super) struct Sharp {
     pub(super) list: Vec<u32>,
     pub(super) walks_per_vertex: usize,
-    /// Per vertex: its own D (sharp vertices only).
-    pub(super) own: Vec<Option<Diff>>,
+    /// Each one's own D, in `list`'s order.
+    pub(super) diffs: Vec<Diff>,
     pub(super) walks: u64,
     pub(super) rays: u64,
     /// Their records, for a new light (`relight`).
@@ -285,7 +285,7 @@ impl<'a> Passes<'a> {
         let walks_per_vertex = SHARP_WALKS
             .max(main_walks_per_vertex)
             .min(settings.max_walks.max(1));
-        let mut own: Vec<Option<Diff>> = vec![None; self.n];
+        let mut diffs = Vec::with_capacity(list.len());
         let (mut walks, mut rays) = (0, 0);
         let mut kept = None;
         if !list.is_empty() {
@@ -297,7 +297,7 @@ impl<'a> Passes<'a> {
                 SHARP_TO,
             )?;
             for (k, &v) in list.iter().enumerate() {
-                own[v as usize] = Some(diff_at(&w, k, self.halfspace[v as usize]));
+                diffs.push(diff_at(&w, k, self.halfspace[v as usize]));
             }
             (walks, rays) = (w.walks, w.rays);
             kept = Kept::of(&list, &w);
@@ -305,7 +305,7 @@ impl<'a> Passes<'a> {
         Ok(Sharp {
             list,
             walks_per_vertex,
-            own,
+            diffs,
             walks,
             rays,
             kept,
@@ -446,9 +446,6 @@ impl<'a> Passes<'a> {
         refined: &Refined,
     ) -> Smoothing {
         let refined_vertices: Vec<u32> = refined.points.iter().map(|(v, _)| *v).collect();
-        let sharp_vertices: Vec<u32> = (sharp.list.iter().copied())
-            .filter(|&v| sharp.own[v as usize].is_some())
-            .collect();
         Kernels {
             mesh: self.mesh,
             embedded: &self.embedded,
@@ -456,7 +453,7 @@ impl<'a> Passes<'a> {
             grid,
             own_weight,
             refined: &refined_vertices,
-            sharp: &sharp_vertices,
+            sharp: &sharp.list,
             near_flagged: &refined.near_flagged,
             fine_spacing: refined.fine_spacing,
         }
@@ -467,9 +464,8 @@ impl<'a> Passes<'a> {
 /// The smoothing's sources in its order: the candidates' D (`diff`), the refined vertices',
 /// the sharp vertices'.
 pub(super) fn sources(diff: &[Diff], refined: &[(u32, Diff)], sharp: &Sharp) -> Vec<Diff> {
-    let sharp_own = sharp.list.iter().filter_map(|&v| sharp.own[v as usize]);
     (diff.iter().copied())
         .chain(refined.iter().map(|(_, d)| *d))
-        .chain(sharp_own)
+        .chain(sharp.diffs.iter().copied())
         .collect()
 }

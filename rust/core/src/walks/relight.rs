@@ -119,7 +119,7 @@ impl WalkTerm {
         // Then the refined vertices' and the sharp ones' (`smoothing`'s order).
         sources.extend(layout.refined.diffs(mesh, &light, halfspace)?);
         sources.extend(layout.sharp.diffs(mesh, &light, halfspace)?);
-        let smoothed = layout.smoothing.apply(&sources);
+        let smoothed = layout.smoothing.apply(&sources)?;
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let (_, albedo) = lengths_and_albedos(&material.profiles);
         self.per_albedo = per_albedo(&smoothed, &albedo);

@@ -16,6 +16,7 @@ use super::grid::Grid;
 use super::passes::KERNEL_SPACINGS;
 use super::shrinkage::LONE;
 use super::term::Diff;
+use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use rayon::prelude::*;
 
@@ -68,7 +69,7 @@ type Built = (Row, Vec<(u32, f32)>);
 /// The walk term's smoothing: per vertex, its row over the sources, which are the
 /// candidates' D (in order), then the second pass's walked vertices' (`refined`), then the
 /// sharp vertices' (`sharp`).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub(super) struct Smoothing {
     rows: Vec<Row>,
     entries: Vec<(u32, f32)>,
@@ -236,11 +237,17 @@ impl Smoothing {
     }
 
     /// D and its variance at every vertex from the sources' (the candidates', the refined
-    /// vertices', the sharp vertices', in that order). Panics on a source count other than
-    /// the one the rows were built for (a caller's bug, not an input).
-    pub(super) fn apply(&self, sources: &[Diff]) -> Vec<Diff> {
-        assert_eq!(sources.len(), self.sources, "the walk term's sources");
-        self.rows[..self.vertices]
+    /// vertices', the sharp vertices', in that order). Errors on a source count other than the
+    /// one the rows were built for.
+    pub(super) fn apply(&self, sources: &[Diff]) -> Result<Vec<Diff>> {
+        if sources.len() != self.sources {
+            return Err(Error::InvalidArgument(format!(
+                "{} walked vertices' D for a walk term of {}",
+                sources.len(),
+                self.sources
+            )));
+        }
+        Ok(self.rows[..self.vertices]
             .par_iter()
             .map(|row| {
                 let d = self.apply_row(row, sources);
@@ -250,7 +257,7 @@ impl Smoothing {
                     d
                 }
             })
-            .collect()
+            .collect())
     }
 }
 
@@ -333,7 +340,9 @@ mod tests {
             .chain(&sharp_diff)
             .copied()
             .collect();
-        let got = kernels.smoothing().apply(&sources);
+        let smoothing = kernels.smoothing();
+        assert!(smoothing.apply(&sources[1..]).is_err(), "a source short");
+        let got = smoothing.apply(&sources).unwrap();
         // The same, vertex by vertex, from the kernels themselves.
         let fine_points: Vec<u32> = candidates.iter().chain(&refined).copied().collect();
         let fine_diff: Vec<Diff> = diff.iter().chain(&refined_diff).copied().collect();

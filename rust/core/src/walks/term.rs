@@ -254,7 +254,7 @@ impl WalkTerm {
             Vec::new()
         };
         let smoothing = passes.smoothing(&main, &grid, &own_weight, &sharp, &refined);
-        let smoothed = smoothing.apply(&sources(&diff, &refined.points, &sharp));
+        let smoothed = smoothing.apply(&sources(&diff, &refined.points, &sharp))?;
         let (noise, share) = noise_and_share(mesh, &smoothed, halfspace);
         let per_albedo = per_albedo(&smoothed, &albedo);
         let std_error = std_errors(&smoothed);
