@@ -474,6 +474,65 @@ impl World {
     }
 }
 
+/// A direction leaving a light, drawn by its emission: where a light path starts
+/// (`Light::emitted`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Emitted {
+    pub origin: Vec3,
+    /// Unit.
+    pub direction: Vec3,
+    /// Its density over the sphere of directions [1/sr] (`Light::emitted_pdf`).
+    pub pdf: f32,
+}
+
+impl Light {
+    /// A direction from a point light uniform over the sphere, from a spot uniform over its
+    /// cone (its blend left to the light's value at the far end), and its density; None for
+    /// the lights sampled from the receiving point alone (a sun, an area light, an emissive
+    /// mesh). The light side of the bounce's two strategies (`irradiance`: Veach 1997 §9.2).
+    pub fn emitted(&self, u: [f32; 2]) -> Option<Emitted> {
+        use std::f32::consts::PI;
+        let pdf = self.emitted_pdf()?;
+        let (origin, axis, cos_half) = match self {
+            Light::Point { position, .. } => (*position, Vec3::Z, -1.0),
+            Light::Spot {
+                position,
+                direction,
+                spot_size,
+                ..
+            } => (*position, *direction, (0.5 * spot_size.min(2.0 * PI)).cos()),
+            _ => return None,
+        };
+        // cos theta uniform over [cos_half, 1] is uniform over the cap's solid angle.
+        let cos = 1.0 - u[0] * (1.0 - cos_half);
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let phi = 2.0 * PI * u[1];
+        let (t, b) = axis.any_orthonormal_pair();
+        let direction = (t * (sin * phi.cos()) + b * (sin * phi.sin()) + axis * cos).normalize();
+        Some(Emitted {
+            origin,
+            direction,
+            pdf,
+        })
+    }
+
+    /// The density of `emitted`'s directions [1/sr]: 1 / 4 pi for a point light,
+    /// 1 / (2 pi (1 - cos(spot_size / 2))) inside a spot's cone (outside it the light sends
+    /// nothing); None for the lights `emitted` does not draw.
+    pub fn emitted_pdf(&self) -> Option<f32> {
+        use std::f32::consts::PI;
+        match self {
+            Light::Point { .. } => Some(1.0 / (4.0 * PI)),
+            Light::Spot { spot_size, .. } => {
+                let cos_half = (0.5 * spot_size.min(2.0 * PI)).cos();
+                let solid = 2.0 * PI * (1.0 - cos_half);
+                (solid > 0.0).then(|| 1.0 / solid)
+            }
+            _ => None,
+        }
+    }
+}
+
 /// Cycles' spot cone (`spot_light_attenuation`): 0 outside the cone of full angle `spot_size`,
 /// a smoothstep over the `blend` fraction of the cone's cosine range, 1 inside it; no extra
 /// cosine. `cos_axis` is the cosine between the spot's axis and the direction to the point.

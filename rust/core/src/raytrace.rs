@@ -345,6 +345,12 @@ impl Tracer {
             .collect()
     }
 
+    /// Whether every object casts this tracer's shadows (no shadow linking): a path traced
+    /// from a light then stops at the first surface it meets, as the shadow rays do.
+    pub fn shadows_unlinked(&self) -> bool {
+        (self.linking.as_ref()).is_none_or(|l| l.blockers.is_none() && l.mesh_blockers.is_none())
+    }
+
     /// Whether the rest of the scene sends light back (`with_bounce`).
     pub fn bounces(&self) -> bool {
         self.bounce.is_some()
