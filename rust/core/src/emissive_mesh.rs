@@ -264,11 +264,7 @@ impl EmissiveMesh {
         let cos_max = (1.0 - sin2).max(0.0).sqrt();
         // cos theta uniform in [cos_max, 1]; 1 - cos_max kept exact for a far, small cone.
         let one_minus = sin2 / (1.0 + cos_max);
-        let cos_t = 1.0 - u[0] * one_minus;
-        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-        let phi = 2.0 * std::f32::consts::PI * u[1];
-        let (a, b) = axis.any_orthonormal_pair();
-        let direction = (axis * cos_t + (a * phi.cos() + b * phi.sin()) * sin_t).normalize();
+        let direction = crate::lights::cone_direction(axis, one_minus, u);
         let solid_angle = 2.0 * std::f32::consts::PI * one_minus;
         let Some(hit) = self.tracer.intersect(x, direction, d + radius) else {
             return Toward::Miss;

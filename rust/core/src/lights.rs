@@ -491,28 +491,11 @@ impl Light {
     /// the lights sampled from the receiving point alone (a sun, an area light, an emissive
     /// mesh). The light side of the bounce's two strategies (`irradiance`: Veach 1997 §9.2).
     pub fn emitted(&self, u: [f32; 2]) -> Option<Emitted> {
-        use std::f32::consts::PI;
-        let pdf = self.emitted_pdf()?;
-        let (origin, axis, cos_half) = match self {
-            Light::Point { position, .. } => (*position, Vec3::Z, -1.0),
-            Light::Spot {
-                position,
-                direction,
-                spot_size,
-                ..
-            } => (*position, *direction, (0.5 * spot_size.min(2.0 * PI)).cos()),
-            _ => return None,
-        };
-        // cos theta uniform over [cos_half, 1] is uniform over the cap's solid angle.
-        let cos = 1.0 - u[0] * (1.0 - cos_half);
-        let sin = (1.0 - cos * cos).max(0.0).sqrt();
-        let phi = 2.0 * PI * u[1];
-        let (t, b) = axis.any_orthonormal_pair();
-        let direction = (t * (sin * phi.cos()) + b * (sin * phi.sin()) + axis * cos).normalize();
+        let (origin, axis, one_minus) = self.emitted_cap()?;
         Some(Emitted {
             origin,
-            direction,
-            pdf,
+            direction: cone_direction(axis, one_minus, u),
+            pdf: 1.0 / (2.0 * std::f32::consts::PI * one_minus),
         })
     }
 
@@ -520,17 +503,36 @@ impl Light {
     /// 1 / (2 pi (1 - cos(spot_size / 2))) inside a spot's cone (outside it the light sends
     /// nothing); None for the lights `emitted` does not draw.
     pub fn emitted_pdf(&self) -> Option<f32> {
-        use std::f32::consts::PI;
-        match self {
-            Light::Point { .. } => Some(1.0 / (4.0 * PI)),
-            Light::Spot { spot_size, .. } => {
-                let cos_half = (0.5 * spot_size.min(2.0 * PI)).cos();
-                let solid = 2.0 * PI * (1.0 - cos_half);
-                (solid > 0.0).then(|| 1.0 / solid)
-            }
-            _ => None,
-        }
+        let (_, _, one_minus) = self.emitted_cap()?;
+        Some(1.0 / (2.0 * std::f32::consts::PI * one_minus))
     }
+
+    /// The cap `emitted` draws from: its apex, axis and 1 - cos of its half angle (2 for a
+    /// point light's whole sphere).
+    fn emitted_cap(&self) -> Option<(Vec3, Vec3, f32)> {
+        let (origin, axis, one_minus) = match self {
+            Light::Point { position, .. } => (*position, Vec3::Z, 2.0),
+            Light::Spot {
+                position,
+                direction,
+                spot_size,
+                ..
+            } => (*position, *direction, 1.0 - (0.5 * spot_size).cos()),
+            _ => return None,
+        };
+        (one_minus > 0.0).then_some((origin, axis, one_minus))
+    }
+}
+
+/// A direction uniform over the cap about the unit `axis` whose half angle has
+/// 1 - cos = `one_minus` (2: the whole sphere), from `u` in [0, 1)^2: cos theta uniform over
+/// [1 - one_minus, 1] is uniform over the cap's solid angle 2 pi `one_minus`.
+pub fn cone_direction(axis: Vec3, one_minus: f32, u: [f32; 2]) -> Vec3 {
+    let cos = 1.0 - u[0] * one_minus;
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u[1];
+    let (a, b) = axis.any_orthonormal_pair();
+    (axis * cos + (a * phi.cos() + b * phi.sin()) * sin).normalize()
 }
 
 /// Cycles' spot cone (`spot_light_attenuation`): 0 outside the cone of full angle `spot_size`,
